@@ -1,0 +1,39 @@
+# asmonc_vision — the two commands for a fresh machine:
+#   make demo   install everything into .venv, then replay the bundled bag through the node graph
+#   make test   install everything into .venv, then run the whole test suite
+# Nothing outside this directory is installed. Needs python3 (3.11 or 3.12), cmake, gcc.
+
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+PIP    := $(PY) -m pip
+STAMP  := $(VENV)/.asmonc-installed
+export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
+
+.PHONY: all venv demo test bags clean-venv
+
+all: demo
+
+venv: $(STAMP)
+
+$(STAMP): requirements.lock setup.py package.xml msg/CMakeLists.txt msg/package.xml msg/pyproject.toml $(wildcard msg/msg/*.msg)
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PIP) install --quiet --disable-pip-version-check -r requirements.lock
+	# The interface package (ament_cmake + rosidl), built against the ROS wheels in .venv.
+	AMENT_PREFIX_PATH=$(CURDIR)/$(VENV) CMAKE_PREFIX_PATH=$(CURDIR)/$(VENV) \
+	  ASMONC_PYTHON=$(CURDIR)/$(PY) \
+	  $(PIP) install --quiet --disable-pip-version-check --no-build-isolation --force-reinstall --no-deps ./msg
+	$(PIP) install --quiet --disable-pip-version-check --no-build-isolation --no-deps -e .
+	touch $(STAMP)
+
+demo: venv
+	$(VENV)/bin/asmonc run
+
+test: venv
+	$(PY) -m pytest -q test
+
+bags: venv
+	$(PY) -m asmonc_vision.sim.cli --regenerate-bundled bags
+
+clean-venv:
+	rm -rf $(VENV)

@@ -1,0 +1,200 @@
+"""rosbag2 (MCAP) access with rosbags: the Jazzy typestore plus asmonc_vision_msgs.
+
+No rclpy here, so the simulator, the evaluation and the tests can read and write bags
+without a ROS middleware. Image messages convert to numpy arrays once, here.
+"""
+from __future__ import annotations
+
+import functools
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+MSG_PACKAGE = 'asmonc_vision_msgs'
+
+#: The topic contract (issue 2). Names and types are stable: evaluations rely on them.
+TOPICS = {
+    'left_image': ('/stereo/left/image_rect', 'sensor_msgs/msg/Image'),
+    'right_image': ('/stereo/right/image_rect', 'sensor_msgs/msg/Image'),
+    'left_info': ('/stereo/left/camera_info', 'sensor_msgs/msg/CameraInfo'),
+    'right_info': ('/stereo/right/camera_info', 'sensor_msgs/msg/CameraInfo'),
+    'imu': ('/inclinometer/imu', 'sensor_msgs/msg/Imu'),
+    'ground_plane': ('/ground_plane', f'{MSG_PACKAGE}/msg/GroundPlane'),
+    'obstacles': ('/obstacles', f'{MSG_PACKAGE}/msg/ObstacleArray'),
+    'markers': ('/obstacles/markers', 'visualization_msgs/msg/MarkerArray'),
+    'debug_image': ('/detector/debug_image', 'sensor_msgs/msg/Image'),
+    'alarms': ('/alarms', f'{MSG_PACKAGE}/msg/Alarm'),
+    'diagnostics': ('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray'),
+    'gt_obstacles': ('/ground_truth/obstacles', f'{MSG_PACKAGE}/msg/ObstacleArray'),
+    'gt_camera_pose': ('/ground_truth/camera_pose', 'geometry_msgs/msg/PoseStamped'),
+    'gt_ground_plane': ('/ground_truth/ground_plane', f'{MSG_PACKAGE}/msg/GroundPlane'),
+}
+
+
+def msg_definition_dirs() -> list[Path]:
+    """Where the .msg files of asmonc_vision_msgs may be, most specific first."""
+    dirs: list[Path] = []
+    env = os.environ.get('ASMONC_MSG_DIR')
+    if env:
+        dirs.append(Path(env))
+    for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
+        if prefix:
+            dirs.append(Path(prefix) / 'share' / MSG_PACKAGE / 'msg')
+    dirs.append(Path(sys.prefix) / 'share' / MSG_PACKAGE / 'msg')
+    # Source checkout: <repo>/msg/msg next to <repo>/asmonc_vision.
+    dirs.append(Path(__file__).resolve().parent.parent / 'msg' / 'msg')
+    return dirs
+
+
+@functools.lru_cache(maxsize=1)
+def typestore():
+    """The rosbags typestore for ROS 2 Jazzy with asmonc_vision_msgs registered.
+
+    Raises:
+        FileNotFoundError: when no directory holds the message definitions.
+    """
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    for d in msg_definition_dirs():
+        files = sorted(d.glob('*.msg')) if d.is_dir() else []
+        if files:
+            types = {}
+            for f in files:
+                types.update(get_types_from_msg(f.read_text(), f'{MSG_PACKAGE}/msg/{f.stem}'))
+            store.register(types)
+            return store
+    raise FileNotFoundError(
+        f'no {MSG_PACKAGE} .msg definitions found in any of: '
+        + ', '.join(str(d) for d in msg_definition_dirs()))
+
+
+def msg_class(msgtype: str):
+    """rosbags dataclass for a message type name such as 'sensor_msgs/msg/Image'."""
+    return typestore().types[msgtype]
+
+
+# --- images -------------------------------------------------------------------------
+
+#: encodings accepted on the image topics, with (channels, dtype)
+IMAGE_ENCODINGS = {'mono8': (1, np.uint8), 'rgb8': (3, np.uint8), 'bgr8': (3, np.uint8)}
+
+
+class ImageFormatError(ValueError):
+    """An image message that cannot be used (encoding, size or step wrong)."""
+
+
+def image_to_gray(encoding: str, height: int, width: int, step: int, data) -> np.ndarray:
+    """Convert raw image fields (any message representation) to a mono8 array.
+
+    Args:
+        encoding: 'mono8', 'rgb8' or 'bgr8'.
+        height, width, step: as in sensor_msgs/Image.
+        data: bytes-like or uint8 array of length >= height * step.
+    Returns:
+        (height, width) uint8 array (a copy, safe to keep).
+    Raises:
+        ImageFormatError: wrong encoding, or data shorter than the header says.
+    """
+    if encoding not in IMAGE_ENCODINGS:
+        raise ImageFormatError(
+            f"unsupported image encoding '{encoding}'; expected one of "
+            f"{', '.join(IMAGE_ENCODINGS)}")
+    ch, _ = IMAGE_ENCODINGS[encoding]
+    if height <= 0 or width <= 0 or step < width * ch:
+        raise ImageFormatError(f'bad image geometry {width}x{height} step {step} ({encoding})')
+    buf = np.frombuffer(memoryview(data), dtype=np.uint8) if not isinstance(
+        data, np.ndarray) else data.reshape(-1).view(np.uint8)
+    if buf.size < height * step:
+        raise ImageFormatError(
+            f'image data has {buf.size} bytes, header says {height}x{step} = {height * step}')
+    img = buf[:height * step].reshape(height, step)[:, :width * ch]
+    if ch == 1:
+        return img.copy()
+    import cv2
+
+    img = img.reshape(height, width, 3)
+    code = cv2.COLOR_RGB2GRAY if encoding == 'rgb8' else cv2.COLOR_BGR2GRAY
+    return cv2.cvtColor(np.ascontiguousarray(img), code)
+
+
+def decode_compressed(fmt: str, data) -> np.ndarray:
+    """Decode a sensor_msgs/CompressedImage payload (PNG, JPEG) to mono8."""
+    import cv2
+
+    buf = np.frombuffer(memoryview(data), dtype=np.uint8) if not isinstance(
+        data, np.ndarray) else data.reshape(-1).view(np.uint8)
+    img = cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE)
+    if img is None:
+        raise ImageFormatError(f"cannot decode compressed image (format '{fmt}')")
+    return img
+
+
+# --- bags -----------------------------------------------------------------------------
+
+class BagError(RuntimeError):
+    """A bag that cannot be read: missing, truncated, empty or not a rosbag2 bag."""
+
+
+def open_reader(path):
+    """Open a rosbag2 bag (a directory with metadata.yaml, or one .mcap file) for reading.
+
+    Returns an open `rosbags.rosbag2.Reader` (use as a context manager or close it).
+    Raises:
+        BagError: with a message naming the path and what is wrong.
+    """
+    from rosbags.rosbag2 import Reader
+    from rosbags.rosbag2.errors import ReaderError
+
+    p = Path(path)
+    if not p.exists():
+        raise BagError(f"bag '{p}' does not exist")
+    try:
+        reader = Reader(p)
+        reader.open()
+    except (ReaderError, OSError, ValueError, KeyError) as exc:
+        raise BagError(f"bag '{p}' cannot be read ({type(exc).__name__}: {exc}); "
+                       'is it a complete rosbag2 (MCAP or sqlite3) bag?') from exc
+    return reader
+
+
+def bag_topics(path) -> dict[str, tuple[str, int]]:
+    """topic -> (message type, message count) of a bag. Raises BagError."""
+    reader = open_reader(path)
+    try:
+        out: dict[str, tuple[str, int]] = {}
+        for c in reader.connections:
+            t, n = out.get(c.topic, (c.msgtype, 0))
+            out[c.topic] = (t, n + c.msgcount)
+        return out
+    finally:
+        reader.close()
+
+
+def read_messages(path, topics):
+    """Yield (topic, bag_time_ns, deserialized rosbags message) for the given topics.
+
+    Raises:
+        BagError: unreadable bag, or a truncated one (after yielding what was readable).
+    """
+    from rosbags.rosbag2.errors import ReaderError
+
+    store = typestore()
+    reader = open_reader(path)
+    try:
+        conns = [c for c in reader.connections if c.topic in set(topics)]
+        try:
+            for conn, t, raw in reader.messages(connections=conns):
+                yield conn.topic, t, store.deserialize_cdr(raw, conn.msgtype)
+        except (ReaderError, OSError, ValueError, EOFError) as exc:
+            raise BagError(f"bag '{path}' is truncated or corrupt: {exc}") from exc
+    finally:
+        reader.close()
+
+
+def header_stamp_ns(msg) -> int:
+    """Integer ns of a rosbags message's header stamp."""
+    s = msg.header.stamp
+    return int(s.sec) * 1_000_000_000 + int(s.nanosec)

@@ -1,0 +1,5 @@
+import sys
+
+from asmonc_vision.cli.main import main
+
+sys.exit(main())

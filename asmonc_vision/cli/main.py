@@ -1,0 +1,28 @@
+"""`asmonc`: the command-line front of asmonc_vision.
+
+    asmonc run [BAG] [--out DIR] [--rate R]   replay a bag through the node graph
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog='asmonc', description='asmonc_vision: stereo obstacle detection for walking.')
+    sub = parser.add_subparsers(dest='command', required=True)
+    from asmonc_vision.cli import run
+    run.add_arguments(sub.add_parser(
+        'run', help='replay a bag through the detector and alarm nodes',
+        description=run.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    return int(args.func(args) or 0)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

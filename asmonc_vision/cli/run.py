@@ -1,0 +1,413 @@
+"""Replay a bag through the node graph and tell what the wearer would have heard.
+
+Starts the detector and alarm nodes as separate processes, then the bag player; prints
+each alarm as it is given, with a progress bar; records every output topic to a rosbag2
+MCAP bag with --out; ends with a summary against the bag's ground truth, if it has any:
+true obstacles detected or missed, false obstacles, alarms given.
+
+The bag may be any rosbag2 bag that follows the topic contract (README), not only the
+simulator's. Exit status: 0 done; 1 frames dropped, a node failed or the bag ended in
+error; 2 the bag or the arguments are unusable.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+from asmonc_vision import bagio
+from asmonc_vision.core.evaluation import FrameObstacles, score_sequence
+
+LEVEL_NAMES = {0: 'CLEAR', 1: 'CAUTION', 2: 'WARNING', 3: 'STOP', 4: 'FAULT'}
+#: every topic a node of the graph publishes (recorded with --out)
+OUTPUT_TOPICS = ('/obstacles', '/ground_plane', '/obstacles/markers', '/detector/debug_image',
+                 '/alarms', '/diagnostics')
+NODE_MODULES = {'detector': 'asmonc_vision.nodes.detector_node',
+                'alarm': 'asmonc_vision.nodes.alarm_node'}
+DEFAULT_BAG_NAME = 'static_obstacles'
+
+
+def default_bag() -> Path:
+    """The bundled static-rig bag ($ASMONC_BAGS or the repository's bags/)."""
+    root = Path(os.environ.get('ASMONC_BAGS', Path(__file__).resolve().parents[2] / 'bags'))
+    return root / DEFAULT_BAG_NAME
+
+
+def add_arguments(p) -> None:
+    p.add_argument('bag', nargs='?', type=Path, default=None,
+                   help=f'rosbag2 bag directory or .mcap file (default: bags/{DEFAULT_BAG_NAME})')
+    p.add_argument('--out', type=Path, default=None,
+                   help='record every output topic to a rosbag2 MCAP bag in this new directory, '
+                        'with summary.json and the nodes\' logs beside it')
+    p.add_argument('--rate', type=float, default=1.0, help='replay speed factor (default 1)')
+    p.add_argument('--params-file', type=Path, action='append', default=[],
+                   help='a ros__parameters YAML passed to the nodes (repeatable)')
+    p.add_argument('--settle', type=float, default=5.0,
+                   help='seconds to wait for the last outputs after the bag ends (default 5)')
+    p.add_argument('--match-radius', type=float, default=0.3,
+                   help='a detection within this distance (m) of a true obstacle\'s top finds it')
+    p.add_argument('--min-height', type=float, default=0.10,
+                   help='true obstacles at least this high (m) count in the recall (default 0.10)')
+    p.add_argument('--max-range', type=float, default=5.0,
+                   help='true obstacles within this range (m) count in the recall (default 5)')
+    p.add_argument('--no-progress', action='store_true', help='no progress bar')
+    p.add_argument('--quiet', action='store_true', help='print only the summary')
+    p.set_defaults(func=run)
+
+
+# --- in-process monitor ------------------------------------------------------------------
+
+class _Monitor:
+    """Collects /obstacles and /alarms in this process (an rclpy node in a thread)."""
+
+    def __init__(self, context):
+        from rclpy.node import Node
+
+        from asmonc_vision.nodes.common import ALARM_QOS, RESULT_QOS
+        from asmonc_vision_msgs.msg import Alarm, ObstacleArray
+
+        self.node = Node('asmonc_run_monitor', context=context)
+        self.lock = threading.Lock()
+        self.detections: dict[int, FrameObstacles] = {}
+        self.alarms: list[dict] = []
+        self.new_alarms: list[dict] = []
+        self.node.create_subscription(ObstacleArray, '/obstacles', self._on_obstacles, RESULT_QOS)
+        self.node.create_subscription(Alarm, '/alarms', self._on_alarm, ALARM_QOS)
+
+    def _on_obstacles(self, msg) -> None:
+        frame = frame_from_obstacle_array(msg)
+        with self.lock:
+            self.detections[frame.stamp_ns] = frame
+
+    def _on_alarm(self, msg) -> None:
+        a = {'stamp_ns': msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec,
+             'level': int(msg.level), 'text': msg.text, 'range': float(msg.range),
+             'bearing': float(msg.bearing), 'obstacle_id': int(msg.obstacle_id)}
+        with self.lock:
+            self.alarms.append(a)
+            self.new_alarms.append(a)
+
+    def take_new_alarms(self) -> list[dict]:
+        with self.lock:
+            out, self.new_alarms = self.new_alarms, []
+        return out
+
+    @property
+    def frames(self) -> int:
+        with self.lock:
+            return len(self.detections)
+
+
+def frame_from_obstacle_array(msg) -> FrameObstacles:
+    """An ObstacleArray (rclpy or rosbags message) to FrameObstacles."""
+    obs = list(msg.obstacles)
+    stamp = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+    if not obs:
+        return FrameObstacles.empty(stamp)
+    return FrameObstacles(
+        stamp_ns=stamp,
+        ids=np.array([o.id for o in obs], int),
+        position=np.array([[o.position.x, o.position.y, o.position.z] for o in obs], float),
+        height=np.array([o.height for o in obs], float),
+        range=np.array([o.range for o in obs], float),
+        bearing=np.array([o.bearing for o in obs], float),
+        roi=np.array([[o.roi.x_offset, o.roi.y_offset, o.roi.width, o.roi.height]
+                      for o in obs], int))
+
+
+# --- child processes ----------------------------------------------------------------------
+
+class _Child:
+    """A node in its own process; its log goes to a file, warnings and errors to stderr."""
+
+    def __init__(self, name: str, cmd: list[str], log_dir: Path, echo, env: dict):
+        self.name = name
+        self.log_path = log_dir / f'{name}.log'
+        self._log = self.log_path.open('w')
+        self._echo = echo
+        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                     env=env, text=True, bufsize=1, start_new_session=True)
+        self._thread = threading.Thread(target=self._pump, daemon=True)
+        self._thread.start()
+
+    def _pump(self) -> None:
+        for line in self.proc.stdout:
+            self._log.write(line)
+            self._log.flush()
+            if '[ERROR]' in line or '[WARN]' in line or '[FATAL]' in line or 'Traceback' in line:
+                self._echo(f'[{self.name}] {line.rstrip()}')
+        self._log.flush()
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def stop(self, timeout: float = 5.0) -> int:
+        if self.alive():
+            try:
+                os.killpg(self.proc.pid, signal.SIGINT)
+                self.proc.wait(timeout=timeout)
+            except (subprocess.TimeoutExpired, ProcessLookupError):
+                self.proc.kill()
+                self.proc.wait()
+        self._thread.join(timeout=2.0)
+        self._log.close()
+        return self.proc.returncode
+
+
+class _Console:
+    """Alarm lines on stdout; a progress bar on stderr (only when it is a terminal)."""
+
+    def __init__(self, total: int, progress: bool, quiet: bool):
+        self.total = max(total, 1)
+        self.progress = progress and sys.stderr.isatty() and not quiet
+        self.quiet = quiet
+        self._bar_shown = False
+
+    def _clear(self) -> None:
+        if self._bar_shown:
+            sys.stderr.write('\r\033[K')
+            self._bar_shown = False
+
+    def line(self, text: str, err: bool = False) -> None:
+        if self.quiet and not err:
+            return
+        self._clear()
+        print(text, file=sys.stderr if err else sys.stdout, flush=True)
+
+    def bar(self, done: int, note: str = '') -> None:
+        if not self.progress:
+            return
+        width = 30
+        k = min(width, int(width * done / self.total))
+        sys.stderr.write(f'\r[{"#" * k}{"." * (width - k)}] {done}/{self.total} frames {note}')
+        sys.stderr.flush()
+        self._bar_shown = True
+
+    def done(self) -> None:
+        self._clear()
+
+
+# --- ground truth ---------------------------------------------------------------------------
+
+def read_truth(bag: Path) -> dict[int, FrameObstacles]:
+    """stamp_ns -> true obstacles, from /ground_truth/obstacles (empty if the bag has none)."""
+    topic = bagio.TOPICS['gt_obstacles'][0]
+    return {bagio.header_stamp_ns(m): frame_from_obstacle_array(m)
+            for _, _, m in bagio.read_messages(bag, [topic])}
+
+
+def first_image_stamp(bag: Path) -> int | None:
+    topic = bagio.TOPICS['left_image'][0]
+    for _, _, m in bagio.read_messages(bag, [topic]):
+        return bagio.header_stamp_ns(m)
+    return None
+
+
+# --- run ----------------------------------------------------------------------------------------
+
+def run(args) -> int:
+    console_err = lambda s: print(s, file=sys.stderr, flush=True)  # noqa: E731
+    bag = Path(args.bag) if args.bag is not None else default_bag()
+    if not (0.01 <= args.rate <= 100):
+        console_err(f'asmonc run: --rate must be in [0.01, 100], got {args.rate}')
+        return 2
+    try:
+        topics = bagio.bag_topics(bag)
+    except bagio.BagError as exc:
+        console_err(f'asmonc run: {exc}')
+        return 2
+    left_topic = bagio.TOPICS['left_image'][0]
+    n_pairs = topics.get(left_topic, ('', 0))[1]
+    if n_pairs == 0:
+        console_err(f"asmonc run: bag '{bag}' has no {left_topic} messages: nothing to detect. "
+                    f"Topics: {', '.join(sorted(topics)) or 'none'}")
+        return 2
+    if args.out is not None and args.out.exists() and any(args.out.iterdir()):
+        console_err(f"asmonc run: --out '{args.out}' exists and is not empty")
+        return 2
+
+    env = dict(os.environ)
+    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    console = _Console(n_pairs, not args.no_progress, args.quiet)
+    try:
+        t0 = first_image_stamp(bag) or 0
+        truth = read_truth(bag) if bagio.TOPICS['gt_obstacles'][0] in topics else {}
+    except bagio.BagError as exc:
+        console.line(f'asmonc run: {exc} (continuing with what could be read)', err=True)
+        t0, truth = 0, {}
+    console.line(f'asmonc run: {bag} — {n_pairs} stereo pairs at rate {args.rate:g}'
+                 + (', with ground truth' if truth else ', no ground truth'))
+
+    import rclpy
+    from rclpy.executors import MultiThreadedExecutor
+
+    log_dir = Path(tempfile.mkdtemp(prefix='asmonc-run-'))
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    monitor = _Monitor(ctx)
+    recorder = None
+    if args.out is not None:
+        from rclpy.parameter import Parameter
+
+        from asmonc_vision.nodes.recorder_node import BagRecorderNode
+        recorder = BagRecorderNode(context=ctx, parameter_overrides=[
+            Parameter('output', value=str(args.out)),
+            Parameter('topics', value=list(OUTPUT_TOPICS)),
+            Parameter('compression', value='zstd')])
+    executor = MultiThreadedExecutor(num_threads=2, context=ctx)
+    executor.add_node(monitor.node)
+    if recorder is not None:
+        executor.add_node(recorder)
+    spin = threading.Thread(target=executor.spin, daemon=True)
+    spin.start()
+
+    ros_params = []
+    for pf in args.params_file:
+        ros_params += ['--params-file', str(pf)]
+    children: dict[str, _Child] = {}
+    failed: list[str] = []
+    player_rc = None
+    try:
+        for name, module in NODE_MODULES.items():
+            cmd = [sys.executable, '-m', module, '--ros-args', *ros_params]
+            children[name] = _Child(name, cmd, log_dir, lambda s: console.line(s, err=True), env)
+        # Wait until the graph is connected, so no frame is lost to discovery.
+        want_obstacle_subs = 2 + (1 if recorder is not None else 0)  # monitor, alarm, recorder
+        deadline = time.monotonic() + 60.0
+        node = monitor.node
+        while time.monotonic() < deadline:
+            if (node.count_publishers('/obstacles') >= 1 and node.count_publishers('/alarms') >= 1
+                    and node.count_subscribers(left_topic) >= 1
+                    and node.count_subscribers('/obstacles') >= want_obstacle_subs):
+                break
+            dead = [n for n, c in children.items() if not c.alive()]
+            if dead:
+                raise RuntimeError(f'{", ".join(dead)} node exited at start; see '
+                                   f'{children[dead[0]].log_path}')
+            time.sleep(0.1)
+        else:
+            raise RuntimeError('the nodes did not connect within 60 s')
+
+        player_cmd = [sys.executable, '-m', 'asmonc_vision.nodes.player_node', '--ros-args',
+                      '-p', f'bag:={bag.resolve()}', '-p', f'rate:={float(args.rate)}',
+                      '-p', 'wait_for_subscribers:=1', '-p', 'exit_when_done:=true']
+        children['player'] = _Child('player', player_cmd, log_dir,
+                                    lambda s: console.line(s, err=True), env)
+
+        def show_alarms() -> None:
+            for a in monitor.take_new_alarms():
+                t = (a['stamp_ns'] - t0) / 1e9 if t0 else 0.0
+                console.line(f'{t:7.1f} s  {LEVEL_NAMES.get(a["level"], a["level"]):8s} '
+                             f'{a["text"]}')
+
+        while children['player'].alive():
+            show_alarms()
+            console.bar(monitor.frames)
+            for name in NODE_MODULES:
+                if not children[name].alive():
+                    raise RuntimeError(f'{name} node died; see {children[name].log_path}')
+            time.sleep(0.1)
+        player_rc = children['player'].proc.wait()
+        # Let the last frames through the detector.
+        last, last_change = monitor.frames, time.monotonic()
+        while monitor.frames < n_pairs and time.monotonic() - last_change < args.settle:
+            show_alarms()
+            console.bar(monitor.frames)
+            time.sleep(0.1)
+            if monitor.frames != last:
+                last, last_change = monitor.frames, time.monotonic()
+        time.sleep(0.3)  # the alarm for the last frame
+        show_alarms()
+    except RuntimeError as exc:
+        failed.append(str(exc))
+    except KeyboardInterrupt:
+        failed.append('interrupted')
+    finally:
+        console.done()
+        for c in children.values():
+            c.stop()
+        executor.shutdown(timeout_sec=2.0)
+        if recorder is not None:
+            recorder.close()
+            recorder.destroy_node()
+        monitor.node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+
+    summary = summarise(monitor, truth, n_pairs, args)
+    summary['player_exit_code'] = player_rc
+    summary['errors'] = failed
+    print_summary(summary, console)
+    if args.out is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / 'summary.json').write_text(json.dumps(summary, indent=2) + '\n')
+        shutil.copytree(log_dir, args.out / 'logs', dirs_exist_ok=True)
+        console.line(f'outputs recorded in {args.out}')
+    shutil.rmtree(log_dir, ignore_errors=True)
+    if failed or summary['dropped_frames'] or player_rc not in (0, None):
+        return 1
+    return 0
+
+
+def summarise(monitor: _Monitor, truth: dict, n_pairs: int, args) -> dict:
+    """Counts, alarms and the score against ground truth, as a JSON-ready dict."""
+    with monitor.lock:
+        detections = dict(monitor.detections)
+        alarms = list(monitor.alarms)
+    levels = Counter(LEVEL_NAMES.get(a['level'], str(a['level'])) for a in alarms)
+    out = {'bag': str(args.bag or default_bag()), 'rate': args.rate, 'input_pairs': n_pairs,
+           'processed_frames': len(detections), 'dropped_frames': max(0, n_pairs - len(detections)),
+           'alarms': dict(levels), 'alarm_log': alarms,
+           'obstacle_reports': int(sum(len(d) for d in detections.values()))}
+    if truth:
+        score, missing = score_sequence(detections, truth, match_radius=args.match_radius,
+                                        min_height=args.min_height, max_range=args.max_range)
+        out['ground_truth'] = score.as_dict()
+        out['ground_truth']['criteria'] = {'match_radius_m': args.match_radius,
+                                           'min_height_m': args.min_height,
+                                           'max_range_m': args.max_range}
+        out['dropped_frames'] = max(out['dropped_frames'], len(missing))
+    return out
+
+
+def print_summary(s: dict, console: _Console) -> None:
+    p = lambda t: console.line(t, err=False) if not console.quiet else print(t)  # noqa: E731
+    p('')
+    p('=== summary ===')
+    p(f"frames: {s['processed_frames']} of {s['input_pairs']} processed, "
+      f"{s['dropped_frames']} dropped")
+    alarms = ', '.join(f'{k} {v}' for k, v in sorted(s['alarms'].items())) or 'none'
+    p(f'alarms given: {alarms}')
+    gt = s.get('ground_truth')
+    if gt:
+        c = gt['criteria']
+        p(f"true obstacles (>= {c['min_height_m'] * 100:.0f} cm high, within "
+          f"{c['max_range_m']:g} m; found = a report within {c['match_radius_m']:g} m):")
+        for oid, o in gt['obstacles'].items():
+            if o['frames_eligible'] == 0:
+                continue
+            verdict = 'DETECTED' if o['detected'] else 'MISSED'
+            p(f"  obstacle {oid:>3}: {o['height_m'] * 100:5.1f} cm, nearest {o['min_range_m']:4.1f} m"
+              f" — {verdict} in {o['frames_detected']}/{o['frames_eligible']} frames")
+        recall = gt['recall']
+        p(f"recall per frame: {gt['detected']}/{gt['eligible']}"
+          + (f' = {recall:.1%}' if gt['eligible'] else ''))
+        p(f"false obstacles: {gt['false_obstacles']} in {gt['frames']} frames "
+          f"({gt['false_per_frame']:.3f} per frame)")
+        if gt['range_error_median_m'] is not None:
+            p(f"median |range error| {gt['range_error_median_m']:.3f} m, "
+              f"median |bearing error| {gt['bearing_error_median_deg']:.2f} deg")
+    else:
+        p('no ground truth in this bag: no score')
+    for e in s.get('errors', []):
+        p(f'error: {e}')

@@ -1,0 +1,1 @@
+"""Pure algorithms of asmonc_vision: numpy, OpenCV and filterpy only (no rclpy, no messages)."""

@@ -1,0 +1,178 @@
+"""What every asmonc_vision node shares: parameters from settings dataclasses, QoS
+profiles, diagnostics and the Jazzy main loop.
+
+Nodes stay thin: they declare their settings dataclass with `declare_config`, convert
+messages once (see `conversions`), call the core, and publish.
+"""
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Callable, TypeVar
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                ParameterType, SetParametersResult)
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy,
+                       qos_profile_sensor_data)
+
+T = TypeVar('T')
+
+#: Large images: RELIABLE so that a replay loses no frame; shallow so a slow reader
+#: gets the newest frames rather than an ever-growing backlog.
+IMAGE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                       reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.VOLATILE)
+#: Small sensor streams (inclinometer): best effort, as sensors publish.
+SENSOR_QOS = qos_profile_sensor_data
+#: Detector outputs: reliable, volatile.
+RESULT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                        reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.VOLATILE)
+#: Alarms: reliable and latched, so a late subscriber (the speech output) hears the
+#: current state at once.
+ALARM_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                       reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+def _descriptor(f: dataclasses.Field) -> ParameterDescriptor:
+    md = f.metadata
+    desc = ParameterDescriptor(description=md.get('description', ''),
+                               read_only=bool(md.get('read_only', False)))
+    if 'range' in md:
+        lo, hi = md['range']
+        if isinstance(f.default, int) and not isinstance(f.default, bool):
+            desc.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=0)]
+        else:
+            desc.floating_point_range = [
+                FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
+    if 'choices' in md:
+        desc.additional_constraints = 'one of: ' + ', '.join(map(str, md['choices']))
+    if isinstance(f.default, tuple):
+        first = f.default[0] if f.default else md.get('item_type', '')
+        desc.type = {str: ParameterType.PARAMETER_STRING_ARRAY,
+                     float: ParameterType.PARAMETER_DOUBLE_ARRAY,
+                     int: ParameterType.PARAMETER_INTEGER_ARRAY}.get(
+                         type(first) if f.default else first,
+                         ParameterType.PARAMETER_STRING_ARRAY)
+        desc.dynamic_typing = False
+    return desc
+
+
+def _ros_default(value: Any) -> Any:
+    return list(value) if isinstance(value, tuple) else value
+
+
+def _from_ros(f: dataclasses.Field, value: Any) -> Any:
+    if isinstance(f.default, tuple):
+        return tuple(value) if value is not None else ()
+    if isinstance(f.default, float) and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    return value
+
+
+def declare_config(node: Node, cls: type[T], prefix: str = '',
+                   on_change: Callable[[T], None] | None = None) -> T:
+    """Declare every field of settings dataclass `cls` as a ROS parameter and build it.
+
+    Each parameter gets a descriptor with the field's description and range, so
+    `ros2 param describe` explains it and rclpy rejects values out of range. Values
+    that pass the descriptor but fail the dataclass's own checks are rejected too.
+
+    Args:
+        node: the node that owns the parameters.
+        cls: a frozen dataclass validated in `__post_init__` (see core.config).
+        prefix: parameter name prefix, e.g. 'gpod.' (empty for none).
+        on_change: if given, parameters may change at run time; it receives the new
+            validated settings. Without it, changes are refused.
+    Returns:
+        The settings built from the declared (YAML or command-line) values.
+    Raises:
+        ValueError: the start-up values are out of range (the message names the field).
+    """
+    fields = {prefix + f.name: f for f in dataclasses.fields(cls)}
+    for name, f in fields.items():
+        node.declare_parameter(name, _ros_default(f.default), _descriptor(f))
+    values = {f.name: _from_ros(f, node.get_parameter(name).value) for name, f in fields.items()}
+    config = cls(**values)
+    state = {'config': config}
+
+    def _on_set(params) -> SetParametersResult:
+        mine = [p for p in params if p.name in fields]
+        if not mine:
+            return SetParametersResult(successful=True)
+        if on_change is None:
+            return SetParametersResult(
+                successful=False, reason='these settings are fixed at start-up')
+        new = dataclasses.asdict(state['config'])
+        for p in mine:
+            new[fields[p.name].name] = _from_ros(fields[p.name], p.value)
+        try:
+            cfg = cls(**new)
+        except (ValueError, TypeError) as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        state['config'] = cfg
+        on_change(cfg)
+        return SetParametersResult(successful=True)
+
+    node.add_on_set_parameters_callback(_on_set)
+    return config
+
+
+class Diagnostics:
+    """Publishes one DiagnosticStatus of a node on /diagnostics, at most `period` apart.
+
+    Call `update(level, message, **values)` whenever the state changes; the status is
+    republished periodically so a monitor sees the node is alive.
+    """
+
+    OK = 0
+    WARN = 1
+    ERROR = 2
+    STALE = 3
+
+    def __init__(self, node: Node, name: str, hardware_id: str = '', period: float = 1.0):
+        self._node = node
+        self._pub = node.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._status = DiagnosticStatus(name=name, hardware_id=hardware_id,
+                                        level=bytes([self.STALE]), message='starting')
+        self._timer = node.create_timer(period, self.publish)
+
+    @property
+    def level(self) -> int:
+        """Current level as an int (0 OK, 1 WARN, 2 ERROR, 3 STALE)."""
+        return self._status.level[0]
+
+    def update(self, level: int, message: str, publish: bool = False, **values: Any) -> None:
+        """Set the status (level 0..3); publish at once if `publish` or it changed."""
+        level = level[0] if isinstance(level, bytes) else int(level)
+        changed = level != self.level or message != self._status.message
+        self._status.level = bytes([level])
+        self._status.message = message
+        self._status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
+        if publish or changed:
+            self.publish()
+
+    def publish(self) -> None:
+        msg = DiagnosticArray()
+        msg.header.stamp = self._node.get_clock().now().to_msg()
+        msg.status = [self._status]
+        self._pub.publish(msg)
+
+
+def run_node(factory: Callable[..., Node], args: list[str] | None = None, **kwargs: Any) -> None:
+    """The Jazzy main: init, spin, exit cleanly on Ctrl-C or external shutdown."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = factory(**kwargs)
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
