@@ -31,9 +31,9 @@ SENSOR_QOS = qos_profile_sensor_data
 RESULT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
                         reliability=ReliabilityPolicy.RELIABLE,
                         durability=DurabilityPolicy.VOLATILE)
-#: Alarms: reliable and latched, so a late subscriber (the speech output) hears the
-#: current state at once.
-ALARM_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+#: Alarms: reliable and latched with depth 1, so a late subscriber (the speech output)
+#: hears the current state at once, and never a backlog of stale alarms.
+ALARM_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                        reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
@@ -147,7 +147,11 @@ class Diagnostics:
         return self._status.level[0]
 
     def update(self, level: int, message: str, publish: bool = False, **values: Any) -> None:
-        """Set the status (level 0..3); publish at once if `publish` or it changed."""
+        """Set the status (level 0..3); publish at once if `publish` or it changed.
+
+        `values` become the status's key/value pairs; they cannot be named `level`,
+        `message` or `publish`.
+        """
         level = level[0] if isinstance(level, bytes) else int(level)
         changed = level != self.level or message != self._status.message
         self._status.level = bytes([level])

@@ -1,0 +1,430 @@
+"""What to tell the wearer: obstacle lists in, spoken alarms out (no ROS here).
+
+The alarm logic turns the detector's obstacles (one list per stereo pair) into a small
+number of plain-speech announcements for a blind pedestrian:
+
+* **Levels** (same numbers as ``asmonc_vision_msgs/Alarm``): CLEAR 0, CAUTION 1,
+  WARNING 2, STOP 3, FAULT 4. FAULT means "the system cannot see: do not trust
+  silence" and outranks every other level.
+* **Walking corridor**: only obstacles with ``|range * sin(bearing)| <= corridor_half_width``,
+  ``range * cos(bearing) >= 0`` and ``range <= max_range`` count, and only if
+  ``|height| >= min_height`` (a drop, negative height, counts by its depth) and
+  ``confidence >= min_confidence``. The nearest such obstacle is the *target*.
+* **Level from the target's range** r: STOP if r <= stop_range, WARNING if
+  r <= warning_range, CAUTION if r <= caution_range, else CLEAR.
+* **Going up is immediate** (a nearer obstacle is announced on the first frame that
+  shows it). **Going down is slow**: to keep a level it already holds, the range may
+  exceed that level's threshold by ``hysteresis`` metres, and a lower level must then
+  persist for ``hold_time`` seconds before the alarm steps down. While the ground plane
+  is LOST (but not yet for ``timeout``) the alarm never steps down: an empty obstacle
+  list then is not evidence that the path is clear.
+* **Announcements** (``Decision``) are made when the level changes, when the target
+  changes (a different non-zero track id, at most once per ``hold_time``), and every
+  ``repeat_period`` seconds while the level is not CLEAR.
+* **Faults**: no obstacle list for longer than ``timeout`` seconds (measured on the
+  caller's clock, the time messages *arrive*), or the ground plane LOST for longer than
+  ``timeout``, or INITIALISING for longer than ``startup_grace``, gives FAULT, repeated
+  every ``repeat_period``. At start, and when the detector (re)initialises its ground
+  plane, FAULT "starting up, hold still" is announced once. When data return, the real
+  level is announced at once (CLEAR as "all clear").
+
+All times are seconds on one monotonic clock chosen by the caller (the node uses the
+steady clock), passed in as ``t``, so the logic is deterministic under test.
+"""
+from __future__ import annotations
+
+import dataclasses
+import enum
+import math
+from dataclasses import dataclass
+from typing import Iterable, Sequence
+
+from asmonc_vision.core.config import check_fields, param
+
+
+class AlarmLevel(enum.IntEnum):
+    """Alarm levels; the values equal the constants of asmonc_vision_msgs/Alarm."""
+
+    CLEAR = 0
+    CAUTION = 1
+    WARNING = 2
+    STOP = 3
+    FAULT = 4
+
+
+class GroundStatus(enum.IntEnum):
+    """Ground-plane status; the values equal the constants of asmonc_vision_msgs/GroundPlane."""
+
+    INITIALISING = 0
+    TRACKING = 1
+    LOST = 2
+
+
+#: Plain-speech texts of the faults (FAULT level).
+TEXT_STARTING = 'starting up, hold still'
+TEXT_NO_DATA = 'fault, obstacle detection has stopped, walk with care'
+TEXT_GROUND_LOST = 'fault, cannot see the ground, walk with care'
+TEXT_CLEAR = 'all clear'
+
+
+@dataclass(frozen=True)
+class AlarmConfig:
+    """Settings of the alarm logic (ROS parameters of the alarm node)."""
+
+    corridor_half_width: float = param(
+        0.5, 'half width of the walking corridor, metres: obstacles whose lateral offset '
+        '|range*sin(bearing)| is larger are ignored', range=(0.05, 5.0))
+    max_range: float = param(
+        5.0, 'obstacles farther than this along the ground are ignored, metres',
+        range=(0.5, 50.0))
+    stop_range: float = param(
+        1.2, 'STOP when the nearest obstacle in the corridor is this near or nearer, metres',
+        range=(0.1, 20.0))
+    warning_range: float = param(
+        2.5, 'WARNING when the nearest obstacle is this near or nearer, metres',
+        range=(0.1, 30.0))
+    caution_range: float = param(
+        5.0, 'CAUTION when the nearest obstacle is this near or nearer, metres '
+        '(must not exceed max_range)', range=(0.1, 50.0))
+    hysteresis: float = param(
+        0.3, 'a level already held is kept until the range exceeds its threshold by this '
+        'much, metres', range=(0.0, 5.0))
+    hold_time: float = param(
+        1.0, 'a lower level must persist this long before the alarm steps down, seconds '
+        '(going up is always immediate)', range=(0.0, 30.0))
+    min_height: float = param(
+        0.05, 'obstacles lower than this are ignored, metres; drops (negative height) '
+        'deeper than this alarm too', range=(0.0, 2.0))
+    min_confidence: float = param(
+        0.3, 'obstacles with a lower detector confidence are ignored (0..1)',
+        range=(0.0, 1.0))
+    timeout: float = param(
+        1.0, 'FAULT when no obstacle list has arrived for this long, or the ground plane '
+        'has been LOST this long, seconds', range=(0.05, 60.0))
+    startup_grace: float = param(
+        10.0, 'at start (or while the ground plane initialises) FAULT says "starting up" '
+        'for at most this long before it says the system has stopped, seconds',
+        range=(0.0, 300.0))
+    repeat_period: float = param(
+        2.0, 'a non-clear alarm (including FAULT) is announced again this often, seconds',
+        range=(0.2, 60.0))
+    ahead_angle_deg: float = param(
+        10.0, 'bearings within +-this angle are spoken as "ahead", degrees',
+        range=(0.0, 90.0))
+    side_angle_deg: float = param(
+        30.0, 'bearings within +-this angle (and beyond ahead_angle_deg) are spoken as '
+        '"slightly left/right"; beyond as "left/right", degrees', range=(0.0, 90.0))
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+        if not self.stop_range < self.warning_range:
+            raise ValueError(f'AlarmConfig.stop_range = {self.stop_range} must be less than '
+                             f'warning_range = {self.warning_range} (metres)')
+        if not self.warning_range <= self.caution_range:
+            raise ValueError(f'AlarmConfig.warning_range = {self.warning_range} must not '
+                             f'exceed caution_range = {self.caution_range} (metres)')
+        if not self.caution_range <= self.max_range:
+            raise ValueError(f'AlarmConfig.caution_range = {self.caution_range} must not '
+                             f'exceed max_range = {self.max_range} (metres)')
+        if not self.ahead_angle_deg <= self.side_angle_deg:
+            raise ValueError(f'AlarmConfig.ahead_angle_deg = {self.ahead_angle_deg} must not '
+                             f'exceed side_angle_deg = {self.side_angle_deg} (degrees)')
+
+
+@dataclass(frozen=True)
+class ObstacleInfo:
+    """One obstacle as the alarm needs it (from asmonc_vision_msgs/Obstacle).
+
+    Attributes:
+        id: track id, 0 if untracked.
+        range: metres along the ground from the point below the cameras to the foot.
+        bearing: radians in the ground plane from the walking direction, positive left.
+        height: metres above the ground; negative for a drop (step down, kerb, hole).
+        confidence: 0..1.
+    """
+
+    id: int
+    range: float
+    bearing: float
+    height: float
+    confidence: float = 1.0
+
+    @property
+    def lateral(self) -> float:
+        """Offset from the walking line, metres, positive to the left."""
+        return self.range * math.sin(self.bearing)
+
+    @property
+    def forward(self) -> float:
+        """Distance along the walking direction, metres."""
+        return self.range * math.cos(self.bearing)
+
+    @property
+    def is_drop(self) -> bool:
+        return self.height < 0.0
+
+
+@dataclass(frozen=True)
+class Decision:
+    """An announcement: publish it as an Alarm and speak its text.
+
+    Attributes:
+        level: the alarm level.
+        text: plain speech for the wearer.
+        obstacle_id: the target's track id (0 if none or untracked).
+        range: the target's range, metres (0 if none).
+        bearing: the target's bearing, radians, positive left (0 if none).
+        t: the caller's time of the decision, seconds.
+        repeat: True when this re-announces an unchanged state.
+    """
+
+    level: AlarmLevel
+    text: str
+    obstacle_id: int = 0
+    range: float = 0.0
+    bearing: float = 0.0
+    t: float = 0.0
+    repeat: bool = False
+
+
+# --- wording -------------------------------------------------------------------------
+
+def range_words(r: float) -> str:
+    """A range in metres as spoken: rounded to 0.5 m, at least "half a metre".
+
+    >>> range_words(1.1), range_words(2.3), range_words(0.2), range_words(1.6)
+    ('1 metre', '2.5 metres', 'half a metre', '1.5 metres')
+    """
+    half = max(1, int(math.floor(max(r, 0.0) * 2.0 + 0.5)))  # in half metres
+    if half == 1:
+        return 'half a metre'
+    if half == 2:
+        return '1 metre'
+    value = half / 2.0
+    return f'{value:g} metres'
+
+
+def direction_words(bearing: float, ahead_deg: float = 10.0, side_deg: float = 30.0) -> str:
+    """A bearing (radians, positive left) as "ahead", "slightly left", "left", ..."""
+    deg = math.degrees(bearing)
+    if abs(deg) <= ahead_deg:
+        return 'ahead'
+    side = 'left' if deg > 0 else 'right'
+    return f'slightly {side}' if abs(deg) <= side_deg else side
+
+
+def obstacle_text(level: AlarmLevel, ob: ObstacleInfo, ahead_deg: float = 10.0,
+                  side_deg: float = 30.0) -> str:
+    """The spoken text for an obstacle alarm.
+
+    Examples: "stop, obstacle, 1 metre, ahead"; "obstacle, 2 metres, slightly left";
+    "drop ahead, 3 metres"; "stop, drop slightly right, 1 metre".
+    """
+    where = direction_words(ob.bearing, ahead_deg, side_deg)
+    dist = range_words(ob.range)
+    body = f'drop {where}, {dist}' if ob.is_drop else f'obstacle, {dist}, {where}'
+    return f'stop, {body}' if level == AlarmLevel.STOP else body
+
+
+# --- the logic -----------------------------------------------------------------------
+
+class AlarmLogic:
+    """The alarm state machine. Not thread-safe: call it from one thread (or lock).
+
+    Feed it with ``update`` (each obstacle list), ``ground_status`` (each ground-plane
+    status) and ``check_timeout`` (periodically, e.g. at 10 Hz). Each returns a
+    ``Decision`` to announce, or None. ``current`` is the state last announced.
+    """
+
+    def __init__(self, config: AlarmConfig | None = None, t0: float = 0.0):
+        """Start in FAULT "starting up, hold still" at time t0 (seconds)."""
+        self._cfg = config or AlarmConfig()
+        self._t0 = float(t0)
+        self._last_obstacles_t: float | None = None
+        self._ground: GroundStatus | None = None
+        self._ground_since = float(t0)
+        self._fault: str | None = 'starting'
+        self._below_since: float | None = None
+        self._current = Decision(AlarmLevel.FAULT, TEXT_STARTING, t=float(t0))
+        self._last_announce_t = float(t0)
+
+    # -- accessors
+    @property
+    def config(self) -> AlarmConfig:
+        return self._cfg
+
+    @property
+    def current(self) -> Decision:
+        """The decision last announced (the initial FAULT before any other)."""
+        return self._current
+
+    @property
+    def fault(self) -> str | None:
+        """None, or why the level is FAULT: 'starting', 'no_data' or 'ground_lost'."""
+        return self._fault if self._current.level == AlarmLevel.FAULT else None
+
+    def set_config(self, config: AlarmConfig) -> None:
+        """Change the settings, keeping the state (used by parameter updates)."""
+        self._cfg = config
+
+    def last_obstacles_age(self, t: float) -> float | None:
+        """Seconds since the last obstacle list, None if none yet."""
+        return None if self._last_obstacles_t is None else t - self._last_obstacles_t
+
+    # -- selection
+    def in_corridor(self, ob: ObstacleInfo, margin: float = 0.0) -> bool:
+        """Whether an obstacle counts: in the corridor, near enough, high/deep enough,
+        confident enough. ``margin`` (m) extends max_range (hysteresis)."""
+        c = self._cfg
+        return (math.isfinite(ob.range) and math.isfinite(ob.bearing)
+                and math.isfinite(ob.height) and ob.range >= 0.0
+                and abs(ob.lateral) <= c.corridor_half_width
+                and ob.forward >= 0.0
+                and ob.range <= c.max_range + margin
+                and abs(ob.height) >= c.min_height
+                and ob.confidence >= c.min_confidence)
+
+    def target(self, obstacles: Iterable[ObstacleInfo]) -> ObstacleInfo | None:
+        """The nearest obstacle that counts (see ``in_corridor``), or None."""
+        held = self._current.level not in (AlarmLevel.CLEAR, AlarmLevel.FAULT)
+        margin = self._cfg.hysteresis if held else 0.0
+        best = None
+        for ob in obstacles:
+            if self.in_corridor(ob, margin) and (best is None or ob.range < best.range):
+                best = ob
+        return best
+
+    def level_for(self, r: float | None, held: AlarmLevel = AlarmLevel.CLEAR) -> AlarmLevel:
+        """Level for a target at range r (m; None for no target), given the level held.
+
+        A level at or below ``held`` (FAULT counts as none) is kept up to its threshold
+        plus the hysteresis.
+        """
+        if r is None:
+            return AlarmLevel.CLEAR
+        c = self._cfg
+        held = AlarmLevel.CLEAR if held == AlarmLevel.FAULT else held
+        for level, threshold in ((AlarmLevel.STOP, c.stop_range),
+                                 (AlarmLevel.WARNING, c.warning_range),
+                                 (AlarmLevel.CAUTION, c.caution_range)):
+            margin = c.hysteresis if held >= level else 0.0
+            if r <= threshold + margin:
+                return level
+        return AlarmLevel.CLEAR
+
+    # -- inputs
+    def update(self, t: float, obstacles: Sequence[ObstacleInfo]) -> Decision | None:
+        """A new obstacle list arrived at time t (s). Returns an announcement or None."""
+        t = float(t)
+        self._last_obstacles_t = t
+        fault = self._fault_reason(t)
+        if fault is not None:
+            return self._announce_fault(t, fault)
+
+        tgt = self.target(obstacles)
+        cur = self._current
+        if cur.level == AlarmLevel.FAULT:
+            # Data are back: announce the real level at once, without memory.
+            level = self.level_for(tgt.range if tgt else None)
+            self._below_since = None
+            return self._announce(self._decide(t, level, tgt))
+
+        level = self.level_for(tgt.range if tgt else None, cur.level)
+        if level > cur.level:
+            self._below_since = None
+            return self._announce(self._decide(t, level, tgt))
+        if level < cur.level:
+            if self._ground == GroundStatus.LOST:
+                self._below_since = None  # no evidence the path is clear: hold
+            else:
+                if self._below_since is None:
+                    self._below_since = t
+                if t - self._below_since >= self._cfg.hold_time:
+                    self._below_since = None
+                    return self._announce(self._decide(t, level, tgt))
+            # Held at the current level: describe the nearest target if there is one.
+            return self._maybe_repeat(t, tgt)
+        self._below_since = None
+        if (tgt is not None and level != AlarmLevel.CLEAR and tgt.id != 0
+                and cur.obstacle_id != 0 and tgt.id != cur.obstacle_id
+                and t - self._last_announce_t >= self._cfg.hold_time):
+            return self._announce(self._decide(t, level, tgt))
+        return self._maybe_repeat(t, tgt)
+
+    def ground_status(self, t: float, status: int) -> Decision | None:
+        """The detector's ground-plane status (GroundStatus value) at time t (s).
+
+        INITIALISING: FAULT "starting up, hold still", said once on entering it (obstacle
+        lists then do not lower the level; after ``startup_grace`` it becomes FAULT
+        "cannot see the ground", repeated). LOST: the level is held (never lowered); after
+        ``timeout`` s FAULT "cannot see the ground". TRACKING: the next obstacle list
+        recovers from such a FAULT.
+        """
+        t = float(t)
+        status = GroundStatus(int(status))
+        if status != self._ground:
+            self._ground = status
+            self._ground_since = t
+        fault = self._fault_reason(t)
+        if fault is not None:
+            return self._announce_fault(t, fault)
+        return None
+
+    def check_timeout(self, t: float) -> Decision | None:
+        """Call periodically: FAULT when obstacle lists stopped or the ground is lost."""
+        t = float(t)
+        fault = self._fault_reason(t)
+        if fault is not None:
+            return self._announce_fault(t, fault)
+        return None
+
+    # -- internals
+    def _fault_reason(self, t: float) -> str | None:
+        c = self._cfg
+        if self._last_obstacles_t is None:
+            return 'starting' if t - self._t0 <= c.startup_grace else 'no_data'
+        if t - self._last_obstacles_t > c.timeout:
+            return 'no_data'
+        if self._ground == GroundStatus.INITIALISING:
+            return 'starting' if t - self._ground_since <= c.startup_grace else 'ground_lost'
+        if self._ground == GroundStatus.LOST and t - self._ground_since > c.timeout:
+            return 'ground_lost'
+        return None
+
+    def _announce_fault(self, t: float, reason: str) -> Decision | None:
+        cur = self._current
+        if cur.level == AlarmLevel.FAULT and self._fault == reason:
+            # "starting up" is said once; real faults are repeated.
+            if reason != 'starting' and t - self._last_announce_t >= self._cfg.repeat_period:
+                return self._announce(dataclasses.replace(cur, t=t, repeat=True))
+            return None
+        self._fault = reason
+        self._below_since = None
+        text = {'starting': TEXT_STARTING, 'no_data': TEXT_NO_DATA,
+                'ground_lost': TEXT_GROUND_LOST}[reason]
+        return self._announce(Decision(AlarmLevel.FAULT, text, t=t))
+
+    def _decide(self, t: float, level: AlarmLevel, tgt: ObstacleInfo | None,
+                repeat: bool = False) -> Decision:
+        if level == AlarmLevel.CLEAR or tgt is None:
+            return Decision(level, TEXT_CLEAR if level == AlarmLevel.CLEAR else
+                            self._current.text, t=t, repeat=repeat)
+        c = self._cfg
+        return Decision(level, obstacle_text(level, tgt, c.ahead_angle_deg, c.side_angle_deg),
+                        obstacle_id=int(tgt.id), range=float(tgt.range),
+                        bearing=float(tgt.bearing), t=t, repeat=repeat)
+
+    def _maybe_repeat(self, t: float, tgt: ObstacleInfo | None) -> Decision | None:
+        cur = self._current
+        if cur.level == AlarmLevel.CLEAR or t - self._last_announce_t < self._cfg.repeat_period:
+            return None
+        if tgt is None:
+            return self._announce(dataclasses.replace(cur, t=t, repeat=True))
+        return self._announce(self._decide(t, cur.level, tgt, repeat=True))
+
+    def _announce(self, d: Decision) -> Decision:
+        self._current = d
+        self._last_announce_t = d.t
+        if d.level != AlarmLevel.FAULT:
+            self._fault = None
+        return d

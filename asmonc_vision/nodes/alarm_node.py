@@ -1,0 +1,195 @@
+"""alarm_node: /obstacles + /ground_plane in, /alarms (what the wearer is told) out.
+
+Subscribes:
+    /obstacles (asmonc_vision_msgs/ObstacleArray, RELIABLE)
+    /ground_plane (asmonc_vision_msgs/GroundPlane, RELIABLE)
+Publishes:
+    /alarms (asmonc_vision_msgs/Alarm, RELIABLE + TRANSIENT_LOCAL: a late subscriber
+        hears the current state at once)
+    /diagnostics
+
+The decisions are made by ``core.alarm.AlarmLogic`` on the node's *steady* clock (time
+of arrival), never on message stamps or sim time, so a stalled pipeline gives FAULT
+even when /clock stops too. A FAULT "starting up" is published at start: silence is
+never "all clear". Parameters: the fields of ``core.alarm.AlarmConfig`` (changeable at
+run time).
+"""
+from __future__ import annotations
+
+import threading
+
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from std_msgs.msg import Header
+
+from asmonc_vision.core.alarm import AlarmConfig, AlarmLevel, AlarmLogic, Decision, ObstacleInfo
+from asmonc_vision.nodes.common import (ALARM_QOS, RESULT_QOS, Diagnostics, declare_config,
+                                        run_node)
+from asmonc_vision.nodes.conversions import stamp_to_ns
+from asmonc_vision_msgs.msg import Alarm, GroundPlane, ObstacleArray
+
+#: frame id of alarms made before any obstacle list was seen
+DEFAULT_FRAME = 'stereo_left_optical_frame'
+#: period of the timeout check on the steady clock, seconds
+CHECK_PERIOD = 0.1
+#: a stamp this much older than the last one is a restarted replay, not a late
+#: message: it is accepted (and the order check starts again), seconds
+CLOCK_RESET_JUMP = 5.0
+
+
+def obstacles_from_msg(msg: ObstacleArray) -> list[ObstacleInfo]:
+    """The alarm's view of an ObstacleArray."""
+    return [ObstacleInfo(id=int(o.id), range=float(o.range), bearing=float(o.bearing),
+                         height=float(o.height), confidence=float(o.confidence))
+            for o in msg.obstacles]
+
+
+class _StampOrder:
+    """Rejects stamps older than the last accepted one (a big jump back resets)."""
+
+    def __init__(self) -> None:
+        self.last_ns: int | None = None
+        self.rejected = 0
+
+    def accept(self, ns: int) -> tuple[bool, bool]:
+        """(accepted, was_reset)."""
+        if self.last_ns is None or ns >= self.last_ns:
+            self.last_ns = ns
+            return True, False
+        if self.last_ns - ns > CLOCK_RESET_JUMP * 1e9:
+            self.last_ns = ns
+            return True, True
+        self.rejected += 1
+        return False, False
+
+
+class AlarmNode(Node):
+    """Turns obstacle lists into spoken alarms (see module doc)."""
+
+    def __init__(self, **kwargs):
+        super().__init__('alarm_node', **kwargs)
+        self._lock = threading.Lock()
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.config: AlarmConfig = declare_config(self, AlarmConfig, on_change=self._on_config)
+        self._logic = AlarmLogic(self.config, t0=self._now())
+        self._frame_id = DEFAULT_FRAME
+        self._obstacle_order = _StampOrder()
+        self._ground_order = _StampOrder()
+        self._messages = 0
+
+        self._pub = self.create_publisher(Alarm, '/alarms', ALARM_QOS)
+        self._diag = Diagnostics(self, 'alarm_node')
+        self.create_subscription(ObstacleArray, '/obstacles', self._on_obstacles, RESULT_QOS)
+        self.create_subscription(GroundPlane, '/ground_plane', self._on_ground, RESULT_QOS)
+        self._timer = self.create_timer(CHECK_PERIOD, self._on_timer, clock=self._steady)
+
+        # Silence at start must not mean "all clear".
+        self._publish(self._logic.current, None)
+        self.get_logger().info(
+            f'alarm node up: corridor +-{self.config.corridor_half_width} m, STOP <= '
+            f'{self.config.stop_range} m, WARNING <= {self.config.warning_range} m, CAUTION '
+            f'<= {self.config.caution_range} m, FAULT after {self.config.timeout} s of silence')
+
+    # -- helpers
+    def _now(self) -> float:
+        return self._steady.now().nanoseconds * 1e-9
+
+    def _on_config(self, cfg: AlarmConfig) -> None:
+        with self._lock:
+            self.config = cfg
+            self._logic.set_config(cfg)
+        self.get_logger().info(f'alarm settings changed: {cfg}')
+
+    def _publish(self, d: Decision, header: Header | None) -> None:
+        msg = Alarm()
+        if header is not None:
+            msg.header.stamp = header.stamp
+            msg.header.frame_id = header.frame_id or self._frame_id
+        else:
+            msg.header.stamp = self.get_clock().now().to_msg()
+            msg.header.frame_id = self._frame_id
+        msg.level = int(d.level)
+        msg.obstacle_id = int(d.obstacle_id) & 0xFFFFFFFF
+        msg.range = float(d.range)
+        msg.bearing = float(d.bearing)
+        msg.text = d.text
+        self._pub.publish(msg)
+        log = self.get_logger()
+        line = f'alarm {AlarmLevel(d.level).name}: "{d.text}"'
+        if d.repeat:
+            log.debug(line)
+        elif d.level == AlarmLevel.FAULT:
+            log.warning(line)
+        else:
+            log.info(line)
+        self._update_diagnostics()
+
+    def _update_diagnostics(self) -> None:
+        cur = self._logic.current
+        age = self._logic.last_obstacles_age(self._now())
+        values = dict(alarm_level=AlarmLevel(cur.level).name, alarm_text=cur.text,
+                      obstacle_lists=self._messages,
+                      last_obstacles_age_s='never' if age is None else f'{age:.2f}',
+                      out_of_order=self._obstacle_order.rejected + self._ground_order.rejected)
+        fault = self._logic.fault
+        if fault is None:
+            self._diag.update(Diagnostics.OK, f'alarm {AlarmLevel(cur.level).name}', **values)
+        elif fault == 'starting':
+            self._diag.update(Diagnostics.WARN, 'starting up: no trusted obstacle data yet',
+                              **values)
+        elif fault == 'no_data':
+            self._diag.update(Diagnostics.ERROR, 'no /obstacles within the timeout', **values)
+        else:
+            self._diag.update(Diagnostics.ERROR, 'ground plane lost', **values)
+
+    # -- callbacks
+    def _on_obstacles(self, msg: ObstacleArray) -> None:
+        ok, reset = self._obstacle_order.accept(stamp_to_ns(msg.header.stamp))
+        if not ok:
+            self.get_logger().warning(
+                '/obstacles stamp older than the last one: message ignored '
+                f'({self._obstacle_order.rejected} so far)', throttle_duration_sec=2.0)
+            return
+        if reset:
+            self.get_logger().info('/obstacles stamps jumped back (replay restarted?): '
+                                   'accepting the new time line')
+        obstacles = obstacles_from_msg(msg)
+        with self._lock:
+            self._messages += 1
+            if msg.header.frame_id:
+                self._frame_id = msg.header.frame_id
+            d = self._logic.update(self._now(), obstacles)
+            if d is not None:
+                self._publish(d, msg.header)
+
+    def _on_ground(self, msg: GroundPlane) -> None:
+        ok, _ = self._ground_order.accept(stamp_to_ns(msg.header.stamp))
+        if not ok:
+            self.get_logger().warning('/ground_plane stamp older than the last one: ignored',
+                                      throttle_duration_sec=2.0)
+            return
+        if msg.status > 2:
+            self.get_logger().warning(
+                f'/ground_plane has unknown status {msg.status}: ignored',
+                throttle_duration_sec=2.0)
+            return
+        with self._lock:
+            d = self._logic.ground_status(self._now(), msg.status)
+            if d is not None:
+                self._publish(d, msg.header)
+
+    def _on_timer(self) -> None:
+        with self._lock:
+            d = self._logic.check_timeout(self._now())
+            if d is not None:
+                self._publish(d, None)
+            else:
+                self._update_diagnostics()  # fresh values for the periodic status
+
+
+def main(args=None):
+    run_node(AlarmNode, args)
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,154 @@
+"""alarm_node over real topics, in-process: /obstacles -> node -> /alarms."""
+from __future__ import annotations
+
+import os
+import time
+
+import pytest
+
+os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+
+import rclpy  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.node import Node  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+
+from asmonc_vision.core.alarm import TEXT_CLEAR, TEXT_NO_DATA, TEXT_STARTING  # noqa: E402
+from asmonc_vision.nodes.alarm_node import AlarmNode  # noqa: E402
+from asmonc_vision.nodes.common import ALARM_QOS, RESULT_QOS  # noqa: E402
+from asmonc_vision_msgs.msg import Alarm, Obstacle, ObstacleArray  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+
+FRAME = 'stereo_left_optical_frame'
+#: a generous bound so a broken node fails the test instead of hanging it (not a speed test)
+DEADLINE = 15.0
+
+
+def _domain_id(offset: int) -> int:
+    # 0..101 are safe DDS domain ids on Linux; keep clear of 0 (the default)
+    return 1 + (os.getpid() * 3 + offset) % 100
+
+
+@pytest.fixture
+def ros():
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=_domain_id(11))
+    ex = SingleThreadedExecutor(context=ctx)
+    nodes = []
+
+    def add(node):
+        nodes.append(node)
+        ex.add_node(node)
+        return node
+
+    def spin_until(pred, what, deadline=DEADLINE, each=None):
+        """Spin until pred(); call each() every 50 ms meanwhile (a 20 Hz detector)."""
+        end = time.monotonic() + deadline
+        next_each = time.monotonic()
+        while time.monotonic() < end:
+            if each is not None and time.monotonic() >= next_each:
+                each()
+                next_each = time.monotonic() + 0.05
+            ex.spin_once(timeout_sec=0.01)
+            if pred():
+                return
+        raise AssertionError(f'timed out waiting for {what}')
+
+    yield ctx, add, spin_until
+    for n in nodes:
+        ex.remove_node(n)
+        n.destroy_node()
+    ex.shutdown()
+    rclpy.try_shutdown(context=ctx)
+
+
+def _array(stamp_ns: int, ranges, heights=None) -> ObstacleArray:
+    msg = ObstacleArray()
+    msg.header.frame_id = FRAME
+    msg.header.stamp.sec = stamp_ns // 1_000_000_000
+    msg.header.stamp.nanosec = stamp_ns % 1_000_000_000
+    for k, r in enumerate(ranges):
+        o = Obstacle()
+        o.id = k + 1
+        o.range = float(r)
+        o.bearing = 0.0
+        o.height = 0.4 if heights is None else heights[k]
+        o.confidence = 0.9
+        msg.obstacles.append(o)
+    return msg
+
+
+def test_alarms_follow_obstacles_fault_on_silence_and_latch(ros):
+    ctx, add, spin_until = ros
+    probe = add(Node('alarm_probe', context=ctx))
+    alarms: list[Alarm] = []
+    diags: list = []
+    probe.create_subscription(Alarm, '/alarms', alarms.append, ALARM_QOS)
+    probe.create_subscription(
+        DiagnosticArray, '/diagnostics',
+        lambda m: diags.extend(s for s in m.status if s.name == 'alarm_node'), 10)
+    pub = probe.create_publisher(ObstacleArray, '/obstacles', RESULT_QOS)
+
+    node = add(AlarmNode(context=ctx, parameter_overrides=[
+        Parameter('timeout', value=0.5), Parameter('hold_time', value=0.0),
+        Parameter('startup_grace', value=60.0)]))
+
+    # the node says "starting up" before any data: silence is never "all clear"
+    spin_until(lambda: alarms, 'the start-up alarm')
+    assert alarms[0].level == Alarm.FAULT and alarms[0].text == TEXT_STARTING
+    spin_until(lambda: pub.get_subscription_count() > 0, 'the node to subscribe')
+
+    stamp = [10_000_000_000]
+
+    def send(ranges):
+        def each():
+            stamp[0] += 50_000_000
+            pub.publish(_array(stamp[0], ranges))
+        return each
+
+    for r, level, text in [(4.0, Alarm.CAUTION, 'obstacle, 4 metres, ahead'),
+                           (2.0, Alarm.WARNING, 'obstacle, 2 metres, ahead'),
+                           (1.0, Alarm.STOP, 'stop, obstacle, 1 metre, ahead')]:
+        spin_until(lambda: alarms[-1].level == level, f'level {level}', each=send([r]))
+        a = alarms[-1]
+        assert a.text == text
+        assert a.obstacle_id == 1 and a.range == pytest.approx(r)
+        assert a.header.frame_id == FRAME
+        assert a.header.stamp.sec * 10**9 + a.header.stamp.nanosec <= stamp[0]
+        assert a.header.stamp.sec >= 10
+
+    # back to CAUTION (hold_time 0), then an older stamp: it is ignored, so the STOP
+    # obstacle it carries must never be announced before the newer WARNING one
+    spin_until(lambda: alarms[-1].level == Alarm.CAUTION, 'CAUTION', each=send([4.0]))
+    n_before = len(alarms)
+    pub.publish(_array(stamp[0] - 1_000_000_000, [0.5]))  # 1 s older: ignored
+    spin_until(lambda: node._obstacle_order.rejected == 1, 'the old message to arrive')
+    spin_until(lambda: any(a.level == Alarm.WARNING for a in alarms[n_before:]),
+               'WARNING after the ignored message', each=send([2.0]))
+    assert all(a.level != Alarm.STOP for a in alarms[n_before:])
+
+    # stop publishing: FAULT, with an ERROR diagnostic
+    spin_until(lambda: alarms[-1].level == Alarm.FAULT, 'FAULT on silence')
+    assert alarms[-1].text == TEXT_NO_DATA
+    spin_until(lambda: any(d.level == b'\x02' for d in diags), 'an ERROR diagnostic')
+
+    # data back, nothing in the way: all clear
+    spin_until(lambda: alarms[-1].level == Alarm.CLEAR, 'recovery', each=send([]))
+    assert alarms[-1].text == TEXT_CLEAR
+    assert sum(a.level == Alarm.CLEAR for a in alarms) == 1
+
+    # a late-joining (TRANSIENT_LOCAL) subscriber hears the current alarm at once
+    late: list[Alarm] = []
+    late_node = add(Node('alarm_late_listener', context=ctx))
+    late_node.create_subscription(Alarm, '/alarms', late.append, ALARM_QOS)
+    spin_until(lambda: late and late[-1].level == Alarm.CLEAR, 'the latched alarm')
+    assert late[-1].text == TEXT_CLEAR
+
+
+def test_bad_parameter_change_is_refused(ros):
+    ctx, add, _ = ros
+    node = add(AlarmNode(context=ctx))
+    res = node.set_parameters([Parameter('stop_range', value=3.0)])[0]
+    assert not res.successful and 'stop_range' in res.reason
+    res = node.set_parameters([Parameter('hysteresis', value=0.5)])[0]
+    assert res.successful and node.config.hysteresis == 0.5

@@ -1,0 +1,84 @@
+"""Stereo geometry and the disparity-space ground plane (core.camera)."""
+import numpy as np
+import pytest
+
+from asmonc_vision.core.camera import (MetricPlane, StereoCamera, ground_range_bearing,
+                                       metric_from_plane, plane_disparity, plane_from_metric)
+
+CAM = StereoCamera(f=300.0, cx=159.5, cy=119.5, baseline=0.35, width=320, height=240)
+
+
+def _pitched_plane(pitch_deg, roll_deg=0.0, height=1.25):
+    t, r = np.radians(pitch_deg), np.radians(roll_deg)
+    down = np.array([0.0, np.cos(t), np.sin(t)])         # pitched down by t
+    cr, sr = np.cos(r), np.sin(r)
+    down = np.array([cr * down[0] - sr * down[1], sr * down[0] + cr * down[1], down[2]])
+    return MetricPlane(normal_up=-down, height=height)
+
+
+def test_project_triangulate_round_trip():
+    rng = np.random.default_rng(0)
+    pts = np.column_stack([rng.uniform(-2, 2, 50), rng.uniform(-1, 1.5, 50),
+                           rng.uniform(1, 20, 50)])
+    u, v, d = CAM.project(pts)
+    np.testing.assert_allclose(CAM.triangulate(u, v, d), pts, rtol=1e-12, atol=1e-12)
+    # left/right columns from cyclopean u and d agree with direct projection
+    ul = CAM.f * pts[:, 0] / pts[:, 2] + CAM.cx
+    np.testing.assert_allclose(u + d / 2, ul, atol=1e-9)
+
+
+@pytest.mark.parametrize('pitch,roll', [(20, 0), (15, 4), (30, -5)])
+def test_plane_conversions_are_exact_for_ground_points(pitch, roll):
+    plane = _pitched_plane(pitch, roll)
+    abc = plane_from_metric(CAM, plane)
+    # points on the plane, spread over the ground ahead
+    rng = np.random.default_rng(1)
+    down = -plane.normal_up
+    fwd = np.array([0.0, 0.0, 1.0]) - down[2] * down
+    fwd /= np.linalg.norm(fwd)
+    side = np.cross(down, fwd)
+    pts = (plane.height * down + rng.uniform(2, 10, (40, 1)) * fwd
+           + rng.uniform(-2, 2, (40, 1)) * side)
+    np.testing.assert_allclose(plane.signed_height(pts), 0, atol=1e-12)
+    u, v, d = CAM.project(pts)
+    np.testing.assert_allclose(plane_disparity(abc, u, v), d, rtol=1e-10)
+    back = metric_from_plane(CAM, abc)
+    np.testing.assert_allclose(back.normal_up, plane.normal_up, atol=1e-12)
+    assert back.height == pytest.approx(plane.height, abs=1e-12)
+
+
+def test_obstacle_disparity_excess_matches_paper_eq1():
+    # Eq. 1: an obstacle of height S at range Y exceeds the ground disparity behind it by
+    # f I S / (Y H), for a camera looking level.
+    plane = _pitched_plane(0.0)
+    abc = plane_from_metric(CAM, plane)
+    S, Y = 0.10, 5.0
+    top = np.array([[CAM.baseline / 2, plane.height - S, Y]])  # on the cyclopean axis
+    u, v, d = CAM.project(top)
+    excess = d - plane_disparity(abc, u, v)
+    assert excess[0] == pytest.approx(CAM.f * CAM.baseline * S / (Y * plane.height), rel=1e-9)
+
+
+def test_metric_from_plane_rejects_degenerate():
+    assert metric_from_plane(CAM, (0.0, 0.0, 0.0)) is None
+
+
+def test_range_and_bearing():
+    plane = _pitched_plane(20)
+    down = -plane.normal_up
+    fwd = np.array([0.0, -np.sin(np.radians(20)), np.cos(np.radians(20))])
+    p = plane.height * down + 4.0 * fwd + np.array([-1.0, 0, 0])  # 1 m to the left
+    rng_, bearing = ground_range_bearing(plane, p[None, :])
+    assert rng_[0] == pytest.approx(np.hypot(4.0, 1.0))
+    assert bearing[0] == pytest.approx(np.arctan2(1.0, 4.0))
+
+
+def test_from_projection_and_validation():
+    pl = [300, 0, 160, 0, 0, 300, 120, 0, 0, 0, 1, 0]
+    pr = [300, 0, 160, -300 * 0.35, 0, 300, 120, 0, 0, 0, 1, 0]
+    cam = StereoCamera.from_projection(pl, pr, 320, 240)
+    assert cam.baseline == pytest.approx(0.35) and cam.f == 300
+    with pytest.raises(ValueError, match='baseline'):
+        StereoCamera.from_projection(pr, pl, 320, 240)
+    with pytest.raises(ValueError, match='f must be'):
+        StereoCamera(f=-1, cx=0, cy=0, baseline=0.3, width=10, height=10)
