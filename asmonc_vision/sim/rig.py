@@ -1,0 +1,93 @@
+"""The simulated stereo rig: intrinsics, mounting and image formation settings.
+
+The default is the rig of Molton et al. (1998): f = 300 px, baseline 0.35 m,
+320 x 240 images, principal point at the image centre, cameras 1.25 m above the
+ground pitched down 20 degrees (ground visible from ~1.4 m to the horizon), 10 Hz.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from asmonc_vision.core.camera import StereoCamera
+from asmonc_vision.core.config import check_fields, param
+
+#: Frame ids (CONVENTIONS.md).
+WORLD_FRAME = 'world'
+LEFT_FRAME = 'stereo_left_optical_frame'
+RIGHT_FRAME = 'stereo_right_optical_frame'
+IMU_FRAME = 'inclinometer_link'
+
+
+@dataclass(frozen=True)
+class RigSettings:
+    """Stereo rig and camera image formation. Frozen; validated on construction."""
+
+    width: int = param(320, 'image width, pixels', range=(16, 4096))
+    height: int = param(240, 'image height, pixels', range=(16, 4096))
+    focal: float = param(300.0, 'focal length f, pixels (both cameras, rectified)',
+                         range=(10.0, 10000.0))
+    principal_dx: float = param(0.0, 'principal point offset from the image centre '
+                                'along u, pixels', range=(-1000.0, 1000.0))
+    principal_dy: float = param(0.0, 'principal point offset from the image centre '
+                                'along v, pixels', range=(-1000.0, 1000.0))
+    baseline: float = param(0.35, 'distance between the optical centres, metres',
+                            range=(0.02, 2.0))
+    camera_height: float = param(1.25, 'height of the baseline midpoint above the ground '
+                                 'when standing, metres', range=(0.2, 3.0))
+    camera_pitch_deg: float = param(20.0, 'nominal downward tilt of the optical axes, '
+                                    'degrees (REP 103 pitch of inclinometer_link)',
+                                    range=(-10.0, 80.0))
+    fps: float = param(10.0, 'camera frame rate, Hz', range=(0.5, 120.0))
+    supersample: int = param(2, 'rays per pixel along each image axis (anti-aliasing)',
+                             range=(1, 4))
+    noise_sigma: float = param(2.0, 'camera noise standard deviation, grey levels',
+                               range=(0.0, 50.0))
+    blur_sigma: float = param(0.5, 'optical blur (Gaussian) standard deviation, pixels',
+                              range=(0.0, 5.0))
+    vignetting: float = param(0.08, 'relative darkening at the image corners',
+                              range=(0.0, 0.9))
+    left_gain: float = param(1.0, 'left camera gain', range=(0.1, 10.0))
+    left_offset: float = param(0.0, 'left camera offset, grey levels', range=(-100.0, 100.0))
+    right_gain: float = param(1.05, 'right camera gain (right = gain * radiance + offset)',
+                              range=(0.1, 10.0))
+    right_offset: float = param(4.0, 'right camera offset, grey levels',
+                                range=(-100.0, 100.0))
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+    @property
+    def cx(self) -> float:
+        """Principal point u, pixels (pixel-centre origin: image centre is (W-1)/2)."""
+        return (self.width - 1) / 2.0 + self.principal_dx
+
+    @property
+    def cy(self) -> float:
+        """Principal point v, pixels."""
+        return (self.height - 1) / 2.0 + self.principal_dy
+
+    @property
+    def pitch(self) -> float:
+        """Nominal camera pitch, radians (positive = looking down)."""
+        return math.radians(self.camera_pitch_deg)
+
+    def camera(self) -> StereoCamera:
+        """The rectified stereo camera model of ``core.camera``."""
+        return StereoCamera(f=float(self.focal), cx=self.cx, cy=self.cy,
+                            baseline=float(self.baseline), width=int(self.width),
+                            height=int(self.height))
+
+    def matrices(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Camera-info matrices of the rectified pair.
+
+        Returns:
+            (K (3, 3), P_left (3, 4), P_right (3, 4)) float64; ``P_right[0, 3] = -f * B``.
+        """
+        k = np.array([[self.focal, 0.0, self.cx], [0.0, self.focal, self.cy], [0.0, 0.0, 1.0]])
+        p_left = np.hstack([k, np.zeros((3, 1))])
+        p_right = p_left.copy()
+        p_right[0, 3] = -self.focal * self.baseline
+        return k, p_left, p_right
