@@ -32,8 +32,13 @@ demo: venv
 test: venv
 	$(PY) -m pytest -q test
 
+# Regenerate the committed bags (bags/README.md): about a minute.
+BUNDLED_BAGS := static_obstacles:5.5 clear_static:3 walk_obstacles:7.5 clear_walk:4 walk_stop_turn:7.5 slope:3
 bags: venv
-	$(PY) -m asmonc_vision.sim.cli --regenerate-bundled bags
+	for spec in $(BUNDLED_BAGS); do \
+	  name=$${spec%%:*}; dur=$${spec##*:}; \
+	  $(PY) -m asmonc_vision.sim $$name bags/$$name --seed 0 --duration $$dur --force || exit 1; \
+	done
 
 clean-venv:
 	rm -rf $(VENV)

@@ -78,3 +78,14 @@ def test_yaml_equals_dataclass_defaults(fname):
                 out[pre + k] = v
         return out
     assert flatten(params) == expected
+
+
+def test_int_field_refuses_a_float():
+    @dataclass(frozen=True)
+    class _Count:
+        n: int = param(3, 'a count', range=(1, 10))
+
+        def __post_init__(self):
+            check_fields(self)
+    with pytest.raises(TypeError, match='whole number'):
+        _Count(n=2.5)

@@ -30,8 +30,9 @@ def test_detected_missed_false_and_dropped():
     det = {
         # frame 1: obstacle 1 found (0.1 m off), obstacle 2 too low to count, a false one
         1: _frame(1, [(0, 0.1, 1.0, 3.0, 0.2, 3.1, 0.01, ROI), (0, -2.0, 1.0, 6.0, 0.3, 6.0, 0.3, FAR_ROI)]),
-        # frame 2: a report 0.5 m away misses, but it lies on the obstacle's roi: not false
-        2: _frame(2, [(0, 0.5, 1.0, 3.0, 0.2, 3.0, -0.1, ROI)]),
+        # frame 2: a report ~0.6 m away on the ground misses, but it lies on the
+        # obstacle's roi: not false
+        2: _frame(2, [(0, 0.5, 1.0, 3.0, 0.2, 3.0, -0.2, ROI)]),
         # frame 3: missing (dropped)
     }
     score, missing = score_sequence(det, truth, match_radius=0.3, min_height=0.1, max_range=5)
@@ -48,8 +49,8 @@ def test_detected_missed_false_and_dropped():
 
 
 def test_one_detection_finds_one_obstacle_only():
-    truth = {5: _frame(5, [(1, 0.0, 1.0, 3.0, 0.2, 3.0, 0.0, ROI), (2, 0.2, 1.0, 3.0, 0.2, 3.0, 0.0, ROI)])}
-    det = {5: _frame(5, [(0, 0.1, 1.0, 3.0, 0.2, 3.0, 0.0, ROI)])}
+    truth = {5: _frame(5, [(1, 0.0, 1.0, 3.0, 0.2, 3.0, 0.0, ROI), (2, 0.2, 1.0, 3.0, 0.2, 3.1, 0.0, ROI)])}
+    det = {5: _frame(5, [(0, 0.1, 1.0, 3.0, 0.2, 3.05, 0.0, ROI)])}
     score, _ = score_sequence(det, truth)
     assert score.detected == 1 and score.false_obstacles == 0
 
@@ -57,3 +58,11 @@ def test_one_detection_finds_one_obstacle_only():
 def test_no_truth_no_recall():
     score, _ = score_sequence({1: FrameObstacles.empty(1)}, {1: FrameObstacles.empty(1)})
     assert np.isnan(score.recall) and score.false_per_frame == 0
+
+
+def test_matching_is_on_the_ground_not_at_the_top():
+    # A tall post: its true top is 2 m up, the detector sees only its visible part.
+    truth = {1: _frame(1, [(1, 0.0, -0.8, 3.0, 2.0, 3.0, 0.05, ROI)])}
+    det = {1: _frame(1, [(0, 0.0, 0.2, 3.0, 1.0, 3.05, 0.06, ROI)])}
+    score, _ = score_sequence(det, truth, match_radius=0.3)
+    assert score.detected == 1

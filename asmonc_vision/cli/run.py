@@ -307,9 +307,8 @@ def run(args) -> int:
 
         def show_alarms() -> None:
             for a in monitor.take_new_alarms():
-                t = (a['stamp_ns'] - t0) / 1e9 if t0 else 0.0
-                console.line(f'{t:7.1f} s  {LEVEL_NAMES.get(a["level"], a["level"]):8s} '
-                             f'{a["text"]}')
+                console.line(f'{_bag_time(a["stamp_ns"], t0)}  '
+                             f'{LEVEL_NAMES.get(a["level"], a["level"]):8s} {a["text"]}')
 
         while children['player'].alive():
             show_alarms()
@@ -359,6 +358,13 @@ def run(args) -> int:
     return 0
 
 
+def _bag_time(stamp_ns: int, t0: int) -> str:
+    """Seconds into the bag, or '(live)' for alarms stamped by a node's own clock
+    (start-up, timeouts), which are not bag times."""
+    t = (stamp_ns - t0) / 1e9
+    return f'{t:7.1f} s' if t0 and -60.0 < t < 86400.0 else '   (live)'
+
+
 def summarise(monitor: _Monitor, truth: dict, n_pairs: int, args) -> dict:
     """Counts, alarms and the score against ground truth, as a JSON-ready dict."""
     with monitor.lock:
@@ -392,7 +398,7 @@ def print_summary(s: dict, console: _Console) -> None:
     if gt:
         c = gt['criteria']
         p(f"true obstacles (>= {c['min_height_m'] * 100:.0f} cm high, within "
-          f"{c['max_range_m']:g} m; found = a report within {c['match_radius_m']:g} m):")
+          f"{c['max_range_m']:g} m; found = a report within {c['match_radius_m']:g} m of it on the ground):")
         for oid, o in gt['obstacles'].items():
             if o['frames_eligible'] == 0:
                 continue

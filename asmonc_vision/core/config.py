@@ -42,6 +42,10 @@ def check_fields(obj: Any) -> None:
             if isinstance(value, bool) or not isinstance(value, (int, float)):
                 raise TypeError(f'{cls}.{f.name} must be a number in [{lo}, {hi}], '
                                 f'got {value!r} ({desc})')
+            if (isinstance(f.default, int) and not isinstance(f.default, bool)
+                    and not isinstance(value, int)):
+                raise TypeError(f'{cls}.{f.name} must be a whole number in [{lo}, {hi}], '
+                                f'got {value!r} ({desc})')
             if isinstance(value, float) and not math.isfinite(value):
                 raise ValueError(f'{cls}.{f.name} = {value} is not finite; '
                                  f'must be in [{lo}, {hi}] ({desc})')

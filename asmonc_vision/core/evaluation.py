@@ -1,11 +1,15 @@
 """Scoring detections against ground truth, frame by frame (pure numpy).
 
-A true obstacle counts as *detected* in a frame when a detection's position (its top, in
-the left optical frame) lies within `match_radius` metres of the true position (the top
-point nearest the wearer). A detection is *false* when it explains no true obstacle:
-it is neither within `match_radius` of one, nor inside one's image region (so a
-detection on the far end of a wall is not false, though the wall's true position is its
-nearest point).
+Positions are compared *on the ground*: each obstacle's place is the point
+``range * (cos bearing, sin bearing)`` in the ground plane, from the point below the
+camera (x forward, y left). That is where the wearer must not step, and it does not
+depend on whether the obstacle's top is in view (a 2 m post's top is not).
+
+A true obstacle counts as *detected* in a frame when a detection lies within
+`match_radius` metres of it on the ground. A detection is *false* when it explains no
+true obstacle: it is neither within `match_radius` of one, nor inside one's image
+region (so a detection on the far end of a wall is not false, though the wall's true
+position is its nearest point).
 """
 from __future__ import annotations
 
@@ -43,6 +47,11 @@ class FrameObstacles:
 
     def __len__(self) -> int:
         return len(self.ids)
+
+    def ground_xy(self) -> np.ndarray:
+        """(N, 2) metres: position on the ground, x forward, y left, from the camera's foot."""
+        return np.stack([self.range * np.cos(self.bearing),
+                         self.range * np.sin(self.bearing)], axis=1)
 
 
 @dataclass
@@ -116,12 +125,13 @@ def score_frame(det: FrameObstacles, truth: FrameObstacles, score: DetectionScor
     """Add one frame's outcome to `score` (in place).
 
     Eligible true obstacles: |height| >= min_height and range <= max_range.
-    Each eligible one is detected if an unused detection lies within match_radius
-    (greedy, nearest first). Range and bearing errors are taken from those matches.
+    Each eligible one is detected if an unused detection lies within match_radius of
+    it on the ground (greedy, nearest true obstacle first). Range and bearing errors
+    are taken from those matches.
     """
     score.frames += 1
     m, n = len(truth), len(det)
-    dist = (np.linalg.norm(truth.position[:, None, :] - det.position[None, :, :], axis=2)
+    dist = (np.linalg.norm(truth.ground_xy()[:, None, :] - det.ground_xy()[None, :, :], axis=2)
             if m and n else np.zeros((m, n)))
     eligible = (np.abs(truth.height) >= min_height) & (truth.range <= max_range)
     used = np.zeros(n, bool)

@@ -1,0 +1,306 @@
+"""Robust least-squares fit of the ground plane in disparity space (Molton et al. 1998).
+
+The ground disparity is linear in the cyclopean image coordinates: ``d = a*u + b*v + c``
+(see :mod:`asmonc_vision.core.camera`). :func:`fit_ground_plane` fits (a, b, c) to matched
+edge features robustly -- RANSAC on minimal triples followed by least squares on the
+inliers, or iteratively trimmed least squares -- and checks that the result is a
+plausible ground below the cameras. Fits that fail return None; data never raise.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .camera import MetricPlane, StereoCamera, metric_from_plane
+
+#: Fitting methods accepted by :func:`fit_ground_plane`.
+METHODS = ('ransac', 'trimmed')
+
+
+@dataclass(frozen=True)
+class PlaneFit:
+    """A fitted ground plane ``d = a*u + b*v + c`` (cyclopean pixels).
+
+    Attributes:
+        abc: (3,) float64 plane parameters (a: px/px, b: px/px, c: px).
+        cov: (3, 3) float64 covariance of (a, b, c) from the inlier residuals.
+        num_features: number of inlier features used in the final least squares.
+        residual_rms: RMS disparity residual of the inliers, pixels.
+        inliers: (N,) bool mask over the input features.
+        metric: the plane in the left optical frame, or None when no camera was given.
+    """
+
+    abc: np.ndarray
+    cov: np.ndarray
+    num_features: int
+    residual_rms: float
+    inliers: np.ndarray
+    metric: MetricPlane | None
+
+
+def lsq_plane(u: np.ndarray, v: np.ndarray, d: np.ndarray, w: np.ndarray | None = None,
+              ) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """Least-squares plane ``d = a*u + b*v + c``, optionally weighted.
+
+    Args:
+        u, v, d: (N,) cyclopean columns, rows and disparities, pixels (N >= 3).
+        w: (N,) non-negative weights, or None for ordinary least squares. The weights
+            are relative (scaled to mean 1); the covariance assumes residuals of variance
+            ``sigma^2 / w``.
+    Returns:
+        (abc (3,), cov (3, 3), residual_rms px (unweighted)), or None when degenerate
+        (fewer than 3 points, zero weights, or the (u, v) points do not span a plane).
+    """
+    n = u.shape[0]
+    if n < 3:
+        return None
+    if w is None:
+        w = np.ones(n)
+    else:
+        w = np.asarray(w, np.float64)
+        mean_w = float(w.mean())
+        if not (np.isfinite(mean_w) and mean_w > 0):
+            return None
+        w = w / mean_w
+    # Centre for conditioning; c is recovered afterwards.
+    mu, mv = float(np.average(u, weights=w)), float(np.average(v, weights=w))
+    a_mat = np.stack([u - mu, v - mv, np.ones(n)], axis=1)
+    aw = a_mat * w[:, None]
+    ata = aw.T @ a_mat
+    # Degenerate when the (u, v) scatter is (nearly) a line or a point.
+    suv = ata[:2, :2] / n
+    ev = np.linalg.eigvalsh(suv)
+    if not np.all(np.isfinite(ev)) or ev[0] < 0.25:      # < 0.5 px spread across
+        return None
+    try:
+        ata_inv = np.linalg.inv(ata)
+    except np.linalg.LinAlgError:
+        return None
+    p = ata_inv @ (aw.T @ d)
+    res = d - a_mat @ p
+    rms = float(np.sqrt(res @ res / n))
+    sigma2 = float((w * res) @ res) / max(n - 3, 1)
+    # Back to (a, b, c): c = p2 - a*mu - b*mv, a linear map J of p.
+    jac = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [-mu, -mv, 1.0]])
+    abc = jac @ p
+    cov = jac @ (sigma2 * ata_inv) @ jac.T
+    return abc, cov, rms
+
+
+def _plausible_mask(cam: StereoCamera, a: np.ndarray, b: np.ndarray, c: np.ndarray,
+                    min_height_m: float, max_height_m: float, max_tilt_deg: float) -> np.ndarray:
+    """Vectorised :func:`plane_is_plausible` for many hypotheses (cyclopean height)."""
+    wz = (c + a * cam.cx + b * cam.cy) / cam.f
+    norm = np.sqrt(a * a + b * b + wz * wz) / cam.baseline
+    with np.errstate(divide='ignore', invalid='ignore'):
+        height = 1.0 / norm
+        up_y = (b / cam.baseline) / norm            # = -normal_up[1] = n_down[1]
+    # The left camera's height differs from the cyclopean one by at most B/2.
+    slack = 0.5 * cam.baseline
+    return (np.isfinite(height) & (up_y > np.cos(np.deg2rad(max_tilt_deg)))
+            & (height >= min_height_m - slack) & (height <= max_height_m + slack))
+
+
+def _ransac_best(u: np.ndarray, v: np.ndarray, d: np.ndarray, threshold: float,
+                 iterations: int, rng: np.random.Generator, cam: StereoCamera | None = None,
+                 bounds: tuple[float, float, float] = (0.1, 10.0, 75.0),
+                 weights: np.ndarray | None = None, confidence: float = 0.99,
+                 batch: int = 64, max_score_points: int = 2000) -> np.ndarray | None:
+    """Best minimal-sample plane by MSAC score (truncated squared residual, optionally
+    weighted per point by ``weights``).
+
+    Hypotheses are drawn in batches; sampling stops once the number drawn exceeds the
+    usual adaptive bound ``log(1 - confidence) / log(1 - w^3)`` (w the inlier fraction of
+    the best hypothesis so far), or ``iterations``. With ``cam``, only hypotheses that
+    are a plausible ground (``bounds`` = min height, max height, max tilt) are scored,
+    so that a dominant non-ground plane (a wall, a car) cannot win.
+
+    Returns:
+        (3,) abc of the best hypothesis, or None if no usable sample was drawn.
+    """
+    n = u.shape[0]
+    sel = rng.choice(n, size=max_score_points, replace=False) if n > max_score_points else None
+    us, vs, ds = (u, v, d) if sel is None else (u[sel], v[sel], d[sel])
+    ws = None if weights is None else (weights if sel is None else weights[sel])
+    t2 = threshold * threshold
+    best, best_score, needed, drawn = None, np.inf, float(iterations), 0
+    while drawn < min(needed, iterations):
+        k = int(min(batch, iterations - drawn))
+        drawn += k
+        idx = rng.integers(0, n, size=(k, 3))
+        p = np.stack([u[idx], v[idx], d[idx]], axis=-1)      # (k, 3, 3)
+        nrm = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])  # (nu, nv, nd)
+        good = np.abs(nrm[:, 2]) > 1.0                        # (u, v) triangle area > 0.5 px^2
+        nrm, p0 = nrm[good], p[good, 0]
+        a = -nrm[:, 0] / nrm[:, 2]
+        b = -nrm[:, 1] / nrm[:, 2]
+        c = p0[:, 2] - a * p0[:, 0] - b * p0[:, 1]
+        if cam is not None and a.size:
+            ok = _plausible_mask(cam, a, b, c, *bounds)
+            a, b, c = a[ok], b[ok], c[ok]
+        if a.size == 0:
+            continue
+        res = ds[None, :] - (a[:, None] * us[None, :] + b[:, None] * vs[None, :] + c[:, None])
+        sq = res * res
+        trunc = np.minimum(sq, t2)
+        score = trunc.sum(axis=1) if ws is None else trunc @ ws
+        j = int(np.argmin(score))
+        if score[j] < best_score:
+            best_score = float(score[j])
+            best = np.array([a[j], b[j], c[j]])
+            w = float(np.mean(sq[j] <= t2))
+            if w >= 1.0:
+                needed = 0.0
+            elif w > 0.0:
+                needed = math.log(1.0 - confidence) / math.log(1.0 - w ** 3)
+    return best
+
+
+def plane_is_plausible(cam: StereoCamera, abc: np.ndarray, *, min_height_m: float = 0.1,
+                       max_height_m: float = 10.0, max_tilt_deg: float = 75.0,
+                       ) -> MetricPlane | None:
+    """The metric plane of (a, b, c) if it is a ground below the cameras, else None.
+
+    A plausible ground has its upward normal pointing up in the image (``normal_up``
+    has negative y in the optical frame, y being down), within ``max_tilt_deg`` of the
+    optical frame's up axis (-y), and lies ``min_height_m`` .. ``max_height_m`` below the
+    left camera.
+    """
+    abc = np.asarray(abc, float)
+    if abc.shape != (3,) or not np.all(np.isfinite(abc)):
+        return None
+    metric = metric_from_plane(cam, abc)
+    if metric is None:
+        return None
+    up_y = -float(metric.normal_up[1])
+    if up_y <= np.cos(np.deg2rad(max_tilt_deg)):
+        return None
+    if not (min_height_m <= metric.height <= max_height_m):
+        return None
+    return metric
+
+
+def fit_ground_plane(u, v, d, *, cam: StereoCamera | None = None, method: str = 'ransac',
+                     inlier_threshold_px: float = 1.0, iterations: int = 1000,
+                     weights: np.ndarray | None = None,
+                     refine_iterations: int = 3, trim_fraction: float = 0.2,
+                     min_features: int = 10, min_height_m: float = 0.1,
+                     max_height_m: float = 10.0, max_tilt_deg: float = 75.0,
+                     rng=None) -> PlaneFit | None:
+    """Robust least-squares ground plane ``d = a*u + b*v + c`` from matched features.
+
+    ``'ransac'``: the best of at most ``iterations`` random minimal triples (MSAC score
+    with ``inlier_threshold_px``; adaptive stopping at 99% confidence), then least squares
+    on its inliers, re-selecting inliers (``|residual| <= inlier_threshold_px``) and
+    refitting ``refine_iterations`` times.
+    ``'trimmed'``: least squares on all, then ``refine_iterations`` times drop the
+    ``trim_fraction`` largest residuals of the current inliers and refit; the final
+    inliers are those within ``max(inlier_threshold_px, 2.5 * rms)``.
+    ``weights`` weight the points in the RANSAC score and the final least squares (e.g.
+    a power of the disparity, so that of two competing surfaces the nearer one -- the
+    ground the wearer stands on -- wins, and far features, where the ground is least
+    flat and least well measured, count less).
+
+    Args:
+        u, v, d: (N,) cyclopean column, row, disparity of each feature, pixels.
+        cam: if given, the fit must be a plausible ground below the cameras
+            (see :func:`plane_is_plausible`) and ``PlaneFit.metric`` is filled.
+        method: 'ransac' or 'trimmed'.
+        inlier_threshold_px: inlier residual bound, pixels of disparity (> 0).
+        iterations: most RANSAC hypotheses (>= 1).
+        weights: (N,) non-negative point weights (RANSAC score and 'ransac' least
+            squares), or None (all 1).
+        refine_iterations: inlier re-selection / trimming rounds (>= 0).
+        trim_fraction: fraction trimmed per round for 'trimmed', in [0, 0.9].
+        min_features: least number of inliers for a valid fit (>= 3).
+        min_height_m, max_height_m, max_tilt_deg: plausibility bounds (with ``cam``).
+        rng: int seed or numpy Generator (RANSAC sampling).
+    Returns:
+        The PlaneFit, or None when the fit fails (too few points, degenerate, or not a
+        plausible ground).
+    Raises:
+        ValueError: unknown method or bad argument values (never for the data).
+    """
+    if method not in METHODS:
+        raise ValueError(f'method must be one of {METHODS}, got {method!r}')
+    if not inlier_threshold_px > 0:
+        raise ValueError(f'inlier_threshold_px must be > 0, got {inlier_threshold_px}')
+    u = np.asarray(u, np.float64).ravel()
+    v = np.asarray(v, np.float64).ravel()
+    d = np.asarray(d, np.float64).ravel()
+    if not (u.shape == v.shape == d.shape):
+        raise ValueError(f'u, v, d must have the same length, got {u.shape}, {v.shape}, {d.shape}')
+    n = u.shape[0]
+    min_features = max(int(min_features), 3)
+    finite = np.isfinite(u) & np.isfinite(v) & np.isfinite(d)
+    if int(finite.sum()) < min_features:
+        return None
+    uf, vf, df = u[finite], v[finite], d[finite]
+    wf = None
+    if weights is not None:
+        w_all = np.asarray(weights, np.float64).ravel()
+        if w_all.shape != u.shape:
+            raise ValueError(f'weights must have the length of u, got {w_all.shape} vs {u.shape}')
+        wf = np.where(np.isfinite(w_all[finite]), np.maximum(w_all[finite], 0.0), 0.0)
+    thr = float(inlier_threshold_px)
+    if method == 'ransac':
+        gen = np.random.default_rng(rng)
+        abc = _ransac_best(uf, vf, df, thr, max(int(iterations), 1), gen, cam=cam,
+                           bounds=(min_height_m, max_height_m, max_tilt_deg), weights=wf)
+        if abc is None:
+            return None
+        inl = np.abs(df - (abc[0] * uf + abc[1] * vf + abc[2])) <= thr
+        rounds = max(int(refine_iterations), 0) + 1
+        for it in range(rounds):
+            if int(inl.sum()) < min_features:
+                return None
+            fit = lsq_plane(uf[inl], vf[inl], df[inl], None if wf is None else wf[inl])
+            if fit is None:
+                return None
+            abc = fit[0]
+            new = np.abs(df - (abc[0] * uf + abc[1] * vf + abc[2])) <= thr
+            if it == rounds - 1 or np.array_equal(new, inl):
+                break           # ``fit`` is the least squares on ``inl``
+            inl = new
+    else:
+        inl = np.ones(uf.shape[0], bool)
+        fit = lsq_plane(uf, vf, df)
+        if fit is None:
+            return None
+        frac = min(max(float(trim_fraction), 0.0), 0.9)
+        for _ in range(max(int(refine_iterations), 0)):
+            abc = fit[0]
+            res = np.abs(df - (abc[0] * uf + abc[1] * vf + abc[2]))
+            k = int(inl.sum())
+            keep = int(np.ceil(k * (1.0 - frac)))
+            if keep < min_features:
+                break
+            cut = np.partition(res[inl], keep - 1)[keep - 1]
+            inl = inl & (res <= cut)
+            fit = lsq_plane(uf[inl], vf[inl], df[inl])
+            if fit is None:
+                return None
+        abc = fit[0]
+        res = np.abs(df - (abc[0] * uf + abc[1] * vf + abc[2]))
+        inl = res <= max(thr, 2.5 * fit[2])
+        if int(inl.sum()) < min_features:
+            return None
+        fit = lsq_plane(uf[inl], vf[inl], df[inl])
+        if fit is None:
+            return None
+    abc, cov, rms = fit
+    if int(inl.sum()) < min_features or not np.all(np.isfinite(abc)):
+        return None
+    metric = None
+    if cam is not None:
+        metric = plane_is_plausible(cam, abc, min_height_m=min_height_m,
+                                    max_height_m=max_height_m, max_tilt_deg=max_tilt_deg)
+        if metric is None:
+            return None
+    mask = np.zeros(n, bool)
+    mask[np.flatnonzero(finite)[inl]] = True
+    return PlaneFit(abc=np.asarray(abc, np.float64), cov=np.asarray(cov, np.float64),
+                    num_features=int(inl.sum()), residual_rms=float(rms), inliers=mask,
+                    metric=metric)

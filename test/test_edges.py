@@ -1,0 +1,130 @@
+"""Vertical edges and edge strings (core.edges) on synthetic step images."""
+import numpy as np
+import pytest
+
+from asmonc_vision.core.edges import EdgeMap, detect_vertical_edges, horizontal_gradient
+
+
+def _step_image(h, w, x0, lo=50.0, hi=150.0, slope=0.0):
+    """Area-sampled step: pixel u covers [u-0.5, u+0.5]; bright for x > x0 + slope*v."""
+    u = np.arange(w, dtype=np.float64)[None, :]
+    v = np.arange(h, dtype=np.float64)[:, None]
+    edge = x0 + slope * v
+    frac = np.clip(u + 0.5 - edge, 0.0, 1.0)
+    return (lo + (hi - lo) * frac).astype(np.float32)
+
+
+@pytest.mark.parametrize('x0', [40.0, 40.25, 40.5, 40.8, 41.1])
+def test_subpixel_position_of_a_step(x0):
+    e = detect_vertical_edges(_step_image(30, 80, x0))
+    assert len(e) == 28                       # one edge per interior row, nothing else
+    np.testing.assert_allclose(e.u, x0, atol=0.02)
+    assert np.all(e.polarity == 1)
+    np.testing.assert_allclose(e.orientation, 0.0, atol=1e-3)
+
+
+def test_subpixel_position_of_a_blurred_noisy_step():
+    import cv2
+    rng = np.random.default_rng(3)
+    img = cv2.GaussianBlur(_step_image(60, 80, 40.3), (0, 0), 1.0)
+    img = img + rng.normal(0.0, 1.0, img.shape).astype(np.float32)
+    e = detect_vertical_edges(img)
+    rows = e.v[np.abs(e.u - 40.3) < 1.0]
+    assert rows.size == 58
+    assert np.median(np.abs(e.u[np.abs(e.u - 40.3) < 1.0] - 40.3)) < 0.1
+
+
+def test_polarity_and_orientation_of_a_falling_step():
+    e = detect_vertical_edges(_step_image(20, 60, 30.4, lo=200.0, hi=20.0))
+    assert len(e) == 18
+    assert np.all(e.polarity == -1)
+    np.testing.assert_allclose(np.abs(e.orientation), np.pi, atol=1e-3)
+    np.testing.assert_allclose(e.u, 30.4, atol=0.02)
+    assert e.strength.dtype == np.float32 and np.all(e.strength > 30)
+
+
+def test_nms_thin_line_gives_two_edges_of_opposite_polarity():
+    img = np.full((12, 40), 100.0, np.float32)
+    img[:, 20] = 200.0                         # a one-pixel bright line
+    e = detect_vertical_edges(img)
+    per_row = np.bincount(e.v, minlength=12)
+    assert np.all(per_row[1:-1] == 2) and per_row[0] == 0 and per_row[-1] == 0
+    left = e.polarity == 1
+    np.testing.assert_allclose(e.u[left], 19.0, atol=1e-6)
+    np.testing.assert_allclose(e.u[~left], 21.0, atol=1e-6)
+    assert e.num_strings == 2                  # one string per polarity
+
+
+def test_sorted_by_row_then_column():
+    rng = np.random.default_rng(0)
+    img = rng.uniform(0, 255, (40, 50)).astype(np.float32)
+    e = detect_vertical_edges(img, abs_threshold=5.0)
+    key = e.v.astype(np.int64) * 1000 + e.u_int
+    assert np.all(np.diff(key) > 0)
+    assert np.all(np.abs(e.u - e.u_int) <= 0.5)
+    assert e.v.dtype == np.int32 and e.u.dtype == np.float32 and e.polarity.dtype == np.int8
+
+
+def test_thresholds_absolute_and_relative():
+    img = _step_image(20, 60, 20.2, lo=100.0, hi=110.0) + _step_image(20, 60, 40.6, 0.0, 100.0)
+    weak_strong = detect_vertical_edges(img, abs_threshold=2.0)
+    assert set(np.round(weak_strong.u).astype(int)) == {20, 41}
+    only_strong = detect_vertical_edges(img, abs_threshold=20.0)
+    assert set(np.round(only_strong.u).astype(int)) == {41}
+    # Relative to the image contrast (mean |dI/du|): the weak edge goes.
+    rel = detect_vertical_edges(img, abs_threshold=0.0, rel_threshold=5.0)
+    assert set(np.round(rel.u).astype(int)) == {41}
+    assert rel.threshold > 2.0
+
+
+def test_horizontal_edges_are_rejected_by_angle():
+    img = np.full((30, 30), 50.0, np.float32)
+    img[15:, :] = 200.0                        # horizontal edge
+    assert len(detect_vertical_edges(img)) == 0
+    gx, gy = horizontal_gradient(img)
+    assert np.abs(gx).max() < 1e-3 and np.abs(gy).max() > 10
+
+
+def test_strings_vertical_and_slanted():
+    img = _step_image(50, 100, 30.3) + _step_image(50, 100, 60.0, 0.0, 80.0, slope=0.6)
+    e = detect_vertical_edges(img)
+    assert e.num_strings == 2
+    np.testing.assert_array_equal(np.sort(e.string_length), [48, 48])
+    for s in range(2):
+        rows = e.v[e.string_id == s]
+        np.testing.assert_array_equal(rows, np.arange(1, 49))
+    # The slanted edge is found at its sub-pixel position on every row.
+    slanted = e.string_id == e.string_id[np.argmax(e.u)]
+    np.testing.assert_allclose(e.u[slanted], 60.0 + 0.6 * e.v[slanted], atol=0.1)
+    # string_prev links each pixel to the one above in its string.
+    prev = e.string_prev
+    has = prev >= 0
+    assert has.sum() == len(e) - 2
+    assert np.all(e.v[prev[has]] == e.v[has] - 1)
+    assert np.all(e.string_id[prev[has]] == e.string_id[has])
+    assert np.all(np.abs(e.u_int[prev[has]] - e.u_int[has]) <= 1)
+
+
+def test_strings_break_at_gaps_and_min_length_drops_short_ones():
+    img = _step_image(40, 60, 30.0)
+    img[20:23, :] = 100.0                      # interrupt the edge for three rows
+    img[:, 45:] = 100.0
+    img[5:8, 45:] = 100.0 + 60.0 * (np.arange(15) >= 5)[None, :]   # a 3-row stub at u=50
+    e = detect_vertical_edges(img, abs_threshold=5.0)
+    long_ = e.string_length[e.string_id]
+    assert e.num_strings >= 3
+    e3 = detect_vertical_edges(img, abs_threshold=5.0, min_string_length=6)
+    assert np.all(e3.string_length >= 6)
+    assert not np.any(np.abs(e3.u - 50) < 1.0)             # the stub has gone
+    assert len(e3) == int((long_ >= 6).sum())
+    np.testing.assert_array_equal(np.unique(e3.string_id), np.arange(e3.num_strings))
+    ok = e3.string_prev >= 0
+    assert np.all(e3.string_id[e3.string_prev[ok]] == e3.string_id[ok])
+
+
+def test_blank_and_tiny_images_give_no_edges():
+    assert len(detect_vertical_edges(np.zeros((50, 60), np.uint8))) == 0
+    e = detect_vertical_edges(np.zeros((2, 2), np.uint8))
+    assert isinstance(e, EdgeMap) and len(e) == 0 and e.num_strings == 0
+    with pytest.raises(ValueError):
+        detect_vertical_edges(np.zeros((4, 4, 3), np.uint8))

@@ -1,0 +1,351 @@
+"""GPOD detector (core.gpod) and its debug drawing (core.draw).
+
+The synthetic scenes are ray cast here (independently of asmonc_vision.sim): a textured
+flat ground seen by the rig of Molton et al. (f = 300 px, B = 0.35 m, 320 x 240, 1.25 m
+high, pitched down 20 degrees), optionally with textured boxes standing on it or a step
+down in the ground.
+"""
+import dataclasses
+import glob
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from asmonc_vision.core.camera import StereoCamera, metric_from_plane
+from asmonc_vision.core.draw import draw_debug, excess_colours
+from asmonc_vision.core.gpod import (GpodConfig, GpodDetector, GpodResult, cluster_points_2d)
+
+CAM = StereoCamera(f=300.0, cx=159.5, cy=119.5, baseline=0.35, width=320, height=240)
+HEIGHT = 1.25
+PITCH = 20.0
+KITTI = Path(__file__).resolve().parent.parent.parent / 'shared' / 'data' / 'kitti_road_seq'
+
+
+def _texture_pyramid(rng, size=2048, sigma=1.5, contrast=45.0, mean=120.0):
+    t = rng.normal(0.0, 1.0, (size, size)).astype(np.float32)
+    t = cv2.GaussianBlur(t, (0, 0), sigma)
+    t = mean + t / t.std() * contrast
+    return [t] + [cv2.GaussianBlur(t, (0, 0), 0.6 * 2 ** i) for i in range(5)]
+
+
+def _rotation(pitch_deg):
+    """Columns: the camera's x, y, z axes in the level frame (X right, Y down, Z ahead)."""
+    t = np.radians(pitch_deg)
+    return np.stack([[1.0, 0.0, 0.0], [0.0, np.cos(t), -np.sin(t)],
+                     [0.0, np.sin(t), np.cos(t)]], axis=1)
+
+
+def render_pair(boxes=(), step=None, seed=0, noise=2.0, ss=2, texel=0.01):
+    """Rectified stereo pair of the level-frame scene.
+
+    Args:
+        boxes: (x0, x1, z0, z1, height) boxes standing on the ground, level frame, m.
+        step: (z_step, depth): the ground drops by ``depth`` m beyond ``Z = z_step``.
+    Returns:
+        (left, right) uint8 images.
+    """
+    rng = np.random.default_rng(seed)
+    ground = _texture_pyramid(rng)
+    boxtex = _texture_pyramid(rng, mean=150.0)
+    rot = _rotation(PITCH)
+    h, w = CAM.height * ss, CAM.width * ss
+    vv, uu = np.mgrid[0:h, 0:w].astype(np.float64)
+    uu = (uu + 0.5) / ss - 0.5
+    vv = (vv + 0.5) / ss - 0.5
+    rays = np.stack([(uu - CAM.cx) / CAM.f, (vv - CAM.cy) / CAM.f, np.ones_like(uu)], -1) @ rot.T
+    out = []
+    for cam_x in (0.0, CAM.baseline):
+        o = rot @ np.array([cam_x, 0.0, 0.0])
+        ry = rays[..., 1]
+        with np.errstate(divide='ignore', invalid='ignore'):
+            t = np.where(ry > 1e-9, (HEIGHT - o[1]) / ry, np.inf)
+            if step is not None:
+                z_step, depth = step
+                beyond = o[2] + t * rays[..., 2] >= z_step
+                t = np.where(beyond & (ry > 1e-9), (HEIGHT + depth - o[1]) / ry, t)
+        hit = o + np.where(np.isfinite(t), t, 0.0)[..., None] * rays
+        tex_a, tex_b = hit[..., 0], hit[..., 2]
+        which = np.where(np.isfinite(t), 1, 0)
+        for (x0, x1, z0, z1, bh) in boxes:
+            lo = np.array([x0, HEIGHT - bh, z0])
+            hi = np.array([x1, HEIGHT, z1])
+            with np.errstate(divide='ignore', invalid='ignore'):
+                t1 = (lo - o) / rays
+                t2 = (hi - o) / rays
+            tn = np.nanmax(np.minimum(t1, t2), axis=-1)
+            tf = np.nanmin(np.maximum(t1, t2), axis=-1)
+            hb = (tf >= tn) & (tn > 0) & (tn < t)
+            q = o + tn[..., None] * rays
+            axis = np.argmax(np.minimum(t1, t2), axis=-1)
+            a = np.where(axis == 0, q[..., 2], q[..., 0]) + 7.0
+            b = np.where(axis == 1, q[..., 2], q[..., 1]) + 3.0
+            t = np.where(hb, tn, t)
+            tex_a = np.where(hb, a, tex_a)
+            tex_b = np.where(hb, b, tex_b)
+            which = np.where(hb, 2, which)
+        img = np.full((h, w), 90.0, np.float32)
+        # Crude mip-mapping: texture blur from the pixel footprint, against aliasing.
+        level = np.clip(np.floor(np.log2(np.maximum(t / (CAM.f * ss) / texel, 1e-9)) + 1),
+                        0, 5).astype(int)
+        mx = (tex_a / texel).astype(np.float32)
+        my = (tex_b / texel).astype(np.float32)
+        for k, pyr in ((1, ground), (2, boxtex)):
+            for li, tex in enumerate(pyr):
+                sel = (which == k) & (level == li)
+                if sel.any():
+                    img[sel] = cv2.remap(tex, mx, my, cv2.INTER_LINEAR,
+                                         borderMode=cv2.BORDER_WRAP)[sel]
+        img = cv2.resize(img, (CAM.width, CAM.height), interpolation=cv2.INTER_AREA)
+        if cam_x > 0:
+            img = img * 1.05 + 4.0                          # right camera gain and offset
+        img = img + rng.normal(0.0, noise, img.shape).astype(np.float32)
+        out.append(np.clip(img, 0, 255).astype(np.uint8))
+    return out[0], out[1]
+
+
+def to_left_optical(p_level):
+    """Level-frame point (m) to the left optical frame."""
+    return _rotation(PITCH).T @ np.asarray(p_level, float)
+
+
+BOX = (0.3, 0.7, 4.0, 4.4, 0.25)        # 25 cm high, 4 m ahead, slightly right
+
+
+@pytest.fixture(scope='module')
+def scenes():
+    free = render_pair(seed=2)
+    box = render_pair(boxes=[BOX], seed=2)
+    free2 = render_pair(seed=3)
+    return {'free': free, 'box': box, 'free2': free2}
+
+
+def _calibrated(pair, config=None, frames=3):
+    det = GpodDetector(config or GpodConfig())
+    results = [det.process(pair[0], pair[1], CAM) for _ in range(frames)]
+    return det, results
+
+
+# ---------------------------------------------------------------- configuration
+def test_config_defaults_and_validation():
+    c = GpodConfig()
+    assert c.threshold_px == 1.7 and c.plane_update == 'refit'
+    with pytest.raises(ValueError, match='threshold_px'):
+        GpodConfig(threshold_px=-1.0)
+    with pytest.raises(ValueError, match='plane_update'):
+        GpodConfig(plane_update='kalman')
+    with pytest.raises(ValueError, match='min_range_m'):
+        GpodConfig(min_range_m=50.0, search_max_range_m=20.0, max_range_m=10.0)
+    with pytest.raises(ValueError, match='max_range_m'):
+        GpodConfig(max_range_m=30.0, search_max_range_m=20.0)
+    with pytest.raises(TypeError):
+        GpodConfig(detect_drops='yes')
+    for f in dataclasses.fields(GpodConfig):
+        assert f.metadata.get('description')
+
+
+# ---------------------------------------------------------------- detection
+def test_initialises_then_tracks_the_ground(scenes):
+    det, results = _calibrated(scenes['free'])
+    assert [r.status for r in results] == ['initialising', 'initialising', 'tracking']
+    r = results[-1]
+    assert [x.frame_index for x in results] == [1, 2, 3]
+    assert r.plane_abc.shape == (3,) and r.plane_cov.shape == (3, 3)
+    assert r.plane_num_features > 500 and r.plane_residual_rms < 0.5
+    assert abs(r.metric_plane.height - HEIGHT) < 0.03
+    up = to_left_optical([0.0, -1.0, 0.0])
+    assert np.degrees(np.arccos(r.metric_plane.normal_up @ up)) < 1.0
+    assert det.calibrated_plane is not None
+    for stage in ('edges', 'matching', 'plane', 'obstacles', 'total'):
+        assert r.timings_ms[stage] >= 0.0
+
+
+def test_no_obstacles_on_flat_ground(scenes):
+    for name in ('free', 'free2'):
+        det, results = _calibrated(scenes[name])
+        for _ in range(3):
+            r = det.process(*scenes[name], CAM)
+            assert r.status == 'tracking'
+            assert r.obstacles == (), [(o.height, o.range, o.roi) for o in r.obstacles]
+            f = r.features
+            assert len(f) > 1000
+            ground = np.abs(f.excess) < r.threshold_px
+            assert ground.mean() > 0.85
+            assert not f.is_obstacle.any()
+
+
+@pytest.mark.parametrize('mode', ['refit', 'fixed'])
+def test_finds_the_box(scenes, mode):
+    det, _ = _calibrated(scenes['free'], GpodConfig(plane_update=mode))
+    r = det.process(*scenes['box'], CAM)
+    assert r.status == 'tracking'
+    assert len(r.obstacles) == 1, [(o.height, o.range) for o in r.obstacles]
+    ob = r.obstacles[0]
+    x0, x1, z0, z1, bh = BOX
+    top_nearest = to_left_optical([0.5 * (x0 + x1), HEIGHT - bh, z0])
+    assert np.linalg.norm(ob.position - top_nearest) < 0.3
+    assert abs(ob.height - bh) < 0.3 * bh
+    assert abs(ob.range - z0) < 0.3
+    assert -0.2 < ob.bearing < 0.0                     # slightly to the right
+    assert 0.1 < ob.width < 0.6
+    assert ob.disparity_excess > r.threshold_px
+    assert 0.5 < ob.confidence <= 1.0
+    assert not ob.is_drop and ob.num_edge_pixels >= 10
+    # The roi covers most of the box's image (silhouette edges may stay unmatched).
+    x, y, w, h = ob.roi
+    corners = [to_left_optical([xx, HEIGHT - hh, zz]) for xx in (x0, x1) for hh in (0.0, bh)
+               for zz in (z0, z1)]
+    us = [CAM.f * p[0] / p[2] + CAM.cx for p in corners]
+    vs = [CAM.f * p[1] / p[2] + CAM.cy for p in corners]
+    inter = (max(0.0, min(x + w, max(us)) - max(x, min(us)))
+             * max(0.0, min(y + h, max(vs)) - max(y, min(vs))))
+    union = w * h + (max(us) - min(us)) * (max(vs) - min(vs)) - inter
+    assert inter / union > 0.4
+    # Features: obstacle pixels are flagged and lie inside the roi.
+    f = r.features
+    assert f.is_obstacle.sum() >= ob.num_edge_pixels
+    inside = ((f.u_left >= x - 1) & (f.u_left <= x + w) & (f.v >= y) & (f.v <= y + h))
+    assert np.all(inside[f.is_obstacle])
+
+
+def test_finds_a_step_down():
+    free = render_pair(seed=4)
+    drop = render_pair(step=(3.5, 0.3), seed=4)
+    det, _ = _calibrated(free)
+    r = det.process(*drop, CAM)
+    assert r.status == 'tracking'
+    drops = [o for o in r.obstacles if o.is_drop]
+    assert drops, [(o.height, o.range) for o in r.obstacles]
+    nearest = min(drops, key=lambda o: o.range)
+    assert -0.45 < nearest.height < -0.15
+    assert 3.4 < nearest.range < 5.0
+    assert nearest.disparity_excess < -r.threshold_px
+    assert not [o for o in r.obstacles if not o.is_drop and o.range < 8.0]
+
+
+def test_no_texture_is_a_status_not_an_exception(scenes):
+    blank = np.full((CAM.height, CAM.width), 128, np.uint8)
+    det = GpodDetector()
+    r = det.process(blank, blank, CAM)
+    assert r.status == 'initialising' and r.plane_abc is None and r.obstacles == ()
+    det, _ = _calibrated(scenes['free'])
+    r = det.process(blank, blank, CAM)
+    assert r.status == 'lost'
+    assert r.plane_abc is None and r.metric_plane is None and len(r.features) == 0
+    r = det.process(*scenes['free'], CAM)                # recovers at once
+    assert r.status == 'tracking' and r.obstacles == ()
+    det, _ = _calibrated(scenes['free'], GpodConfig(plane_update='fixed'))
+    assert det.process(blank, blank, CAM).status == 'lost'
+    assert det.process(*scenes['free'], CAM).status == 'tracking'
+
+
+def test_bad_images_raise_and_camera_change_resets(scenes):
+    det, _ = _calibrated(scenes['free'])
+    left, right = scenes['free']
+    with pytest.raises(ValueError):
+        det.process(left[:, :300], right[:, :300], CAM)
+    with pytest.raises(ValueError):
+        det.process(left.astype(np.float32), right, CAM)
+    with pytest.raises(ValueError):
+        det.process(np.dstack([left] * 3), right, CAM)
+    other = dataclasses.replace(CAM, baseline=0.3)
+    r = det.process(left, right, other)
+    assert r.status == 'initialising' and r.frame_index == 1
+    det.reset()
+    assert det.calibrated_plane is None
+
+
+def test_refit_follows_a_pitch_change(scenes):
+    """'refit' keeps the ground as the rig pitches by 2 degrees; 'fixed' would not."""
+    global PITCH
+    base = PITCH
+    try:
+        PITCH = base + 2.0
+        tilted = render_pair(seed=2)
+    finally:
+        PITCH = base
+    for mode, ok in (('refit', True), ('fixed', False)):
+        det, _ = _calibrated(scenes['free'], GpodConfig(plane_update=mode))
+        for _ in range(4):
+            r = det.process(*tilted, CAM)
+        assert r.status == 'tracking'
+        f = r.features
+        ground_ok = np.mean(np.abs(f.excess) < 1.0) > 0.8
+        assert ground_ok == ok
+        if ok:
+            assert r.obstacles == ()
+            assert abs(r.metric_plane.height - HEIGHT) < 0.05
+
+
+# ---------------------------------------------------------------- helpers, drawing
+def test_cluster_points_2d():
+    pts = np.array([[0.0, 0.0], [0.2, 0.0], [1.0, 0.0], [1.1, 0.05], [5.0, 5.0], [0.45, 0.0]])
+    grp = np.array([0, 1, 2, 3, 4, 1])
+    lab = cluster_points_2d(pts, grp, 0.3)
+    assert lab[0] == lab[1] == lab[5] and lab[2] == lab[3] and lab[4] not in lab[:4]
+    assert len(set(lab.tolist())) == 3
+    assert cluster_points_2d(np.zeros((0, 2)), np.zeros(0, int), 0.3).size == 0
+
+
+def test_draw_debug(scenes):
+    det, _ = _calibrated(scenes['free'])
+    r = det.process(*scenes['box'], CAM)
+    img = draw_debug(scenes['box'][0], r)
+    assert img.shape == (CAM.height, CAM.width, 3) and img.dtype == np.uint8
+    x, y, w, h = r.obstacles[0].roi
+    assert (img[y + h - 1, x:x + w] == [0, 0, 255]).all(axis=1).mean() > 0.8   # red roi
+    blank = np.zeros((CAM.height, CAM.width), np.uint8)
+    r0 = GpodDetector().process(blank, blank, CAM)
+    assert draw_debug(blank, r0).shape == (CAM.height, CAM.width, 3)
+    col = excess_colours(np.array([0.0, 1.0, 5.0, -5.0, np.nan]), 1.7)
+    assert col.shape == (5, 3) and tuple(col[4]) == (160, 160, 160)
+    assert col[2, 2] == 255 and col[3, 0] == 255
+
+
+# ---------------------------------------------------------------- real images
+@pytest.mark.skipif(not KITTI.is_dir(), reason='KITTI sample not available')
+def test_kitti_road_plane_gives_the_camera_height():
+    files_l = sorted(glob.glob(str(KITTI / 'image_2' / '*.png')))[:3]
+    files_r = sorted(glob.glob(str(KITTI / 'image_3' / '*.png')))[:3]
+    calib = {ln.split(':')[0]: np.array(ln.split()[1:], float).reshape(3, 4)
+             for ln in open(KITTI / 'calib.txt') if ':' in ln}
+    left = [cv2.imread(f, cv2.IMREAD_GRAYSCALE) for f in files_l]
+    right = [cv2.imread(f, cv2.IMREAD_GRAYSCALE) for f in files_r]
+    h, w = left[0].shape
+    cam = StereoCamera.from_projection(calib['P2'], calib['P3'], w, h)
+    assert abs(cam.baseline - 0.532) < 0.01
+    det = GpodDetector(GpodConfig(min_range_m=3.0, max_range_m=20.0, init_frames=3))
+    results = [det.process(l_, r_, cam) for l_, r_ in zip(left, right)]
+    assert results[-1].status == 'tracking'
+    height = metric_from_plane(cam, det.calibrated_plane.abc).height
+    assert abs(height - 1.65) < 0.15 * 1.65
+    assert isinstance(results[-1], GpodResult)
+
+
+def test_matched_run_length():
+    from asmonc_vision.core.edges import detect_vertical_edges
+    from asmonc_vision.core.gpod import matched_run_length
+    from asmonc_vision.core.matching import Matches
+    img = np.zeros((12, 40), np.uint8)
+    img[:, 20:] = 200
+    e = detect_vertical_edges(img)                # one string, rows 1..10
+    k = len(e)
+    d = np.full(k, 10.0, np.float32)
+    d[5] = 20.0                                   # a disparity jump splits the run
+    z = np.zeros(k, np.float32)
+    m = Matches(u_left=e.u, u_right=e.u - d, v=e.v, d=d, strength=z, string_id=e.string_id,
+                left_index=np.arange(k, dtype=np.int32), right_index=np.arange(k, dtype=np.int32),
+                support=z)
+    np.testing.assert_array_equal(matched_run_length(e, m, 1.0), [5, 5, 5, 5, 5, 1, 4, 4, 4, 4])
+
+
+def test_result_plane_view(scenes):
+    det, results = _calibrated(scenes['free'])
+    r = results[-1]
+    p = r.plane
+    assert p is not None and p.updated
+    np.testing.assert_array_equal(p.abc, r.plane_abc)
+    assert p.num_features == r.plane_num_features and p.metric is r.metric_plane
+    assert results[0].plane is None
+    assert r.timings is r.timings_ms

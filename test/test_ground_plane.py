@@ -1,0 +1,152 @@
+"""Robust ground-plane fit in disparity space (core.ground_plane)."""
+import numpy as np
+import pytest
+
+from asmonc_vision.core.camera import MetricPlane, StereoCamera, plane_from_metric
+from asmonc_vision.core.ground_plane import (PlaneFit, fit_ground_plane, lsq_plane,
+                                             plane_is_plausible)
+
+CAM = StereoCamera(f=300.0, cx=159.5, cy=119.5, baseline=0.35, width=320, height=240)
+
+
+def _ground(pitch_deg=20.0, height=1.25, roll_deg=0.0):
+    t, r = np.radians(pitch_deg), np.radians(roll_deg)
+    down = np.array([0.0, np.cos(t), np.sin(t)])
+    cr, sr = np.cos(r), np.sin(r)
+    down = np.array([cr * down[0] - sr * down[1], sr * down[0] + cr * down[1], down[2]])
+    plane = MetricPlane(normal_up=-down, height=height)
+    return plane, plane_from_metric(CAM, plane)
+
+
+def _noisy_points(abc, n=600, noise=0.3, outlier_frac=0.2, seed=0):
+    rng = np.random.default_rng(seed)
+    u = rng.uniform(0, 319, n)
+    v = rng.uniform(60, 239, n)
+    d = abc[0] * u + abc[1] * v + abc[2] + rng.normal(0, noise, n)
+    out = rng.random(n) < outlier_frac
+    d[out] += rng.uniform(3, 40, out.sum()) * rng.choice([-1.0, 1.0], out.sum())
+    return u, v, d, out
+
+
+@pytest.mark.parametrize('method', ['ransac', 'trimmed'])
+def test_recovers_plane_with_20_percent_outliers(method):
+    plane, abc = _ground(pitch_deg=20, roll_deg=3)
+    u, v, d, out = _noisy_points(abc)
+    fit = fit_ground_plane(u, v, d, cam=CAM, method=method, rng=0)
+    assert isinstance(fit, PlaneFit)
+    sigma = np.sqrt(np.diag(fit.cov))
+    assert np.all(np.abs(fit.abc - abc) < 5 * sigma)
+    assert np.all(sigma < [2e-3, 3e-3, 0.3])
+    # Disparity error over the image well below the noise.
+    uu, vv = np.meshgrid(np.arange(0, 320, 20), np.arange(60, 240, 20))
+    err = (fit.abc[0] - abc[0]) * uu + (fit.abc[1] - abc[1]) * vv + (fit.abc[2] - abc[2])
+    assert np.abs(err).max() < 0.15
+    assert np.mean(fit.inliers == ~out) > 0.97
+    assert fit.num_features == int(fit.inliers.sum())
+    assert 0.2 < fit.residual_rms < 0.4
+    assert fit.metric is not None
+    assert abs(fit.metric.height - plane.height) < 0.03
+    assert np.degrees(np.arccos(np.clip(fit.metric.normal_up @ plane.normal_up, -1, 1))) < 1.0
+
+
+def test_ransac_with_outlier_majority():
+    """The road is a minority of the features (as on KITTI): RANSAC with the
+    plausibility check still finds it; plain least squares would not."""
+    _, abc = _ground()
+    u, v, d, out = _noisy_points(abc, n=1000, outlier_frac=0.7, seed=4)
+    fit = fit_ground_plane(u, v, d, cam=CAM, rng=1)
+    assert fit is not None
+    assert np.all(np.abs(fit.abc - abc) < [3e-3, 3e-3, 0.3])
+    assert np.mean(fit.inliers[~out]) > 0.9
+
+
+def test_seeded_fits_are_reproducible():
+    _, abc = _ground()
+    u, v, d, _ = _noisy_points(abc, seed=2)
+    f1 = fit_ground_plane(u, v, d, rng=7)
+    f2 = fit_ground_plane(u, v, d, rng=np.random.default_rng(7))
+    np.testing.assert_array_equal(f1.abc, f2.abc)
+    np.testing.assert_array_equal(f1.inliers, f2.inliers)
+    assert f1.metric is None                                  # no camera given
+
+
+def test_failures_return_none():
+    _, abc = _ground()
+    u, v, d, _ = _noisy_points(abc, outlier_frac=0.0)
+    assert fit_ground_plane(u[:2], v[:2], d[:2]) is None                      # too few
+    assert fit_ground_plane(u[:20], v[:20], d[:20], min_features=30) is None  # too few
+    assert fit_ground_plane([], [], []) is None
+    assert fit_ground_plane(u, np.full_like(v, 150.0), d) is None             # one row
+    assert fit_ground_plane(np.full_like(u, 100.0), v, d) is None             # one column
+    nan = np.full_like(d, np.nan)
+    assert fit_ground_plane(u, v, nan) is None
+    # A plane above the cameras (disparity growing upwards) is not a ground.
+    assert fit_ground_plane(u, 240.0 - v, d, cam=CAM) is None
+    # A fronto-parallel wall is not a ground.
+    assert fit_ground_plane(u, v, np.full_like(d, 20.0), cam=CAM) is None
+    # Camera too high for the bounds.
+    assert fit_ground_plane(u, v, d, cam=CAM, max_height_m=1.0) is None
+
+
+def test_nans_are_ignored_and_masked_out():
+    _, abc = _ground()
+    u, v, d, _ = _noisy_points(abc, outlier_frac=0.0, seed=3)
+    d[::10] = np.nan
+    fit = fit_ground_plane(u, v, d, cam=CAM, rng=0)
+    assert fit is not None and not fit.inliers[::10].any()
+    assert np.all(np.abs(fit.abc - abc) < [2e-3, 2e-3, 0.2])
+
+
+def test_bad_arguments_raise():
+    with pytest.raises(ValueError):
+        fit_ground_plane([1, 2, 3], [1, 2, 3], [1, 2, 3], method='hough')
+    with pytest.raises(ValueError):
+        fit_ground_plane([1, 2, 3], [1, 2, 3], [1, 2], rng=0)
+    with pytest.raises(ValueError):
+        fit_ground_plane([1, 2, 3], [1, 2, 3], [1, 2, 3], inlier_threshold_px=0.0)
+
+
+def test_lsq_plane_exact_and_covariance():
+    rng = np.random.default_rng(0)
+    u = rng.uniform(0, 300, 400)
+    v = rng.uniform(0, 200, 400)
+    d = 0.02 * u + 0.3 * v - 7.0 + rng.normal(0, 0.5, 400)
+    abc, cov, rms = lsq_plane(u, v, d)
+    assert np.all(np.abs(abc - [0.02, 0.3, -7.0]) < [2e-3, 2e-3, 0.3])
+    a_mat = np.stack([u, v, np.ones_like(u)], 1)
+    ref = np.linalg.lstsq(a_mat, d, rcond=None)[0]
+    np.testing.assert_allclose(abc, ref, rtol=1e-9, atol=1e-9)
+    res = d - a_mat @ ref
+    np.testing.assert_allclose(cov, res @ res / (400 - 3) * np.linalg.inv(a_mat.T @ a_mat),
+                               rtol=1e-6)
+    assert abs(rms - 0.5) < 0.05
+
+
+def test_plausibility_check():
+    plane, abc = _ground(pitch_deg=30, height=1.4)
+    m = plane_is_plausible(CAM, abc)
+    assert m is not None and abs(m.height - 1.4) < 1e-9
+    assert plane_is_plausible(CAM, abc, max_height_m=1.0) is None
+    assert plane_is_plausible(CAM, abc, max_tilt_deg=20.0) is None
+    assert plane_is_plausible(CAM, np.zeros(3)) is None
+    assert plane_is_plausible(CAM, np.array([np.nan, 0.1, 1.0])) is None
+
+
+def test_weights_prefer_the_near_surface():
+    """Ground here (large disparity) and a larger area of lower ground beyond a step:
+    weighting by disparity cubed picks the near one; unweighted RANSAC the bigger one."""
+    _, near_abc = _ground(height=1.25)
+    _, far_abc = _ground(height=1.40)
+    rng = np.random.default_rng(6)
+    un, vn = rng.uniform(0, 319, 150), rng.uniform(190, 239, 150)
+    uf, vf = rng.uniform(0, 319, 600), rng.uniform(40, 170, 600)
+    u, v = np.r_[un, uf], np.r_[vn, vf]
+    d = np.r_[near_abc[0] * un + near_abc[1] * vn + near_abc[2],
+              far_abc[0] * uf + far_abc[1] * vf + far_abc[2]] + rng.normal(0, 0.2, 750)
+    plain = fit_ground_plane(u, v, d, cam=CAM, rng=0)
+    near = fit_ground_plane(u, v, d, cam=CAM, weights=np.maximum(d, 0) ** 3, rng=0)
+    assert abs(plain.metric.height - 1.40) < 0.03
+    assert abs(near.metric.height - 1.25) < 0.03
+    assert near.inliers[:150].mean() > 0.95
+    with pytest.raises(ValueError):
+        fit_ground_plane(u, v, d, weights=np.ones(3))

@@ -1,0 +1,138 @@
+"""Row-wise PMF edge matching (core.matching) on synthetic warped texture pairs."""
+import cv2
+import numpy as np
+import pytest
+
+from asmonc_vision.core.edges import detect_vertical_edges
+from asmonc_vision.core.matching import (candidate_matches, disparity_gradient_interval,
+                                         match_edges, pmf_support, support_links)
+
+
+def _texture(rng, h, w, blur=1.5, contrast=40.0):
+    t = rng.normal(0.0, 1.0, (h, w)).astype(np.float32)
+    t = cv2.GaussianBlur(t, (0, 0), blur)
+    return 128.0 + t / t.std() * contrast
+
+
+def _warped_pair(abc, h=240, w=320, seed=0, noise=1.0, blur=1.5):
+    """Left = texture; right sampled so that the disparity is ``d = a*u + b*v + c`` in
+    cyclopean coordinates (u = (uL + uR)/2): d = (a*uR + b*v + c) / (1 - a/2)."""
+    rng = np.random.default_rng(seed)
+    a, b, c = abc
+    tex = _texture(rng, h, w + 140, blur)
+    uu, vv = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    d_right = (a * uu + b * vv + c) / (1.0 - a / 2.0)
+    right = cv2.remap(tex, (uu + d_right).astype(np.float32), vv, cv2.INTER_CUBIC)
+    left = tex[:, :w]
+    left = left + rng.normal(0.0, noise, left.shape)
+    right = right + rng.normal(0.0, noise, right.shape)
+    return (np.clip(left, 0, 255).astype(np.uint8), np.clip(right, 0, 255).astype(np.uint8))
+
+
+@pytest.fixture(scope='module')
+def plane_pair():
+    abc = (0.01, 0.12, 2.0)                   # disparity 2 .. 33 px across the image
+    left, right = _warped_pair(abc)
+    el = detect_vertical_edges(left, min_string_length=3)
+    er = detect_vertical_edges(right, min_string_length=3)
+    return abc, el, er
+
+
+def test_recovers_a_ground_plane_disparity_field(plane_pair):
+    abc, el, er = plane_pair
+    m = match_edges(el, er, 0.5, 80.0, support_radius=3.0, iterations=2, min_support=0.5)
+    err = m.d - (abc[0] * m.u + abc[1] * m.v + abc[2])
+    assert len(m) > 0.7 * len(el)                      # most edges matched
+    assert np.mean(np.abs(err) < 0.2) > 0.85           # sub-pixel accurate
+    assert np.median(np.abs(err)) < 0.08
+    assert np.mean(np.abs(err) > 1.0) < 0.02           # few wrong matches
+    # Dtypes and shapes of the output.
+    for name in ('u_left', 'u_right', 'd', 'strength', 'support'):
+        assert getattr(m, name).dtype == np.float32 and getattr(m, name).shape == (len(m),)
+    for name in ('v', 'string_id', 'left_index', 'right_index'):
+        assert getattr(m, name).dtype == np.int32
+    np.testing.assert_allclose(m.d, m.u_left - m.u_right, atol=1e-4)
+    np.testing.assert_array_equal(m.string_id, el.string_id[m.left_index])
+
+
+def test_uniqueness_in_both_images(plane_pair):
+    _, el, er = plane_pair
+    m = match_edges(el, er, 0.5, 80.0)
+    assert np.unique(m.left_index).size == len(m)
+    assert np.unique(m.right_index).size == len(m)
+    np.testing.assert_array_equal(el.v[m.left_index], er.v[m.right_index])
+
+
+def test_disparity_range_is_respected(plane_pair):
+    _, el, er = plane_pair
+    m = match_edges(el, er, 10.0, 20.0)
+    assert len(m) > 0
+    assert m.d.min() >= 10.0 - 1e-4 and m.d.max() <= 20.0 + 1e-4
+
+
+def test_constant_shift_with_gain_difference():
+    rng = np.random.default_rng(5)
+    tex = _texture(rng, 120, 260)
+    shift = 17.35
+    uu, vv = np.meshgrid(np.arange(200, dtype=np.float32), np.arange(120, dtype=np.float32))
+    left = tex[:, :200]
+    right = cv2.remap(tex, uu + shift, vv, cv2.INTER_CUBIC) * 1.05 + 4.0   # gain, offset
+    left = np.clip(left + rng.normal(0, 2.0, left.shape), 0, 255).astype(np.uint8)
+    right = np.clip(right + rng.normal(0, 2.0, right.shape), 0, 255).astype(np.uint8)
+    el, er = detect_vertical_edges(left, min_string_length=3), detect_vertical_edges(right, min_string_length=3)
+    m = match_edges(el, er, 1.0, 60.0)
+    assert len(m) > 0.6 * len(el)
+    assert np.median(np.abs(m.d - shift)) < 0.1
+    assert np.mean(np.abs(m.d - shift) > 1.0) < 0.02
+
+
+def test_candidates_obey_polarity_strength_and_range(plane_pair):
+    _, el, er = plane_pair
+    c = candidate_matches(el, er, 5.0, 40.0, min_strength_ratio=0.6, max_orientation_diff_deg=25.0)
+    assert len(c) > 0
+    np.testing.assert_array_equal(el.polarity[c.left], er.polarity[c.right])
+    np.testing.assert_array_equal(el.v[c.left], er.v[c.right])
+    assert np.all((c.d >= 5.0) & (c.d <= 40.0))
+    s1, s2 = el.strength[c.left], er.strength[c.right]
+    assert np.all(np.minimum(s1, s2) >= 0.6 * np.maximum(s1, s2) - 1e-6)
+    dori = np.abs(el.orientation[c.left] - er.orientation[c.right])
+    assert np.all(np.minimum(dori, 2 * np.pi - dori) <= np.deg2rad(25.0) + 1e-6)
+    assert np.all(np.diff(c.left) >= 0)
+
+
+def test_disparity_gradient_interval_matches_brute_force():
+    rng = np.random.default_rng(1)
+    du = rng.uniform(-5, 5, 200)
+    dv = rng.integers(-5, 6, 200).astype(float)
+    for limit in (0.5, 1.0, 1.5):
+        lo, hi = disparity_gradient_interval(du, dv, limit)
+        x = np.linspace(-40, 40, 16001)[None, :]
+        sep = np.hypot(du[:, None] - x / 2.0, dv[:, None])
+        ok = np.abs(x) <= limit * sep
+        ok_lo = np.where(ok.any(1), x[0, np.argmax(ok, 1)], np.nan)
+        ok_hi = np.where(ok.any(1), x[0, ok.shape[1] - 1 - np.argmax(ok[:, ::-1], 1)], np.nan)
+        np.testing.assert_allclose(lo, ok_lo, atol=0.01)
+        np.testing.assert_allclose(hi, ok_hi, atol=0.01)
+
+
+def test_support_prefers_true_matches(plane_pair):
+    abc, el, er = plane_pair
+    c = candidate_matches(el, er, 0.5, 80.0)
+    links = support_links(el, er, c, 0.5, 80.0, support_radius=3.0)
+    s = pmf_support(links)
+    uc = el.u[c.left] - c.d / 2.0
+    true = np.abs(c.d - (abc[0] * uc + abc[1] * el.v[c.left] + abc[2])) < 0.5
+    assert np.median(s[true]) > 2.0 * max(np.median(s[~true]), 0.1)
+
+
+def test_empty_inputs():
+    blank = detect_vertical_edges(np.zeros((40, 50), np.uint8))
+    m = match_edges(blank, blank, 1.0, 30.0)
+    assert len(m) == 0 and m.d.dtype == np.float32
+    rng = np.random.default_rng(0)
+    tex = detect_vertical_edges(_texture(rng, 40, 50))
+    assert len(match_edges(tex, blank, 1.0, 30.0)) == 0
+    assert len(match_edges(blank, tex, 1.0, 30.0)) == 0
+    with pytest.raises(ValueError):
+        support_links(tex, tex, candidate_matches(tex, tex, 0.0, 5.0), 0.0, 5.0,
+                      disparity_gradient_limit=2.5)
