@@ -23,8 +23,10 @@ def ob(rng, bearing_deg=0.0, id=1, height=0.5, conf=1.0):
 
 
 def started(**cfg) -> AlarmLogic:
-    """A logic that has seen one empty frame at t=0 (so it is CLEAR, not starting)."""
+    """A logic that has seen a tracked ground and one empty frame at t=0 (so it is
+    CLEAR, not starting)."""
     logic = AlarmLogic(AlarmConfig(**cfg), t0=0.0)
+    logic.ground_status(0.0, GroundStatus.TRACKING)
     d = logic.update(0.0, [])
     assert d is not None and d.level == L.CLEAR and d.text == TEXT_CLEAR
     return logic
@@ -47,6 +49,20 @@ def test_no_data_ever_becomes_a_fault_after_the_grace_period():
     assert logic.check_timeout(2.9) is None
     d = logic.check_timeout(3.1)
     assert d.level == L.FAULT and d.text == TEXT_NO_DATA
+
+
+def test_no_all_clear_before_the_ground_is_seen():
+    # /obstacles may arrive before the first /ground_plane: an empty list then is no
+    # evidence of a clear path.
+    logic = AlarmLogic(AlarmConfig(), t0=0.0)
+    assert logic.update(0.1, []) is None
+    assert logic.current.level == L.FAULT and logic.current.text == TEXT_STARTING
+    logic.ground_status(0.2, GroundStatus.TRACKING)
+    d = logic.update(0.2, [])
+    assert d.level == L.CLEAR and d.text == TEXT_CLEAR
+    # the old behaviour, for detectors that publish no ground plane
+    relaxed = AlarmLogic(AlarmConfig(require_ground_plane=False), t0=0.0)
+    assert relaxed.update(0.1, []).level == L.CLEAR
 
 
 def test_nearest_obstacle_in_corridor_is_the_target():

@@ -16,7 +16,7 @@ from rclpy.parameter import Parameter  # noqa: E402
 from asmonc_vision.core.alarm import TEXT_CLEAR, TEXT_NO_DATA, TEXT_STARTING  # noqa: E402
 from asmonc_vision.nodes.alarm_node import AlarmNode  # noqa: E402
 from asmonc_vision.nodes.common import ALARM_QOS, RESULT_QOS  # noqa: E402
-from asmonc_vision_msgs.msg import Alarm, Obstacle, ObstacleArray  # noqa: E402
+from asmonc_vision_msgs.msg import GroundPlane, Alarm, Obstacle, ObstacleArray  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 
 FRAME = 'stereo_left_optical_frame'
@@ -97,6 +97,11 @@ def test_alarms_follow_obstacles_fault_on_silence_and_latch(ros):
     spin_until(lambda: alarms, 'the start-up alarm')
     assert alarms[0].level == Alarm.FAULT and alarms[0].text == TEXT_STARTING
     spin_until(lambda: pub.get_subscription_count() > 0, 'the node to subscribe')
+    # the detector reports a tracked ground (without it no list can mean "clear")
+    plane_pub = probe.create_publisher(GroundPlane, '/ground_plane', RESULT_QOS)
+    spin_until(lambda: plane_pub.get_subscription_count() > 0, 'the ground subscription')
+    plane_pub.publish(GroundPlane(status=GroundPlane.TRACKING))
+    spin_until(lambda: node._logic._ground is not None, 'the ground status to arrive')
 
     stamp = [10_000_000_000]
 

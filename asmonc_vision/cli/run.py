@@ -334,8 +334,11 @@ def run(args) -> int:
         failed.append('interrupted')
     finally:
         console.done()
-        for c in children.values():
-            c.stop()
+        # Player, then alarm, then detector: the alarm must not outlive the detector
+        # and announce the end of the replay as a fault.
+        for name in ('player', 'alarm', 'detector'):
+            if name in children:
+                children[name].stop()
         executor.shutdown(timeout_sec=2.0)
         if recorder is not None:
             recorder.close()

@@ -114,6 +114,10 @@ class AlarmConfig:
     side_angle_deg: float = param(
         30.0, 'bearings within +-this angle (and beyond ahead_angle_deg) are spoken as '
         '"slightly left/right"; beyond as "left/right", degrees', range=(0.0, 90.0))
+    require_ground_plane: bool = param(
+        True, 'until the detector has reported a TRACKING ground plane on /ground_plane, '
+        'obstacle lists count as "starting up": an empty list before the ground is seen is '
+        'no evidence of a clear path. False only for detectors that publish no /ground_plane')
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -385,6 +389,8 @@ class AlarmLogic:
             return 'starting' if t - self._t0 <= c.startup_grace else 'no_data'
         if t - self._last_obstacles_t > c.timeout:
             return 'no_data'
+        if self._ground is None and c.require_ground_plane:
+            return 'starting' if t - self._t0 <= c.startup_grace else 'ground_lost'
         if self._ground == GroundStatus.INITIALISING:
             return 'starting' if t - self._ground_since <= c.startup_grace else 'ground_lost'
         if self._ground == GroundStatus.LOST and t - self._ground_since > c.timeout:

@@ -16,7 +16,6 @@ ground plane from the images: the node works on any rectified rig and image size
 from __future__ import annotations
 
 import collections
-import queue
 import threading
 import time
 from dataclasses import dataclass
@@ -63,6 +62,9 @@ class DetectorNodeConfig:
     time_jump_reset: float = param(
         1.0, 'stamps going back by more than this (s) restart the detector (bag loop)',
         range=(0.0, 1e6))
+    info_wait: float = param(
+        1.0, 'how long a pair waits for its first camera_info before it is skipped, s',
+        range=(0.0, 10.0))
     input_timeout: float = param(
         2.0, 'no image pair for this long (s) is reported in /diagnostics', range=(0.1, 60.0))
 
@@ -146,7 +148,6 @@ class DetectorNode(Node):
         self._info = {'left': None, 'right': None}
         self._pairer = StereoPairer(int(cfg.max_stamp_skew * 1e9),
                                     int(cfg.unpaired_timeout * 1e9))
-        self._queue: queue.Queue[_Pair | None] = queue.Queue()
         self._pending = collections.deque()
         self._cv = threading.Condition()
         self._last_stamp_ns: int | None = None
@@ -226,10 +227,20 @@ class DetectorNode(Node):
                 self.diag.update(Diagnostics.ERROR, f'internal error: {exc}')
 
     def _camera_for(self, pair: _Pair) -> StereoCamera | None:
-        if pair.left_info is None or pair.right_info is None:
-            self.get_logger().warn('no camera_info yet on /stereo/{left,right}/camera_info; '
-                                   'pair skipped', throttle_duration_sec=2.0)
-            return None
+        # The infos travel on their own topics and may arrive just after the images.
+        deadline = time.monotonic() + self.node_config.info_wait
+        while pair.left_info is None or pair.right_info is None:
+            with self._lock:
+                pair.left_info = pair.left_info or self._info['left']
+                pair.right_info = pair.right_info or self._info['right']
+            if pair.left_info is not None and pair.right_info is not None:
+                break
+            if time.monotonic() > deadline or self._stop:
+                self.get_logger().warn(
+                    'no camera_info on /stereo/{left,right}/camera_info; pair skipped',
+                    throttle_duration_sec=2.0)
+                return None
+            time.sleep(0.01)
         key = (tuple(pair.left_info.p), tuple(pair.right_info.p),
                pair.left_info.width, pair.left_info.height)
         if key != self._camera_key:
