@@ -1,0 +1,120 @@
+"""detector_node over real topics, in-process: frames from the committed static bag."""
+import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.serialization import deserialize_message
+from sensor_msgs.msg import CameraInfo, Image
+
+from asmonc_vision import bagio
+from asmonc_vision.nodes.common import IMAGE_QOS, RESULT_QOS
+from asmonc_vision.nodes.detector_node import DetectorNode, StereoPairer
+from asmonc_vision_msgs.msg import GroundPlane, ObstacleArray
+from conftest import BAGS, spin_until
+
+TYPES = {'/stereo/left/image_rect': Image, '/stereo/right/image_rect': Image,
+         '/stereo/left/camera_info': CameraInfo, '/stereo/right/camera_info': CameraInfo}
+
+
+def load_frames(bag, indices):
+    """[(left, right, left_info, right_info)] rclpy messages of the given frame indices."""
+    from rosbags.rosbag2 import Reader
+    per_topic = {t: [] for t in TYPES}
+    with Reader(bag) as r:
+        conns = [c for c in r.connections if c.topic in TYPES]
+        for c, _, raw in r.messages(connections=conns):
+            per_topic[c.topic].append(deserialize_message(bytes(raw), TYPES[c.topic]))
+    return [tuple(per_topic[t][i] for t in TYPES) for i in indices]
+
+
+@pytest.fixture
+def graph(ros_context):
+    ctx = ros_context
+    det = DetectorNode(context=ctx, parameter_overrides=[Parameter('publish_debug_image', value=True)])
+    probe = Node('probe', context=ctx)
+    got = {'obstacles': [], 'plane': [], 'debug': []}
+    probe.create_subscription(ObstacleArray, '/obstacles', got['obstacles'].append, RESULT_QOS)
+    probe.create_subscription(GroundPlane, '/ground_plane', got['plane'].append, RESULT_QOS)
+    probe.create_subscription(Image, '/detector/debug_image', got['debug'].append, IMAGE_QOS)
+    pubs = {t: probe.create_publisher(typ, t, IMAGE_QOS) for t, typ in TYPES.items()}
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(det)
+    ex.add_node(probe)
+    assert spin_until(ex, lambda: all(p.get_subscription_count() >= 1 for p in pubs.values())
+                      and probe.count_publishers('/obstacles') >= 1)
+
+    def send(left, right, linfo, rinfo):
+        pubs['/stereo/left/camera_info'].publish(linfo)
+        pubs['/stereo/right/camera_info'].publish(rinfo)
+        pubs['/stereo/left/image_rect'].publish(left)
+        pubs['/stereo/right/image_rect'].publish(right)
+    yield det, ex, send, got
+    ex.shutdown()
+    det.destroy_node()
+    probe.destroy_node()
+
+
+def test_one_result_per_pair_and_obstacles_found(graph):
+    det, ex, send, got = graph
+    frames = load_frames(BAGS / 'static_obstacles', [0, 1, 2, 3, 45, 46, 47])
+    for i, f in enumerate(frames):
+        send(*f)
+        assert spin_until(ex, lambda: len(got['obstacles']) == i + 1, timeout=15)
+    stamps = [(m.header.stamp.sec, m.header.stamp.nanosec) for m in got['obstacles']]
+    assert stamps == [(f[0].header.stamp.sec, f[0].header.stamp.nanosec) for f in frames]
+    assert all(m.header.frame_id == 'stereo_left_optical_frame' for m in got['obstacles'])
+    assert spin_until(ex, lambda: len(got['plane']) == len(frames))
+    assert got['plane'][0].status == GroundPlane.INITIALISING
+    assert got['plane'][-1].status == GroundPlane.TRACKING
+    # the paper's rig: cameras 1.25 m above the ground
+    assert got['plane'][-1].height == pytest.approx(1.25, abs=0.05)
+    assert got['obstacles'][0].obstacles == []  # initialising: nothing reported
+    assert len(got['obstacles'][-1].obstacles) >= 3  # boxes, post and bollard are up
+    assert spin_until(ex, lambda: len(got['debug']) >= 1)
+    assert got['debug'][-1].encoding == 'bgr8'
+
+
+def test_bad_inputs_are_logged_skipped_and_the_node_keeps_going(graph, capfd):
+    det, ex, send, got = graph
+    good = load_frames(BAGS / 'static_obstacles', [0, 1, 2, 15])  # 15: 1.5 s later
+
+    # 1. a wrong encoding
+    left, right, li, ri = load_frames(BAGS / 'static_obstacles', [0])[0]
+    left.encoding = right.encoding = '16UC1'
+    send(left, right, li, ri)
+    assert spin_until(ex, lambda: det.frames_bad >= 1, timeout=10)
+    # 2. left and right of different sizes
+    left, right, li, ri = load_frames(BAGS / 'static_obstacles', [0])[0]
+    right.height, right.data = right.height // 2, bytes(right.data)[:len(right.data) // 2]
+    right.header.stamp.nanosec += 1  # a new stamp, so it is a new pair
+    left.header.stamp.nanosec += 1
+    send(left, right, li, ri)
+    assert spin_until(ex, lambda: det.frames_bad >= 2, timeout=10)
+    # 3. a pair whose stamps do not match: never paired, dropped when it expires
+    left, right, li, ri = load_frames(BAGS / 'static_obstacles', [0])[0]
+    left.header.stamp.nanosec += 2
+    right.header.stamp.nanosec += 50_000_002
+    send(left, right, li, ri)
+    assert got['obstacles'] == []
+    # the node still works on good pairs (which also push the mismatched ones out)
+    for f in good:
+        send(*f)
+    assert spin_until(ex, lambda: len(got['obstacles']) == len(good), timeout=15)
+    assert spin_until(ex, lambda: det.frames_bad >= 3, timeout=10)
+    err = capfd.readouterr().err
+    assert "unsupported image encoding '16UC1'" in err
+    assert 'left image is 320x240 but right is 320x120' in err
+    assert 'has no partner with the same stamp' in err
+
+
+def test_pairer_pairs_by_stamp_and_expires_orphans():
+    p = StereoPairer(max_skew_ns=0, timeout_ns=1_000_000_000)
+    assert p.add('left', 100, 'L1') is None
+    assert p.add('right', 200, 'R2') is None
+    assert p.add('right', 100, 'R1') == ('L1', 'R1')
+    assert p.add('left', 200, 'L2') == ('L2', 'R2')
+    assert p.add('left', 300, 'L3') is None
+    assert p.expire() == []
+    assert p.add('left', 2_000_000_000, 'L4') is None
+    assert p.expire() == [('left', 300)]

@@ -1,0 +1,122 @@
+"""End to end: `asmonc run` replays committed bags through the real node graph
+(player, detector and alarm nodes in their own processes), records the outputs, and
+the recorded /obstacles are scored against the bag's ground truth here, independently
+of the command's own summary."""
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from asmonc_vision import bagio
+from asmonc_vision.cli.run import frame_from_obstacle_array
+from asmonc_vision.core.evaluation import score_sequence
+from conftest import BAGS
+
+
+def asmonc_run(*args, timeout=240):
+    env = dict(os.environ)
+    return subprocess.run([sys.executable, '-m', 'asmonc_vision.cli', 'run', *map(str, args)],
+                          env=env, capture_output=True, text=True, timeout=timeout)
+
+
+def frames(bag, topic):
+    return {bagio.header_stamp_ns(m): frame_from_obstacle_array(m)
+            for _, _, m in bagio.read_messages(bag, [topic])}
+
+
+@pytest.fixture(scope='module')
+def static_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp('static') / 'out'
+    res = asmonc_run(BAGS / 'static_obstacles', '--out', out, '--no-progress')
+    return res, out
+
+
+def test_static_bag_every_true_obstacle_is_reported(static_run):
+    res, out = static_run
+    assert res.returncode == 0, res.stdout + res.stderr
+    n_pairs = bagio.bag_topics(BAGS / 'static_obstacles')['/stereo/left/image_rect'][1]
+    det = frames(out, '/obstacles')
+    truth = frames(BAGS / 'static_obstacles', '/ground_truth/obstacles')
+    # an /obstacles message for every input pair: nothing dropped at rate 1
+    assert len(det) == n_pairs == len(truth)
+    assert set(det) == set(truth)
+    score, missing = score_sequence(det, truth, match_radius=0.3, min_height=0.10,
+                                    max_range=5.0)
+    assert missing == []
+    eligible = {k: o for k, o in score.obstacles.items() if o.frames_eligible}
+    assert len(eligible) >= 4
+    for oid, o in eligible.items():
+        # reported within 0.3 m of its true position, in most of the frames it is in view
+        assert o.detected, f'obstacle {oid} ({o.height:.2f} m high) missed: ' \
+                           f'{o.frames_detected}/{o.frames_eligible} frames'
+    assert score.false_per_frame < 0.1
+    # the command's own summary agrees
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['dropped_frames'] == 0
+    assert summary['ground_truth']['detected'] == score.detected
+    assert 'WARNING' in summary['alarms'] or 'STOP' in summary['alarms']
+    assert '=== summary ===' in res.stdout and 'DETECTED' in res.stdout
+
+
+def test_static_bag_outputs_are_recorded(static_run):
+    _, out = static_run
+    topics = bagio.bag_topics(out)
+    for t in ('/obstacles', '/ground_plane', '/alarms', '/obstacles/markers', '/diagnostics'):
+        assert topics.get(t, ('', 0))[1] > 0, f'{t} not recorded: {topics}'
+    planes = [m for _, _, m in bagio.read_messages(out, ['/ground_plane'])]
+    assert planes[-1].status == 1
+    assert planes[-1].height == pytest.approx(1.25, abs=0.05)
+    # the nodes' logs are kept beside the bag
+    assert (out / 'logs' / 'detector.log').exists()
+
+
+def test_clear_path_standing_still_gives_no_alarm(tmp_path):
+    out = tmp_path / 'out'
+    res = asmonc_run(BAGS / 'clear_static', '--out', out, '--no-progress')
+    assert res.returncode == 0, res.stdout + res.stderr
+    alarms = [m for _, _, m in bagio.read_messages(out, ['/alarms'])]
+    assert alarms, 'the alarm node said nothing at all'
+    obstacle_alarms = [a.text for a in alarms if a.level in (1, 2, 3)]  # CAUTION..STOP
+    assert obstacle_alarms == []
+    assert any(a.level == 0 for a in alarms)  # "all clear" was said once the ground was seen
+    det = frames(out, '/obstacles')
+    assert sum(len(f) for f in det.values()) <= 1
+
+
+def test_missing_bag_is_a_clear_error(tmp_path):
+    res = asmonc_run(tmp_path / 'no_such_bag')
+    assert res.returncode == 2
+    assert 'does not exist' in res.stderr
+
+
+def test_truncated_bag_is_a_clear_error(tmp_path):
+    src = next((BAGS / 'clear_static').glob('*.mcap'))
+    cut = tmp_path / 'cut.mcap'
+    data = src.read_bytes()
+    cut.write_bytes(data[:len(data) // 3])
+    res = asmonc_run(cut)
+    assert res.returncode == 2
+    assert 'cut.mcap' in res.stderr and 'cannot be read' in res.stderr
+
+
+def test_bag_without_cameras_is_a_clear_error(tmp_path):
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    store = bagio.typestore()
+    Imu = store.types['sensor_msgs/msg/Imu']
+    with Writer(tmp_path / 'imu_only', version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        c = w.add_connection('/inclinometer/imu', 'sensor_msgs/msg/Imu', typestore=store)
+        msg = Imu(header=store.types['std_msgs/msg/Header'](
+            stamp=store.types['builtin_interfaces/msg/Time'](sec=1, nanosec=0), frame_id='x'),
+            orientation=store.types['geometry_msgs/msg/Quaternion'](x=0, y=0, z=0, w=1),
+            orientation_covariance=np.zeros(9), angular_velocity=store.types[
+                'geometry_msgs/msg/Vector3'](x=0, y=0, z=0),
+            angular_velocity_covariance=np.zeros(9),
+            linear_acceleration=store.types['geometry_msgs/msg/Vector3'](x=0, y=0, z=0),
+            linear_acceleration_covariance=np.zeros(9))
+        w.write(c, 1, store.serialize_cdr(msg, 'sensor_msgs/msg/Imu'))
+    res = asmonc_run(tmp_path / 'imu_only')
+    assert res.returncode == 2
+    assert 'no /stereo/left/image_rect messages' in res.stderr
