@@ -1,6 +1,7 @@
 """`asmonc`: the command-line front of asmonc_vision.
 
     asmonc run [BAG] [--out DIR] [--rate R]   replay a bag through the node graph
+    asmonc bench [BAG ...]                     time the detector per frame, one core
 """
 from __future__ import annotations
 
@@ -12,10 +13,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog='asmonc', description='asmonc_vision: stereo obstacle detection for walking.')
     sub = parser.add_subparsers(dest='command', required=True)
-    from asmonc_vision.cli import run
+    from asmonc_vision.cli import bench, run
     run.add_arguments(sub.add_parser(
         'run', help='replay a bag through the detector and alarm nodes',
         description=run.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
+    bench.add_arguments(sub.add_parser(
+        'bench', help='time the detector per frame on one core',
+        description=bench.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
     return parser
 
 

@@ -6,15 +6,20 @@ messages once (see `conversions`), call the core, and publish.
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import signal
+import threading
 from typing import Any, Callable, TypeVar
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType, SetParametersResult)
-from rclpy.executors import ExternalShutdownException
+from rclpy.exceptions import ParameterUninitializedException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy,
                        qos_profile_sensor_data)
 
@@ -66,6 +71,14 @@ def _ros_default(value: Any) -> Any:
     return list(value) if isinstance(value, tuple) else value
 
 
+def _get_value(node: Node, name: str) -> Any:
+    """A declared parameter's value; an array left unset (YAML `[]`) reads as None."""
+    try:
+        return node.get_parameter(name).value
+    except ParameterUninitializedException:
+        return None
+
+
 def _from_ros(f: dataclasses.Field, value: Any) -> Any:
     if isinstance(f.default, tuple):
         return tuple(value) if value is not None else ()
@@ -95,8 +108,14 @@ def declare_config(node: Node, cls: type[T], prefix: str = '',
     """
     fields = {prefix + f.name: f for f in dataclasses.fields(cls)}
     for name, f in fields.items():
-        node.declare_parameter(name, _ros_default(f.default), _descriptor(f))
-    values = {f.name: _from_ros(f, node.get_parameter(name).value) for name, f in fields.items()}
+        desc = _descriptor(f)
+        default = _ros_default(f.default)
+        if isinstance(default, list) and not default:
+            # rclpy cannot type an empty list (it would become a BYTE_ARRAY): declare the
+            # descriptor's array type with no value; unset reads back as empty.
+            default = Parameter.Type(desc.type)
+        node.declare_parameter(name, default, desc)
+    values = {f.name: _from_ros(f, _get_value(node, name)) for name, f in fields.items()}
     config = cls(**values)
     state = {'config': config}
 
@@ -167,13 +186,73 @@ class Diagnostics:
         self._pub.publish(msg)
 
 
+def config_overrides(config: Any) -> list[Parameter]:
+    """Parameter overrides that make a node declare exactly the settings `config`
+    (a settings dataclass), for building nodes in-process. An empty list becomes an
+    unset override, which `declare_config` reads back as empty."""
+    out = []
+    for f in dataclasses.fields(config):
+        value = getattr(config, f.name)
+        if isinstance(value, tuple) and not value:
+            out.append(Parameter(f.name, Parameter.Type.NOT_SET))
+        else:
+            out.append(Parameter(f.name, value=list(value) if isinstance(value, tuple) else value))
+    return out
+
+
+def quiet_interrupts() -> threading.Event:
+    """Make Ctrl-C (SIGINT) shut ROS down cleanly instead of raising KeyboardInterrupt.
+
+    Call before `rclpy.init`. Once rclpy is initialised its own handler shuts the
+    contexts down (so spinning returns) and then calls this one, so Python does not raise
+    KeyboardInterrupt at a random later point (e.g. while a bag is being finalised). A
+    Ctrl-C before rclpy has installed its handler sets the returned event and shuts the
+    default context down from a helper thread.
+
+    Returns:
+        An event set by the first SIGINT.
+    """
+    interrupted = threading.Event()
+    if threading.current_thread() is threading.main_thread():
+        def _on_sigint(signum, frame) -> None:
+            interrupted.set()
+            threading.Thread(target=_try_shutdown_default, daemon=True).start()
+
+        signal.signal(signal.SIGINT, _on_sigint)
+    return interrupted
+
+
+def _try_shutdown_default() -> None:
+    with contextlib.suppress(Exception):
+        rclpy.try_shutdown()
+
+
+def spin_until_shutdown(node: Node, interrupted: threading.Event | None = None,
+                        period: float = 0.1) -> None:
+    """Spin `node` until its context is shut down or `interrupted` is set.
+
+    Unlike `rclpy.spin`, the executor wakes every `period` seconds, so a shutdown that did
+    not wake the wait set (a Ctrl-C racing rclpy's signal handling) is still noticed and
+    Python signal handlers get to run.
+    """
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    try:
+        while node.context.ok() and not (interrupted is not None and interrupted.is_set()):
+            executor.spin_once(timeout_sec=period)
+    finally:
+        with contextlib.suppress(Exception):
+            executor.remove_node(node)
+
+
 def run_node(factory: Callable[..., Node], args: list[str] | None = None, **kwargs: Any) -> None:
     """The Jazzy main: init, spin, exit cleanly on Ctrl-C or external shutdown."""
+    interrupted = quiet_interrupts()
     rclpy.init(args=args)
     node = None
     try:
         node = factory(**kwargs)
-        rclpy.spin(node)
+        spin_until_shutdown(node, interrupted)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

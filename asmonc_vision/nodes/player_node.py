@@ -1,0 +1,402 @@
+"""Bag player: replays a rosbag2 bag (MCAP directory or single .mcap file) on ROS topics.
+
+PyPI has no rosbag2, so this node stands in for ``ros2 bag play``: it publishes every
+topic of the bag with its recorded type and timing (receive timestamps scaled by
+1/rate), passing the serialized CDR bytes through untouched. image_transport
+``<topic>/compressed`` streams (PNG/JPEG) are decoded and published as mono8
+``sensor_msgs/Image`` on ``<topic>``.
+
+Publishing runs in a dedicated thread (`BagPlayerNode.start`), so the node needs no
+spinning to play; spinning only serves its parameter services. Before the end is
+reported, the player waits (at most ACK_TIMEOUT) until reliable subscribers have
+acknowledged the last messages, so exiting right after does not lose them. For the ``asmonc run``
+orchestrator the node offers `play_done` (an Event), `published_counts` and `error`.
+
+Errors: a missing, unreadable or empty bag is logged (naming the file) and raises
+`BagError` from the constructor; `main` exits with status 2. A bag cut short plays what
+can be read, then logs the truncation; `error` is set and `main` exits with status 2.
+"""
+from __future__ import annotations
+
+import contextlib
+import importlib
+import threading
+import time
+from collections.abc import Iterable
+from typing import Any
+
+import rclpy
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from asmonc_vision.bagplay import (BagError, BagSource, PlayerConfig, PlayTopic,
+                                   ReplaySchedule, compressed_to_image_cdr, plan_topics)
+from asmonc_vision.nodes.common import (config_overrides, declare_config, quiet_interrupts,
+                                        spin_until_shutdown)
+
+__all__ = ['BagPlayerNode', 'BagError', 'PlayerConfig', 'message_class', 'main']
+
+#: publisher depth of image streams (a reader keeps up; a deep queue only adds latency)
+IMAGE_DEPTH = 10
+#: publisher depth of small topics (camera_info, imu, results)
+SMALL_DEPTH = 100
+#: /clock is published at least this often while waiting for the next message
+CLOCK_HZ = 25.0
+#: at the end, wait at most this long (s) for subscribers to acknowledge the last messages
+ACK_TIMEOUT = 2.0
+
+
+def message_class(msgtype: str):
+    """rclpy message class for 'pkg/msg/Name'.
+
+    Raises:
+        ImportError: the package is not installed, or the name is not 'pkg/msg/Name'.
+    """
+    parts = msgtype.split('/')
+    if len(parts) != 3 or parts[1] != 'msg':
+        raise ImportError(f"'{msgtype}' is not a message type name (pkg/msg/Name)")
+    module = importlib.import_module(f'{parts[0]}.msg')
+    try:
+        return getattr(module, parts[2])
+    except AttributeError:
+        raise ImportError(f'{parts[0]}.msg has no message {parts[2]}') from None
+
+
+class BagPlayerNode(Node):
+    """Replays a bag on its topics (see the module docstring).
+
+    Args:
+        config: settings; None reads them from the ROS parameters (YAML, command line).
+        node_name: the node's name.
+        start: start playing at once (else call `start()`).
+        **node_kwargs: passed to rclpy's Node (context, parameter_overrides, ...).
+    Raises:
+        BagError: the bag is missing, unreadable or empty, or no topic can be played
+            (already logged as an error).
+        ValueError, rclpy.exceptions.InvalidParameterValueException: bad settings.
+
+    Attributes:
+        config: the `PlayerConfig` in force.
+        source: the opened `BagSource` (its `info` describes the bag).
+        plan: the published streams (`PlayTopic`).
+        published_counts: messages published per published topic (updated while playing).
+        play_done: set when playing has ended (bag done and not looping, error, or stop).
+        passes: completed passes through the bag.
+        error: why the bag could not be played to its end, or None.
+    """
+
+    def __init__(self, config: PlayerConfig | None = None, *,
+                 node_name: str = 'bag_player_node', start: bool = True, **node_kwargs: Any):
+        if config is not None:
+            node_kwargs['parameter_overrides'] = (
+                list(node_kwargs.get('parameter_overrides') or []) + config_overrides(config))
+        super().__init__(node_name, **node_kwargs)
+        self.published_counts: dict[str, int] = {}
+        self.play_done = threading.Event()
+        self.passes = 0
+        self.error: str | None = None
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._destroyed = False
+        try:
+            self.config: PlayerConfig = declare_config(self, PlayerConfig)
+            self._setup()
+        except BagError as exc:
+            self.get_logger().error(str(exc))
+            self.error = str(exc)
+            with contextlib.suppress(Exception):
+                self.destroy_node()
+            raise
+        except Exception:
+            with contextlib.suppress(Exception):
+                self.destroy_node()
+            raise
+        if start:
+            self.start()
+
+    # --- setup --------------------------------------------------------------------------
+
+    def _setup(self) -> None:
+        cfg = self.config
+        self.source = BagSource(cfg.bag)
+        info = self.source.info
+        self._start_ns = info.start_ns + int(round(cfg.start_offset * 1e9))
+        if self._start_ns > info.end_ns:
+            raise BagError(f"bag '{info.path}': start_offset {cfg.start_offset:.3f} s is "
+                           f'past the end of the bag ({info.duration_s:.3f} s long)')
+        log = self.get_logger()
+        for t in info.topics.values():
+            if t.other_types:
+                log.warning(f"bag topic {t.name} also holds type(s) {', '.join(t.other_types)}"
+                            f': playing only {t.msgtype}')
+        plan = plan_topics(info.topics, cfg.topics, cfg.exclude_topics)
+        self.plan: list[PlayTopic] = []
+        self._pubs: dict[str, Any] = {}
+        for p in plan:
+            try:
+                cls = message_class(p.out_type)
+            except ImportError as exc:
+                log.warning(f'skipping topic {p.bag_topic}: unknown message type '
+                            f'{p.bag_type} ({exc})')
+                continue
+            if p.out_topic in self._pubs:
+                log.warning(f'skipping topic {p.bag_topic}: {p.out_topic} is already played')
+                continue
+            if cfg.publish_clock and p.out_topic == '/clock':
+                log.warning('skipping the bag\'s /clock: publish_clock makes a new one')
+                continue
+            depth = IMAGE_DEPTH if p.out_type.endswith('Image') else SMALL_DEPTH
+            qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                             reliability=ReliabilityPolicy.RELIABLE,
+                             durability=(DurabilityPolicy.TRANSIENT_LOCAL if p.latched
+                                         else DurabilityPolicy.VOLATILE))
+            self._pubs[p.out_topic] = self.create_publisher(cls, p.out_topic, qos)
+            self.published_counts[p.out_topic] = 0
+            self.plan.append(p)
+        if not self.plan:
+            raise BagError(f"bag '{info.path}': no topic to play (bag topics: "
+                           f"{', '.join(sorted(info.topics)) or 'none'}; topics="
+                           f'{list(cfg.topics)}, exclude_topics={list(cfg.exclude_topics)})')
+        self._by_bag_topic = {p.bag_topic: p for p in self.plan}
+        self._clock_pub = None
+        if cfg.publish_clock:
+            from rosgraph_msgs.msg import Clock
+            self._clock_pub = self.create_publisher(
+                Clock, '/clock', QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+            self._clock_msg = Clock()
+            self._last_clock = 0.0
+        note = ''
+        if info.truncated:
+            note = f' [damaged: playing the {info.message_count} message(s) that can be read]'
+        files = ', '.join(f.name for f in info.files)
+        log.info(f"bag '{info.path}' ({info.storage}, {files}): "
+                 f'{info.duration_s:.3f} s, {info.message_count} messages, '
+                 f'{len(info.topics)} topics; rate {cfg.rate:g}'
+                 + (f', from {cfg.start_offset:g} s' if cfg.start_offset else '')
+                 + (', looping' if cfg.loop else '') + note)
+        for p in self.plan:
+            how = (f' -> {p.out_topic} [{p.out_type}, decoded mono8]' if p.decompress
+                   else '')
+            log.info(f'  {p.bag_topic} [{p.bag_type}] {p.count} msgs{how}'
+                     + (' (latched)' if p.latched else ''))
+        if info.truncated:
+            log.warning(info.truncated)
+
+    # --- playing ------------------------------------------------------------------------
+
+    def start(self) -> None:
+        """Start the playing thread (once)."""
+        if self._thread is not None:
+            return
+        self._thread = threading.Thread(target=self._run, name='bag_player', daemon=True)
+        self._thread.start()
+
+    def stop(self, timeout: float = 5.0) -> None:
+        """Stop playing and wait for the thread to end."""
+        self._stop.set()
+        t = self._thread
+        if t is not None and t is not threading.current_thread():
+            t.join(timeout)
+
+    @property
+    def image_topics(self) -> list[str]:
+        """Published topics of type sensor_msgs/Image."""
+        return [p.out_topic for p in self.plan if p.is_image]
+
+    def wait_for_subscribers(self, count: int, timeout: float,
+                             topics: Iterable[str] | None = None) -> bool:
+        """Wait until each of `topics` (default: the image topics) has `count` subscribers.
+
+        Args:
+            count: subscribers needed per topic.
+            timeout: seconds; <= 0 waits without limit (until `stop`).
+        Returns:
+            True when they are there, False on timeout or stop.
+        """
+        topics = list(self.image_topics if topics is None else topics)
+        deadline = None if timeout <= 0 else time.monotonic() + timeout
+        while not self._stop.is_set():
+            missing = {t: n for t in topics
+                       if (n := self._pubs[t].get_subscription_count()) < count}
+            if not missing:
+                return True
+            if deadline is not None and time.monotonic() > deadline:
+                self.get_logger().warning(
+                    f'waited {timeout:g} s for {count} subscriber(s); still missing on '
+                    + ', '.join(f'{t} ({n})' for t, n in sorted(missing.items()))
+                    + ': playing anyway')
+                return False
+            self._stop.wait(0.02)
+        return False
+
+    def _run(self) -> None:
+        cfg = self.config
+        log = self.get_logger()
+        stopped_early = False
+        try:
+            if cfg.wait_for_subscribers > 0 and self.image_topics:
+                log.info(f'waiting for {cfg.wait_for_subscribers} subscriber(s) on '
+                         + ', '.join(self.image_topics))
+                self.wait_for_subscribers(cfg.wait_for_subscribers, cfg.wait_timeout)
+            while not self._stop.is_set():
+                self._play_pass()
+                if self._stop.is_set():
+                    break
+                self.passes += 1
+                if not cfg.loop:
+                    break
+        except _ContextGone:
+            stopped_early = True
+        except Exception as exc:  # noqa: BLE001 - report, never die silently in a thread
+            self.error = f"bag '{self.source.info.path}': playing failed: {exc!r}"
+            log.error(self.error)
+        finally:
+            stopped_early = stopped_early or self._stop.is_set()
+            total = sum(self.published_counts.values())
+            try:
+                log.info(f'published {total} messages'
+                         + (f' in {self.passes} pass(es)' if cfg.loop else '')
+                         + (' (stopped)' if stopped_early else '') + ': '
+                         + ', '.join(f'{t} {n}' for t, n in self.published_counts.items()))
+                if self.error:
+                    log.error(f'bag not played to its end: {self.error}')
+            except Exception:  # noqa: BLE001 - the logger may be gone at shutdown
+                pass
+            if not stopped_early:
+                self._wait_acked(ACK_TIMEOUT)
+            self.play_done.set()
+            if cfg.exit_when_done and not stopped_early:
+                self.context.try_shutdown()
+
+    def _wait_acked(self, timeout: float) -> bool:
+        """Wait until subscribers have acknowledged every message (the last ones too)."""
+        from rclpy.duration import Duration
+
+        deadline = time.monotonic() + timeout
+        try:
+            for topic, pub in self._pubs.items():
+                left = max(0.0, deadline - time.monotonic())
+                if not pub.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))):
+                    self.get_logger().warning(
+                        f'{topic}: not every message was acknowledged by its subscribers '
+                        f'within {timeout:g} s')
+                    return False
+        except Exception:  # noqa: BLE001 - the context is going down: nothing to wait for
+            return False
+        return True
+
+    def _play_pass(self) -> None:
+        """Publish the bag once, from start_offset, at the configured rate."""
+        cfg = self.config
+        selected = {p.bag_topic: p.bag_type for p in self.plan}
+        sched = ReplaySchedule(self._start_ns, time.monotonic(), cfg.rate)
+        try:
+            for msg in self.source.messages(selected, self._start_ns):
+                p = self._by_bag_topic[msg.topic]
+                data = self._decode(p, msg.data) if p.decompress else msg.data
+                if not self._wait_until(sched, msg.timestamp):
+                    return
+                if data is not None:
+                    self._publish(p, data, msg.timestamp)
+        except BagError as exc:  # a cut or damage: logged once when playing ends
+            if self.error is None:
+                self.error = str(exc)
+
+    def _wait_until(self, sched: ReplaySchedule, t_ns: int) -> bool:
+        """Sleep until bag time `t_ns` is due, publishing /clock meanwhile; False on stop."""
+        while True:
+            now = time.monotonic()
+            delay = sched.delay(t_ns, now)
+            if self._stop.is_set():
+                return False
+            if delay <= 0.0:
+                return True
+            if self._clock_pub is not None:
+                if now - self._last_clock >= 1.0 / CLOCK_HZ:
+                    self._publish_clock(sched.bag_time(now))
+                    self._last_clock = now
+                delay = min(delay, 1.0 / CLOCK_HZ)
+            self._stop.wait(delay)
+
+    def _publish_clock(self, t_ns: int) -> None:
+        self._clock_msg.clock.sec = int(t_ns // 1_000_000_000)
+        self._clock_msg.clock.nanosec = int(t_ns % 1_000_000_000)
+        self._clock_pub.publish(self._clock_msg)
+
+    def _decode(self, p: PlayTopic, data: bytes) -> bytes | None:
+        """CompressedImage CDR -> mono8 Image CDR; None (and a warning) if undecodable."""
+        try:
+            return compressed_to_image_cdr(data)
+        except Exception as exc:  # noqa: BLE001 - a bad frame must not stop the replay
+            self.get_logger().warning(
+                f'cannot decode a compressed image on {p.bag_topic}: {exc}',
+                throttle_duration_sec=2.0)
+            return None
+
+    def _publish(self, p: PlayTopic, data: bytes, t_ns: int) -> None:
+        if not self.context.ok():
+            raise _ContextGone()
+        try:
+            if self._clock_pub is not None:
+                self._publish_clock(t_ns)
+                self._last_clock = time.monotonic()
+            self._pubs[p.out_topic].publish(data)
+        except Exception:
+            if not self.context.ok():
+                raise _ContextGone() from None
+            raise
+        self.published_counts[p.out_topic] += 1
+
+    def destroy_node(self) -> None:
+        """Stop the playing thread, then destroy the node."""
+        if self._destroyed:
+            return
+        self._destroyed = True
+        self.stop()
+        super().destroy_node()
+
+
+class _ContextGone(Exception):
+    """The context was shut down under the playing thread."""
+
+
+def main(args: list[str] | None = None) -> None:
+    """`bag_player_node`: play the bag given by the `bag` parameter.
+
+    Exits 0 when the bag has been played (or on Ctrl-C), 2 when the bag is missing,
+    unreadable, empty or truncated, or the settings are invalid.
+    """
+    interrupted = quiet_interrupts()
+    rclpy.init(args=args)
+    node = None
+    status = 0
+    try:
+        if not interrupted.is_set():
+            node = BagPlayerNode()
+            spin_until_shutdown(node, interrupted)
+    except BagError:
+        status = 2  # logged by the node
+    except (ValueError, TypeError, InvalidParameterValueException,
+            InvalidParameterTypeException) as exc:
+        rclpy.logging.get_logger('bag_player_node').error(f'invalid settings: {exc}')
+        status = 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except Exception:  # noqa: BLE001
+        if rclpy.ok():
+            raise
+        # Ctrl-C while starting up: rcl calls fail once the context is shut down
+    finally:
+        if node is not None:
+            if node.error:
+                status = 2
+            node.destroy_node()
+        rclpy.try_shutdown()
+    if status:
+        raise SystemExit(status)
+
+
+if __name__ == '__main__':
+    main()
