@@ -118,3 +118,15 @@ def test_pairer_pairs_by_stamp_and_expires_orphans():
     assert p.expire() == []
     assert p.add('left', 2_000_000_000, 'L4') is None
     assert p.expire() == [('left', 300)]
+
+
+def test_parameter_out_of_range_is_a_clear_error_and_exit_2():
+    import os
+    import subprocess
+    import sys
+    res = subprocess.run(
+        [sys.executable, '-m', 'asmonc_vision.nodes.detector_node', '--ros-args',
+         '-p', 'gpod.threshold_px:=-1.0'],
+        env=dict(os.environ), capture_output=True, text=True, timeout=60)
+    assert res.returncode == 2
+    assert 'invalid settings' in res.stderr and 'gpod.threshold_px' in res.stderr

@@ -188,7 +188,7 @@ class AlarmNode(Node):
 
 
 def main(args=None):
-    run_node(AlarmNode, args)
+    run_node(AlarmNode, args, name='alarm_node')
 
 
 if __name__ == '__main__':

@@ -183,7 +183,7 @@ class StereoCaptureNode(Node):
 
 
 def main(args=None):
-    run_node(StereoCaptureNode, args)
+    run_node(StereoCaptureNode, args, name='stereo_capture_node')
 
 
 if __name__ == '__main__':

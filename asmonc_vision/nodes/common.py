@@ -16,7 +16,8 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType, SetParametersResult)
-from rclpy.exceptions import ParameterUninitializedException
+from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
+                              ParameterUninitializedException)
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -245,17 +246,48 @@ def spin_until_shutdown(node: Node, interrupted: threading.Event | None = None,
             executor.remove_node(node)
 
 
-def run_node(factory: Callable[..., Node], args: list[str] | None = None, **kwargs: Any) -> None:
-    """The Jazzy main: init, spin, exit cleanly on Ctrl-C or external shutdown."""
+def run_node(factory: Callable[..., Node], args: list[str] | None = None, *,
+             name: str = 'asmonc_vision', errors: tuple[type[BaseException], ...] = (),
+             failed: Callable[[Node], bool] | None = None, **kwargs: Any) -> None:
+    """The Jazzy main: init, spin, exit cleanly on Ctrl-C or external shutdown.
+
+    Settings out of range (ValueError/TypeError from the settings dataclass, or rclpy's
+    parameter exceptions while the node is built) are logged as one clear error line and
+    the process exits with status 2, as it does for the node's own fatal `errors`
+    (logged by the node itself) or when `failed(node)` is true at the end.
+
+    Args:
+        factory: builds the node (called with `**kwargs`).
+        args: command-line arguments for rclpy.
+        name: logger name for errors raised before the node exists.
+        errors: exception types that mean "cannot run" (exit status 2).
+        failed: called with the node before it is destroyed; true means exit status 2.
+    """
     interrupted = quiet_interrupts()
     rclpy.init(args=args)
     node = None
+    status = 0
     try:
-        node = factory(**kwargs)
-        spin_until_shutdown(node, interrupted)
+        if not interrupted.is_set():
+            node = factory(**kwargs)
+            spin_until_shutdown(node, interrupted)
+    except errors:
+        status = 2
+    except (ValueError, TypeError, InvalidParameterValueException,
+            InvalidParameterTypeException) as exc:
+        rclpy.logging.get_logger(name).error(f'invalid settings: {exc}')
+        status = 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:  # noqa: BLE001
+        if rclpy.ok():
+            raise
+        # Ctrl-C while starting up: rcl calls fail once the context is shut down
     finally:
         if node is not None:
+            if failed is not None and failed(node):
+                status = 2
             node.destroy_node()
         rclpy.try_shutdown()
+    if status:
+        raise SystemExit(status)

@@ -385,7 +385,7 @@ def markers_msg(result: GpodResult, header) -> MarkerArray:
 
 
 def main(args=None):
-    run_node(DetectorNode, args=args)
+    run_node(DetectorNode, args, name='detector_node')
 
 
 if __name__ == '__main__':

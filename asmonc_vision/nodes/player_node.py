@@ -25,16 +25,12 @@ import time
 from collections.abc import Iterable
 from typing import Any
 
-import rclpy
-from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from asmonc_vision.bagplay import (BagError, BagSource, PlayerConfig, PlayTopic,
                                    ReplaySchedule, compressed_to_image_cdr, plan_topics)
-from asmonc_vision.nodes.common import (config_overrides, declare_config, quiet_interrupts,
-                                        spin_until_shutdown)
+from asmonc_vision.nodes.common import config_overrides, declare_config, run_node
 
 __all__ = ['BagPlayerNode', 'BagError', 'PlayerConfig', 'message_class', 'main']
 
@@ -368,34 +364,7 @@ def main(args: list[str] | None = None) -> None:
     Exits 0 when the bag has been played (or on Ctrl-C), 2 when the bag is missing,
     unreadable, empty or truncated, or the settings are invalid.
     """
-    interrupted = quiet_interrupts()
-    rclpy.init(args=args)
-    node = None
-    status = 0
-    try:
-        if not interrupted.is_set():
-            node = BagPlayerNode()
-            spin_until_shutdown(node, interrupted)
-    except BagError:
-        status = 2  # logged by the node
-    except (ValueError, TypeError, InvalidParameterValueException,
-            InvalidParameterTypeException) as exc:
-        rclpy.logging.get_logger('bag_player_node').error(f'invalid settings: {exc}')
-        status = 2
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:  # noqa: BLE001
-        if rclpy.ok():
-            raise
-        # Ctrl-C while starting up: rcl calls fail once the context is shut down
-    finally:
-        if node is not None:
-            if node.error:
-                status = 2
-            node.destroy_node()
-        rclpy.try_shutdown()
-    if status:
-        raise SystemExit(status)
+    run_node(BagPlayerNode, args, name='bag_player_node', errors=(BagError,), failed=lambda n: bool(n.error))
 
 
 if __name__ == '__main__':

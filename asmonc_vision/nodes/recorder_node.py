@@ -21,17 +21,13 @@ import time
 from pathlib import Path
 from typing import Any
 
-import rclpy
-from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from asmonc_vision.bagio import typestore
 from asmonc_vision.bagplay import normalize_topic
 from asmonc_vision.core.config import check_fields, param
-from asmonc_vision.nodes.common import declare_config
-from asmonc_vision.nodes.common import config_overrides, quiet_interrupts, spin_until_shutdown
+from asmonc_vision.nodes.common import config_overrides, declare_config, run_node
 from asmonc_vision.nodes.player_node import message_class
 
 __all__ = ['BagRecorderNode', 'RecorderConfig', 'RecorderError', 'subscription_qos',
@@ -307,32 +303,7 @@ def main(args: list[str] | None = None) -> None:
     Exits 0 after a clean stop, 2 when the output cannot be written or the settings are
     invalid.
     """
-    interrupted = quiet_interrupts()  # a Ctrl-C must not interrupt close()
-    rclpy.init(args=args)
-    node = None
-    status = 0
-    try:
-        if not interrupted.is_set():
-            node = BagRecorderNode()
-            spin_until_shutdown(node, interrupted)
-    except RecorderError:
-        status = 2  # logged by the node
-    except (ValueError, TypeError, InvalidParameterValueException,
-            InvalidParameterTypeException) as exc:
-        rclpy.logging.get_logger('bag_recorder_node').error(f'invalid settings: {exc}')
-        status = 2
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:  # noqa: BLE001
-        if rclpy.ok():
-            raise
-        # Ctrl-C while starting up: rcl calls fail once the context is shut down
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    if status:
-        raise SystemExit(status)
+    run_node(BagRecorderNode, args, name='bag_recorder_node', errors=(RecorderError,))
 
 
 if __name__ == '__main__':
