@@ -24,6 +24,9 @@ $(STAMP): requirements.lock setup.py package.xml msg/CMakeLists.txt msg/package.
 	  ASMONC_PYTHON=$(CURDIR)/$(PY) \
 	  $(PIP) install --quiet --disable-pip-version-check --no-build-isolation --force-reinstall --no-deps ./msg
 	$(PIP) install --quiet --disable-pip-version-check --no-build-isolation --no-deps -e .
+	# setup.cfg puts the console scripts where `ros2 run` looks (lib/asmonc_vision);
+	# link them onto the venv's PATH too, under the same names.
+	for f in $(VENV)/lib/asmonc_vision/*; do ln -sf "$$(realpath $$f)" $(VENV)/bin/; done
 	touch $(STAMP)
 
 demo: venv
