@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from asmonc_vision import bagio
-from asmonc_vision.core.camera import (MetricPlane, plane_disparity, plane_from_metric)
+from asmonc_vision.core.camera import (MetricPlane, ground_range_bearing, plane_disparity,
+                                       plane_from_metric)
 from asmonc_vision.sim.geometry import (R_BODY_OPTICAL, RigPose, camera_poses,
                                         matrix_to_quaternion, quaternion_from_rpy,
                                         rpy_to_matrix)
@@ -20,8 +21,10 @@ from asmonc_vision.sim.render import StereoRenderer
 from asmonc_vision.sim.rig import LEFT_FRAME, RIGHT_FRAME, RigSettings
 from asmonc_vision.sim.scenarios import (SCENARIOS, Scenario, make_scenario,
                                          simulate_frame)
-from asmonc_vision.sim.truth import ground_plane_truth
-from asmonc_vision.sim.world import Box, Ground, World, bollard, kerb_up, post, step_down
+from asmonc_vision.sim.truth import (MIN_PIXELS, analytic_nearest_top_point,
+                                     ground_plane_truth, obstacle_truth)
+from asmonc_vision.sim.world import (Box, Ground, World, bollard, kerb_up, post, step_down,
+                                     wall)
 
 
 def _pose(x=0.0, y=0.0, z=1.25, roll=0.0, pitch=20.0, yaw=0.0) -> RigPose:
@@ -209,6 +212,139 @@ def test_step_down_truth_is_negative():
     d = drops[0]
     assert d.height == pytest.approx(-0.15, abs=0.01)
     assert d.disparity_excess < 0 and 1.5 < d.range < 4.0
+    # its place is the nearest visible lower ground, just beyond the brink: in view
+    uv = _left_uv(sc.rig.camera(), d.position)
+    assert _in_image(sc.rig.camera(), uv) and _in_roi(d.roi, uv)
+
+
+def _single_truth(obstacle, pose, rig=None, world_seed=1):
+    """Render one obstacle's left-image truth: (ObstacleTruth or None, world, left, plane,
+    depth, labels, faces)."""
+    rig = rig if rig is not None else RigSettings()
+    world = World(Ground(), [obstacle], seed=world_seed)
+    left, _ = camera_poses(pose, rig.baseline)
+    depth, labels, faces = StereoRenderer(rig, threads=1).truth(world, 0.0, left)
+    plane = ground_plane_truth(world, 0.0, pose, left)
+    obs = obstacle_truth(world, 0.0, pose, left, rig.camera(), plane, depth, labels, faces)
+    assert len(obs) <= 1
+    return (obs[0] if obs else None), world, left, plane, depth, labels, faces
+
+
+def _left_uv(cam, point):
+    """Left-image pixel (u, v) of a left optical-frame point."""
+    u, v, d = cam.project(np.asarray(point, float)[None, :])
+    return float(u[0] + d[0] / 2.0), float(v[0])
+
+
+def _in_image(cam, uv, tol=0.5):
+    return -tol <= uv[0] <= cam.width - 1 + tol and -tol <= uv[1] <= cam.height - 1 + tol
+
+
+def _in_roi(roi, uv, tol=1.0):
+    x, y, w, h = roi
+    return x - tol <= uv[0] <= x + w - 1 + tol and y - tol <= uv[1] <= y + h - 1 + tol
+
+
+@pytest.mark.parametrize('height', [2.4, 0.6])
+def test_truth_of_a_wall_beside_the_path_is_in_view(height):
+    """A wall parallel to the path 1.7 m to the right: its nearest point is abeam (out of
+    view); the truth is where it enters the field of view."""
+    rig = RigSettings()
+    cam = rig.camera()
+    pose = _pose(roll=1.0, pitch=21.0, yaw=2.0)
+    o, world, left, plane, depth, labels, _ = _single_truth(
+        wall(-3.0, -1.7, 12.0, -1.7, height=height), pose, rig)
+    assert o is not None and o.kind == 'wall'
+    assert o.height == pytest.approx(height, abs=1e-6)
+    # range and bearing are those of a visible pixel's foot: that foot (the position
+    # dropped to the ground: what the scorer compares) is in the image and in the roi.
+    # (The position itself is the wall's top above it, which for a wall seen at the
+    # image's edge is out of view: a point raised towards the camera projects outwards.)
+    foot = o.position - o.height * np.asarray(plane.normal_up)
+    uv = _left_uv(cam, foot)
+    assert _in_image(cam, uv) and _in_roi(o.roi, uv), (uv, o.roi)
+    # its bearing is that of a point in view: within the bearings of the image's ground
+    v, u = np.nonzero(labels == 0)
+    z = depth[v, u]
+    pts = np.column_stack([(u - cam.cx) * z / cam.f, (v - cam.cy) * z / cam.f, z])
+    rng_g, brg_g = ground_range_bearing(plane, pts)
+    near = np.abs(rng_g - o.range) < 0.1
+    assert brg_g[near].min() - 1e-3 <= o.bearing <= brg_g[near].max() + 1e-3
+    assert math.radians(-32) < o.bearing < 0
+    # and it is the nearest visible part (a robust minimum: the 21st nearest pixel, a few
+    # pixels in from the corner where the wall leaves the image, ~3 cm per pixel here)
+    v, u = np.nonzero(labels == o.id)
+    z = depth[v, u]
+    pts = np.column_stack([(u - cam.cx) * z / cam.f, (v - cam.cy) * z / cam.f, z])
+    assert ground_range_bearing(plane, pts)[0].min() > o.range - 0.08
+    # the former definition (nearest point of the whole wall) was abeam, out of view
+    old = analytic_nearest_top_point(world.obstacles[0], left, plane)
+    assert abs(ground_range_bearing(plane, old[None, :])[1][0]) > math.radians(60)
+
+
+def test_truth_of_an_obstacle_cut_by_the_bottom_edge_is_in_view():
+    """A 30 cm box being passed: its front is below the image's bottom edge; the truth is
+    the nearest part of its top still in view."""
+    rig = RigSettings()
+    cam = rig.camera()
+    pose = _pose(pitch=20.0)
+    o, world, left, plane, _, labels, _ = _single_truth(
+        Box(x=1.1, y=0.3, length=0.4, width=0.4, height=0.3, yaw_deg=10.0), pose, rig)
+    assert o is not None
+    x, y, w, h = o.roi
+    assert y + h == cam.height                   # cut by the bottom edge
+    uv = _left_uv(cam, o.position)
+    assert _in_image(cam, uv) and _in_roi(o.roi, uv), (uv, o.roi)
+    assert o.height == pytest.approx(0.3, abs=1e-6)
+    # the former definition (the front edge of the top) is below the image
+    old = analytic_nearest_top_point(world.obstacles[0], left, plane)
+    assert _left_uv(cam, old)[1] > cam.height + 5
+    r_old = ground_range_bearing(plane, old[None, :])[0][0]
+    assert r_old + 0.05 < o.range < 1.3
+
+
+def test_truth_of_a_box_in_full_view_is_its_nearest_point():
+    """For obstacles wholly in view the nearest visible part is the nearest point."""
+    rig = RigSettings()
+    pose = _pose(roll=1.5, pitch=21.0, yaw=3.0)
+    for ob in (Box(x=3.0, y=0.4, length=0.35, width=0.4, height=0.2, yaw_deg=25.0),
+               Box(x=4.5, y=-0.8, length=0.3, width=0.45, height=0.05, yaw_deg=-40.0),
+               Box(x=2.2, y=0.0, length=0.4, width=0.3, height=0.3, yaw_deg=0.0),
+               bollard(3.5, 1.0)):
+        o, world, left, plane, _, _, _ = _single_truth(ob, pose, rig)
+        old = analytic_nearest_top_point(world.obstacles[0], left, plane)
+        assert np.linalg.norm(o.position - old) < 0.03, ob
+        r_old, b_old = ground_range_bearing(plane, old[None, :])
+        assert o.range == pytest.approx(r_old[0], abs=0.03)
+        assert o.range * abs(o.bearing - b_old[0]) < 0.03
+        assert o.height == pytest.approx(ob.height, abs=1e-6)
+
+
+def test_truth_needs_a_few_pixels_and_ignores_stray_ones():
+    rig = RigSettings()
+    cam = rig.camera()
+    pose = _pose()
+    box = Box(x=3.0, y=0.2, length=0.3, width=0.4, height=0.2)
+    o, world, left, plane, depth, labels, faces = _single_truth(box, pose, rig)
+    assert o is not None and o.pixels > 200
+    v, u = np.nonzero(labels == 1)
+    for keep in (MIN_PIXELS - 1, MIN_PIXELS):
+        lab = np.zeros_like(labels)
+        lab[v[:keep], u[:keep]] = 1
+        obs = obstacle_truth(world, 0.0, pose, left, cam, plane, depth, lab, faces)
+        if keep < MIN_PIXELS:
+            assert obs == []                     # not in view
+        else:
+            assert len(obs) == 1 and obs[0].pixels == keep
+            assert obs[0].roi == (int(u[:keep].min()), int(v[:keep].min()),
+                                  int(u[:keep].max() - u[:keep].min() + 1),
+                                  int(v[:keep].max() - v[:keep].min() + 1))
+    # two stray pixels labelled with the box near the bottom of the image do not move it
+    lab = labels.copy()
+    lab[cam.height - 3, 150:152] = 1
+    stray = obstacle_truth(world, 0.0, pose, left, cam, plane, depth, lab, faces)[0]
+    assert stray.range == pytest.approx(o.range, abs=0.01)
+    assert np.linalg.norm(stray.position - o.position) < 0.02
 
 
 # --------------------------------------------------------------------------- motion

@@ -9,7 +9,7 @@ A true obstacle counts as *detected* in a frame when a detection lies within
 `match_radius` metres of it on the ground. A detection is *false* when it explains no
 true obstacle: it is neither within `match_radius` of one, nor inside one's image
 region (so a detection on the far end of a wall is not false, though the wall's true
-position is its nearest point).
+position is its nearest visible part).
 """
 from __future__ import annotations
 
