@@ -130,8 +130,10 @@ def frame_from_obstacle_array(msg) -> FrameObstacles:
 class _Child:
     """A node in its own process; its log goes to a file, warnings and errors to stderr."""
 
-    def __init__(self, name: str, cmd: list[str], log_dir: Path, echo, env: dict):
+    def __init__(self, name: str, cmd: list[str], log_dir: Path, echo, env: dict,
+                 echo_warnings: bool = True):
         self.name = name
+        self._marks = ('[ERROR]', '[FATAL]', 'Traceback') + (('[WARN]',) if echo_warnings else ())
         self.log_path = log_dir / f'{name}.log'
         self._log = self.log_path.open('w')
         self._echo = echo
@@ -144,7 +146,7 @@ class _Child:
         for line in self.proc.stdout:
             self._log.write(line)
             self._log.flush()
-            if '[ERROR]' in line or '[WARN]' in line or '[FATAL]' in line or 'Traceback' in line:
+            if any(m in line for m in self._marks):
                 self._echo(f'[{self.name}] {line.rstrip()}')
         self._log.flush()
 
@@ -281,7 +283,9 @@ def run(args) -> int:
     try:
         for name, module in NODE_MODULES.items():
             cmd = [sys.executable, '-m', module, '--ros-args', *ros_params]
-            children[name] = _Child(name, cmd, log_dir, lambda s: console.line(s, err=True), env)
+            # the alarm node's warnings are its alarms, which are printed anyway
+            children[name] = _Child(name, cmd, log_dir, lambda s: console.line(s, err=True), env,
+                                    echo_warnings=(name != 'alarm'))
         # Wait until the graph is connected, so no frame is lost to discovery.
         want_obstacle_subs = 2 + (1 if recorder is not None else 0)  # monitor, alarm, recorder
         deadline = time.monotonic() + 60.0
@@ -310,24 +314,31 @@ def run(args) -> int:
                 console.line(f'{_bag_time(a["stamp_ns"], t0)}  '
                              f'{LEVEL_NAMES.get(a["level"], a["level"]):8s} {a["text"]}')
 
-        while children['player'].alive():
-            show_alarms()
-            console.bar(monitor.frames)
+        def check_nodes() -> None:
             for name in NODE_MODULES:
                 if not children[name].alive():
                     raise RuntimeError(f'{name} node died; see {children[name].log_path}')
-            time.sleep(0.1)
-        player_rc = children['player'].proc.wait()
-        # Let the last frames through the detector.
+
+        # Until every pair has its result, or the player has ended and nothing more comes.
         last, last_change = monitor.frames, time.monotonic()
-        while monitor.frames < n_pairs and time.monotonic() - last_change < args.settle:
+        while monitor.frames < n_pairs:
             show_alarms()
             console.bar(monitor.frames)
+            check_nodes()
             time.sleep(0.1)
-            if monitor.frames != last:
+            if monitor.frames != last or children['player'].alive():
                 last, last_change = monitor.frames, time.monotonic()
+            elif time.monotonic() - last_change > args.settle:
+                break
         time.sleep(0.3)  # the alarm for the last frame
         show_alarms()
+        # The replay is over: stop the alarm node before it reports the silence as a fault.
+        children['alarm'].stop()
+        show_alarms()
+        try:
+            player_rc = children['player'].proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            failed.append('the player did not finish within 30 s of the last frame')
     except RuntimeError as exc:
         failed.append(str(exc))
     except KeyboardInterrupt:
