@@ -30,6 +30,9 @@ TOPICS = {
     'gt_obstacles': ('/ground_truth/obstacles', f'{MSG_PACKAGE}/msg/ObstacleArray'),
     'gt_camera_pose': ('/ground_truth/camera_pose', 'geometry_msgs/msg/PoseStamped'),
     'gt_ground_plane': ('/ground_truth/ground_plane', f'{MSG_PACKAGE}/msg/GroundPlane'),
+    'gait_state': ('/gait/state', f'{MSG_PACKAGE}/msg/GaitState'),
+    'egomotion': ('/egomotion', 'geometry_msgs/msg/TransformStamped'),
+    'egomotion_odometry': ('/egomotion/odometry', 'nav_msgs/msg/Odometry'),
 }
 
 
