@@ -12,6 +12,9 @@ NODES = {
     'alarm_node': 'asmonc_vision.nodes.alarm_node:main',
     'bag_player_node': 'asmonc_vision.nodes.player_node:main',
     'bag_recorder_node': 'asmonc_vision.nodes.recorder_node:main',
+    'egomotion_node': 'asmonc_vision.nodes.egomotion_node:main',
+    'compass_node': 'asmonc_vision.nodes.compass_node:main',
+    'gait_filter_node': 'asmonc_vision.nodes.gait_node:main',
 }
 TOOLS = {
     'asmonc': 'asmonc_vision.cli.main:main',
