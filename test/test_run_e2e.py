@@ -102,12 +102,12 @@ def test_truncated_bag_is_a_clear_error(tmp_path):
     assert 'cut.mcap' in res.stderr and 'cannot be read' in res.stderr
 
 
-def test_bag_without_cameras_is_a_clear_error(tmp_path):
+def test_bag_with_neither_cameras_nor_inclinometer_is_a_clear_error(tmp_path):
     from rosbags.rosbag2 import StoragePlugin, Writer
     store = bagio.typestore()
     Imu = store.types['sensor_msgs/msg/Imu']
     with Writer(tmp_path / 'imu_only', version=9, storage_plugin=StoragePlugin.MCAP) as w:
-        c = w.add_connection('/inclinometer/imu', 'sensor_msgs/msg/Imu', typestore=store)
+        c = w.add_connection('/some/other/imu', 'sensor_msgs/msg/Imu', typestore=store)
         msg = Imu(header=store.types['std_msgs/msg/Header'](
             stamp=store.types['builtin_interfaces/msg/Time'](sec=1, nanosec=0), frame_id='x'),
             orientation=store.types['geometry_msgs/msg/Quaternion'](x=0, y=0, z=0, w=1),
@@ -119,4 +119,4 @@ def test_bag_without_cameras_is_a_clear_error(tmp_path):
         w.write(c, 1, store.serialize_cdr(msg, 'sensor_msgs/msg/Imu'))
     res = asmonc_run(tmp_path / 'imu_only')
     assert res.returncode == 2
-    assert 'no /stereo/left/image_rect messages' in res.stderr
+    assert 'no /stereo/left/image_rect messages and no /inclinometer/imu messages' in res.stderr

@@ -11,6 +11,7 @@ error; 2 the bag or the arguments are unusable.
 """
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import shutil
@@ -21,6 +22,7 @@ import tempfile
 import threading
 import time
 from collections import Counter
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -31,9 +33,33 @@ from asmonc_vision.core.evaluation import FrameObstacles, score_sequence
 LEVEL_NAMES = {0: 'CLEAR', 1: 'CAUTION', 2: 'WARNING', 3: 'STOP', 4: 'FAULT'}
 #: every topic a node of the graph publishes (recorded with --out)
 OUTPUT_TOPICS = ('/obstacles', '/ground_plane', '/obstacles/markers', '/detector/debug_image',
-                 '/alarms', '/diagnostics')
-NODE_MODULES = {'detector': 'asmonc_vision.nodes.detector_node',
-                'alarm': 'asmonc_vision.nodes.alarm_node'}
+                 '/alarms', '/diagnostics', '/egomotion', '/egomotion/odometry', '/gait/state',
+                 '/gait/predicted_motion')
+
+
+@dataclass(frozen=True)
+class NodeSpec:
+    """A node of the graph: its module, its ROS node name, what input it needs from the
+    bag ('images' or 'imu'), and the topics that show it is connected (it publishes
+    `outputs` and subscribes `inputs`)."""
+
+    module: str
+    ros_name: str
+    needs: str
+    outputs: tuple[str, ...]
+    inputs: tuple[str, ...]
+
+
+NODES = {
+    'detector': NodeSpec('asmonc_vision.nodes.detector_node', 'detector_node', 'images',
+                         ('/obstacles',), ('/stereo/left/image_rect', '/stereo/right/image_rect')),
+    'alarm': NodeSpec('asmonc_vision.nodes.alarm_node', 'alarm_node', 'images',
+                      ('/alarms',), ('/obstacles',)),
+    'egomotion': NodeSpec('asmonc_vision.nodes.egomotion_node', 'egomotion_node', 'images',
+                          ('/egomotion',), ('/stereo/left/image_rect',)),
+    'gait': NodeSpec('asmonc_vision.nodes.gait_node', 'gait_filter_node', 'imu',
+                     ('/gait/state',), ('/inclinometer/imu',)),
+}
 DEFAULT_BAG_NAME = 'static_obstacles'
 
 
@@ -229,10 +255,20 @@ def run(args) -> int:
         console_err(f'asmonc run: {exc}')
         return 2
     left_topic = bagio.TOPICS['left_image'][0]
+    imu_topic = bagio.TOPICS['imu'][0]
     n_pairs = topics.get(left_topic, ('', 0))[1]
-    if n_pairs == 0:
-        console_err(f"asmonc run: bag '{bag}' has no {left_topic} messages: nothing to detect. "
-                    f"Topics: {', '.join(sorted(topics)) or 'none'}")
+    n_imu = topics.get(imu_topic, ('', 0))[1]
+    inputs = {'images'} if n_pairs else set()
+    inputs |= {'imu'} if n_imu else set()
+    nodes = {name: spec for name, spec in NODES.items()
+             if spec.needs in inputs and importlib.util.find_spec(spec.module) is not None}
+    if not inputs:
+        console_err(f"asmonc run: bag '{bag}' has no {left_topic} messages and no {imu_topic} "
+                    f"messages: nothing to do. Topics: {', '.join(sorted(topics)) or 'none'}")
+        return 2
+    if not nodes:
+        console_err(f"asmonc run: bag '{bag}' holds only {', '.join(sorted(inputs))}, and no node "
+                    'for that is installed')
         return 2
     if args.out is not None and args.out.exists() and any(args.out.iterdir()):
         console_err(f"asmonc run: --out '{args.out}' exists and is not empty")
@@ -241,15 +277,19 @@ def run(args) -> int:
     env = dict(os.environ)
     env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    console = _Console(n_pairs, not args.no_progress, args.quiet)
+    console = _Console(n_pairs or n_imu, not args.no_progress, args.quiet)
     try:
         t0 = first_image_stamp(bag) or 0
         truth = read_truth(bag) if bagio.TOPICS['gt_obstacles'][0] in topics else {}
     except bagio.BagError as exc:
         console.line(f'asmonc run: {exc} (continuing with what could be read)', err=True)
         t0, truth = 0, {}
-    console.line(f'asmonc run: {bag} — {n_pairs} stereo pairs at rate {args.rate:g}'
-                 + (', with ground truth' if truth else ', no ground truth'))
+    console.line(f'asmonc run: {bag} — {n_pairs} stereo pairs, {n_imu} inclinometer readings, '
+                 f'at rate {args.rate:g}' + (', with ground truth' if truth else ', no ground truth')
+                 + f"; nodes: {', '.join(nodes)}")
+    if not n_pairs:
+        console.line(f'asmonc run: no stereo images in this bag ({left_topic}): '
+                     'running the walk model only')
 
     import rclpy
     from rclpy.executors import MultiThreadedExecutor
@@ -281,19 +321,17 @@ def run(args) -> int:
     failed: list[str] = []
     player_rc = None
     try:
-        for name, module in NODE_MODULES.items():
-            cmd = [sys.executable, '-m', module, '--ros-args', *ros_params]
+        for name, spec in nodes.items():
+            cmd = [sys.executable, '-m', spec.module, '--ros-args', *ros_params]
             # the alarm node's warnings are its alarms, which are printed anyway
             children[name] = _Child(name, cmd, log_dir, lambda s: console.line(s, err=True), env,
                                     echo_warnings=(name != 'alarm'))
-        # Wait until the graph is connected, so no frame is lost to discovery.
-        want_obstacle_subs = 2 + (1 if recorder is not None else 0)  # monitor, alarm, recorder
+        # Wait until the graph is connected, so no frame is lost to discovery: each node
+        # publishes its outputs and subscribes its inputs, and the recorder (if any) has
+        # subscribed every output.
         deadline = time.monotonic() + 60.0
-        node = monitor.node
         while time.monotonic() < deadline:
-            if (node.count_publishers('/obstacles') >= 1 and node.count_publishers('/alarms') >= 1
-                    and node.count_subscribers(left_topic) >= 1
-                    and node.count_subscribers('/obstacles') >= want_obstacle_subs):
+            if all(_connected(monitor.node, spec, recorder is not None) for spec in nodes.values()):
                 break
             dead = [n for n, c in children.items() if not c.alive()]
             if dead:
@@ -315,13 +353,14 @@ def run(args) -> int:
                              f'{LEVEL_NAMES.get(a["level"], a["level"]):8s} {a["text"]}')
 
         def check_nodes() -> None:
-            for name in NODE_MODULES:
+            for name in nodes:
                 if not children[name].alive():
                     raise RuntimeError(f'{name} node died; see {children[name].log_path}')
 
-        # Until every pair has its result, or the player has ended and nothing more comes.
+        # Until every pair has its result (or, with no cameras, the bag has been played),
+        # or the player has ended and nothing more comes.
         last, last_change = monitor.frames, time.monotonic()
-        while monitor.frames < n_pairs:
+        while (monitor.frames < n_pairs) if n_pairs else children['player'].alive():
             show_alarms()
             console.bar(monitor.frames)
             check_nodes()
@@ -333,7 +372,8 @@ def run(args) -> int:
         time.sleep(0.3)  # the alarm for the last frame
         show_alarms()
         # The replay is over: stop the alarm node before it reports the silence as a fault.
-        children['alarm'].stop()
+        if 'alarm' in children:
+            children['alarm'].stop()
         show_alarms()
         try:
             player_rc = children['player'].proc.wait(timeout=30)
@@ -347,7 +387,7 @@ def run(args) -> int:
         console.done()
         # Player, then alarm, then detector: the alarm must not outlive the detector
         # and announce the end of the replay as a fault.
-        for name in ('player', 'alarm', 'detector'):
+        for name in ['player', 'alarm', *children]:
             if name in children:
                 children[name].stop()
         executor.shutdown(timeout_sec=2.0)
@@ -370,6 +410,19 @@ def run(args) -> int:
     if failed or summary['dropped_frames'] or player_rc not in (0, None):
         return 1
     return 0
+
+
+def _connected(node, spec: NodeSpec, recording: bool) -> bool:
+    """True once `spec`'s node publishes its outputs and subscribes its inputs (and the
+    recorder, when recording, subscribes its outputs)."""
+    for topic in spec.outputs:
+        if spec.ros_name not in {i.node_name for i in node.get_publishers_info_by_topic(topic)}:
+            return False
+        if recording and 'bag_recorder_node' not in {
+                i.node_name for i in node.get_subscriptions_info_by_topic(topic)}:
+            return False
+    return all(spec.ros_name in {i.node_name for i in node.get_subscriptions_info_by_topic(t)}
+               for t in spec.inputs)
 
 
 def _bag_time(stamp_ns: int, t0: int) -> str:
