@@ -1,102 +1,353 @@
-"""Time the detector per frame on a bag's stereo pairs, on one core, and print the numbers.
+"""Time our detector (GPOD) and the SGBM baseline per frame on one core, and their recall.
 
-The detector runs on the pairs in bag order (so the ground plane initialises and tracks
-as it would live), after `--warmup` untimed pairs; OpenCV is pinned to one thread.
-Reports the median and 90th percentile per stage in milliseconds, and the rate.
+    asmonc bench [BAG ...] [--frames N] [--warmup K] [--large-frames M] [--no-large] [--json F]
+
+Both methods run on the same stereo pairs in order (so GPOD's ground plane initialises
+and tracks as it would live), with OpenCV pinned to one thread (cv2.setNumThreads(1));
+the first `--warmup` pairs are processed but not timed. Reported per method: the median
+and 90th percentile of the per-frame time of `process()` in milliseconds, the rate, the
+median per stage, and the recall per frame of true obstacles >= 10 cm high within 5 m
+(a report within 0.3 m on the ground, as `asmonc run`) with the false obstacles per
+frame, over all the pairs processed. Then the ratio of the median times.
+
+Two image sizes:
+
+* 320x240, the paper's rig: the bundled bags (default static_obstacles and
+  walk_obstacles) or the BAGs given.
+* 640x480 with f = 600 px (the same field of view, baseline 0.35 m): the
+  static_obstacles scene (seed 0) rendered by the simulator at run time, in memory --
+  `max(--warmup, 3)` obstacle-free frames first (GPOD calibrates its ground plane on
+  them; untimed), then `--large-frames` frames with every obstacle in place. Rendering
+  takes about a second per frame; --no-large skips this part.
+
+The loaders here (`load_frames`, `load_pairs`, `render_frames`) and the runner
+(`run_method`) are shared with `asmonc eval`.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from asmonc_vision import bagio
 
+METHODS = ('gpod', 'sgbm')
+#: the 640x480 rig of the bench: f = 600 px keeps the paper's field of view
+LARGE_RIG = {'width': 640, 'height': 480, 'focal': 600.0}
+#: frames of the static_obstacles scenario with every obstacle in place (the bollard
+#: appears at 4 s, 10 Hz)
+LARGE_FIRST_FULL_FRAME = 40
+
 
 def add_arguments(p) -> None:
     p.add_argument('bags', nargs='*', type=Path,
-                   help='bags to time on (default: the bundled static and walking bags)')
-    p.add_argument('--frames', type=int, default=0, help='at most this many pairs per bag (0: all)')
+                   help='320x240 bags to time on (default: the bundled static_obstacles and '
+                        'walk_obstacles)')
+    p.add_argument('--frames', type=int, default=0,
+                   help='at most this many pairs per bag, warm-up included (0: all); also '
+                        'caps the rendered 640x480 sequence')
     p.add_argument('--warmup', type=int, default=5, help='untimed pairs first (default 5)')
+    p.add_argument('--large-frames', type=int, default=15,
+                   help='timed 640x480 frames to render (default 15)')
+    p.add_argument('--no-large', action='store_true', help='skip the 640x480 part')
     p.add_argument('--json', type=Path, default=None, help='also write the numbers as JSON')
     p.set_defaults(func=run)
 
 
-def load_pairs(bag: Path, limit: int = 0):
-    """[(left (H,W) uint8, right, StereoCamera)] from a bag, in stamp order."""
+# --- loading ---------------------------------------------------------------------------
+
+@dataclass
+class Frame:
+    """One stereo pair with what is known about it.
+
+    Attributes:
+        stamp_ns: the pair's header stamp.
+        left, right: (H, W) uint8 rectified images (None when loaded without images).
+        cam: the rectified stereo camera from the pair's CameraInfos.
+        truth: true obstacles (core.evaluation.FrameObstacles), or None.
+        truth_plane: the true ground plane (core.camera.MetricPlane), or None.
+    """
+
+    stamp_ns: int
+    left: np.ndarray | None
+    right: np.ndarray | None
+    cam: object
+    truth: object = None
+    truth_plane: object = None
+
+
+def plane_from_msg(msg, cam=None):
+    """MetricPlane of a GroundPlane message (rosbags or rclpy), or None when its status is
+    not TRACKING. Uses its `normal`/`height`; when the normal is unset (zero) and a camera
+    is given, converts (a, b, c) with core.camera.metric_from_plane."""
+    from asmonc_vision.core.camera import MetricPlane, metric_from_plane
+
+    if int(msg.status) != 1:          # GroundPlane.TRACKING
+        return None
+    n = np.array([msg.normal.x, msg.normal.y, msg.normal.z], float)
+    norm = float(np.linalg.norm(n))
+    if np.isfinite(norm) and abs(norm - 1.0) < 1e-3 and np.isfinite(msg.height):
+        return MetricPlane(normal_up=n / norm, height=float(msg.height))
+    if cam is not None:
+        return metric_from_plane(cam, (msg.a, msg.b, msg.c))
+    return None
+
+
+def load_frames(bag: Path, limit: int = 0, images: bool = True) -> list[Frame]:
+    """The stereo pairs of a bag in stamp order, with ground truth where the bag has it.
+
+    Args:
+        bag: rosbag2 directory or .mcap file following the topic contract.
+        limit: at most this many pairs (0: all).
+        images: False skips the images (for scoring recorded outputs: stamps, cameras
+            and truth only); a pair is then any stamp with both CameraInfos.
+    Raises:
+        bagio.BagError: unreadable bag.
+    """
+    from asmonc_vision.cli.run import frame_from_obstacle_array
     from asmonc_vision.core.camera import StereoCamera
 
-    topics = [bagio.TOPICS[k][0] for k in ('left_image', 'right_image', 'left_info', 'right_info')]
+    T = {k: bagio.TOPICS[k][0] for k in ('left_image', 'right_image', 'left_info', 'right_info',
+                                         'gt_obstacles', 'gt_ground_plane')}
+    need = ['left_info', 'right_info'] + (['left_image', 'right_image'] if images else [])
+    topics = [T[k] for k in need] + [T['gt_obstacles'], T['gt_ground_plane']]
     by_stamp: dict[int, dict] = {}
     for topic, _, m in bagio.read_messages(bag, topics):
-        slot = by_stamp.setdefault(bagio.header_stamp_ns(m), {})
-        if topic.endswith('image_rect'):
-            slot[topic] = bagio.image_to_gray(m.encoding, m.height, m.width, m.step, m.data)
-        else:
-            slot[topic] = m
-    pairs = []
+        by_stamp.setdefault(bagio.header_stamp_ns(m), {})[topic] = m
+    frames: list[Frame] = []
     for stamp in sorted(by_stamp):
         s = by_stamp[stamp]
-        if len(s) < 4:
+        if any(T[k] not in s for k in need):
             continue
-        li, ri = s[topics[2]], s[topics[3]]
+        li, ri = s[T['left_info']], s[T['right_info']]
         cam = StereoCamera.from_projection(li.p, ri.p, li.width, li.height)
-        pairs.append((s[topics[0]], s[topics[1]], cam))
-        if limit and len(pairs) >= limit:
+        left = right = None
+        if images:
+            lm, rm = s[T['left_image']], s[T['right_image']]
+            left = bagio.image_to_gray(lm.encoding, lm.height, lm.width, lm.step, lm.data)
+            right = bagio.image_to_gray(rm.encoding, rm.height, rm.width, rm.step, rm.data)
+        truth = (frame_from_obstacle_array(s[T['gt_obstacles']])
+                 if T['gt_obstacles'] in s else None)
+        tplane = (plane_from_msg(s[T['gt_ground_plane']], cam)
+                  if T['gt_ground_plane'] in s else None)
+        frames.append(Frame(stamp, left, right, cam, truth, tplane))
+        if limit and len(frames) >= limit:
             break
-    return pairs
+    return frames
+
+
+def load_pairs(bag: Path, limit: int = 0):
+    """[(left (H,W) uint8, right, StereoCamera)] from a bag, in stamp order."""
+    return [(f.left, f.right, f.cam) for f in load_frames(bag, limit)]
+
+
+def render_frames(scenario: str = 'static_obstacles', seed: int = 0, frames=(0,),
+                  **rig_changes) -> list[Frame]:
+    """Render frames of a simulator scenario in memory, with their ground truth.
+
+    Args:
+        scenario, seed: as `asmonc-sim`.
+        frames: frame indices to render (10 Hz; in this order).
+        **rig_changes: RigSettings fields to change (e.g. width, height, focal).
+    """
+    from asmonc_vision.core.evaluation import frame_from_detections
+    from asmonc_vision.sim import RigSettings, StereoRenderer, make_scenario, simulate_frame
+    from asmonc_vision.sim.bagwriter import stamp_ns
+
+    rig = dataclasses.replace(RigSettings(), **rig_changes)
+    sc = make_scenario(scenario, seed=seed, duration=max(frames) / rig.fps + 1.0 / rig.fps,
+                       rig=rig)
+    renderer = StereoRenderer(rig)
+    cam = rig.camera()
+    out = []
+    for k in frames:
+        f = simulate_frame(sc, int(k), renderer)
+        ns = stamp_ns(f.time)
+        out.append(Frame(ns, f.left, f.right, cam, frame_from_detections(ns, f.obstacles),
+                         f.plane))
+    return out
+
+
+# --- running ---------------------------------------------------------------------------
+
+@dataclass
+class FrameRun:
+    """One frame's output of a method: status, obstacles (FrameObstacles), ground plane
+    (MetricPlane or None), the wall time of process() and its stage timings (ms)."""
+
+    stamp_ns: int
+    status: str
+    obstacles: object
+    plane: object
+    latency_ms: float
+    timings: dict
+
+
+def make_method(method: str, threshold_px: float | None = None):
+    """A fresh detector: 'gpod' (GpodDetector, default GpodConfig) or 'sgbm' (SgbmBaseline,
+    default SgbmConfig); threshold_px overrides the obstacle threshold of either."""
+    if method == 'gpod':
+        from asmonc_vision.core.gpod import GpodConfig, GpodDetector
+        cfg = GpodConfig() if threshold_px is None else GpodConfig(threshold_px=threshold_px)
+        return GpodDetector(cfg)
+    if method == 'sgbm':
+        from asmonc_vision.core.baseline import SgbmBaseline, SgbmConfig
+        cfg = SgbmConfig() if threshold_px is None else SgbmConfig(threshold_px=threshold_px)
+        return SgbmBaseline(cfg)
+    raise ValueError(f"unknown method '{method}'; expected one of {', '.join(METHODS)}")
+
+
+def run_method(frames: list[Frame], method: str = 'gpod', threshold_px: float | None = None,
+               progress=None) -> list[FrameRun]:
+    """Run a fresh detector over the frames in order, on one OpenCV thread.
+
+    Args:
+        frames: with images.
+        method: 'gpod' or 'sgbm'; threshold_px: obstacle threshold override.
+        progress: optional callback(done, total) after each frame.
+    """
+    import cv2
+
+    from asmonc_vision.core.evaluation import frame_from_detections
+
+    cv2.setNumThreads(1)
+    det = make_method(method, threshold_px)
+    out = []
+    for i, f in enumerate(frames):
+        t = time.perf_counter()
+        res = det.process(f.left, f.right, f.cam)
+        ms = (time.perf_counter() - t) * 1e3
+        plane = res.plane.metric if res.plane is not None else None
+        out.append(FrameRun(f.stamp_ns, res.status, frame_from_detections(f.stamp_ns,
+                                                                          res.obstacles),
+                            plane, ms, dict(res.timings)))
+        if progress is not None:
+            progress(i + 1, len(frames))
+    return out
+
+
+def score_runs(frames: list[Frame], runs: list[FrameRun], evaluation=None, warmup: int = 0,
+               **criteria):
+    """Score a method's output against the frames' truth (frames without truth are skipped).
+
+    Args:
+        evaluation: a core.evaluation.SequenceEvaluation to add to (default a new one with
+            `criteria`: match_radius, min_height, max_range).
+        warmup: the first `warmup` latencies are left out of the latency statistics.
+    Returns:
+        the SequenceEvaluation.
+    """
+    from asmonc_vision.core.evaluation import SequenceEvaluation
+
+    ev = evaluation if evaluation is not None else SequenceEvaluation(**criteria)
+    for i, (f, r) in enumerate(zip(frames, runs)):
+        if f.truth is None:
+            continue
+        ev.add_frame(r.obstacles, f.truth, plane=r.plane, truth_plane=f.truth_plane,
+                     latency_ms=r.latency_ms if i >= warmup else None, status=r.status)
+    return ev
 
 
 def time_detector(pairs, warmup: int = 5) -> dict:
     """Run GpodDetector over the pairs; per-stage median/p90 ms of the timed ones."""
-    import cv2
+    frames = [Frame(i, l, r, c) for i, (l, r, c) in enumerate(pairs)]
+    return _timing(run_method(frames, 'gpod'), warmup, pairs[0][2] if pairs else None)
 
-    from asmonc_vision.core.gpod import GpodConfig, GpodDetector
 
-    cv2.setNumThreads(1)
-    det = GpodDetector(GpodConfig())
-    stages: dict[str, list[float]] = {}
-    wall = []
-    for i, (left, right, cam) in enumerate(pairs):
-        t = time.perf_counter()
-        res = det.process(left, right, cam)
-        dt = (time.perf_counter() - t) * 1e3
-        if i < warmup:
-            continue
-        wall.append(dt)
-        for k, v in res.timings.items():
-            stages.setdefault(k, []).append(v)
-    if not wall:
+def _timing(runs: list[FrameRun], warmup: int, cam) -> dict:
+    timed = runs[warmup:]
+    if not timed:
         return {}
-    out = {'frames': len(wall), 'size': f'{pairs[0][2].width}x{pairs[0][2].height}',
-           'median_ms': float(np.median(wall)), 'p90_ms': float(np.percentile(wall, 90)),
-           'rate_hz': 1e3 / float(np.median(wall)),
-           'stages_median_ms': {k: float(np.median(v)) for k, v in stages.items()}}
+    wall = [r.latency_ms for r in timed]
+    stages: dict[str, list[float]] = {}
+    for r in timed:
+        for k, v in r.timings.items():
+            stages.setdefault(k, []).append(v)
+    return {'frames': len(wall), 'size': f'{cam.width}x{cam.height}',
+            'median_ms': float(np.median(wall)), 'p90_ms': float(np.percentile(wall, 90)),
+            'rate_hz': 1e3 / float(np.median(wall)),
+            'stages_median_ms': {k: float(np.median(v)) for k, v in stages.items()}}
+
+
+def bench_frames(frames: list[Frame], warmup: int) -> dict:
+    """Time and score both methods on the frames: {method: {timing..., 'recall'...},
+    'ratio_gpod_over_sgbm': median time ratio}."""
+    out = {}
+    for method in METHODS:
+        runs = run_method(frames, method)
+        r = _timing(runs, warmup, frames[0].cam)
+        ev = score_runs(frames, runs)
+        s = ev.summary()
+        r['recall'] = s['recall']['recall']
+        r['eligible'] = s['recall']['eligible']
+        r['detected'] = s['recall']['detected']
+        r['false_per_frame'] = s['false_obstacles']['per_frame']
+        out[method] = r
+    if out['gpod'] and out['sgbm']:
+        out['ratio_gpod_over_sgbm'] = out['gpod']['median_ms'] / out['sgbm']['median_ms']
     return out
+
+
+def _print(name: str, res: dict) -> None:
+    g = res['gpod']
+    print(f"{name}: {g['size']}, {g['frames']} timed frames, one core")
+    for method in METHODS:
+        r = res[method]
+        stages = ', '.join(f'{k} {v:.1f}' for k, v in r['stages_median_ms'].items()
+                           if k != 'total')
+        recall = (f"{r['detected']}/{r['eligible']} = {r['recall']:.1%}" if r['eligible']
+                  else 'no eligible obstacles')
+        fpf = r['false_per_frame']
+        false = f'{fpf:.3f}/frame' if fpf is not None else '-'
+        print(f"  {method:5s} median {r['median_ms']:6.1f} ms (p90 {r['p90_ms']:6.1f}) = "
+              f"{r['rate_hz']:5.1f} Hz [{stages}]; recall (>=10 cm, <=5 m) {recall}, "
+              f"false {false}")
+    if 'ratio_gpod_over_sgbm' in res:
+        print(f"  ratio gpod/sgbm median time: {res['ratio_gpod_over_sgbm']:.2f}")
 
 
 def run(args) -> int:
     root = Path(__file__).resolve().parents[2] / 'bags'
     bags = args.bags or [root / 'static_obstacles', root / 'walk_obstacles']
-    results = {}
+    if args.warmup < 0 or args.frames < 0 or args.large_frames < 1:
+        print('asmonc bench: --warmup and --frames must be >= 0, --large-frames >= 1',
+              file=sys.stderr)
+        return 2
+    results: dict[str, dict] = {}       # 'WxH' -> bag -> numbers
     for bag in bags:
         try:
-            pairs = load_pairs(bag, args.frames)
+            frames = load_frames(bag, args.frames)
         except bagio.BagError as exc:
             print(f'asmonc bench: {exc}', file=sys.stderr)
             return 2
-        r = time_detector(pairs, args.warmup)
-        if not r:
-            print(f'asmonc bench: {bag}: fewer pairs than --warmup', file=sys.stderr)
+        if len(frames) <= args.warmup:
+            print(f'asmonc bench: {bag}: {len(frames)} pairs, not more than --warmup '
+                  f'{args.warmup}', file=sys.stderr)
             return 2
-        results[str(bag)] = r
-        stages = ', '.join(f'{k} {v:.1f}' for k, v in r['stages_median_ms'].items())
-        print(f"{bag.name}: {r['size']}, {r['frames']} frames: detector median "
-              f"{r['median_ms']:.1f} ms (p90 {r['p90_ms']:.1f} ms) = {r['rate_hz']:.0f} Hz "
-              f"on one core [{stages}]")
+        res = bench_frames(frames, args.warmup)
+        cam = frames[0].cam
+        results.setdefault(f'{cam.width}x{cam.height}', {})[str(bag)] = res
+        _print(Path(bag).name, res)
+    if not args.no_large:
+        clear = max(args.warmup, 3)
+        n = args.large_frames
+        if args.frames:
+            n = max(1, min(n, args.frames - clear))
+        ks = list(range(clear)) + list(range(LARGE_FIRST_FULL_FRAME, LARGE_FIRST_FULL_FRAME + n))
+        t0 = time.monotonic()
+        frames = render_frames('static_obstacles', 0, ks, **LARGE_RIG)
+        render_s = time.monotonic() - t0
+        res = bench_frames(frames, clear)
+        size = f'{LARGE_RIG["width"]}x{LARGE_RIG["height"]}'
+        results.setdefault(size, {})['static_obstacles (rendered, seed 0)'] = res
+        _print(f'static_obstacles (seed 0) rendered at 640x480, f = 600 px, in '
+               f'{render_s:.0f} s ({clear} clear + {n} frames with obstacles)', res)
     if args.json:
-        args.json.write_text(json.dumps(results, indent=2) + '\n')
+        from asmonc_vision.core.evaluation import json_ready
+        args.json.write_text(json.dumps(json_ready(results), indent=2) + '\n')
     return 0

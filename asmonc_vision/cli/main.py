@@ -2,6 +2,7 @@
 
     asmonc run [BAG] [--out DIR] [--rate R]   replay a bag through the node graph
     asmonc bench [BAG ...]                     time the detector per frame, one core
+    asmonc eval BAG [BAG ...]                  score a detector against ground truth
 """
 from __future__ import annotations
 
@@ -14,12 +15,16 @@ def build_parser() -> argparse.ArgumentParser:
         prog='asmonc', description='asmonc_vision: stereo obstacle detection for walking.')
     sub = parser.add_subparsers(dest='command', required=True)
     from asmonc_vision.cli import bench, run
+    from asmonc_vision.cli import eval as eval_
     run.add_arguments(sub.add_parser(
         'run', help='replay a bag through the detector and alarm nodes',
         description=run.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
     bench.add_arguments(sub.add_parser(
         'bench', help='time the detector per frame on one core',
         description=bench.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
+    eval_.add_arguments(sub.add_parser(
+        'eval', help="score a detector against a bag's ground truth, offline",
+        description=eval_.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
     return parser
 
 

@@ -13,9 +13,12 @@ position is its nearest visible part).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from .camera import MetricPlane
 
 
 @dataclass
@@ -119,45 +122,47 @@ def _inside_roi(roi: np.ndarray, pts_uv: np.ndarray, margin: float) -> np.ndarra
     return (u >= x - margin) & (u <= x + w + margin) & (v >= y - margin) & (v <= y + h + margin)
 
 
-def score_frame(det: FrameObstacles, truth: FrameObstacles, score: DetectionScore, *,
-                match_radius: float = 0.3, min_height: float = 0.10,
-                max_range: float = 5.0, roi_margin: float = 4.0) -> None:
-    """Add one frame's outcome to `score` (in place).
+@dataclass
+class FrameMatch:
+    """How the detections of one frame pair up with its true obstacles (`match_frame`).
 
-    Eligible true obstacles: |height| >= min_height and range <= max_range.
-    Each eligible one is detected if an unused detection lies within match_radius of
-    it on the ground (greedy, nearest true obstacle first). Range and bearing errors
-    are taken from those matches.
+    Attributes:
+        truth_det: (M,) int, index of the detection that found true obstacle m, or -1.
+        eligible: (M,) bool, true obstacle m counts in the recall (height and range).
+        false: (N,) bool, detection n explains no true obstacle.
     """
-    score.frames += 1
+
+    truth_det: np.ndarray
+    eligible: np.ndarray
+    false: np.ndarray
+
+
+def match_frame(det: FrameObstacles, truth: FrameObstacles, *, match_radius: float = 0.3,
+                min_height: float = 0.10, max_range: float = 5.0,
+                roi_margin: float = 4.0) -> FrameMatch:
+    """Pair one frame's detections with its true obstacles, on the ground.
+
+    First the eligible true obstacles (|height| >= min_height, range <= max_range), nearest
+    first, each take the nearest unused detection within match_radius of it on the
+    ground (greedy); then the other true obstacles, nearest first, take what is left. So
+    low or far obstacles never take a detection from an eligible one, and the eligible
+    matches are exactly those `score_frame` counts.
+    """
     m, n = len(truth), len(det)
     dist = (np.linalg.norm(truth.ground_xy()[:, None, :] - det.ground_xy()[None, :, :], axis=2)
             if m and n else np.zeros((m, n)))
     eligible = (np.abs(truth.height) >= min_height) & (truth.range <= max_range)
+    truth_det = np.full(m, -1, int)
     used = np.zeros(n, bool)
     order = np.argsort(truth.range) if m else np.zeros(0, int)
-    for i in order:
-        tid = int(truth.ids[i])
-        rec = score.obstacles.get(tid)
-        if rec is None:
-            rec = score.obstacles[tid] = ObstacleRecord(tid, float(truth.height[i]),
-                                                        float(truth.range[i]))
-        rec.min_range = min(rec.min_range, float(truth.range[i]))
-        if not eligible[i]:
-            continue
-        rec.frames_eligible += 1
-        score.eligible += 1
-        if n == 0:
-            continue
-        d = np.where(used, np.inf, dist[i])
-        j = int(np.argmin(d))
-        if d[j] <= match_radius:
-            used[j] = True
-            score.detected += 1
-            rec.frames_detected += 1
-            score.range_errors.append(float(det.range[j] - truth.range[i]))
-            db = (det.bearing[j] - truth.bearing[i] + np.pi) % (2 * np.pi) - np.pi
-            score.bearing_errors.append(float(db))
+    if n:
+        for i in np.r_[order[eligible[order]], order[~eligible[order]]].astype(int):
+            d = np.where(used, np.inf, dist[i])
+            j = int(np.argmin(d))
+            if d[j] <= match_radius:
+                used[j] = True
+                truth_det[i] = j
+    false = np.zeros(n, bool)
     if n:
         near_any = (dist <= match_radius).any(axis=0) if m else np.zeros(n, bool)
         det_uv = np.stack([det.roi[:, 0] + det.roi[:, 2] / 2.0,
@@ -165,7 +170,46 @@ def score_frame(det: FrameObstacles, truth: FrameObstacles, score: DetectionScor
         in_roi = (_inside_roi(truth.roi, det_uv, roi_margin).any(axis=0)
                   if m else np.zeros(n, bool))
         false = ~(used | near_any | in_roi)
-        nf = int(false.sum())
+    return FrameMatch(truth_det=truth_det, eligible=eligible, false=false)
+
+
+def score_frame(det: FrameObstacles, truth: FrameObstacles, score: DetectionScore, *,
+                match_radius: float = 0.3, min_height: float = 0.10,
+                max_range: float = 5.0, roi_margin: float = 4.0,
+                match: FrameMatch | None = None) -> None:
+    """Add one frame's outcome to `score` (in place).
+
+    Eligible true obstacles: |height| >= min_height and range <= max_range.
+    Each eligible one is detected if an unused detection lies within match_radius of
+    it on the ground (greedy, nearest true obstacle first). Range and bearing errors
+    are taken from those matches. `match` (from `match_frame` with the same criteria)
+    saves matching twice.
+    """
+    if match is None:
+        match = match_frame(det, truth, match_radius=match_radius, min_height=min_height,
+                            max_range=max_range, roi_margin=roi_margin)
+    score.frames += 1
+    order = np.argsort(truth.range) if len(truth) else np.zeros(0, int)
+    for i in order:
+        tid = int(truth.ids[i])
+        rec = score.obstacles.get(tid)
+        if rec is None:
+            rec = score.obstacles[tid] = ObstacleRecord(tid, float(truth.height[i]),
+                                                        float(truth.range[i]))
+        rec.min_range = min(rec.min_range, float(truth.range[i]))
+        if not match.eligible[i]:
+            continue
+        rec.frames_eligible += 1
+        score.eligible += 1
+        j = int(match.truth_det[i])
+        if j >= 0:
+            score.detected += 1
+            rec.frames_detected += 1
+            score.range_errors.append(float(det.range[j] - truth.range[i]))
+            db = (det.bearing[j] - truth.bearing[i] + np.pi) % (2 * np.pi) - np.pi
+            score.bearing_errors.append(float(db))
+    if len(det):
+        nf = int(match.false.sum())
         score.false_obstacles += nf
         score.frames_with_false += int(nf > 0)
 
@@ -190,3 +234,269 @@ def score_sequence(detections: dict[int, FrameObstacles], truth: dict[int, Frame
             continue
         score_frame(det, truth[stamp], score, **kwargs)
     return score, missing
+
+
+# --- a whole evaluation: recall per bin, errors, ground plane, latency ---------------------
+
+#: Height bins (m, of |height|; the last is open): 0-5, 5-10, 10-20, 20-50, >= 50 cm.
+HEIGHT_BINS_M = (0.0, 0.05, 0.10, 0.20, 0.50, math.inf)
+#: Range bins (m along the ground): 1-2, 2-3, 3-4, 4-5, 5-8 m.
+RANGE_BINS_M = (1.0, 2.0, 3.0, 4.0, 5.0, 8.0)
+
+
+def frame_from_detections(stamp_ns: int, obstacles) -> FrameObstacles:
+    """FrameObstacles from detector obstacles (GpodObstacle, SgbmObstacle, sim ObstacleTruth:
+    anything with position, height, range, bearing, roi and optionally id)."""
+    obs = list(obstacles)
+    if not obs:
+        return FrameObstacles.empty(int(stamp_ns))
+    return FrameObstacles(
+        stamp_ns=int(stamp_ns),
+        ids=np.array([int(getattr(o, 'id', 0)) for o in obs], int),
+        position=np.array([np.asarray(o.position, float).reshape(3) for o in obs]),
+        height=np.array([o.height for o in obs], float),
+        range=np.array([o.range for o in obs], float),
+        bearing=np.array([o.bearing for o in obs], float),
+        roi=np.array([tuple(int(x) for x in o.roi) for o in obs], int).reshape(-1, 4))
+
+
+def plane_error(estimate: MetricPlane, truth: MetricPlane) -> tuple[float, float]:
+    """(angle between the up normals in degrees, estimate.height - truth.height in metres):
+    how far a ground plane is from the true one, both in the left optical frame."""
+    n1 = np.asarray(estimate.normal_up, float)
+    n2 = np.asarray(truth.normal_up, float)
+    c = float(np.dot(n1, n2) / (np.linalg.norm(n1) * np.linalg.norm(n2)))
+    return math.degrees(math.acos(min(1.0, max(-1.0, c)))), float(estimate.height - truth.height)
+
+
+def _bin_label(lo: float, hi: float, unit: str, scale: float) -> str:
+    if math.isinf(hi):
+        return f'>={lo * scale:g} {unit}'
+    return f'{lo * scale:g}-{hi * scale:g} {unit}'
+
+
+def _median(x) -> float | None:
+    x = np.asarray(x, float)
+    return float(np.median(x)) if x.size else None
+
+
+def _pct(x, q: float) -> float | None:
+    x = np.asarray(x, float)
+    return float(np.percentile(x, q)) if x.size else None
+
+
+def json_ready(obj):
+    """obj with NaN/inf floats replaced by None and numpy scalars by Python ones (strict JSON)."""
+    if isinstance(obj, dict):
+        return {str(k): json_ready(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_ready(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return json_ready(obj.tolist())
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        f = float(obj)
+        return f if math.isfinite(f) else None
+    return obj
+
+
+@dataclass
+class SequenceEvaluation:
+    """Everything `asmonc eval` reports about one run of a detector over a sequence.
+
+    Feed it frame by frame with `add_frame` (and `add_missing` for frames that got no
+    output); `summary()` gives a JSON-ready dict. The headline recall, false obstacles and
+    range/bearing errors are those of `score_frame` (the same as `asmonc run`); on top of
+    them come the recall per |height| x range bin over *all* true obstacles in the bins,
+    the ground-plane error against the true plane, and the per-frame latency.
+    """
+
+    match_radius: float = 0.3
+    min_height: float = 0.10
+    max_range: float = 5.0
+    roi_margin: float = 4.0
+    height_bins: tuple = HEIGHT_BINS_M
+    range_bins: tuple = RANGE_BINS_M
+    score: DetectionScore = field(default_factory=DetectionScore)
+    bin_eligible: np.ndarray = None
+    bin_detected: np.ndarray = None
+    #: one row per matched true obstacle: (true range m, range error m, bearing error rad,
+    #: true height m, 1 if eligible else 0)
+    matches: list = field(default_factory=list)
+    stamps: list = field(default_factory=list)
+    missing: list = field(default_factory=list)
+    plane_angle_deg: list = field(default_factory=list)
+    plane_height_m: list = field(default_factory=list)
+    frames_without_plane: int = 0
+    frames_without_truth_plane: int = 0
+    latency_ms: list = field(default_factory=list)
+    status_counts: dict = field(default_factory=dict)
+    #: for a pooled evaluation: the scored seconds of each part (None: a part had no rate)
+    part_durations_s: list | None = None
+
+    def __post_init__(self) -> None:
+        shape = (len(self.height_bins) - 1, len(self.range_bins) - 1)
+        if self.bin_eligible is None:
+            self.bin_eligible = np.zeros(shape, int)
+        if self.bin_detected is None:
+            self.bin_detected = np.zeros(shape, int)
+
+    @property
+    def criteria(self) -> dict:
+        return {'match_radius': self.match_radius, 'min_height': self.min_height,
+                'max_range': self.max_range, 'roi_margin': self.roi_margin}
+
+    def add_frame(self, det: FrameObstacles, truth: FrameObstacles, *,
+                  plane: MetricPlane | None = None, truth_plane: MetricPlane | None = None,
+                  latency_ms: float | None = None, status: str | None = None) -> FrameMatch:
+        """Score one frame: its detections against its truth, its ground plane (None: the
+        detector had none this frame) against the true one, and its latency."""
+        match = match_frame(det, truth, **self.criteria)
+        score_frame(det, truth, self.score, match=match, **self.criteria)
+        self.stamps.append(int(truth.stamp_ns))
+        # (1 um: a 5 cm box stored as 0.0499999... is in the 5-10 cm bin)
+        hb = np.digitize(np.abs(truth.height) + 1e-6, self.height_bins) - 1
+        rb = np.digitize(truth.range, self.range_bins) - 1
+        for i in range(len(truth)):
+            j = int(match.truth_det[i])
+            if j >= 0:
+                db = (det.bearing[j] - truth.bearing[i] + np.pi) % (2 * np.pi) - np.pi
+                self.matches.append((float(truth.range[i]), float(det.range[j] - truth.range[i]),
+                                     float(db), float(truth.height[i]),
+                                     int(match.eligible[i])))
+            if 0 <= hb[i] < self.bin_eligible.shape[0] and 0 <= rb[i] < self.bin_eligible.shape[1]:
+                self.bin_eligible[hb[i], rb[i]] += 1
+                self.bin_detected[hb[i], rb[i]] += int(j >= 0)
+        if truth_plane is None:
+            self.frames_without_truth_plane += 1
+        elif plane is None:
+            self.frames_without_plane += 1
+        else:
+            ang, dh = plane_error(plane, truth_plane)
+            self.plane_angle_deg.append(ang)
+            self.plane_height_m.append(dh)
+        if latency_ms is not None:
+            self.latency_ms.append(float(latency_ms))
+        if status is not None:
+            self.status_counts[status] = self.status_counts.get(status, 0) + 1
+        return match
+
+    def add_missing(self, stamp_ns: int) -> None:
+        """A frame with ground truth but no detector output (dropped)."""
+        self.missing.append(int(stamp_ns))
+
+    @classmethod
+    def pooled(cls, evals: list['SequenceEvaluation']) -> 'SequenceEvaluation':
+        """One evaluation of several sequences together (same criteria and bins); the
+        true obstacles' records are keyed 'part:id' (ids are per sequence)."""
+        if not evals:
+            return cls()
+        e0 = evals[0]
+        out = cls(match_radius=e0.match_radius, min_height=e0.min_height,
+                  max_range=e0.max_range, roi_margin=e0.roi_margin,
+                  height_bins=e0.height_bins, range_bins=e0.range_bins)
+        s = out.score
+        for i, e in enumerate(evals):
+            if (e.criteria, e.height_bins, e.range_bins) != (out.criteria, out.height_bins,
+                                                             out.range_bins):
+                raise ValueError('cannot pool evaluations with different criteria or bins')
+            t = e.score
+            s.frames += t.frames
+            s.eligible += t.eligible
+            s.detected += t.detected
+            s.false_obstacles += t.false_obstacles
+            s.frames_with_false += t.frames_with_false
+            s.range_errors += t.range_errors
+            s.bearing_errors += t.bearing_errors
+            for k, rec in t.obstacles.items():      # ids are per sequence: 'part:id'
+                s.obstacles[f'{i}:{k}'] = rec
+            out.bin_eligible += e.bin_eligible
+            out.bin_detected += e.bin_detected
+            out.matches += e.matches
+            out.missing += e.missing
+            out.plane_angle_deg += e.plane_angle_deg
+            out.plane_height_m += e.plane_height_m
+            out.frames_without_plane += e.frames_without_plane
+            out.frames_without_truth_plane += e.frames_without_truth_plane
+            out.latency_ms += e.latency_ms
+            for k, v in e.status_counts.items():
+                out.status_counts[k] = out.status_counts.get(k, 0) + v
+        out.part_durations_s = [e.duration_s() for e in evals]
+        return out
+
+    def camera_rate_hz(self) -> float | None:
+        """Camera rate from the frames' stamps (median interval), or None (also when
+        pooled: the parts may differ)."""
+        if self.part_durations_s is not None:
+            return None
+        st = np.unique(np.asarray(self.stamps + self.missing, np.int64))
+        if st.size < 2:
+            return None
+        dt = float(np.median(np.diff(st))) / 1e9
+        return 1.0 / dt if dt > 0 else None
+
+    def duration_s(self) -> float | None:
+        """Seconds of camera time scored: scored frames / camera rate (None if unknown)."""
+        if self.part_durations_s is not None:
+            parts = self.part_durations_s
+            return None if any(d is None for d in parts) else float(sum(parts))
+        rate = self.camera_rate_hz()
+        return self.score.frames / rate if rate else None
+
+    def summary(self) -> dict:
+        """The whole evaluation as a JSON-ready dict (NaN as None)."""
+        s = self.score
+        gt = s.as_dict()
+        dur = self.duration_s()
+        rate = self.camera_rate_hz()
+        mt = np.asarray(self.matches, float).reshape(-1, 5)
+        elig = mt[mt[:, 4] > 0] if mt.size else mt
+        rel = np.abs(elig[:, 1]) / np.maximum(elig[:, 0], 1e-6) * 100 if elig.size else []
+        with np.errstate(invalid='ignore', divide='ignore'):
+            recall = np.where(self.bin_eligible > 0,
+                              self.bin_detected / np.maximum(self.bin_eligible, 1), np.nan)
+        hl = [_bin_label(lo, hi, 'cm', 100) for lo, hi in zip(self.height_bins[:-1],
+                                                             self.height_bins[1:])]
+        rl = [_bin_label(lo, hi, 'm', 1) for lo, hi in zip(self.range_bins[:-1],
+                                                          self.range_bins[1:])]
+        pa = self.plane_angle_deg
+        ph = np.asarray(self.plane_height_m, float) * 1e3
+        out = {
+            'frames': s.frames, 'missing_frames': len(self.missing),
+            'camera_rate_hz': rate, 'duration_s': dur,
+            'criteria': {'match_radius_m': self.match_radius, 'min_height_m': self.min_height,
+                         'max_range_m': self.max_range, 'roi_margin_px': self.roi_margin},
+            'status_counts': dict(self.status_counts),
+            'recall': {'eligible': s.eligible, 'detected': s.detected, 'recall': s.recall,
+                       'obstacles': gt['obstacles'],
+                       'obstacles_detected': sum(1 for o in s.obstacles.values() if o.detected),
+                       'obstacles_eligible': sum(1 for o in s.obstacles.values()
+                                                 if o.frames_eligible > 0)},
+            'recall_bins': {'height_labels': hl, 'range_labels': rl,
+                            'height_edges_m': list(self.height_bins),
+                            'range_edges_m': list(self.range_bins),
+                            'eligible': self.bin_eligible.tolist(),
+                            'detected': self.bin_detected.tolist(), 'recall': recall.tolist()},
+            'false_obstacles': {'total': s.false_obstacles, 'per_frame': s.false_per_frame,
+                                'per_minute': (s.false_obstacles / dur * 60.0) if dur else None,
+                                'frames_with_false': s.frames_with_false},
+            'range_error': {'n': len(s.range_errors),
+                            'median_abs_m': gt['range_error_median_m'],
+                            'median_m': _median(s.range_errors),
+                            'median_abs_pct_of_range': _median(rel)},
+            'bearing_error': {'n': len(s.bearing_errors),
+                              'median_abs_deg': gt['bearing_error_median_deg'],
+                              'median_deg': (math.degrees(_median(s.bearing_errors))
+                                             if s.bearing_errors else None)},
+            'ground_plane': {'frames_with_plane': len(pa),
+                             'frames_without_plane': self.frames_without_plane,
+                             'frames_without_truth': self.frames_without_truth_plane,
+                             'angle_median_deg': _median(pa), 'angle_p90_deg': _pct(pa, 90),
+                             'height_median_abs_mm': _median(np.abs(ph)),
+                             'height_p90_abs_mm': _pct(np.abs(ph), 90),
+                             'height_median_mm': _median(ph)},
+            'latency_ms': {'n': len(self.latency_ms), 'median': _median(self.latency_ms),
+                           'p90': _pct(self.latency_ms, 90)},
+        }
+        return json_ready(out)

@@ -1,0 +1,392 @@
+"""Score a detector on bags with ground truth, offline, and tell how good it is.
+
+    asmonc eval BAG [BAG ...] [--method gpod|sgbm ...] [--threshold-px T ...]
+                [--outputs DIR ...] [--json OUT.json] [--plots DIR] [--frames N]
+                [--match-radius 0.3] [--min-height 0.10] [--max-range 5]
+
+By default runs our detector (GPOD, default settings) in this process, without ROS, over
+each bag's stereo pairs in order; `--method sgbm` runs the OpenCV StereoSGBM baseline
+(core.baseline) instead, and several methods or `--threshold-px` values give one run
+each. With `--outputs DIR` (one per BAG) nothing is run: the /obstacles and
+/ground_plane recorded by `asmonc run BAG --out DIR` are scored against BAG's truth.
+Both paths are scored by the same code (core.evaluation.SequenceEvaluation):
+
+* recall per frame, per |height| x range bin of the true obstacles (0-5, 5-10, 10-20,
+  20-50, >= 50 cm x 1-2, 2-3, 3-4, 4-5, 5-8 m) with counts: a true obstacle is found in a
+  frame when a report lies within --match-radius of it on the ground (one report finds
+  one obstacle; obstacles >= --min-height within --max-range take reports first); and the
+  headline recall of those (>= 10 cm, <= 5 m, as `asmonc run`);
+* false obstacles (reports that explain no true obstacle) per frame and per minute (the
+  camera rate from the stamps);
+* range error (median |error|, m and % of the true range) and bearing error (median
+  |error|, deg) of the headline matches;
+* ground-plane error against /ground_truth/ground_plane: the angle between the normals
+  (deg) and the camera-height difference (mm), over the frames with a plane;
+* latency of process() per frame (median, p90 ms; OpenCV on one thread; not for --outputs).
+
+Prints a table per run (and pooled over the bags when there are several), writes all of
+it as JSON with --json and PNG plots (recall heat map, range error vs range) with
+--plots. Exit status: 0 done; 2 a bag is unreadable or has no ground truth, or the
+arguments are wrong.
+"""
+from __future__ import annotations
+
+import json
+import re
+import sys
+from pathlib import Path
+
+from asmonc_vision import bagio
+from asmonc_vision.cli.bench import METHODS, load_frames, make_method, plane_from_msg, \
+    run_method, score_runs
+
+STATUS_NAMES = {0: 'initialising', 1: 'tracking', 2: 'lost'}
+
+
+def add_arguments(p) -> None:
+    p.add_argument('bags', nargs='+', type=Path,
+                   help='rosbag2 bags with /ground_truth/* topics (e.g. bags/static_obstacles)')
+    p.add_argument('--method', nargs='+', choices=METHODS, default=['gpod'],
+                   help="'gpod' (ours, default) and/or 'sgbm' (the OpenCV StereoSGBM baseline)")
+    p.add_argument('--threshold-px', nargs='+', type=float, default=None,
+                   help='obstacle threshold(s), pixels of disparity excess (default: each '
+                        "method's own, 1.7); several values give one run each")
+    p.add_argument('--outputs', type=Path, action='append', default=None,
+                   help='score the /obstacles and /ground_plane of this bag recorded by '
+                        '`asmonc run BAG --out DIR` instead of running a detector; give one '
+                        'per BAG, in the same order')
+    p.add_argument('--frames', type=int, default=0, help='only the first N pairs per bag (0: all)')
+    p.add_argument('--match-radius', type=float, default=0.3,
+                   help='a report within this distance (m) on the ground finds a true obstacle')
+    p.add_argument('--min-height', type=float, default=0.10,
+                   help='true obstacles at least this high (m) count in the headline recall')
+    p.add_argument('--max-range', type=float, default=5.0,
+                   help='true obstacles within this range (m) count in the headline recall')
+    p.add_argument('--json', type=Path, default=None, help='write every number as JSON here')
+    p.add_argument('--plots', type=Path, default=None,
+                   help='write PNG plots here (eval_recall_*.png, eval_range_error_*.png)')
+    p.add_argument('--no-progress', action='store_true', help='no progress bar')
+    p.set_defaults(func=run)
+
+
+# --- progress --------------------------------------------------------------------------
+
+class _Progress:
+    """A one-line bar on stderr, only when stderr is a terminal."""
+
+    def __init__(self, enabled: bool):
+        self.on = enabled and sys.stderr.isatty()
+        self.shown = False
+
+    def __call__(self, label: str):
+        def update(done: int, total: int) -> None:
+            if not self.on:
+                return
+            w = 30
+            k = int(w * done / max(total, 1))
+            sys.stderr.write(f'\r  {label:32.32s} [{"#" * k}{"." * (w - k)}] {done}/{total}')
+            sys.stderr.flush()
+            self.shown = True
+        return update
+
+    def clear(self) -> None:
+        if self.on and self.shown:
+            sys.stderr.write('\r' + ' ' * 78 + '\r')
+            sys.stderr.flush()
+            self.shown = False
+
+
+# --- scoring recorded outputs ------------------------------------------------------------
+
+def score_outputs(frames, outputs: Path, evaluation) -> None:
+    """Add the /obstacles and /ground_plane of a recorded outputs bag to `evaluation`,
+    frame by frame against `frames` (from `load_frames`, truth needed); a frame with no
+    /obstacles message counts as missing.
+
+    Raises:
+        bagio.BagError: unreadable bag, or one without /obstacles.
+    """
+    from asmonc_vision.cli.run import frame_from_obstacle_array
+
+    t_obs, t_plane = bagio.TOPICS['obstacles'][0], bagio.TOPICS['ground_plane'][0]
+    topics = bagio.bag_topics(outputs)
+    if t_obs not in topics:
+        raise bagio.BagError(f"bag '{outputs}' has no {t_obs} messages (topics: "
+                             f"{', '.join(sorted(topics)) or 'none'})")
+    dets, planes = {}, {}
+    for topic, _, m in bagio.read_messages(outputs, [t_obs, t_plane]):
+        if topic == t_obs:
+            f = frame_from_obstacle_array(m)
+            dets[f.stamp_ns] = f
+        else:
+            planes[bagio.header_stamp_ns(m)] = m
+    for f in frames:
+        if f.truth is None:
+            continue
+        det = dets.get(f.stamp_ns)
+        if det is None:
+            evaluation.add_missing(f.stamp_ns)
+            continue
+        pm = planes.get(f.stamp_ns)
+        evaluation.add_frame(det, f.truth, plane=plane_from_msg(pm, f.cam) if pm else None,
+                             truth_plane=f.truth_plane,
+                             status=STATUS_NAMES.get(int(pm.status), str(pm.status))
+                             if pm else 'no /ground_plane')
+
+
+# --- report ------------------------------------------------------------------------------
+
+def _f(x, fmt: str, none: str = '-') -> str:
+    return none if x is None else format(x, fmt)
+
+
+def format_summary(title: str, s: dict) -> list[str]:
+    """The printed table of one SequenceEvaluation.summary()."""
+    lines = [f'=== {title} ===']
+    rate = s['camera_rate_hz']
+    lines.append(f"frames: {s['frames']} scored, {s['missing_frames']} missing"
+                 + (f", camera {rate:.1f} Hz" if rate else '')
+                 + (f", {s['duration_s']:.1f} s" if s['duration_s'] else '')
+                 + ('; status ' + ', '.join(f'{k} {v}' for k, v in
+                                            sorted(s['status_counts'].items()))
+                    if s['status_counts'] else ''))
+    b = s['recall_bins']
+    lines.append('recall per frame by true |height| x range (found/eligible, recall):')
+    cw = 15
+    lines.append('  ' + 'height \\ range'.ljust(12)
+                 + ''.join(r.rjust(cw) for r in b['range_labels']))
+    for i, hl in enumerate(b['height_labels']):
+        cells = []
+        for j in range(len(b['range_labels'])):
+            e, d, r = b['eligible'][i][j], b['detected'][i][j], b['recall'][i][j]
+            cells.append(('.' if not e else f'{d}/{e} {r * 100:3.0f}%').rjust(cw))
+        lines.append('  ' + hl.ljust(12) + ''.join(cells))
+    c = s['criteria']
+    rc = s['recall']
+    head = (f"{rc['detected']}/{rc['eligible']} = {rc['recall']:.1%}" if rc['eligible']
+            else 'no eligible obstacles')
+    lines.append(f"recall (>= {c['min_height_m'] * 100:g} cm, <= {c['max_range_m']:g} m, "
+                 f"within {c['match_radius_m']:g} m): {head}; obstacles found in >= half their "
+                 f"frames: {rc['obstacles_detected']} of {rc['obstacles_eligible']}")
+    fo = s['false_obstacles']
+    lines.append(f"false obstacles: {fo['total']} in {s['frames']} frames = "
+                 f"{_f(fo['per_frame'], '.3f')} per frame = {_f(fo['per_minute'], '.1f')} per "
+                 f"minute ({fo['frames_with_false']} frames with any)")
+    re_, be = s['range_error'], s['bearing_error']
+    lines.append(f"range error: median |e| {_f(re_['median_abs_m'], '.3f')} m = "
+                 f"{_f(re_['median_abs_pct_of_range'], '.1f')} % of range (signed median "
+                 f"{_f(re_['median_m'], '+.3f')} m, n = {re_['n']}); bearing error: median |e| "
+                 f"{_f(be['median_abs_deg'], '.2f')} deg")
+    g = s['ground_plane']
+    lines.append(f"ground plane: {g['frames_with_plane']} frames with a plane, "
+                 f"{g['frames_without_plane']} without; normal angle median "
+                 f"{_f(g['angle_median_deg'], '.2f')} deg (p90 {_f(g['angle_p90_deg'], '.2f')}), "
+                 f"camera height median |e| {_f(g['height_median_abs_mm'], '.1f')} mm "
+                 f"(p90 {_f(g['height_p90_abs_mm'], '.1f')}, signed median "
+                 f"{_f(g['height_median_mm'], '+.1f')} mm)")
+    lat = s['latency_ms']
+    if lat['n']:
+        lines.append(f"latency of process(): median {lat['median']:.1f} ms, p90 "
+                     f"{lat['p90']:.1f} ms over {lat['n']} frames (one OpenCV thread)")
+    else:
+        lines.append('latency: not measured (recorded outputs)')
+    return lines
+
+
+def _slug(text: str) -> str:
+    return re.sub(r'[^A-Za-z0-9._-]+', '_', text).strip('_')
+
+
+def write_plots(ev, title: str, stem: str, out_dir: Path) -> list[Path]:
+    """eval_recall_<stem>.png (recall heat map per bin, with counts) and
+    eval_range_error_<stem>.png (signed range error of the matches vs true range)."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    s = ev.summary()
+    b = s['recall_bins']
+    elig = np.asarray(b['eligible'])
+    det = np.asarray(b['detected'])
+    rec = np.where(elig > 0, det / np.maximum(elig, 1), np.nan)
+    fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    cmap = plt.get_cmap('RdYlGn').with_extremes(bad='#dddddd')
+    im = ax.imshow(np.ma.masked_invalid(rec), cmap=cmap, vmin=0, vmax=1, origin='lower',
+                   aspect='auto')
+    for i in range(rec.shape[0]):
+        for j in range(rec.shape[1]):
+            txt = f'{rec[i, j]:.0%}\n{det[i, j]}/{elig[i, j]}' if elig[i, j] else 'none'
+            ax.text(j, i, txt, ha='center', va='center', fontsize=8)
+    ax.set_xticks(range(len(b['range_labels'])), b['range_labels'])
+    ax.set_yticks(range(len(b['height_labels'])), b['height_labels'])
+    ax.set_xlabel('true range along the ground')
+    ax.set_ylabel('true obstacle |height|')
+    ax.set_title(f'recall per frame: {title}', fontsize=10)
+    fig.colorbar(im, ax=ax, label='recall')
+    fig.tight_layout()
+    p1 = out_dir / f'eval_recall_{stem}.png'
+    fig.savefig(p1, dpi=100)
+    plt.close(fig)
+
+    m = np.asarray(ev.matches, float).reshape(-1, 5)
+    fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    if m.size:
+        e = m[:, 4] > 0
+        ax.scatter(m[~e, 0], m[~e, 1], s=10, c='#aaaaaa',
+                   label='other matches (low or far obstacles)')
+        ax.scatter(m[e, 0], m[e, 1], s=12, c='tab:blue',
+                   label=f'>= {ev.min_height * 100:g} cm, <= {ev.max_range:g} m')
+        edges = np.asarray(ev.range_bins)
+        mids, meds = [], []
+        for lo, hi in zip(edges[:-1], edges[1:]):
+            k = (m[:, 0] >= lo) & (m[:, 0] < hi)
+            if k.any():
+                mids.append((lo + hi) / 2)
+                meds.append(np.median(np.abs(m[k, 1])))
+        if mids:
+            ax.plot(mids, meds, 'o-', c='tab:red', label='median |error| per range bin')
+        r = np.linspace(max(edges[0], 0.5), edges[-1], 50)
+        ax.plot(r, 0.05 * r, ':', c='k', lw=0.8, label='±5 % of range')
+        ax.plot(r, -0.05 * r, ':', c='k', lw=0.8)
+        ax.legend(fontsize=8)
+    else:
+        ax.text(0.5, 0.5, 'no matches', ha='center', va='center', transform=ax.transAxes)
+    ax.axhline(0, c='k', lw=0.5)
+    ax.set_xlabel('true range (m)')
+    ax.set_ylabel('reported - true range (m)')
+    ax.set_title(f'range error: {title}', fontsize=10)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    p2 = out_dir / f'eval_range_error_{stem}.png'
+    fig.savefig(p2, dpi=100)
+    plt.close(fig)
+    return [p1, p2]
+
+
+# --- main ----------------------------------------------------------------------------------
+
+def run(args) -> int:
+    from asmonc_vision.core.config import to_dict
+    from asmonc_vision.core.evaluation import SequenceEvaluation, json_ready
+
+    err = lambda s: print(f'asmonc eval: {s}', file=sys.stderr)  # noqa: E731
+    if args.outputs is not None:
+        if len(args.outputs) != len(args.bags):
+            err(f'give one --outputs per BAG ({len(args.bags)} bags, '
+                f'{len(args.outputs)} --outputs)')
+            return 2
+        if args.threshold_px is not None or args.method != ['gpod']:
+            err('--method and --threshold-px do not apply to --outputs (nothing is run)')
+            return 2
+    if args.frames < 0 or args.match_radius <= 0 or args.max_range <= 0 or args.min_height < 0:
+        err('--frames must be >= 0, --match-radius and --max-range > 0, --min-height >= 0')
+        return 2
+    thresholds = args.threshold_px or [None]
+    for t in thresholds:
+        if t is not None and not (0.05 <= t <= 50):
+            err(f'--threshold-px must be in [0.05, 50], got {t:g}')
+            return 2
+    criteria = dict(match_radius=args.match_radius, min_height=args.min_height,
+                    max_range=args.max_range)
+    progress = _Progress(not args.no_progress)
+    runs: list[dict] = []
+    groups: dict[tuple, list] = {}
+    for bi, bag in enumerate(args.bags):
+        try:
+            frames = load_frames(bag, args.frames, images=args.outputs is None)
+        except bagio.BagError as exc:
+            progress.clear()
+            err(str(exc))
+            return 2
+        if not frames:
+            err(f"bag '{bag}' has no stereo pairs")
+            return 2
+        if all(f.truth is None for f in frames):
+            err(f"bag '{bag}' has no {bagio.TOPICS['gt_obstacles'][0]}: nothing to score against")
+            return 2
+        name = Path(bag).name.removesuffix('.mcap')
+        if args.outputs is not None:
+            ev = SequenceEvaluation(**criteria)
+            try:
+                score_outputs(frames, args.outputs[bi], ev)
+            except bagio.BagError as exc:
+                err(str(exc))
+                return 2
+            key = ('outputs', None)
+            runs.append({'bag': str(bag), 'name': name, 'method': 'outputs',
+                         'source': 'recorded', 'outputs': str(args.outputs[bi]),
+                         'threshold_px': None, 'evaluation': ev})
+            groups.setdefault(key, []).append(ev)
+            continue
+        for method in args.method:
+            for thr in thresholds:
+                label = f'{name} {method}' + (f' {thr:g}px' if thr is not None else '')
+                rs = run_method(frames, method, thr, progress=progress(label))
+                progress.clear()
+                ev = score_runs(frames, rs, **criteria)
+                cfg = make_method(method, thr).config
+                runs.append({'bag': str(bag), 'name': name, 'method': method,
+                             'source': 'in-process', 'threshold_px': cfg.threshold_px,
+                             'config': to_dict(cfg), 'evaluation': ev})
+                groups.setdefault((method, cfg.threshold_px), []).append(ev)
+
+    pooled = []
+    if len(args.bags) > 1:
+        for (method, thr), evs in groups.items():
+            pooled.append({'bags': [str(b) for b in args.bags], 'method': method,
+                           'threshold_px': thr, 'evaluation': SequenceEvaluation.pooled(evs)})
+
+    def title(r: dict, pooled_: bool = False) -> str:
+        who = {'gpod': 'GPOD (ours)', 'sgbm': 'SGBM baseline',
+               'outputs': 'recorded outputs'}[r['method']]
+        thr = f", threshold {r['threshold_px']:g} px" if r.get('threshold_px') else ''
+        src = f" ({r['outputs']})" if r.get('outputs') else ''
+        where = 'all bags' if pooled_ else r['name']
+        return f'{where} - {who}{thr}{src}'
+
+    def stem(r: dict, pooled_: bool = False) -> str:
+        thr = f"_t{r['threshold_px']:g}" if (r.get('threshold_px') and args.threshold_px) else ''
+        return _slug(f"{'all' if pooled_ else r['name']}_{r['method']}{thr}")
+
+    for r in runs:
+        print('\n'.join(format_summary(title(r), r['evaluation'].summary())))
+        print()
+    for r in pooled:
+        print('\n'.join(format_summary(title(r, True), r['evaluation'].summary())))
+        print()
+    if len(runs) > 1:
+        print('=== overview ===')
+        print(f"  {'bag':20s} {'method':8s} {'thr px':>6s} {'recall':>14s} {'false/frame':>11s} "
+              f"{'range |e| m':>11s} {'plane deg':>9s} {'plane mm':>8s} {'median ms':>9s}")
+        for r in runs + pooled:
+            s = r['evaluation'].summary()
+            rc = s['recall']
+            rec = (f"{rc['detected']}/{rc['eligible']} {rc['recall']:4.0%}" if rc['eligible']
+                   else '-')
+            print(f"  {r.get('name', 'all bags'):20s} {r['method']:8s} "
+                  f"{_f(r.get('threshold_px'), 'g'):>6s} {rec:>14s} "
+                  f"{_f(s['false_obstacles']['per_frame'], '.3f'):>11s} "
+                  f"{_f(s['range_error']['median_abs_m'], '.3f'):>11s} "
+                  f"{_f(s['ground_plane']['angle_median_deg'], '.2f'):>9s} "
+                  f"{_f(s['ground_plane']['height_median_abs_mm'], '.1f'):>8s} "
+                  f"{_f(s['latency_ms']['median'], '.1f'):>9s}")
+    if args.plots is not None:
+        written = []
+        for r in runs:
+            written += write_plots(r['evaluation'], title(r), stem(r), args.plots)
+        for r in pooled:
+            written += write_plots(r['evaluation'], title(r, True), stem(r, True), args.plots)
+        print(f'plots: {len(written)} PNG files in {args.plots}')
+    if args.json is not None:
+        doc = {'criteria': {'match_radius_m': args.match_radius, 'min_height_m': args.min_height,
+                            'max_range_m': args.max_range, 'frames_limit': args.frames},
+               'runs': [{k: v for k, v in r.items() if k != 'evaluation'}
+                        | r['evaluation'].summary() for r in runs],
+               'pooled': [{k: v for k, v in r.items() if k != 'evaluation'}
+                          | r['evaluation'].summary() for r in pooled]}
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(json_ready(doc), indent=2) + '\n')
+        print(f'json: {args.json}')
+    return 0

@@ -1,0 +1,47 @@
+"""`asmonc bench`: both methods timed and scored, at 320x240 (a bag) and 640x480 (rendered)."""
+import json
+
+import numpy as np
+
+from asmonc_vision.cli.bench import load_pairs, render_frames, time_detector
+from asmonc_vision.cli.main import main
+from conftest import BAGS
+
+
+def test_bench_prints_both_methods_at_both_sizes(tmp_path, capsys):
+    out = tmp_path / 'bench.json'
+    rc = main(['bench', str(BAGS / 'static_obstacles'), '--frames', '6', '--warmup', '2',
+               '--large-frames', '1', '--json', str(out)])
+    assert rc == 0
+    lines = capsys.readouterr().out.splitlines()
+    gpod = [ln for ln in lines if ln.strip().startswith('gpod ')]
+    sgbm = [ln for ln in lines if ln.strip().startswith('sgbm ')]
+    assert len(gpod) == 2 and len(sgbm) == 2, lines
+    assert all('median' in ln and 'recall' in ln for ln in gpod + sgbm)
+    assert sum('ratio gpod/sgbm' in ln for ln in lines) == 2
+    assert any('640x480' in ln for ln in lines)
+    doc = json.loads(out.read_text())
+    small = next(iter(doc['320x240'].values()))
+    assert small['gpod']['frames'] == 4 and small['gpod']['size'] == '320x240'
+    assert small['sgbm']['median_ms'] > 0 and small['ratio_gpod_over_sgbm'] > 0
+    large = doc['640x480']['static_obstacles (rendered, seed 0)']
+    assert large['gpod']['size'] == '640x480' and large['sgbm']['frames'] == 1
+    assert large['sgbm']['eligible'] > 0          # the obstacles are in the rendered frame
+
+
+def test_bench_refuses_too_few_pairs(capsys):
+    assert main(['bench', str(BAGS / 'clear_static'), '--frames', '3', '--warmup', '5',
+                 '--no-large']) == 2
+    assert 'warmup' in capsys.readouterr().err
+
+
+def test_loaders_and_the_old_timing_api():
+    pairs = load_pairs(BAGS / 'clear_static', limit=4)
+    assert len(pairs) == 4 and pairs[0][0].shape == (240, 320) and pairs[0][2].f == 300.0
+    r = time_detector(pairs, warmup=1)
+    assert r['frames'] == 3 and r['median_ms'] > 0 and 'matching' in r['stages_median_ms']
+    frames = render_frames('static_obstacles', 0, [40], width=160, height=120, focal=150.0)
+    f = frames[0]
+    assert f.left.shape == (120, 160) and f.cam.f == 150.0
+    assert len(f.truth) >= 4 and np.all(f.truth.range > 1.0)
+    assert abs(f.truth_plane.height - 1.25) < 0.1
