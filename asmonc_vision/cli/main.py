@@ -25,6 +25,9 @@ def build_parser() -> argparse.ArgumentParser:
     eval_.add_arguments(sub.add_parser(
         'eval', help="score a detector against a bag's ground truth, offline",
         description=eval_.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
+    from asmonc_vision.cli import fig5
+    fig5.add_arguments(sub.add_parser('fig5', help="the paper's Fig. 5, model and measured",
+        description=fig5.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
     return parser
 
 
