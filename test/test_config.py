@@ -19,6 +19,8 @@ NODE_CONFIGS = {
     'stereo_capture.yaml': ('stereo_capture_node', [('', 'asmonc_vision.core.capture:CaptureConfig')]),
     'bag_player.yaml': ('bag_player_node', [('', 'asmonc_vision.nodes.player_node:PlayerConfig')]),
     'bag_recorder.yaml': ('bag_recorder_node', [('', 'asmonc_vision.nodes.recorder_node:RecorderConfig')]),
+    'egomotion.yaml': ('egomotion_node', [('', 'asmonc_vision.nodes.egomotion_node:EgomotionNodeConfig'),
+                                          ('motion.', 'asmonc_vision.core.motion:EgomotionConfig')]),
 }
 
 

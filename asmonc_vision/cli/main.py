@@ -3,6 +3,8 @@
     asmonc run [BAG] [--out DIR] [--rate R]   replay a bag through the node graph
     asmonc bench [BAG ...]                     time the detector per frame, one core
     asmonc eval BAG [BAG ...]                  score a detector against ground truth
+    asmonc fig5 [--empirical]                  the paper's Fig. 5, model and measured
+    asmonc motion {tables,eval,corners}        visual egomotion: Tables 2-3, bag errors
 """
 from __future__ import annotations
 
@@ -28,6 +30,10 @@ def build_parser() -> argparse.ArgumentParser:
     from asmonc_vision.cli import fig5
     fig5.add_arguments(sub.add_parser('fig5', help="the paper's Fig. 5, model and measured",
         description=fig5.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
+    from asmonc_vision.cli import motion
+    motion.add_arguments(sub.add_parser(
+        'motion', help="visual egomotion: the paper's Tables 2 and 3, errors and time on bags",
+        description=motion.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
     return parser
 
 

@@ -341,9 +341,12 @@ def run(args) -> int:
         else:
             raise RuntimeError('the nodes did not connect within 60 s')
 
+        # The player itself must also see every image subscriber before the first frame.
+        image_readers = sum(left_topic in spec.inputs for spec in nodes.values())
         player_cmd = [sys.executable, '-m', 'asmonc_vision.nodes.player_node', '--ros-args',
                       '-p', f'bag:={bag.resolve()}', '-p', f'rate:={float(args.rate)}',
-                      '-p', 'wait_for_subscribers:=1', '-p', 'exit_when_done:=true']
+                      '-p', f'wait_for_subscribers:={max(image_readers, 1)}',
+                      '-p', 'exit_when_done:=true']
         children['player'] = _Child('player', player_cmd, log_dir,
                                     lambda s: console.line(s, err=True), env)
 
