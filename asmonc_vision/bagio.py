@@ -31,6 +31,7 @@ TOPICS = {
     'gt_camera_pose': ('/ground_truth/camera_pose', 'geometry_msgs/msg/PoseStamped'),
     'gt_ground_plane': ('/ground_truth/ground_plane', f'{MSG_PACKAGE}/msg/GroundPlane'),
     'gait_state': ('/gait/state', f'{MSG_PACKAGE}/msg/GaitState'),
+    'gait_motion': ('/gait/predicted_motion', 'geometry_msgs/msg/TransformStamped'),
     'egomotion': ('/egomotion', 'geometry_msgs/msg/TransformStamped'),
     'egomotion_odometry': ('/egomotion/odometry', 'nav_msgs/msg/Odometry'),
 }

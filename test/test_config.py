@@ -21,6 +21,9 @@ NODE_CONFIGS = {
     'bag_recorder.yaml': ('bag_recorder_node', [('', 'asmonc_vision.nodes.recorder_node:RecorderConfig')]),
     'egomotion.yaml': ('egomotion_node', [('', 'asmonc_vision.nodes.egomotion_node:EgomotionNodeConfig'),
                                           ('motion.', 'asmonc_vision.core.motion:EgomotionConfig')]),
+    'compass.yaml': ('compass_node', [('', 'asmonc_vision.core.nmea:CompassConfig')]),
+    'gait_filter.yaml': ('gait_filter_node', [('', 'asmonc_vision.nodes.gait_node:GaitNodeConfig'),
+                                              ('gait.', 'asmonc_vision.core.gait.model:GaitConfig')]),
 }
 
 

@@ -120,3 +120,25 @@ def test_bag_with_neither_cameras_nor_inclinometer_is_a_clear_error(tmp_path):
     res = asmonc_run(tmp_path / 'imu_only')
     assert res.returncode == 2
     assert 'no /stereo/left/image_rect messages and no /inclinometer/imu messages' in res.stderr
+
+
+def test_inclinometer_only_bag_runs_the_walk_model_alone(tmp_path):
+    # An IMU-only recording: the /inclinometer/imu stream of a committed walking bag.
+    from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+    bag = tmp_path / 'imu_only'
+    with Reader(BAGS / 'walk_stop_turn') as r, \
+            Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        conns = [c for c in r.connections if c.topic == '/inclinometer/imu']
+        out = w.add_connection('/inclinometer/imu', 'sensor_msgs/msg/Imu',
+                               typestore=bagio.typestore())
+        n_imu = 0
+        for _, t, raw in r.messages(connections=conns):
+            w.write(out, t, raw)
+            n_imu += 1
+    res = asmonc_run(bag, '--out', tmp_path / 'out', '--no-progress')
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert 'no stereo images in this bag' in res.stdout
+    assert res.stdout.count('no stereo images') == 1  # said once, not as an error
+    states = [m for _, _, m in bagio.read_messages(tmp_path / 'out', ['/gait/state'])]
+    assert len(states) >= 0.9 * n_imu
+    assert any(s.walking for s in states)

@@ -5,6 +5,7 @@
     asmonc eval BAG [BAG ...]                  score a detector against ground truth
     asmonc fig5 [--empirical]                  the paper's Fig. 5, model and measured
     asmonc motion {tables,eval,corners}        visual egomotion: Tables 2-3, bag errors
+    asmonc gait {sim,fusion,real,figs}         the walk model: errors, real walking, Figs. 13-15
 """
 from __future__ import annotations
 
@@ -34,6 +35,10 @@ def build_parser() -> argparse.ArgumentParser:
     motion.add_arguments(sub.add_parser(
         'motion', help="visual egomotion: the paper's Tables 2 and 3, errors and time on bags",
         description=motion.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
+    from asmonc_vision.cli import gait
+    gait.add_arguments(sub.add_parser(
+        'gait', help='evaluate the walk model: sim, fusion, real walking, Figs. 13-15',
+        description=gait.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
     return parser
 
 

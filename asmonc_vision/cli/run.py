@@ -100,7 +100,7 @@ class _Monitor:
         from rclpy.node import Node
 
         from asmonc_vision.nodes.common import ALARM_QOS, RESULT_QOS
-        from asmonc_vision_msgs.msg import Alarm, ObstacleArray
+        from asmonc_vision_msgs.msg import Alarm, GaitState, ObstacleArray
 
         self.node = Node('asmonc_run_monitor', context=context)
         self.lock = threading.Lock()
@@ -109,6 +109,14 @@ class _Monitor:
         self.new_alarms: list[dict] = []
         self.node.create_subscription(ObstacleArray, '/obstacles', self._on_obstacles, RESULT_QOS)
         self.node.create_subscription(Alarm, '/alarms', self._on_alarm, ALARM_QOS)
+        self.gait_states = 0
+        self.gait_walking = 0
+        self.node.create_subscription(GaitState, '/gait/state', self._on_gait, RESULT_QOS)
+
+    def _on_gait(self, msg) -> None:
+        with self.lock:
+            self.gait_states += 1
+            self.gait_walking += int(bool(msg.walking))
 
     def _on_obstacles(self, msg) -> None:
         frame = frame_from_obstacle_array(msg)
@@ -444,7 +452,8 @@ def summarise(monitor: _Monitor, truth: dict, n_pairs: int, args) -> dict:
     out = {'bag': str(args.bag or default_bag()), 'rate': args.rate, 'input_pairs': n_pairs,
            'processed_frames': len(detections), 'dropped_frames': max(0, n_pairs - len(detections)),
            'alarms': dict(levels), 'alarm_log': alarms,
-           'obstacle_reports': int(sum(len(d) for d in detections.values()))}
+           'obstacle_reports': int(sum(len(d) for d in detections.values())),
+           'gait_states': monitor.gait_states, 'gait_walking_states': monitor.gait_walking}
     if truth:
         score, missing = score_sequence(detections, truth, match_radius=args.match_radius,
                                         min_height=args.min_height, max_range=args.max_range)
@@ -460,8 +469,12 @@ def print_summary(s: dict, console: _Console) -> None:
     p = lambda t: console.line(t, err=False) if not console.quiet else print(t)  # noqa: E731
     p('')
     p('=== summary ===')
-    p(f"frames: {s['processed_frames']} of {s['input_pairs']} processed, "
-      f"{s['dropped_frames']} dropped")
+    if s['input_pairs']:
+        p(f"frames: {s['processed_frames']} of {s['input_pairs']} processed, "
+          f"{s['dropped_frames']} dropped")
+    if s['gait_states']:
+        p(f"walk model: {s['gait_states']} /gait/state messages, walking in "
+          f"{s['gait_walking_states']}")
     alarms = ', '.join(f'{k} {v}' for k, v in sorted(s['alarms'].items())) or 'none'
     p(f'alarms given: {alarms}')
     gt = s.get('ground_truth')

@@ -1,0 +1,160 @@
+"""gait_filter_node over real topics, in-process: a simulated inclinometer stream (best
+effort and reliable publishers) and visual motion in; /gait/state at the inclinometer's
+rate, /gait/predicted_motion, out-of-order stamps, a silent sensor."""
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+import pytest
+
+os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+
+import rclpy  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from geometry_msgs.msg import TransformStamped  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.node import Node  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from sensor_msgs.msg import Imu  # noqa: E402
+
+from asmonc_vision.cli import gait as ev  # noqa: E402
+from asmonc_vision.core.gait.rotations import (matrix_to_quaternion,  # noqa: E402
+                                               quaternion_to_matrix)
+from asmonc_vision.nodes.common import RESULT_QOS, SENSOR_QOS  # noqa: E402
+from asmonc_vision.nodes.compass_node import imu_message  # noqa: E402
+from asmonc_vision.nodes.conversions import ns_to_stamp  # noqa: E402
+from asmonc_vision.nodes.gait_node import GaitFilterNode  # noqa: E402
+from asmonc_vision_msgs.msg import GaitState  # noqa: E402
+
+DEADLINE = 20.0
+T0_NS = 1_700_000_000_000_000_000
+
+
+def _domain_id(offset: int) -> int:
+    return 1 + (os.getpid() * 3 + offset) % 100
+
+
+@pytest.fixture
+def ros():
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=_domain_id(53))
+    ex = SingleThreadedExecutor(context=ctx)
+    nodes = []
+
+    def add(node):
+        nodes.append(node)
+        ex.add_node(node)
+        return node
+
+    def spin_until(pred, what, deadline=DEADLINE):
+        end = time.monotonic() + deadline
+        while time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.01)
+            if pred():
+                return
+        raise AssertionError(f'timed out waiting for {what}')
+
+    def spin_for(seconds):
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.01)
+
+    yield ctx, add, spin_until, spin_for
+    for n in nodes:
+        ex.remove_node(n)
+        n.destroy_node()
+    ex.shutdown()
+    rclpy.try_shutdown(context=ctx)
+
+
+def _imu(t: float, rpy, var: float) -> Imu:
+    return imu_message(rpy, np.full(3, var), ns_to_stamp(T0_NS + int(round(t * 1e9))),
+                       'inclinometer_link')
+
+
+@pytest.mark.parametrize('qos_name', ['best_effort', 'reliable'])
+def test_walk_stream_gives_gait_state_and_predicted_motion(ros, qos_name):
+    ctx, add, spin_until, spin_for = ros
+    probe = add(Node('gait_probe', context=ctx))
+    states: list[GaitState] = []
+    motions: list[TransformStamped] = []
+    diags: list = []
+    probe.create_subscription(GaitState, '/gait/state', states.append, RESULT_QOS)
+    probe.create_subscription(TransformStamped, '/gait/predicted_motion', motions.append,
+                              RESULT_QOS)
+    probe.create_subscription(
+        DiagnosticArray, '/diagnostics',
+        lambda m: diags.extend(s for s in m.status if s.name == 'gait_filter_node'), 10)
+    qos = SENSOR_QOS if qos_name == 'best_effort' else RESULT_QOS
+    imu_pub = probe.create_publisher(Imu, '/inclinometer/imu', qos)
+    ego_pub = probe.create_publisher(TransformStamped, '/egomotion', SENSOR_QOS)
+    node = add(GaitFilterNode(context=ctx, parameter_overrides=[
+        Parameter('timeout', value=0.5)]))
+    spin_until(lambda: imu_pub.get_subscription_count() > 0, 'the node to subscribe')
+
+    case = ev.make_case('walk', 0)
+    ego = ev.simulate_egomotion(case.walker, case.duration, 0.2, rng=3)
+    n = int(np.searchsorted(case.imu_times, 12.0))
+    j = 0
+    for i in range(n):
+        t = float(case.imu_times[i])
+        while j < len(ego) and ego[j][1] <= t:
+            _, tc, r = ego[j]
+            j += 1
+            m = TransformStamped()
+            m.header.stamp = ns_to_stamp(T0_NS + int(round(tc * 1e9)))
+            m.header.frame_id = 'stereo_left_optical_frame'
+            m.child_frame_id = 'stereo_left_optical_frame'
+            q = matrix_to_quaternion(r)
+            m.transform.rotation.x, m.transform.rotation.y, m.transform.rotation.z, \
+                m.transform.rotation.w = (float(v) for v in q)
+            ego_pub.publish(m)
+        imu_pub.publish(_imu(t, case.imu_rpy[i], case.imu_variance))
+        spin_for(0.004)
+        if i == n // 2:
+            # a stale sample: ignored, counted
+            imu_pub.publish(_imu(t - 0.5, case.imu_rpy[i], case.imu_variance))
+    spin_until(lambda: len(states) >= n - 5, f'{n} GaitState messages')
+    # one state per inclinometer sample (best effort on a local link loses none here)
+    assert len(states) <= n
+    assert node.counts['out_of_order'] == 1
+    assert node.counts['egomotion'] > 20
+    last = states[-1]
+    assert last.walking and last.horizon == pytest.approx(0.5)
+    assert 1.7 < last.step_frequency < 2.2
+    assert np.all(np.asarray(last.amplitude) > 0.005)
+    assert np.all(np.asarray(last.predicted_variance) > 0)
+    stamp_s = last.header.stamp.sec + last.header.stamp.nanosec * 1e-9 - T0_NS * 1e-9
+    _, truth = case.walker.states(np.array([stamp_s + 0.5]))
+    err = np.degrees(np.abs(np.asarray(last.predicted)[:2] - truth[0, :2]))
+    assert np.all(err < 1.5), err
+    # the predicted motion agrees with the predicted attitude, same stamp
+    assert motions and motions[-1].header.frame_id == 'inclinometer_link'
+    assert motions[-1].child_frame_id == 'inclinometer_link_predicted'
+    q = motions[-1].transform.rotation
+    r = quaternion_to_matrix(np.array([q.x, q.y, q.z, q.w]))
+    assert np.degrees(np.arccos(np.clip((np.trace(r) - 1) / 2, -1, 1))) < 15.0
+    # diagnostics report the out-of-order stamp
+    spin_until(lambda: any('out of order' in s.message for s in diags), 'a WARN')
+
+    # the sensor falls silent: WARN and walking false
+    states.clear()
+    spin_until(lambda: any(not s.walking for s in states), 'walking false after silence')
+    spin_until(lambda: any('silent' in s.message and s.level == b'\x01' for s in diags),
+               'a silence WARN')
+
+
+def test_imu_without_orientation_is_ignored(ros):
+    ctx, add, spin_until, spin_for = ros
+    probe = add(Node('gait_probe2', context=ctx))
+    pub = probe.create_publisher(Imu, '/inclinometer/imu', SENSOR_QOS)
+    node = add(GaitFilterNode(context=ctx))
+    spin_until(lambda: pub.get_subscription_count() > 0, 'the node to subscribe')
+    m = Imu()
+    m.orientation_covariance[0] = -1.0
+    m.header.stamp = ns_to_stamp(T0_NS)
+    pub.publish(m)
+    spin_until(lambda: node.counts['bad_imu'] == 1, 'the message to be refused')
+    assert node.counts['imu'] == 0
