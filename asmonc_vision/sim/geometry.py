@@ -17,11 +17,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-#: Rotation taking optical-frame vectors to body-frame vectors: optical z = body x,
-#: optical x = -body y, optical y = -body z.
-R_BODY_OPTICAL = np.array([[0.0, 0.0, 1.0],
-                           [-1.0, 0.0, 0.0],
-                           [0.0, -1.0, 0.0]])
+from asmonc_vision.core.rotations import (R_BODY_OPTICAL, matrix_to_quaternion,  # noqa: F401
+                                         matrix_to_rpy, rpy_to_quaternion)
+from asmonc_vision.core.rotations import rpy_to_matrix as _rpy_to_matrix
 
 
 def rpy_to_matrix(roll, pitch, yaw) -> np.ndarray:
@@ -32,64 +30,15 @@ def rpy_to_matrix(roll, pitch, yaw) -> np.ndarray:
     Returns:
         (*S, 3, 3) float64 rotation(s) taking body vectors to world vectors.
     """
-    r, p, y = (np.asarray(a, float) for a in (roll, pitch, yaw))
-    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
-    m = np.empty(np.broadcast(r, p, y).shape + (3, 3))
-    m[..., 0, 0] = cy * cp
-    m[..., 0, 1] = cy * sp * sr - sy * cr
-    m[..., 0, 2] = cy * sp * cr + sy * sr
-    m[..., 1, 0] = sy * cp
-    m[..., 1, 1] = sy * sp * sr + cy * cr
-    m[..., 1, 2] = sy * sp * cr - cy * sr
-    m[..., 2, 0] = -sp
-    m[..., 2, 1] = cp * sr
-    m[..., 2, 2] = cp * cr
-    return m
-
-
-def matrix_to_rpy(m) -> np.ndarray:
-    """REP 103 (roll, pitch, yaw) of rotation matrices (*S, 3, 3); returns (*S, 3) radians."""
-    m = np.asarray(m, float)
-    roll = np.arctan2(m[..., 2, 1], m[..., 2, 2])
-    pitch = np.arcsin(np.clip(-m[..., 2, 0], -1.0, 1.0))
-    yaw = np.arctan2(m[..., 1, 0], m[..., 0, 0])
-    return np.stack([roll, pitch, yaw], axis=-1)
+    return _rpy_to_matrix(np.stack(np.broadcast_arrays(*(np.asarray(a, float)
+                                                         for a in (roll, pitch, yaw))), -1))
 
 
 def quaternion_from_rpy(roll, pitch, yaw) -> np.ndarray:
-    """Unit quaternion(s) (x, y, z, w) of REP 103 roll, pitch, yaw (radians).
-
-    Returns:
-        (*S, 4) float64, the rotation taking body vectors to world vectors, with w >= 0.
-    """
-    r, p, y = (np.asarray(a, float) / 2.0 for a in (roll, pitch, yaw))
-    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
-    q = np.stack([sr * cp * cy - cr * sp * sy,
-                  cr * sp * cy + sr * cp * sy,
-                  cr * cp * sy - sr * sp * cy,
-                  cr * cp * cy + sr * sp * sy], axis=-1)
-    return np.where(q[..., 3:4] < 0, -q, q)
-
-
-def matrix_to_quaternion(m) -> np.ndarray:
-    """Unit quaternion (x, y, z, w), w >= 0, of one 3x3 rotation matrix. Returns (4,)."""
-    m = np.asarray(m, float)
-    tr = np.trace(m)
-    if tr > 0:
-        s = 2.0 * np.sqrt(tr + 1.0)
-        q = [(m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, s / 4]
-    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
-        q = [s / 4, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s, (m[2, 1] - m[1, 2]) / s]
-    elif m[1, 1] > m[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
-        q = [(m[0, 1] + m[1, 0]) / s, s / 4, (m[1, 2] + m[2, 1]) / s, (m[0, 2] - m[2, 0]) / s]
-    else:
-        s = 2.0 * np.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
-        q = [(m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, s / 4, (m[1, 0] - m[0, 1]) / s]
-    q = np.array(q)
-    q /= np.linalg.norm(q)
-    return -q if q[3] < 0 else q
+    """Unit quaternion(s) (x, y, z, w), w >= 0, of REP 103 roll, pitch, yaw (radians):
+    (*S, 4), the rotation taking body vectors to world vectors."""
+    return rpy_to_quaternion(np.stack(np.broadcast_arrays(*(np.asarray(a, float)
+                                                            for a in (roll, pitch, yaw))), -1))
 
 
 @dataclass(frozen=True)

@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from asmonc_vision.core.rotations import matrix_to_quaternion, quaternion_to_matrix  # noqa: F401
+
 
 def skew(w) -> np.ndarray:
     """Cross-product matrices ``[w]x`` of vectors (..., 3); returns (..., 3, 3)."""
@@ -129,39 +131,6 @@ def rotation_error_components(r_est, r_true) -> np.ndarray:
     axis), y (yaw: the vertical axis) and z (roll: the optical axis).
     """
     return so3_log(np.asarray(r_est, float) @ np.swapaxes(np.asarray(r_true, float), -1, -2))
-
-
-def quaternion_to_matrix(q) -> np.ndarray:
-    """3x3 rotation of a quaternion (x, y, z, w) (normalised first)."""
-    x, y, z, w = (float(v) for v in q)
-    n = np.sqrt(x * x + y * y + z * z + w * w)
-    if n <= 0:
-        raise ValueError('zero quaternion')
-    x, y, z, w = x / n, y / n, z / n, w / n
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
-
-
-def matrix_to_quaternion(r) -> np.ndarray:
-    """Unit quaternion (x, y, z, w), w >= 0, of a 3x3 rotation."""
-    m = np.asarray(r, float)
-    tr = np.trace(m)
-    if tr > 0:
-        s = 2.0 * np.sqrt(tr + 1.0)
-        q = [(m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, s / 4]
-    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
-        q = [s / 4, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s, (m[2, 1] - m[1, 2]) / s]
-    elif m[1, 1] > m[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
-        q = [(m[0, 1] + m[1, 0]) / s, s / 4, (m[1, 2] + m[2, 1]) / s, (m[0, 2] - m[2, 0]) / s]
-    else:
-        s = 2.0 * np.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
-        q = [(m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, s / 4, (m[1, 0] - m[0, 1]) / s]
-    q = np.array(q)
-    q /= np.linalg.norm(q)
-    return -q if q[3] < 0 else q
 
 
 # --- rectified stereo -----------------------------------------------------------------
