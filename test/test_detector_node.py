@@ -9,7 +9,8 @@ from sensor_msgs.msg import CameraInfo, Image
 
 from asmonc_vision import bagio
 from asmonc_vision.nodes.common import IMAGE_QOS, RESULT_QOS
-from asmonc_vision.nodes.detector_node import DetectorNode, StereoPairer
+from asmonc_vision.nodes.detector_node import DetectorNode
+from asmonc_vision.nodes.stereo_input import StereoPairer
 from asmonc_vision_msgs.msg import GroundPlane, ObstacleArray
 from conftest import BAGS, spin_until
 

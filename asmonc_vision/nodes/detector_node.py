@@ -15,15 +15,11 @@ ground plane from the images: the node works on any rectified rig and image size
 """
 from __future__ import annotations
 
-import collections
-import threading
-import time
 from dataclasses import dataclass
 
 import numpy as np
 from geometry_msgs.msg import Point
-from rclpy.node import Node
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import Image
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -35,9 +31,8 @@ from asmonc_vision.core.draw import draw_debug
 from asmonc_vision.core.gpod import GpodConfig, GpodDetector, GpodResult
 from asmonc_vision.nodes.common import (IMAGE_QOS, RESULT_QOS, Diagnostics, declare_config,
                                         run_node)
-from asmonc_vision.nodes.conversions import (ImageFormatError, array_to_image_msg,
-                                             image_msg_to_gray, stamp_to_ns,
-                                             stereo_camera_from_infos)
+from asmonc_vision.nodes.conversions import array_to_image_msg
+from asmonc_vision.nodes.stereo_input import StereoInputNode, StereoPair
 
 _STATUS = {'initialising': GroundPlane.INITIALISING, 'tracking': GroundPlane.TRACKING,
            'lost': GroundPlane.LOST}
@@ -71,237 +66,27 @@ class DetectorNodeConfig:
         check_fields(self)
 
 
-@dataclass
-class _Pair:
-    stamp_ns: int
-    left: Image
-    right: Image
-    left_info: CameraInfo | None
-    right_info: CameraInfo | None
-
-
-class StereoPairer:
-    """Pairs left and right images by stamp (pure bookkeeping, no ROS calls).
-
-    `add(side, stamp_ns, item)` returns the (left, right) items when a partner with a
-    stamp within `max_skew_ns` exists, else None. Items older than `timeout_ns` than the
-    newest stamp seen, still unpaired, are returned by `expire()` for reporting.
-    """
-
-    def __init__(self, max_skew_ns: int, timeout_ns: int, capacity: int = 64):
-        self.max_skew_ns = max_skew_ns
-        self.timeout_ns = timeout_ns
-        self._waiting = {'left': collections.OrderedDict(), 'right': collections.OrderedDict()}
-        self._capacity = capacity
-        self._newest = 0
-
-    def add(self, side: str, stamp_ns: int, item):
-        other = 'right' if side == 'left' else 'left'
-        self._newest = max(self._newest, stamp_ns)
-        best, best_dt = None, None
-        for s in self._waiting[other]:
-            dt = abs(s - stamp_ns)
-            if dt <= self.max_skew_ns and (best_dt is None or dt < best_dt):
-                best, best_dt = s, dt
-        if best is not None:
-            partner = self._waiting[other].pop(best)
-            return (item, partner) if side == 'left' else (partner, item)
-        waiting = self._waiting[side]
-        waiting[stamp_ns] = item
-        while len(waiting) > self._capacity:
-            waiting.popitem(last=False)
-        return None
-
-    def expire(self) -> list[tuple[str, int]]:
-        """Drop and return (side, stamp_ns) of images that will never find a partner."""
-        gone = []
-        for side, waiting in self._waiting.items():
-            for s in [s for s in waiting if self._newest - s > self.timeout_ns]:
-                waiting.pop(s)
-                gone.append((side, s))
-        return gone
-
-    def clear(self) -> None:
-        for w in self._waiting.values():
-            w.clear()
-        self._newest = 0
-
-
-class DetectorNode(Node):
+class DetectorNode(StereoInputNode):
     """GPOD detection on the rectified stereo pair; see the module docstring."""
 
     def __init__(self, **kwargs):
-        super().__init__('detector_node', **kwargs)
+        super().__init__('detector_node', 'detector', **kwargs)
         self.node_config = declare_config(self, DetectorNodeConfig)
         self.gpod_config = declare_config(self, GpodConfig, prefix='gpod.')
         self.detector = GpodDetector(self.gpod_config)
-        cfg = self.node_config
-
         self.pub_obstacles = self.create_publisher(ObstacleArray, '/obstacles', RESULT_QOS)
         self.pub_plane = self.create_publisher(GroundPlane, '/ground_plane', RESULT_QOS)
         self.pub_markers = self.create_publisher(MarkerArray, '/obstacles/markers', RESULT_QOS)
         self.pub_debug = self.create_publisher(Image, '/detector/debug_image', IMAGE_QOS)
-        self.diag = Diagnostics(self, 'asmonc_vision: detector')
-
-        self._lock = threading.Lock()
-        self._info = {'left': None, 'right': None}
-        self._pairer = StereoPairer(int(cfg.max_stamp_skew * 1e9),
-                                    int(cfg.unpaired_timeout * 1e9))
-        self._pending = collections.deque()
-        self._cv = threading.Condition()
-        self._last_stamp_ns: int | None = None
-        self._camera: StereoCamera | None = None
-        self._camera_key = None
-        self._last_pair_wall = time.monotonic()
-        self.frames_in = 0
-        self.frames_done = 0
-        self.frames_dropped = 0
-        self.frames_bad = 0
-        self._stop = False
-
-        self.create_subscription(Image, '/stereo/left/image_rect',
-                                 lambda m: self._on_image('left', m), IMAGE_QOS)
-        self.create_subscription(Image, '/stereo/right/image_rect',
-                                 lambda m: self._on_image('right', m), IMAGE_QOS)
-        self.create_subscription(CameraInfo, '/stereo/left/camera_info',
-                                 lambda m: self._on_info('left', m), IMAGE_QOS)
-        self.create_subscription(CameraInfo, '/stereo/right/camera_info',
-                                 lambda m: self._on_info('right', m), IMAGE_QOS)
-        self.create_timer(0.5, self._check_input)
-        self._worker = threading.Thread(target=self._work, name='gpod-worker', daemon=True)
-        self._worker.start()
+        self.start_stereo_input(self.node_config)
         self.get_logger().info('detector ready: waiting for /stereo/{left,right}/image_rect')
 
-    # --- callbacks: cheap bookkeeping only --------------------------------------------
-    def _on_info(self, side: str, msg: CameraInfo) -> None:
-        with self._lock:
-            self._info[side] = msg
+    def restart(self) -> None:
+        self.detector.reset()
 
-    def _on_image(self, side: str, msg: Image) -> None:
-        stamp = stamp_to_ns(msg.header.stamp)
-        with self._lock:
-            pair = self._pairer.add(side, stamp, msg)
-            expired = self._pairer.expire()
-            infos = (self._info['left'], self._info['right'])
-        for s, t in expired:
-            self.frames_bad += 1
-            self.get_logger().warn(
-                f'{s} image at stamp {t / 1e9:.3f} s has no partner with the same stamp; '
-                'dropped (left and right must share one stamp)', throttle_duration_sec=2.0)
-        if pair is None:
-            return
-        self.frames_in += 1
-        with self._cv:
-            self._pending.append(_Pair(stamp, pair[0], pair[1], *infos))
-            while len(self._pending) > self.node_config.max_pending_pairs:
-                old = self._pending.popleft()
-                self.frames_dropped += 1
-                self.get_logger().warn(
-                    f'detector falling behind: dropped the pair at {old.stamp_ns / 1e9:.3f} s '
-                    f'({self.frames_dropped} dropped so far)', throttle_duration_sec=2.0)
-            self._cv.notify()
-
-    def _check_input(self) -> None:
-        idle = time.monotonic() - self._last_pair_wall
-        if idle > self.node_config.input_timeout:
-            self.diag.update(Diagnostics.WARN, f'no stereo pair for {idle:.1f} s',
-                             frames_in=self.frames_in, frames_done=self.frames_done)
-
-    # --- worker --------------------------------------------------------------------
-    def _work(self) -> None:
-        while True:
-            with self._cv:
-                while not self._pending and not self._stop:
-                    self._cv.wait(timeout=0.5)
-                if self._stop:
-                    return
-                pair = self._pending.popleft()
-            try:
-                self._process(pair)
-            except Exception as exc:  # a bug must not silence the detector for good
-                self.frames_bad += 1
-                self.get_logger().error(f'detector failed on pair {pair.stamp_ns / 1e9:.3f} s: '
-                                        f'{type(exc).__name__}: {exc}',
-                                        throttle_duration_sec=1.0)
-                self.diag.update(Diagnostics.ERROR, f'internal error: {exc}')
-
-    def _camera_for(self, pair: _Pair) -> StereoCamera | None:
-        # The infos travel on their own topics and may arrive just after the images.
-        deadline = time.monotonic() + self.node_config.info_wait
-        while pair.left_info is None or pair.right_info is None:
-            with self._lock:
-                pair.left_info = pair.left_info or self._info['left']
-                pair.right_info = pair.right_info or self._info['right']
-            if pair.left_info is not None and pair.right_info is not None:
-                break
-            if time.monotonic() > deadline or self._stop:
-                self.get_logger().warn(
-                    'no camera_info on /stereo/{left,right}/camera_info; pair skipped',
-                    throttle_duration_sec=2.0)
-                return None
-            time.sleep(0.01)
-        key = (tuple(pair.left_info.p), tuple(pair.right_info.p),
-               pair.left_info.width, pair.left_info.height)
-        if key != self._camera_key:
-            try:
-                cam = stereo_camera_from_infos(pair.left_info, pair.right_info)
-            except ValueError as exc:
-                self.get_logger().error(f'bad camera_info: {exc}', throttle_duration_sec=2.0)
-                return None
-            if self._camera is not None:
-                self.get_logger().info(f'camera changed to {cam}; re-initialising the plane')
-                self.detector.reset()
-            self._camera, self._camera_key = cam, key
-            self.get_logger().info(
-                f'camera: {cam.width}x{cam.height}, f={cam.f:.1f} px, B={cam.baseline:.3f} m')
-        return self._camera
-
-    def _process(self, pair: _Pair) -> None:
-        self._last_pair_wall = time.monotonic()
-        if self._last_stamp_ns is not None and pair.stamp_ns <= self._last_stamp_ns:
-            back = (self._last_stamp_ns - pair.stamp_ns) / 1e9
-            if back > self.node_config.time_jump_reset:
-                self.get_logger().info(f'time went back {back:.1f} s: restarting the detector')
-                self.detector.reset()
-            else:
-                self.frames_bad += 1
-                self.get_logger().warn(
-                    f'pair at {pair.stamp_ns / 1e9:.3f} s is not newer than the last one '
-                    f'({self._last_stamp_ns / 1e9:.3f} s); skipped', throttle_duration_sec=2.0)
-                return
-        try:
-            left = image_msg_to_gray(pair.left)
-            right = image_msg_to_gray(pair.right)
-        except ImageFormatError as exc:
-            self.frames_bad += 1
-            self.get_logger().error(f'bad image: {exc}; pair skipped', throttle_duration_sec=2.0)
-            self.diag.update(Diagnostics.ERROR, f'bad image: {exc}')
-            return
-        if left.shape != right.shape:
-            self.frames_bad += 1
-            self.get_logger().error(
-                f'left image is {left.shape[1]}x{left.shape[0]} but right is '
-                f'{right.shape[1]}x{right.shape[0]}; pair skipped', throttle_duration_sec=2.0)
-            self.diag.update(Diagnostics.ERROR, 'left and right images differ in size')
-            return
-        cam = self._camera_for(pair)
-        if cam is None:
-            self.frames_bad += 1
-            return
-        if (cam.height, cam.width) != left.shape:
-            self.frames_bad += 1
-            self.get_logger().error(
-                f'images are {left.shape[1]}x{left.shape[0]} but camera_info says '
-                f'{cam.width}x{cam.height}; pair skipped', throttle_duration_sec=2.0)
-            return
+    def process_pair(self, pair: StereoPair, left: np.ndarray, right: np.ndarray,
+                     cam: StereoCamera) -> None:
         result = self.detector.process(left, right, cam)
-        self._last_stamp_ns = pair.stamp_ns
-        self._publish(pair, cam, left, result)
-        self.frames_done += 1
-
-    # --- output --------------------------------------------------------------------
-    def _publish(self, pair: _Pair, cam: StereoCamera, left: np.ndarray,
-                 result: GpodResult) -> None:
         header = pair.left.header
         self.pub_obstacles.publish(obstacles_to_msg(result, header))
         self.pub_plane.publish(plane_to_msg(result, cam, header))
@@ -311,16 +96,9 @@ class DetectorNode(Node):
             self.pub_debug.publish(array_to_image_msg(draw_debug(left, result), header))
         level = Diagnostics.OK if result.status == 'tracking' else Diagnostics.WARN
         self.diag.update(level, f'{result.status}: {len(result.obstacles)} obstacles',
-                         frames_in=self.frames_in, frames_done=self.frames_done,
+                         frames_in=self.frames_in, frames_done=self.frames_done + 1,
                          frames_dropped=self.frames_dropped, frames_bad=self.frames_bad,
                          total_ms=f"{result.timings.get('total', float('nan')):.1f}")
-
-    def destroy_node(self):
-        with self._cv:
-            self._stop = True
-            self._cv.notify_all()
-        self._worker.join(timeout=2.0)
-        return super().destroy_node()
 
 
 def obstacles_to_msg(result: GpodResult, header) -> ObstacleArray:

@@ -1,7 +1,7 @@
 """Visual egomotion node: the stereo rig's motion from pair to pair.
 
 Subscribes to the rectified pair and its camera infos (``bagio.TOPICS``), pairs left
-and right by stamp (``detector_node.StereoPairer``), and runs the core estimator
+and right by stamp (``stereo_input.StereoInputNode``), and runs the core estimator
 (``core.motion.EgomotionEstimator``) on a worker thread, so the image callbacks only
 queue messages. Publishes, per pair:
 
@@ -34,17 +34,11 @@ adds ``lost_position_variance`` / ``lost_rotation_variance`` to its covariance.
 """
 from __future__ import annotations
 
-import collections
-import itertools
-import threading
-import time
 from dataclasses import dataclass
 
 import numpy as np
 from geometry_msgs.msg import TransformStamped
 from nav_msgs.msg import Odometry
-from rclpy.node import Node
-from sensor_msgs.msg import CameraInfo, Image
 
 from asmonc_vision.core.camera import StereoCamera
 from asmonc_vision.core.config import check_fields, param
@@ -53,11 +47,9 @@ from asmonc_vision.core.motion import (FIRST, TOO_FEW_FEATURES, EgomotionConfig,
 from asmonc_vision.core.motion.geometry import (adjoint, compose, invert, matrix_to_quaternion,
                                                 so3_log)
 from asmonc_vision.core.motion.pipeline import use_one_core
-from asmonc_vision.nodes.common import (IMAGE_QOS, RESULT_QOS, Diagnostics, declare_config,
+from asmonc_vision.nodes.common import (RESULT_QOS, Diagnostics, declare_config,
                                         run_node)
-from asmonc_vision.nodes.conversions import (ImageFormatError, image_msg_to_gray, stamp_to_ns,
-                                             stereo_camera_from_infos)
-from asmonc_vision.nodes.detector_node import StereoPairer
+from asmonc_vision.nodes.stereo_input import StereoInputNode, StereoPair
 
 DEFAULT_LEFT_FRAME = 'stereo_left_optical_frame'
 
@@ -99,153 +91,27 @@ class EgomotionNodeConfig:
         check_fields(self)
 
 
-@dataclass
-class _Pair:
-    seq: int
-    stamp_ns: int
-    left: Image
-    right: Image
-    left_info: CameraInfo | None
-    right_info: CameraInfo | None
-
-
-class EgomotionNode(Node):
+class EgomotionNode(StereoInputNode):
     """Stereo visual egomotion; see the module docstring."""
 
     def __init__(self, **kwargs):
-        super().__init__('egomotion_node', **kwargs)
+        super().__init__('egomotion_node', 'egomotion', **kwargs)
         self.node_config = declare_config(self, EgomotionNodeConfig)
         self.motion_config = declare_config(self, EgomotionConfig, prefix='motion.')
         self.estimator = EgomotionEstimator(self.motion_config)
-        cfg = self.node_config
-
         self.pub_motion = self.create_publisher(TransformStamped, '/egomotion', RESULT_QOS)
         self.pub_odom = self.create_publisher(Odometry, '/egomotion/odometry', RESULT_QOS)
-        self.diag = Diagnostics(self, 'asmonc_vision: egomotion')
-
-        self._lock = threading.Lock()
-        self._info = {'left': None, 'right': None}
-        self._pairer = StereoPairer(int(cfg.max_stamp_skew * 1e9),
-                                    int(cfg.unpaired_timeout * 1e9))
-        self._seq = itertools.count()
-        self._pending: collections.deque[_Pair] = collections.deque()
-        self._cv = threading.Condition()
-        self._stop = False
-        self._camera: StereoCamera | None = None
-        self._camera_key = None
-        self._last_pair_wall = time.monotonic()
-        self._last_stamp_ns: int | None = None
         self._last_seq: int | None = None       # seq of the last pair given to the estimator
         self._ref_seq: int | None = None        # seq of the estimator's reference pair
         self._reset_odometry()
-        self.frames_in = 0
-        self.frames_done = 0
-        self.frames_dropped = 0
-        self.frames_bad = 0
         self.motions = 0
         self.last_result: EgomotionResult | None = None
-
-        self.create_subscription(Image, '/stereo/left/image_rect',
-                                 lambda m: self._on_image('left', m), IMAGE_QOS)
-        self.create_subscription(Image, '/stereo/right/image_rect',
-                                 lambda m: self._on_image('right', m), IMAGE_QOS)
-        self.create_subscription(CameraInfo, '/stereo/left/camera_info',
-                                 lambda m: self._on_info('left', m), IMAGE_QOS)
-        self.create_subscription(CameraInfo, '/stereo/right/camera_info',
-                                 lambda m: self._on_info('right', m), IMAGE_QOS)
-        self.create_timer(0.5, self._check_input)
-        self._worker = threading.Thread(target=self._work, name='egomotion-worker', daemon=True)
-        self._worker.start()
+        self.start_stereo_input(self.node_config)
         self.get_logger().info(
             f'egomotion ready ({self.motion_config.method}): waiting for '
             '/stereo/{left,right}/image_rect')
 
-    # --- callbacks: cheap bookkeeping only --------------------------------------------
-    def _on_info(self, side: str, msg: CameraInfo) -> None:
-        with self._lock:
-            self._info[side] = msg
-
-    def _on_image(self, side: str, msg: Image) -> None:
-        stamp = stamp_to_ns(msg.header.stamp)
-        with self._lock:
-            pair = self._pairer.add(side, stamp, msg)
-            expired = self._pairer.expire()
-            infos = (self._info['left'], self._info['right'])
-        for s, t in expired:
-            self.frames_bad += 1
-            self.get_logger().warn(
-                f'{s} image at stamp {t / 1e9:.3f} s has no partner with the same stamp; '
-                'dropped (left and right must share one stamp)', throttle_duration_sec=2.0)
-        if pair is None:
-            return
-        self.frames_in += 1
-        with self._cv:
-            self._pending.append(_Pair(next(self._seq), stamp, pair[0], pair[1], *infos))
-            while len(self._pending) > self.node_config.max_pending_pairs:
-                old = self._pending.popleft()
-                self.frames_dropped += 1
-                self.get_logger().warn(
-                    f'egomotion falling behind: dropped the pair at {old.stamp_ns / 1e9:.3f} s '
-                    f'({self.frames_dropped} dropped so far)', throttle_duration_sec=2.0)
-            self._cv.notify()
-
-    def _check_input(self) -> None:
-        idle = time.monotonic() - self._last_pair_wall
-        if idle > self.node_config.input_timeout:
-            self.diag.update(Diagnostics.WARN, f'no stereo pair for {idle:.1f} s',
-                             frames_in=self.frames_in, frames_done=self.frames_done)
-
-    # --- worker --------------------------------------------------------------------
-    def _work(self) -> None:
-        while True:
-            with self._cv:
-                while not self._pending and not self._stop:
-                    self._cv.wait(timeout=0.5)
-                if self._stop:
-                    return
-                pair = self._pending.popleft()
-            try:
-                self._process(pair)
-            except Exception as exc:  # a bug must not silence the node for good
-                self.frames_bad += 1
-                self.get_logger().error(f'egomotion failed on pair {pair.stamp_ns / 1e9:.3f} s: '
-                                        f'{type(exc).__name__}: {exc}',
-                                        throttle_duration_sec=1.0)
-                self.diag.update(Diagnostics.ERROR, f'internal error: {exc}')
-
-    def _camera_for(self, pair: _Pair) -> StereoCamera | None:
-        deadline = time.monotonic() + self.node_config.info_wait
-        while pair.left_info is None or pair.right_info is None:
-            with self._lock:
-                pair.left_info = pair.left_info or self._info['left']
-                pair.right_info = pair.right_info or self._info['right']
-            if pair.left_info is not None and pair.right_info is not None:
-                break
-            if time.monotonic() > deadline or self._stop:
-                self.get_logger().warn(
-                    'no camera_info on /stereo/{left,right}/camera_info; pair skipped',
-                    throttle_duration_sec=2.0)
-                self.diag.update(Diagnostics.WARN, 'waiting for camera_info')
-                return None
-            time.sleep(0.01)
-        key = (tuple(pair.left_info.p), tuple(pair.right_info.p),
-               pair.left_info.width, pair.left_info.height)
-        if key != self._camera_key:
-            try:
-                cam = stereo_camera_from_infos(pair.left_info, pair.right_info)
-            except ValueError as exc:
-                self.get_logger().error(f'bad camera_info: {exc}', throttle_duration_sec=2.0)
-                self.diag.update(Diagnostics.ERROR, f'bad camera_info: {exc}')
-                return None
-            if self._camera is not None:
-                self.get_logger().info(f'camera changed to {cam}; restarting the egomotion')
-                self._restart()
-            self._camera, self._camera_key = cam, key
-            self.get_logger().info(
-                f'camera: {cam.width}x{cam.height}, f={cam.f:.1f} px, B={cam.baseline:.3f} m')
-        return self._camera
-
-    def _restart(self) -> None:
+    def restart(self) -> None:
         self.estimator.reset()
         self._ref_seq = None
         self._reset_odometry()
@@ -256,52 +122,14 @@ class EgomotionNode(Node):
         self._odom_cov = np.zeros((6, 6))
         self._odom_started = False
 
-    def _skip(self, pair: _Pair, level: int, why: str) -> None:
-        self.frames_bad += 1
+    def skip_pair(self, pair: StereoPair, level: int, why: str) -> None:
         self._last_seq = pair.seq
-        self.diag.update(level, why, frames_in=self.frames_in, frames_done=self.frames_done,
-                         frames_bad=self.frames_bad)
+        super().skip_pair(pair, level, why)
 
-    def _process(self, pair: _Pair) -> None:
-        self._last_pair_wall = time.monotonic()
-        if self._last_stamp_ns is not None and pair.stamp_ns <= self._last_stamp_ns:
-            back = (self._last_stamp_ns - pair.stamp_ns) / 1e9
-            if back > self.node_config.time_jump_reset:
-                self.get_logger().info(f'time went back {back:.1f} s: restarting the egomotion')
-                self._restart()
-            else:
-                self.get_logger().warn(
-                    f'pair at {pair.stamp_ns / 1e9:.3f} s is not newer than the last one '
-                    f'({self._last_stamp_ns / 1e9:.3f} s); skipped', throttle_duration_sec=2.0)
-                self._skip(pair, Diagnostics.WARN, 'stamps not increasing')
-                return
-        try:
-            left = image_msg_to_gray(pair.left)
-            right = image_msg_to_gray(pair.right)
-        except ImageFormatError as exc:
-            self.get_logger().error(f'bad image: {exc}; pair skipped', throttle_duration_sec=2.0)
-            self._skip(pair, Diagnostics.ERROR, f'bad image: {exc}')
-            return
-        if left.shape != right.shape:
-            self.get_logger().error(
-                f'left image is {left.shape[1]}x{left.shape[0]} but right is '
-                f'{right.shape[1]}x{right.shape[0]}; pair skipped', throttle_duration_sec=2.0)
-            self._skip(pair, Diagnostics.ERROR, 'left and right images differ in size')
-            return
-        cam = self._camera_for(pair)
-        if cam is None:
-            self._skip(pair, Diagnostics.WARN, 'no usable camera_info')
-            return
-        if (cam.height, cam.width) != left.shape:
-            self.get_logger().error(
-                f'images are {left.shape[1]}x{left.shape[0]} but camera_info says '
-                f'{cam.width}x{cam.height}; pair skipped', throttle_duration_sec=2.0)
-            self._skip(pair, Diagnostics.ERROR, 'image size differs from camera_info')
-            return
+    def process_pair(self, pair: StereoPair, left: np.ndarray, right: np.ndarray,
+                     cam: StereoCamera) -> None:
         res = self.estimator.process(left, right, cam, pair.stamp_ns)
-        self._last_stamp_ns = pair.stamp_ns
         self.last_result = res
-        self.frames_done += 1
         consecutive = (self._ref_seq is not None and self._last_seq is not None
                        and self._ref_seq == self._last_seq and pair.seq == self._last_seq + 1)
         self._last_seq = pair.seq
@@ -383,13 +211,6 @@ class EgomotionNode(Node):
             text = f'{res.message}; no motion published'
         self.get_logger().warn(text, throttle_duration_sec=2.0)
         self.diag.update(Diagnostics.WARN, text, **values)
-
-    def destroy_node(self):
-        with self._cv:
-            self._stop = True
-            self._cv.notify_all()
-        self._worker.join(timeout=2.0)
-        return super().destroy_node()
 
 
 def _symmetric(c: np.ndarray) -> np.ndarray:
