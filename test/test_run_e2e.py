@@ -142,3 +142,12 @@ def test_inclinometer_only_bag_runs_the_walk_model_alone(tmp_path):
     states = [m for _, _, m in bagio.read_messages(tmp_path / 'out', ['/gait/state'])]
     assert len(states) >= 0.9 * n_imu
     assert any(s.walking for s in states)
+
+
+def test_recorded_egomotion_scores_against_the_true_camera_pose(static_run):
+    from asmonc_vision.cli.motion import score_recorded_egomotion
+    _, out = static_run
+    m = score_recorded_egomotion(BAGS / 'static_obstacles', out)
+    assert m is not None and m['motions'] >= 0.9 * (m['pairs'] - 1)
+    assert m['errors']['pitch']['median'] < 0.3      # degrees (issue 4 target on walking bags)
+    assert m['errors']['translation']['median'] < 10  # mm

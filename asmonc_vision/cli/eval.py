@@ -55,6 +55,9 @@ def add_arguments(p) -> None:
                    help='score the /obstacles and /ground_plane of this bag recorded by '
                         '`asmonc run BAG --out DIR` instead of running a detector; give one '
                         'per BAG, in the same order')
+    p.add_argument('--motion', action='store_true',
+                   help='also score visual egomotion against /ground_truth/camera_pose: run '
+                        'the estimator offline (or, with --outputs, the recorded /egomotion)')
     p.add_argument('--frames', type=int, default=0, help='only the first N pairs per bag (0: all)')
     p.add_argument('--match-radius', type=float, default=0.3,
                    help='a report within this distance (m) on the ground finds a true obstacle')
@@ -132,6 +135,30 @@ def score_outputs(frames, outputs: Path, evaluation) -> None:
                              truth_plane=f.truth_plane,
                              status=STATUS_NAMES.get(int(pm.status), str(pm.status))
                              if pm else 'no /ground_plane')
+
+
+def egomotion_scores(bag: Path, outputs: Path | None, frames: int = 0) -> dict | None:
+    """Egomotion errors on a bag: the estimator run offline, or the recorded /egomotion."""
+    from asmonc_vision.cli import motion
+
+    if outputs is not None:
+        return motion.score_recorded_egomotion(bag, outputs)
+    return motion.evaluate_sequence(motion.load_sequence(bag, frames))
+
+
+def format_motion(name: str, m: dict | None) -> list[str]:
+    """Printed lines of an egomotion score (see `egomotion_scores`)."""
+    if not m or not m.get('errors'):
+        return [f'{name} - egomotion: no motion or no ground-truth pose to score', '']
+    e = m['errors']
+    lines = [f'{name} - egomotion ({m.get("motions", 0)} motions):',
+             '  per-frame error, median / p90: '
+             f"pitch {e['pitch']['median']:.3f} / {e['pitch']['p90']:.3f} deg, "
+             f"roll {e['roll']['median']:.3f} / {e['roll']['p90']:.3f} deg, "
+             f"translation {e['translation']['median']:.1f} / {e['translation']['p90']:.1f} mm"]
+    if m.get('cpu_ms'):
+        lines.append(f"  time per frame (one core): median {m['cpu_ms']['median']:.1f} ms CPU")
+    return lines + ['']
 
 
 # --- report ------------------------------------------------------------------------------
@@ -293,6 +320,7 @@ def run(args) -> int:
     progress = _Progress(not args.no_progress)
     runs: list[dict] = []
     groups: dict[tuple, list] = {}
+    motion_results: dict[str, dict | None] = {}
     for bi, bag in enumerate(args.bags):
         try:
             frames = load_frames(bag, args.frames, images=args.outputs is None)
@@ -307,6 +335,9 @@ def run(args) -> int:
             err(f"bag '{bag}' has no {bagio.TOPICS['gt_obstacles'][0]}: nothing to score against")
             return 2
         name = Path(bag).name.removesuffix('.mcap')
+        if args.motion:
+            motion_results[name] = egomotion_scores(bag, args.outputs[bi] if args.outputs
+                                                    else None, args.frames)
         if args.outputs is not None:
             ev = SequenceEvaluation(**criteria)
             try:
@@ -372,6 +403,8 @@ def run(args) -> int:
                   f"{_f(s['ground_plane']['angle_median_deg'], '.2f'):>9s} "
                   f"{_f(s['ground_plane']['height_median_abs_mm'], '.1f'):>8s} "
                   f"{_f(s['latency_ms']['median'], '.1f'):>9s}")
+    for name, m in motion_results.items():
+        print('\n'.join(format_motion(name, m)))
     if args.plots is not None:
         written = []
         for r in runs:
@@ -386,6 +419,9 @@ def run(args) -> int:
                         | r['evaluation'].summary() for r in runs],
                'pooled': [{k: v for k, v in r.items() if k != 'evaluation'}
                           | r['evaluation'].summary() for r in pooled]}
+        if motion_results:
+            doc['egomotion'] = {k: ({kk: vv for kk, vv in v.items() if kk != 'per_frame'}
+                                    if v else None) for k, v in motion_results.items()}
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(json_ready(doc), indent=2) + '\n')
         print(f'json: {args.json}')

@@ -317,11 +317,7 @@ def evaluate_sequence(frames: list[dict], config=None) -> dict:
         v = np.asarray(v, float)
         return ({'median': float(np.median(v)), 'p90': float(np.percentile(v, 90)),
                  'max': float(np.max(v))} if v.size else None)
-    errors = None
-    if errs:
-        e = np.array(errs)
-        errors = {'pitch': stats(e[:, 0]), 'roll': stats(e[:, 1]), 'yaw': stats(e[:, 2]),
-                  'translation': stats(e[:, 3])}
+    errors = _error_stats(errs)
     drift = None
     if start_pose is not None and last_pose is not None and path > 0 and \
             statuses.get('ok', 0) == len(frames) - 1:
@@ -335,6 +331,59 @@ def evaluate_sequence(frames: list[dict], config=None) -> dict:
             'wall_ms': {'median': float(np.median(wall)), 'p90': float(np.percentile(wall, 90))},
             'stages_cpu_ms': {k: float(np.median(v)) for k, v in stages.items()},
             'per_frame': per}
+
+
+def _error_stats(errs: list) -> dict | None:
+    """{'pitch', 'roll', 'yaw' (deg), 'translation' (mm): {'median', 'p90', 'max'}} of
+    rows (pitch, roll, yaw, translation); None when empty."""
+    if not errs:
+        return None
+    e = np.asarray(errs, float)
+    stats = lambda v: {'median': float(np.median(v)), 'p90': float(np.percentile(v, 90)),  # noqa: E731
+                       'max': float(np.max(v))}
+    return {'pitch': stats(e[:, 0]), 'roll': stats(e[:, 1]), 'yaw': stats(e[:, 2]),
+            'translation': stats(e[:, 3])}
+
+
+def score_recorded_egomotion(bag: Path, outputs: Path) -> dict | None:
+    """Per-frame error of the /egomotion recorded by `asmonc run BAG --out OUTPUTS` against
+    BAG's /ground_truth/camera_pose.
+
+    Each /egomotion is the left camera's motion T_prev_curr from the pair before its stamp
+    (the node publishes only for consecutive pairs). Returns None when the outputs hold no
+    /egomotion or the bag has no ground-truth pose; else {'motions', 'pairs', 'errors'}.
+    """
+    from asmonc_vision import bagio
+    from asmonc_vision.core.motion.geometry import (compose, invert, quaternion_to_matrix,
+                                                    rotation_error_components)
+
+    t_ego, t_pose = bagio.TOPICS['egomotion'][0], bagio.TOPICS['gt_camera_pose'][0]
+    if t_ego not in bagio.bag_topics(outputs):
+        return None
+    poses = {}
+    for _, _, m in bagio.read_messages(bag, [t_pose]):
+        p = m.pose
+        poses[bagio.header_stamp_ns(m)] = (
+            quaternion_to_matrix([p.orientation.x, p.orientation.y, p.orientation.z,
+                                  p.orientation.w]),
+            np.array([p.position.x, p.position.y, p.position.z]))
+    if not poses:
+        return None
+    stamps = sorted(poses)
+    previous = dict(zip(stamps[1:], stamps[:-1]))
+    errs, n = [], 0
+    for _, _, m in bagio.read_messages(outputs, [t_ego]):
+        n += 1
+        stamp = bagio.header_stamp_ns(m)
+        if stamp not in previous:
+            continue
+        q, tr = m.transform.rotation, m.transform.translation
+        r_est = quaternion_to_matrix([q.x, q.y, q.z, q.w])
+        t_est = np.array([tr.x, tr.y, tr.z])
+        rt, tt = compose(*invert(*poses[previous[stamp]]), *poses[stamp])
+        w = np.degrees(np.abs(rotation_error_components(r_est, rt)))
+        errs.append((w[0], w[2], w[1], float(np.linalg.norm(t_est - tt)) * 1e3))
+    return {'motions': n, 'pairs': len(stamps), 'errors': _error_stats(errs)}
 
 
 def run_eval(args) -> int:
