@@ -47,6 +47,11 @@ class EdgeMap:
         string_length: (S,) int32 number of pixels of each string.
         shape: (H, W) of the image.
         threshold: magnitude threshold that was applied, grey levels per pixel.
+        curvature: (N,) float32 ``2*m(u) - m(u-1) - m(u+1)`` of the gradient magnitude m
+            at the maximum (> 0), grey levels per pixel^3: the sub-pixel position's noise
+            is about ``0.7 * gradient noise / curvature`` pixels, so it measures how
+            precisely the edge is located (sharp, contrasted edges: large). None if not
+            computed.
     """
 
     v: np.ndarray
@@ -60,6 +65,7 @@ class EdgeMap:
     string_length: np.ndarray
     shape: tuple[int, int]
     threshold: float
+    curvature: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.v.shape[0])
@@ -148,6 +154,7 @@ def detect_vertical_edges(image: np.ndarray, *, abs_threshold: float = 4.0,
     with np.errstate(divide='ignore', invalid='ignore'):
         off = np.where(denom < 0, 0.5 * (ml - mr) / denom, 0.0)
     off = np.clip(off, -0.5, 0.5).astype(np.float32)
+    curv = np.maximum(-denom, 0.0).astype(np.float32)
     peak = (mc - 0.25 * (ml - mr) * off).astype(np.float32)
     u_sub = uu.astype(np.float32) + off
     pol = np.where(gxe >= 0, 1, -1).astype(np.int8)
@@ -159,14 +166,15 @@ def detect_vertical_edges(image: np.ndarray, *, abs_threshold: float = 4.0,
         kept_strings[sid[keep]] = True
         new_id = np.cumsum(kept_strings, dtype=np.int32) - 1
         new_index = np.cumsum(keep, dtype=np.int32) - 1
-        vv, uu, u_sub, peak, pol, ori, prev = (
-            a[keep] for a in (vv, uu, u_sub, peak, pol, ori, prev))
+        vv, uu, u_sub, peak, pol, ori, prev, curv = (
+            a[keep] for a in (vv, uu, u_sub, peak, pol, ori, prev, curv))
         prev = np.where(prev >= 0, new_index[np.maximum(prev, 0)], -1).astype(np.int32)
         sid = new_id[sid[keep]]
         slen = slen[kept_strings]
     return EdgeMap(v=vv, u_int=uu, u=u_sub, strength=peak, polarity=pol, orientation=ori,
                    string_id=sid.astype(np.int32), string_prev=prev.astype(np.int32),
-                   string_length=slen.astype(np.int32), shape=(h, w), threshold=thr)
+                   string_length=slen.astype(np.int32), shape=(h, w), threshold=thr,
+                   curvature=curv)
 
 
 def _empty(h: int, w: int, thr: float) -> EdgeMap:
@@ -174,7 +182,7 @@ def _empty(h: int, w: int, thr: float) -> EdgeMap:
     f = np.zeros(0, np.float32)
     return EdgeMap(v=i, u_int=i, u=f, strength=f, polarity=np.zeros(0, np.int8),
                    orientation=f, string_id=i, string_prev=i, string_length=i, shape=(h, w),
-                   threshold=thr)
+                   threshold=thr, curvature=f)
 
 
 def _link_strings(v: np.ndarray, u: np.ndarray, u_sub: np.ndarray, pol: np.ndarray,

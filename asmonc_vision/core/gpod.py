@@ -15,17 +15,28 @@ Per stereo pair:
    dynamic recalibration, which will add a motion model to the prediction. The RANSAC
    fits weigh features by disparity cubed: of two surfaces, the near one -- the ground
    the wearer stands on -- wins.
-4. Obstacles: a matched edge pixel whose disparity exceeds the plane's by more than
-   ``threshold_px`` (1.7 px in the paper) is an obstacle pixel, if it lies in a run of at
-   least ``min_matched_run`` disparity-consistent matched pixels of its edge string
-   (figural continuity: isolated mismatches never make obstacles). An edge string is an
-   obstacle if at least ``min_obstacle_pixels`` of its pixels are (1 is the paper's
-   rule "any pixel"; the default 2 also rejects single-pixel excursions of far ground).
-   Pixels below the plane by more than the threshold (a disparity deficit where the
-   ground should be) make drop-offs: hazards with negative height. Obstacle strings are
-   clustered by the proximity of their feet on the ground, and each cluster is reported
-   with its top, height, range, bearing, width, disparity excess, confidence and image
-   region.
+4. The obstacle threshold: ``threshold_mode='fixed'``: ``threshold_px`` (1.7 px in the
+   paper); ``'sigma'`` (default): ``threshold_k`` times the robust (MAD) spread sigma of
+   the disparity residuals of the initial plane fit -- the paper's reasoning from its
+   Fig. 4 -- within ``threshold_floor_px`` .. ``threshold_ceiling_px`` (the paper's 1.7);
+   with ``sigma_per_edge``, sigma is taken per edge pixel from the initial fit's
+   residuals in bins of the precision of its edges' sub-pixel positions (gradient
+   curvature: sharp, contrasted edges are located better) and bands of image rows.
+5. Obstacles: the disparity excess (measured minus plane disparity) of every matched edge
+   pixel is averaged over ``string_window`` neighbouring pixels of its matched run and,
+   while the rig stands still (most edges stay in place from frame to frame), over
+   about ``temporal_frames`` frames; a pixel above its threshold is an obstacle pixel if
+   it lies in a disparity-consistent matched run of its edge string of at least
+   ``min_matched_run`` pixels, longer for a larger excess (``obstacle_run_fraction``;
+   figural continuity: isolated and short mismatches never make obstacles). An edge
+   string is an obstacle if it has at least ``min_obstacle_pixels`` of them (1 is the
+   paper's rule "any pixel"; weak edges count less, ``obstacle_min_strength``), comes
+   down to the ground (``max_floating_height_m``) and is not a repetitive pattern
+   matched a period off (``ambiguity_fraction``). Pixels below the plane by more than the
+   threshold (a disparity deficit where the ground should be) make drop-offs: hazards
+   with negative height. Obstacle strings are clustered by the proximity of their feet
+   on the ground, and each cluster is reported with its top, height, range and bearing
+   of its near part, width, disparity excess, confidence and image region.
 
 Status per frame: ``'initialising'`` (not enough calibration frames yet), ``'tracking'``
 (a plane is valid for this frame, refitted or carried over for up to
@@ -41,11 +52,27 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .camera import MetricPlane, StereoCamera, ground_range_bearing, plane_disparity
+from .camera import MetricPlane, StereoCamera, plane_disparity
 from .config import check_fields, param
 from .edges import EdgeMap, detect_vertical_edges
 from .ground_plane import PlaneFit, fit_ground_plane, plane_is_plausible
-from .matching import Matches, match_edges
+from .matching import Candidates, Matches, pmf_match
+
+#: Obstacle pixels this far above the plane (pixels) or more are checked for a ground
+#: alternative (``GpodConfig.ambiguity_fraction``): a repetitive pattern matched one
+#: period off; genuine small obstacles are never this far above the plane.
+_AMBIGUOUS_EXCESS_PX = 3.0
+
+#: An obstacle's reported foot is at its nearest range, in the median direction of the
+#: nearest feet of its edge strings (one per string) that lie within this distance
+#: (metres) or this fraction of the nearest range, whichever is larger, of it: the near
+#: part of the obstacle (its nearest point itself often has no vertical edge).
+_NEAR_ZONE_M = 0.5
+_NEAR_ZONE_FRACTION = 0.1
+
+#: The residual spread sigma of the initial fit is taken over the calibration features
+#: within this many ``plane_inlier_px`` of the fitted plane.
+_SIGMA_GATE = 3.0
 
 #: Detector statuses (GroundPlane.msg: INITIALISING = 0, TRACKING = 1, LOST = 2).
 STATUSES = ('initialising', 'tracking', 'lost')
@@ -59,6 +86,48 @@ class GpodConfig:
     threshold_px: float = param(
         1.7, 'Disparity excess over the ground plane above which an edge pixel is an '
         'obstacle, pixels (Molton et al. 1998 use 1.7)', range=(0.05, 50.0))
+    threshold_mode: str = param(
+        'sigma', "'fixed': an edge pixel is an obstacle pixel when its disparity excess is "
+        "above threshold_px (the paper's rule); 'sigma': above threshold_k times the robust "
+        '(MAD) spread sigma of the disparity residuals of the initial ground-plane fit (the '
+        "paper's Fig. 4 reasoning), kept within threshold_floor_px .. threshold_ceiling_px",
+        choices=('fixed', 'sigma'))
+    threshold_k: float = param(
+        3.5, "'sigma': the obstacle threshold in units of the residual spread sigma",
+        range=(0.5, 50.0))
+    threshold_floor_px: float = param(
+        0.5, "'sigma': least obstacle threshold, pixels", range=(0.05, 50.0))
+    threshold_ceiling_px: float = param(
+        1.7, "'sigma': largest obstacle threshold, pixels", range=(0.05, 50.0))
+    sigma_per_edge: bool = param(
+        True, "'sigma': take sigma per edge pixel rather than one for all: the residual "
+        'spread of the initial fit in bins of the precision of the edges (gradient '
+        'curvature at the maximum: contrast and sharpness; blurred or faint edges are '
+        'located less well), times a factor per band of image rows (the far ground '
+        'matches less well)')
+    obstacle_min_strength: float = param(
+        8.0, 'Edge strength (mean |dI/du| of the left and right edge, grey levels per pixel) '
+        'from which an obstacle or drop pixel counts fully towards min_obstacle_pixels and '
+        'min_drop_pixels; a weaker one counts as (strength / this)^2 of a pixel (weak edges '
+        'are often mismatched)', range=(0.0, 255.0))
+    temporal_frames: int = param(
+        5, 'While the rig stands still, the disparity excess of each edge pixel is averaged '
+        'over about this many consecutive frames (exponentially weighted) before the '
+        'threshold test; 1 = no averaging. Any motion restarts the average',
+        range=(1, 1000))
+    still_overlap: float = param(
+        0.8, 'The rig counts as still when at least this fraction of the left edge pixels '
+        'lie within one column of an edge pixel of the previous frame on the same row',
+        range=(0.0, 1.0))
+    temporal_gate_px: float = param(
+        1.0, 'An edge pixel joins the running average of the pixel at its place in the '
+        'previous frame only if its excess is within this of that average, pixels (else the '
+        'average restarts there)', range=(0.01, 100.0))
+    ambiguity_fraction: float = param(
+        0.8, 'An obstacle string whose excess is above 3 px is dropped when at least this '
+        'fraction of its obstacle pixels also had a candidate match on the ground plane (a '
+        'repetitive pattern, e.g. paving joints matched one tile off); 0 = off',
+        range=(0.0, 1.0))
     min_range_m: float = param(
         1.0, 'Nearest depth searched by the matcher, metres along the optical axis '
         '(largest disparity f*B/min_range)', range=(0.05, 100.0))
@@ -136,7 +205,7 @@ class GpodConfig:
         0.0, 'Least horizontal gradient as a multiple of the mean |dI/du| of the image '
         '(0 = off); the larger of the two thresholds applies', range=(0.0, 100.0))
     edge_max_angle_deg: float = param(
-        60.0, 'Largest angle of an edge from the vertical, degrees', range=(1.0, 90.0))
+        70.0, 'Largest angle of an edge from the vertical, degrees', range=(1.0, 90.0))
     edge_blur_sigma: float = param(
         0.0, 'Gaussian pre-blur of the images before the Sobel operator, pixels (0 = none)',
         range=(0.0, 10.0))
@@ -150,25 +219,47 @@ class GpodConfig:
         30.0, 'Largest difference of gradient directions of a match, degrees',
         range=(0.0, 180.0))
     pmf_support_radius_px: float = param(
-        3.0, 'PMF support neighbourhood radius in the left image, pixels', range=(1.0, 30.0))
+        3.0, 'PMF support neighbourhood radius in the cyclopean image, pixels',
+        range=(1.0, 30.0))
     pmf_disparity_gradient_limit: float = param(
         1.0, 'PMF disparity-gradient limit (1.0 in PMF)', range=(0.05, 1.95))
     pmf_iterations: int = param(
-        2, 'PMF winner-take-all rounds (1 = one pass)', range=(1, 50))
+        2, 'PMF winner-take-all rounds: accept the matches with the highest support for '
+        'both their edges, remove their competitors, recompute the support (1 = one pass)',
+        range=(1, 50))
     pmf_min_support: float = param(
         0.5, 'Least PMF support of an accepted match (sum of 1/distance)', range=(0.0, 1000.0))
     # --- obstacles -----------------------------------------------------------------
     min_matched_run: int = param(
-        5, 'An obstacle or drop pixel counts only within a run of at least this many '
+        3, 'An obstacle or drop pixel counts only within a run of at least this many '
         'consecutive matched pixels of its edge string whose disparities agree (figural '
         'continuity; isolated mismatches never make obstacles)', range=(1, 100000))
+    obstacle_run_fraction: float = param(
+        0.25, 'A pixel with a disparity excess E counts only within a matched run of at '
+        'least this fraction of E / |b| pixels (b: the plane disparity change per image '
+        'row; an edge standing on the ground needs about E / |b| rows to rise E above the '
+        'plane), at least min_matched_run and at most max_required_run: a short run with a '
+        'large excess is a mismatch, not a tall obstacle', range=(0.0, 10.0))
+    max_required_run: int = param(
+        10, 'Longest matched run that obstacle_run_fraction asks for, pixels',
+        range=(1, 100000))
     string_disparity_tolerance_px: float = param(
         1.0, 'Largest disparity difference between consecutive pixels of one matched run, '
         'pixels', range=(0.01, 100.0))
+    string_window: int = param(
+        3, 'The disparity excess of each matched edge pixel is averaged over a window of '
+        'this many consecutive pixels of its matched run (centred; 1 = no averaging) '
+        'before the threshold test: an obstacle raises its edges coherently, noise does '
+        'not', range=(1, 99))
     min_obstacle_pixels: int = param(
         2, 'Obstacle pixels an edge string needs to be an obstacle; 1 is the rule of '
         'Molton et al. (any pixel), 2 rejects single-pixel excursions of far ground',
         range=(1, 100000))
+    max_floating_height_m: float = param(
+        0.5, 'An obstacle edge string must come down to within this height above the ground '
+        '(its lowest reliably matched pixel); obstacles stand on the ground, a string '
+        'floating higher is a mismatch (e.g. a distant pole matched to the wrong edge), '
+        'metres', range=(0.0, 100.0))
     detect_drops: bool = param(
         True, 'Report drop-offs (disparity below the ground plane) as negative obstacles')
     min_drop_pixels: int = param(
@@ -187,7 +278,7 @@ class GpodConfig:
         2.5, 'Pixels higher than this above the plane are ignored (overhead, no hazard), '
         'metres', range=(0.05, 100.0))
     cluster_radius_m: float = param(
-        0.5, 'Obstacle strings whose feet on the ground are closer than this join one '
+        0.7, 'Obstacle strings whose feet on the ground are closer than this join one '
         'obstacle (a gap narrower than this cannot be walked through), metres',
         range=(0.01, 10.0))
     disparity_sigma_px: float = param(
@@ -208,6 +299,10 @@ class GpodConfig:
         if self.max_range_m > self.search_max_range_m:
             raise ValueError(f'GpodConfig.max_range_m = {self.max_range_m} must not exceed '
                              f'search_max_range_m = {self.search_max_range_m}')
+        if self.threshold_floor_px > self.threshold_ceiling_px:
+            raise ValueError(
+                f'GpodConfig.threshold_floor_px = {self.threshold_floor_px} must not exceed '
+                f'threshold_ceiling_px = {self.threshold_ceiling_px}')
         if self.min_camera_height_m >= self.max_camera_height_m:
             raise ValueError(
                 f'GpodConfig.min_camera_height_m = {self.min_camera_height_m} must be less '
@@ -266,6 +361,12 @@ class GpodFeatures:
         string_class: (K,) int8 class of the pixel's edge string: 1 obstacle, -1 drop,
             0 ground / unclassified.
         string_id: (K,) int32 edge-string id (left EdgeMap).
+        strength: (K,) float32 edge strength, grey levels per pixel (None if unknown).
+        excess_mean: (K,) float32 the excess averaged over the frames the rig stood still
+            (= excess when it moved), pixels, which the threshold test uses (None if
+            unknown).
+        threshold: (K,) float32 the obstacle threshold of each pixel, pixels (None if
+            unknown).
     """
 
     u_left: np.ndarray
@@ -277,6 +378,9 @@ class GpodFeatures:
     is_drop: np.ndarray
     string_class: np.ndarray
     string_id: np.ndarray
+    strength: np.ndarray | None = None
+    excess_mean: np.ndarray | None = None
+    threshold: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.v.shape[0])
@@ -318,10 +422,16 @@ class GpodResult:
         metric_plane: the plane in the left optical frame, or None.
         obstacles: obstacles and drop-offs, nearest first.
         features: the matched edge features.
-        threshold_px: the obstacle threshold used, pixels.
+        threshold_px: the obstacle threshold used, pixels ('sigma' mode: threshold_k
+            times sigma_px within the floor and ceiling; with ``sigma_per_edge`` each
+            pixel has its own, see ``features.threshold``).
         num_edges: (left, right) numbers of edge pixels.
         timings_ms: stage -> milliseconds ('edges', 'matching', 'plane', 'obstacles',
             'total').
+        sigma_px: robust (MAD) spread of the disparity residuals of the initial ground
+            plane fit, pixels (NaN before it).
+        still: True when the rig stood still since the previous frame (the excess is
+            being averaged over frames).
     """
 
     status: str
@@ -337,6 +447,8 @@ class GpodResult:
     threshold_px: float
     num_edges: tuple[int, int]
     timings_ms: dict[str, float]
+    sigma_px: float = float('nan')
+    still: bool = False
 
     @property
     def plane(self) -> GpodPlane | None:
@@ -447,8 +559,8 @@ def cluster_points_2d(points: np.ndarray, group: np.ndarray, radius: float) -> n
     return _components(n_g, a, b)[g]
 
 
-def matched_run_length(edges: EdgeMap, m: Matches, tolerance_px: float) -> np.ndarray:
-    """Length of the disparity-consistent matched run that each match belongs to.
+def run_links(edges: EdgeMap, m: Matches, tolerance_px: float) -> np.ndarray:
+    """The previous match in the same matched run of each match.
 
     A run is a maximal chain of matches on consecutive pixels of one edge string (rows
     v, v+1, ...) whose disparities differ by at most ``tolerance_px`` from one pixel to
@@ -459,7 +571,7 @@ def matched_run_length(edges: EdgeMap, m: Matches, tolerance_px: float) -> np.nd
         m: the matches.
         tolerance_px: largest disparity step within a run, pixels.
     Returns:
-        (K,) int64 run length (>= 1) of each match.
+        (K,) int64 index of the match one row up in the same run, -1 at a run's top.
     """
     k = len(m)
     if k == 0:
@@ -468,15 +580,67 @@ def matched_run_length(edges: EdgeMap, m: Matches, tolerance_px: float) -> np.nd
     feat_of_edge[m.left_index] = np.arange(k)
     prev_edge = edges.string_prev[m.left_index]
     prev = np.where(prev_edge >= 0, feat_of_edge[np.maximum(prev_edge, 0)], -1)
-    d = m.d.astype(np.float64)
+    d = m.d
     link = (prev >= 0) & (np.abs(d - d[np.maximum(prev, 0)]) <= tolerance_px)
-    root = np.where(link, prev, np.arange(k))
+    return np.where(link, prev, -1)
+
+
+def matched_run_length(edges: EdgeMap, m: Matches, tolerance_px: float,
+                       prev: np.ndarray | None = None) -> np.ndarray:
+    """Length of the disparity-consistent matched run (see :func:`run_links`) that each
+    match belongs to.
+
+    Args:
+        edges: the left EdgeMap the matches index (for ``string_prev``).
+        m: the matches.
+        tolerance_px: largest disparity step within a run, pixels.
+        prev: :func:`run_links` of the matches, if already known.
+    Returns:
+        (K,) int64 run length (>= 1) of each match.
+    """
+    k = len(m)
+    if k == 0:
+        return np.zeros(0, np.int64)
+    if prev is None:
+        prev = run_links(edges, m, tolerance_px)
+    root = np.where(prev >= 0, prev, np.arange(k))
     while True:
         nxt = root[root]
         if np.array_equal(nxt, root):
             break
         root = nxt
     return np.bincount(root, minlength=k)[root]
+
+
+def smooth_along_runs(x: np.ndarray, prev: np.ndarray, window: int) -> np.ndarray:
+    """Mean of x over a window of up to ``window`` consecutive pixels of each pixel's
+    matched run, centred on it (shortened at the run's ends).
+
+    Args:
+        x: (K,) values per match.
+        prev: (K,) :func:`run_links` of the matches.
+        window: pixels (odd; 1 = no smoothing).
+    Returns:
+        (K,) float64.
+    """
+    x = np.asarray(x, np.float64)
+    k = x.shape[0]
+    half = max(int(window), 1) // 2
+    if half == 0 or k == 0:
+        return x.copy()
+    nxt = np.full(k, -1, np.int64)
+    has = prev >= 0
+    nxt[prev[has]] = np.flatnonzero(has)
+    total, count = x.copy(), np.ones(k)
+    for step in (prev, nxt):
+        cur = np.arange(k)
+        for _ in range(half):
+            ok = cur >= 0
+            cur = np.where(ok, step[np.maximum(cur, 0)], -1)
+            ok = cur >= 0
+            total += np.where(ok, x[np.maximum(cur, 0)], 0.0)
+            count += ok
+    return total / count
 
 
 class GpodDetector:
@@ -502,6 +666,15 @@ class GpodDetector:
         self._cov: np.ndarray | None = None
         self._last_fit: PlaneFit | None = None
         self._coast = 0
+        #: residual spread of the initial fit: global, and per edge strength (bin
+        #: strengths, bin sigmas), pixels
+        self._sigma = float('nan')
+        self._sigma_bins: tuple[np.ndarray, np.ndarray] | None = None
+        #: the previous frame's left edge pixels (H, W+2) bool, and the running sums of
+        #: the excess (S, W) at the matched edge pixels, (H, W) float32 each
+        self._prev_edges: np.ndarray | None = None
+        self._acc: tuple[np.ndarray, np.ndarray] | None = None
+        self._frame_thr = np.zeros(0)
 
     @property
     def calibrated_plane(self) -> PlaneFit | None:
@@ -557,19 +730,86 @@ class GpodDetector:
         cosang = float(np.clip(np.dot(fit.metric.normal_up, cur.normal_up), -1.0, 1.0))
         return math.degrees(math.acos(cosang)) <= c.refit_max_angle_change_deg
 
-    def _update_plane(self, u, v, d, cam: StereoCamera) -> tuple[str, bool]:
-        """Advance the plane state with this frame's features. Returns (status, updated)."""
+    @property
+    def sigma_px(self) -> float:
+        """Robust (MAD) spread of the disparity residuals of the initial ground-plane fit,
+        pixels (NaN while initialising)."""
+        return self._sigma
+
+    def _calibrate_sigma(self, u, v, d, s) -> None:
+        """Residual spread of the calibration features about the calibrated plane.
+
+        ``sigma_px``: one robust sigma (1.4826 * MAD) over the features within
+        ``_SIGMA_GATE * plane_inlier_px`` of the plane. For ``sigma_per_edge``: sigmas in
+        (equal-count) bins of the features' precision s (made non-increasing with it),
+        and factors (>= 1) in bands of image rows by which the residuals, divided by their
+        bin's sigma, are still spread (the far ground, foreshortened, matches less well).
+        """
+        res = d - plane_disparity(self._abc, u, v)
+        # Features near the plane only: far off it are other surfaces (walls, trees),
+        # not the fit's error.
+        near = np.abs(res) <= _SIGMA_GATE * self.config.plane_inlier_px
+        res, s, v = res[near], s[near], v[near]
+        self._sigma = _mad_sigma(res)
+        n_bins = int(min(8, res.size // 100))
+        self._sigma_bins = None
+        if n_bins >= 2:
+            order = np.argsort(s, kind='stable')
+            parts = np.array_split(order, n_bins)
+            s_b = np.array([np.median(s[p]) for p in parts])
+            sig_b = np.array([_mad_sigma(res[p]) for p in parts])
+            sig_b = np.maximum(np.minimum.accumulate(sig_b), 0.01)
+            log_s = np.log(np.maximum(s_b, 1e-3))
+            r_n = res / np.interp(np.log(np.maximum(s, 1e-3)), log_s, sig_b)
+            order = np.argsort(v, kind='stable')
+            parts = np.array_split(order, n_bins)
+            v_b = np.array([np.median(v[p]) for p in parts])
+            f_b = np.array([max(1.0, _mad_sigma(r_n[p])) for p in parts])
+            self._sigma_bins = (log_s, sig_b, v_b, f_b)
+
+    def pixel_thresholds(self, precision: np.ndarray, v: np.ndarray | None = None
+                         ) -> tuple[np.ndarray, float]:
+        """The obstacle thresholds of edge pixels, and the global one.
+
+        Args:
+            precision: (K,) the pixels' ``Matches.precision`` (or edge strengths).
+            v: (K,) their image rows (None: no row factor).
+        Returns:
+            ((K,) float64 per-pixel thresholds, global threshold), pixels.
+        """
+        c = self.config
+        k = precision.shape[0]
+        if c.threshold_mode == 'fixed' or not np.isfinite(self._sigma):
+            return np.full(k, c.threshold_px), c.threshold_px
+        glob = float(np.clip(c.threshold_k * self._sigma, c.threshold_floor_px,
+                             c.threshold_ceiling_px))
+        if not c.sigma_per_edge or self._sigma_bins is None:
+            return np.full(k, glob), glob
+        log_s, sig_b, v_b, f_b = self._sigma_bins
+        log_p = np.log(np.maximum(precision.astype(np.float64), 1e-3))
+        sig = np.interp(log_p, log_s, sig_b)
+        # Below the least precise bin, sigma grows as 1 / precision.
+        sig *= np.exp(np.maximum(log_s[0] - log_p, 0.0))
+        if v is not None:
+            sig = sig * np.interp(v, v_b, f_b)
+        thr = np.clip(c.threshold_k * sig, c.threshold_floor_px, c.threshold_ceiling_px)
+        return thr, glob
+
+    def _update_plane(self, u, v, d, s, cam: StereoCamera) -> tuple[str, bool]:
+        """Advance the plane state with this frame's features (s: their
+        :func:`_noise_key`, for the residual spread). Returns (status, updated)."""
         c = self.config
         if self._calib is None:
-            self._init_window.append((u, v, d))
+            self._init_window.append((u, v, d, s))
             if len(self._init_window) < c.init_frames:
                 return 'initialising', False
-            uu, vv, dd = (np.concatenate(x) for x in zip(*self._init_window))
+            uu, vv, dd, ss = (np.concatenate(x) for x in zip(*self._init_window))
             fit = self._fit(uu, vv, dd, cam)
             if fit is None:
                 return 'initialising', False
             self._calib = self._last_fit = fit
             self._abc, self._cov = fit.abc.copy(), fit.cov.copy()
+            self._calibrate_sigma(uu, vv, dd, ss.astype(np.float64))
             self._init_window.clear()
             return 'tracking', True
         enough = u.shape[0] >= c.min_plane_features
@@ -655,18 +895,20 @@ class GpodDetector:
         timings['edges'] = (t1 - t0) * 1e3
 
         d_min, d_max = self.disparity_range(cam)
-        m = match_edges(el, er, d_min, d_max, min_strength_ratio=c.match_min_strength_ratio,
-                        max_orientation_diff_deg=c.match_max_orientation_diff_deg,
-                        support_radius=c.pmf_support_radius_px,
-                        disparity_gradient_limit=c.pmf_disparity_gradient_limit,
-                        iterations=c.pmf_iterations, min_support=c.pmf_min_support)
+        m, cand, _ = pmf_match(el, er, d_min, d_max,
+                               min_strength_ratio=c.match_min_strength_ratio,
+                               max_orientation_diff_deg=c.match_max_orientation_diff_deg,
+                               support_radius=c.pmf_support_radius_px,
+                               disparity_gradient_limit=c.pmf_disparity_gradient_limit,
+                               iterations=c.pmf_iterations, min_support=c.pmf_min_support)
         t2 = time.perf_counter()
         timings['matching'] = (t2 - t1) * 1e3
 
         u = m.u
         v = m.v.astype(np.float64)
         d = m.d.astype(np.float64)
-        status, updated = self._update_plane(u, v, d, cam)
+        status, updated = self._update_plane(u, v, d, _noise_key(m), cam)
+        still = self._stillness(el)
         t3 = time.perf_counter()
         timings['plane'] = (t3 - t2) * 1e3
 
@@ -675,11 +917,14 @@ class GpodDetector:
         if status == 'tracking':
             metric = plane_is_plausible(cam, self._abc, min_height_m=0.0,
                                         max_height_m=float('inf'), max_tilt_deg=90.0)
+        threshold = self.pixel_thresholds(np.zeros(0))[1]
         if status == 'tracking' and metric is not None:
-            features, obstacles = self._detect(m, u, v, d, cam, metric, d_min, d_max, el)
+            features, obstacles = self._detect(m, u, v, d, cam, metric, d_min, d_max, el,
+                                               er, cand, still)
         else:
             if status == 'tracking':          # smoothing made an implausible plane
                 status = 'lost'
+            self._acc = None
             features = _features(m, np.full(len(m), np.nan, np.float32))
         t4 = time.perf_counter()
         timings['obstacles'] = (t4 - t3) * 1e3
@@ -695,8 +940,56 @@ class GpodDetector:
             plane_residual_rms=(fit.residual_rms if (fit is not None and have_plane)
                                 else float('nan')),
             plane_updated=bool(updated and have_plane), metric_plane=metric if have_plane else None,
-            obstacles=obstacles, features=features, threshold_px=c.threshold_px,
-            num_edges=(len(el), len(er)), timings_ms=timings)
+            obstacles=obstacles, features=features, threshold_px=threshold,
+            num_edges=(len(el), len(er)), timings_ms=timings, sigma_px=self._sigma,
+            still=still)
+
+    def _stillness(self, el: EdgeMap) -> bool:
+        """Whether the rig stood still since the previous frame: most left edge pixels
+        are where an edge pixel was (same row, within one column). Remembers the edges."""
+        h, w = el.shape
+        prev = self._prev_edges
+        img = np.zeros((h, w + 2), bool)
+        img[el.v, el.u_int + 1] = True
+        self._prev_edges = img
+        if prev is None or prev.shape != img.shape or len(el) == 0:
+            return False
+        hit = prev[el.v, el.u_int] | prev[el.v, el.u_int + 1] | prev[el.v, el.u_int + 2]
+        return bool(hit.mean() >= self.config.still_overlap)
+
+    def _temporal_excess(self, m: Matches, excess: np.ndarray, still: bool,
+                         shape: tuple[int, int]) -> np.ndarray:
+        """The excess of each match averaged (exponentially, over about
+        ``temporal_frames`` frames) with the running average found at its place (same
+        row, within one column) in the previous frame, when the rig stood still and the
+        two agree to within ``temporal_gate_px``. Updates the running sums."""
+        c = self.config
+        h, w = shape
+        k = len(m)
+        lam = 1.0 - 1.0 / c.temporal_frames
+        vv = m.v.astype(np.int64)
+        uu = np.clip(np.rint(m.u_left).astype(np.int64), 0, w - 1)
+        s_new = excess.astype(np.float64)
+        w_new = np.ones(k)
+        prev = self._acc
+        if still and prev is not None and lam > 0 and k:
+            ps, pw = prev
+            cols = np.clip(uu[:, None] + np.array([0, -1, 1])[None, :], 0, w - 1)
+            wp = pw[vv[:, None], cols]
+            j = np.argmax(wp, axis=1)
+            w0 = wp[np.arange(k), j].astype(np.float64)
+            s0 = ps[vv, cols[np.arange(k), j]].astype(np.float64)
+            with np.errstate(divide='ignore', invalid='ignore'):
+                ok = (w0 > 0) & (np.abs(excess - s0 / w0) <= c.temporal_gate_px)
+            s_new = np.where(ok, s_new + lam * s0, s_new)
+            w_new = np.where(ok, w_new + lam * w0, w_new)
+        acc_s = np.zeros((h, w), np.float32)
+        acc_w = np.zeros((h, w), np.float32)
+        if k:
+            acc_s[vv, uu] = s_new
+            acc_w[vv, uu] = w_new
+        self._acc = (acc_s, acc_w)
+        return s_new / w_new
 
     def disparity_range(self, cam: StereoCamera) -> tuple[float, float]:
         """Disparity search range (d_min, d_max) of the matcher, pixels, from
@@ -707,8 +1000,8 @@ class GpodDetector:
 
     # ------------------------------------------------------------------ obstacles
     def _detect(self, m: Matches, u, v, d, cam: StereoCamera, metric: MetricPlane,
-                d_min: float, d_max: float, el: EdgeMap
-                ) -> tuple[GpodFeatures, tuple[GpodObstacle, ...]]:
+                d_min: float, d_max: float, el: EdgeMap, er: EdgeMap, cand: Candidates,
+                still: bool) -> tuple[GpodFeatures, tuple[GpodObstacle, ...]]:
         c = self.config
         pd = plane_disparity(self._abc, u, v)
         excess = d - pd
@@ -716,25 +1009,54 @@ class GpodDetector:
         h = metric.signed_height(pts)
         feet = pts - h[:, None] * metric.normal_up[None, :]
         ground_range = np.linalg.norm(feet + metric.height * metric.normal_up[None, :], axis=1)
-        reliable = matched_run_length(el, m, c.string_disparity_tolerance_px) >= c.min_matched_run
+        prev = run_links(el, m, c.string_disparity_tolerance_px)
+        run = matched_run_length(el, m, c.string_disparity_tolerance_px, prev)
         in_range = ground_range <= c.max_range_m
-        obst = (excess > c.threshold_px) & (h <= c.max_obstacle_height_m) & reliable & in_range
+        thr, thr_global = self.pixel_thresholds(_noise_key(m), v)
+        ex_mean = self._temporal_excess(m, smooth_along_runs(excess, prev, c.string_window),
+                                        still, el.shape)
+        # Figural continuity: a run of min_matched_run pixels at least, and longer for a
+        # larger excess -- an edge standing on the ground rises by |b| px of excess per
+        # row, so an excess E needs about E / |b| rows of it (a fraction of them, up to
+        # max_required_run, must be matched in one run).
+        slope = max(abs(float(self._abc[1])), 1e-3)
+        need = np.clip(np.ceil(c.obstacle_run_fraction * np.abs(ex_mean) / slope),
+                       c.min_matched_run, max(c.max_required_run, c.min_matched_run))
+        reliable = run >= need
+        usable = reliable & in_range
+        obst = (ex_mean > thr) & (h <= c.max_obstacle_height_m) & usable
         drop = np.zeros_like(obst)
         if c.detect_drops:
             # Below the plane where the plane itself is within the detection range.
             pd_far = cam.fb / c.max_range_m
-            drop = ((excess < -c.threshold_px) & (pd >= pd_far) & (pd <= d_max)
-                    & (h >= -c.max_drop_depth_m) & reliable & in_range)
+            drop = ((ex_mean < -thr) & (pd >= pd_far) & (pd <= d_max)
+                    & (h >= -c.max_drop_depth_m) & usable)
         sid = m.string_id
         n_s = max(el.num_strings, int(sid.max()) + 1 if sid.size else 0)
-        n_obst = np.bincount(sid[obst], minlength=n_s)
-        n_drop = np.bincount(sid[drop], minlength=n_s)
+        # Weak edges are often mismatched: a pixel weaker than obstacle_min_strength
+        # counts as the fraction (strength / obstacle_min_strength)^2 of a pixel.
+        weight = np.minimum(m.strength / max(c.obstacle_min_strength, 1e-6), 1.0) ** 2
+        n_obst = np.bincount(sid[obst], weights=weight[obst], minlength=n_s) + 1e-9
+        n_drop = np.bincount(sid[drop], weights=weight[drop], minlength=n_s) + 1e-9
         obst_string = n_obst >= c.min_obstacle_pixels
+        if obst_string.any():
+            # Obstacles stand on the ground: a string whose matched pixels all float
+            # higher than max_floating_height_m above it is a mismatch (a distant pole
+            # matched to the wrong edge), not an obstacle.
+            low = np.full(n_s, np.inf)
+            ok = reliable & in_range
+            np.minimum.at(low, sid[ok], h[ok])
+            obst_string &= low <= c.max_floating_height_m
+        if c.ambiguity_fraction > 0 and obst_string.any():
+            obst_string &= ~self._ambiguous_strings(m, excess, obst, cand, el, er, thr_global,
+                                                    n_s)
         drop_string = ~obst_string & (n_drop >= c.min_drop_pixels)
         obst &= obst_string[sid]
         drop &= drop_string[sid]
         sclass = np.where(obst_string[sid], 1, np.where(drop_string[sid], -1, 0)).astype(np.int8)
-        features = _features(m, excess.astype(np.float32), obst, drop, sclass)
+        features = _features(m, excess.astype(np.float32), obst, drop, sclass,
+                             ex_mean.astype(np.float32), thr.astype(np.float32))
+        self._frame_thr = thr
         found: list[GpodObstacle] = []
         for sel, sign, radius, min_px in (
                 (obst, 1.0, c.cluster_radius_m, 1),
@@ -745,6 +1067,22 @@ class GpodDetector:
                                             cam, metric))
         found.sort(key=lambda o: o.range)
         return features, tuple(found)
+
+    def _ambiguous_strings(self, m: Matches, excess: np.ndarray, obst: np.ndarray,
+                           cand: Candidates, el: EdgeMap, er: EdgeMap, threshold: float,
+                           n_s: int) -> np.ndarray:
+        """(n_s,) bool: edge strings whose obstacle pixels are well above the plane
+        (> ``_AMBIGUOUS_EXCESS_PX``) but, for at least ``ambiguity_fraction`` of them,
+        the left edge also had a candidate match on the ground (|excess| <= threshold):
+        a repetitive pattern matched one period off."""
+        uc = 0.5 * (el.u[cand.left].astype(np.float64) + er.u[cand.right])
+        exc_c = cand.d - plane_disparity(self._abc, uc, el.v[cand.left].astype(np.float64))
+        on_ground = np.zeros(len(el), bool)
+        on_ground[cand.left[np.abs(exc_c) <= threshold]] = True
+        alt = obst & (excess > _AMBIGUOUS_EXCESS_PX) & on_ground[m.left_index]
+        n_alt = np.bincount(m.string_id[alt], minlength=n_s)
+        n_obst = np.bincount(m.string_id[obst], minlength=n_s)
+        return n_alt >= self.config.ambiguity_fraction * np.maximum(n_obst, 1)
 
     def _clusters(self, idx: np.ndarray, sign: float, radius: float, min_pixels: int,
                   m: Matches, pts: np.ndarray, h: np.ndarray, excess: np.ndarray,
@@ -763,60 +1101,116 @@ class GpodDetector:
         g = feet - origin[None, :]
         g2 = np.stack([g @ fwd, g @ lft], axis=1)
         label = cluster_points_2d(g2, m.string_id[idx], radius)
+        return self._describe(idx, label, sign, min_pixels, hh, g2, m, excess, cam, metric,
+                              fwd, lft)
+
+    def _describe(self, idx, label, sign, min_pixels, hh, g2, m: Matches, excess, cam,
+                  metric, fwd, lft) -> list[GpodObstacle]:
+        """GpodObstacles of the clusters ``label`` (0..C-1) of the pixels ``idx``, all at
+        once (per-cluster quantiles from one sort by (cluster, value)).
+
+        Height: the 90th percentile of the pixels' heights (10th for a drop). Foot: at the
+        cluster's nearest range (5th percentile of the feet's ranges; 2nd for a drop --
+        it starts at its near edge), in the median direction of the nearest feet of its
+        edge strings (one vote per string) within
+        ``max(_NEAR_ZONE_M, _NEAR_ZONE_FRACTION * range)`` of that range.
+        """
+        c = self.config
+        n_c = int(label.max()) + 1
+        count = np.bincount(label, minlength=n_c)
         rng_px = np.hypot(g2[:, 0], g2[:, 1])
-        out = []
+        height = _group_quantile(label, hh, 0.9 if sign > 0 else 0.1, n_c)
+        r_near = _group_quantile(label, rng_px, 0.05 if sign > 0 else 0.02, n_c)
+        # Each edge string votes once, with its nearest foot, if that is within the near
+        # zone of the cluster's nearest range.
+        sid_all = m.string_id[idx]
+        o3 = np.lexsort((rng_px, sid_all, label))
+        lab3, sid3 = label[o3], sid_all[o3]
+        head = np.r_[True, (lab3[1:] != lab3[:-1]) | (sid3[1:] != sid3[:-1])]
+        s_lab, s_rng, s_g = lab3[head], rng_px[o3][head], g2[o3][head]
+        zone = s_rng <= (r_near + np.maximum(_NEAR_ZONE_M, _NEAR_ZONE_FRACTION * r_near))[s_lab]
+        zx = _group_quantile(s_lab[zone], s_g[zone, 0], 0.5, n_c)
+        zy = _group_quantile(s_lab[zone], s_g[zone, 1], 0.5, n_c)
+        bearing = np.arctan2(zy, zx)
+        foot = (-metric.height * metric.normal_up[None, :]
+                + r_near[:, None] * (np.cos(bearing)[:, None] * fwd[None, :]
+                                     + np.sin(bearing)[:, None] * lft[None, :]))
+        position = foot + height[:, None] * metric.normal_up[None, :]
+        # Lateral extent of the feet across the line of sight to their median.
+        mx = _group_quantile(label, g2[:, 0], 0.5, n_c)
+        my = _group_quantile(label, g2[:, 1], 0.5, n_c)
+        norm = np.maximum(np.hypot(mx, my), 1e-9)
+        lat = (g2[:, 1] * mx[label] - g2[:, 0] * my[label]) / norm[label]
         order = np.argsort(label, kind='stable')
-        bounds = np.flatnonzero(np.r_[True, np.diff(label[order]) != 0, True])
-        for s0, s1 in zip(bounds[:-1], bounds[1:]):
-            k = order[s0:s1]
-            if k.size < min_pixels:
+        starts = np.flatnonzero(np.r_[True, np.diff(label[order]) != 0])
+        lo_lat = np.minimum.reduceat(lat[order], starts)
+        hi_lat = np.maximum.reduceat(lat[order], starts)
+        ex = excess[idx]
+        ex_o = ex[order]
+        exc = (np.maximum.reduceat(ex_o, starts) if sign > 0
+               else np.minimum.reduceat(ex_o, starts))
+        z = (np.abs(ex) - self._frame_thr[idx]) / c.disparity_sigma_px
+        p_i = np.clip(_normal_cdf(z), 0.0, 1.0 - 1e-12)
+        p_any = 1.0 - np.exp(np.bincount(label, weights=np.log1p(-p_i), minlength=n_c))
+        conf = np.clip(p_any * np.minimum(1.0, count / c.confidence_full_pixels), 0.0, 1.0)
+        ul = m.u_left[idx][order]
+        vv = m.v[idx][order]
+        x0 = np.floor(np.minimum.reduceat(ul, starts)).astype(np.int64)
+        x1 = np.ceil(np.maximum.reduceat(ul, starts)).astype(np.int64)
+        y0 = np.minimum.reduceat(vv, starts).astype(np.int64)
+        y1 = np.maximum.reduceat(vv, starts).astype(np.int64)
+        sid = m.string_id[idx][order]
+        lab_o = label[order]
+        srt = np.lexsort((sid, lab_o))
+        sid_s, lab_s = sid[srt], lab_o[srt]
+        uniq = np.r_[True, (sid_s[1:] != sid_s[:-1]) | (lab_s[1:] != lab_s[:-1])]
+        sid_u, lab_u = sid_s[uniq], lab_s[uniq]
+        out = []
+        for k in range(n_c):
+            if count[k] < min_pixels:
                 continue
-            out.append(self._describe(idx[k], sign, hh[k], feet[k], g2[k], rng_px[k], m,
-                                      excess, cam, metric, fwd, lft))
+            yk1 = int(y1[k])
+            fk = foot[k]
+            if sign > 0 and fk[2] > 1e-6:    # extend down to where the obstacle meets the ground
+                v_foot = cam.f * fk[1] / fk[2] + cam.cy
+                if np.isfinite(v_foot):
+                    yk1 = max(yk1, int(round(min(v_foot, cam.height - 1))))
+            xk0, yk0 = max(int(x0[k]), 0), max(int(y0[k]), 0)
+            xk1, yk1 = min(int(x1[k]), cam.width - 1), min(yk1, cam.height - 1)
+            roi = (xk0, yk0, max(xk1 - xk0 + 1, 1), max(yk1 - yk0 + 1, 1))
+            out.append(GpodObstacle(
+                position=position[k].astype(np.float64), height=float(height[k]),
+                range=float(r_near[k]), bearing=float(bearing[k]),
+                width=float(hi_lat[k] - lo_lat[k]), disparity_excess=float(exc[k]),
+                confidence=float(conf[k]), roi=roi, num_edge_pixels=int(count[k]),
+                string_ids=sid_u[lab_u == k].astype(np.int32)))
         return out
 
-    def _describe(self, ids, sign, hh, feet, g2, rng_px, m: Matches, excess, cam, metric,
-                  fwd, lft) -> GpodObstacle:
-        c = self.config
-        n = ids.size
-        height = float(np.quantile(hh, 0.9 if sign > 0 else 0.1))
-        r_near = np.quantile(rng_px, 0.1 if sign > 0 else 0.02)   # a drop starts at its near edge
-        near = int(np.argmin(np.abs(rng_px - r_near)))
-        foot = feet[near]
-        position = foot + height * metric.normal_up
-        rng_, brg = ground_range_bearing(metric, position[None, :])
-        # Lateral extent of the feet across the line of sight to their median.
-        centre = np.median(g2, axis=0)
-        norm = float(np.hypot(*centre))
-        across = np.array([-centre[1], centre[0]]) / norm if norm > 1e-9 else np.array([0.0, 1.0])
-        lat = g2 @ across
-        width = float(lat.max() - lat.min())
-        ex = excess[ids]
-        exc = float(ex.max()) if sign > 0 else float(ex.min())
-        z = (np.abs(ex) - c.threshold_px) / c.disparity_sigma_px
-        p_i = np.clip(_normal_cdf(z), 0.0, 1.0 - 1e-12)
-        p_any = 1.0 - math.exp(float(np.sum(np.log1p(-p_i))))
-        conf = p_any * min(1.0, n / c.confidence_full_pixels)
-        ul = m.u_left[ids]
-        vv = m.v[ids]
-        x0, x1 = int(np.floor(ul.min())), int(np.ceil(ul.max()))
-        y0, y1 = int(vv.min()), int(vv.max())
-        if sign > 0 and foot[2] > 1e-6:      # extend down to where the obstacle meets the ground
-            v_foot = cam.f * foot[1] / foot[2] + cam.cy
-            if np.isfinite(v_foot):
-                y1 = max(y1, int(round(min(v_foot, cam.height - 1))))
-        x0, y0 = max(x0, 0), max(y0, 0)
-        x1, y1 = min(x1, cam.width - 1), min(y1, cam.height - 1)
-        roi = (x0, y0, max(x1 - x0 + 1, 1), max(y1 - y0 + 1, 1))
-        return GpodObstacle(
-            position=position.astype(np.float64), height=height, range=float(rng_[0]),
-            bearing=float(brg[0]), width=width, disparity_excess=exc,
-            confidence=float(np.clip(conf, 0.0, 1.0)), roi=roi, num_edge_pixels=int(n),
-            string_ids=np.unique(m.string_id[ids]).astype(np.int32))
+
+def _group_quantile(group: np.ndarray, x: np.ndarray, q: float, n_groups: int) -> np.ndarray:
+    """``np.quantile(x[group == k], q)`` (linear interpolation) for k = 0..n_groups-1
+    (NaN for an empty group)."""
+    out = np.full(n_groups, np.nan)
+    if x.size == 0:
+        return out
+    order = np.lexsort((x, group))
+    g, xs = group[order], x[order]
+    count = np.bincount(g, minlength=n_groups)
+    start = np.cumsum(count) - count
+    has = count > 0
+    pos = q * (count[has] - 1)
+    lo = np.floor(pos).astype(np.int64)
+    hi = np.minimum(lo + 1, count[has] - 1)
+    frac = pos - lo
+    s = start[has]
+    out[has] = xs[s + lo] + (xs[s + hi] - xs[s + lo]) * frac
+    return out
 
 
 def _features(m: Matches, excess: np.ndarray, obst: np.ndarray | None = None,
-              drop: np.ndarray | None = None, sclass: np.ndarray | None = None) -> GpodFeatures:
+              drop: np.ndarray | None = None, sclass: np.ndarray | None = None,
+              excess_mean: np.ndarray | None = None,
+              threshold: np.ndarray | None = None) -> GpodFeatures:
     """GpodFeatures of the matches (no pixel flagged when the flags are None)."""
     k = len(m)
     z = np.zeros(k, bool)
@@ -824,4 +1218,21 @@ def _features(m: Matches, excess: np.ndarray, obst: np.ndarray | None = None,
                         is_obstacle=z if obst is None else obst,
                         is_drop=z.copy() if drop is None else drop,
                         string_class=np.zeros(k, np.int8) if sclass is None else sclass,
-                        string_id=m.string_id)
+                        string_id=m.string_id, strength=m.strength,
+                        excess_mean=excess if excess_mean is None else excess_mean,
+                        threshold=threshold)
+
+
+def _noise_key(m: Matches) -> np.ndarray:
+    """What the disparity noise of a match is binned by for ``sigma_per_edge``: the
+    precision of its edges' sub-pixel positions (their gradient curvature,
+    ``Matches.precision``), or the edge strength when that is unknown."""
+    return m.precision if m.precision is not None else m.strength
+
+
+def _mad_sigma(x: np.ndarray) -> float:
+    """Robust standard deviation, 1.4826 * median absolute deviation (NaN if empty)."""
+    x = np.asarray(x, np.float64)
+    if x.size == 0:
+        return float('nan')
+    return float(1.4826 * np.median(np.abs(x - np.median(x))))

@@ -30,6 +30,7 @@ class PlaneFit:
         residual_rms: RMS disparity residual of the inliers, pixels.
         inliers: (N,) bool mask over the input features.
         metric: the plane in the left optical frame, or None when no camera was given.
+        residual_sigma: robust spread (1.4826 * MAD) of the inliers' residuals, pixels.
     """
 
     abc: np.ndarray
@@ -38,6 +39,7 @@ class PlaneFit:
     residual_rms: float
     inliers: np.ndarray
     metric: MetricPlane | None
+    residual_sigma: float = float('nan')
 
 
 def lsq_plane(u: np.ndarray, v: np.ndarray, d: np.ndarray, w: np.ndarray | None = None,
@@ -57,31 +59,37 @@ def lsq_plane(u: np.ndarray, v: np.ndarray, d: np.ndarray, w: np.ndarray | None 
     if n < 3:
         return None
     if w is None:
-        w = np.ones(n)
+        sw = float(n)
+        mu, mv = float(u.mean()), float(v.mean())
+        uu, vv = u - mu, v - mv
+        wu, wv, wd, w1 = uu, vv, d, None
     else:
         w = np.asarray(w, np.float64)
         mean_w = float(w.mean())
         if not (np.isfinite(mean_w) and mean_w > 0):
             return None
         w = w / mean_w
-    # Centre for conditioning; c is recovered afterwards.
-    mu, mv = float(np.average(u, weights=w)), float(np.average(v, weights=w))
-    a_mat = np.stack([u - mu, v - mv, np.ones(n)], axis=1)
-    aw = a_mat * w[:, None]
-    ata = aw.T @ a_mat
+        sw = float(w.sum())
+        mu, mv = float(w @ u) / sw, float(w @ v) / sw
+        uu, vv = u - mu, v - mv
+        wu, wv, wd, w1 = w * uu, w * vv, w * d, w
+    # Normal equations of the centred problem (the cross terms with the constant vanish).
+    suu, suv, svv = float(wu @ uu), float(wu @ vv), float(wv @ vv)
     # Degenerate when the (u, v) scatter is (nearly) a line or a point.
-    suv = ata[:2, :2] / n
-    ev = np.linalg.eigvalsh(suv)
-    if not np.all(np.isfinite(ev)) or ev[0] < 0.25:      # < 0.5 px spread across
+    tr, det = (suu + svv) / n, (suu * svv - suv * suv) / (n * n)
+    ev0 = 0.5 * tr - math.sqrt(max(0.25 * tr * tr - det, 0.0))
+    if not (math.isfinite(ev0) and ev0 >= 0.25):          # < 0.5 px spread across
         return None
+    ata = np.array([[suu, suv, 0.0], [suv, svv, 0.0], [0.0, 0.0, sw]])
+    rhs = np.array([float(wd @ uu), float(wd @ vv), float(wd.sum())])
     try:
         ata_inv = np.linalg.inv(ata)
     except np.linalg.LinAlgError:
         return None
-    p = ata_inv @ (aw.T @ d)
-    res = d - a_mat @ p
+    p = ata_inv @ rhs
+    res = d - (p[0] * uu + p[1] * vv + p[2])
     rms = float(np.sqrt(res @ res / n))
-    sigma2 = float((w * res) @ res) / max(n - 3, 1)
+    sigma2 = float((res * res).sum() if w1 is None else (w1 * res) @ res) / max(n - 3, 1)
     # Back to (a, b, c): c = p2 - a*mu - b*mv, a linear map J of p.
     jac = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [-mu, -mv, 1.0]])
     abc = jac @ p
@@ -107,7 +115,7 @@ def _ransac_best(u: np.ndarray, v: np.ndarray, d: np.ndarray, threshold: float,
                  iterations: int, rng: np.random.Generator, cam: StereoCamera | None = None,
                  bounds: tuple[float, float, float] = (0.1, 10.0, 75.0),
                  weights: np.ndarray | None = None, confidence: float = 0.99,
-                 batch: int = 64, max_score_points: int = 2000) -> np.ndarray | None:
+                 batch: int = 16, max_score_points: int = 1000) -> np.ndarray | None:
     """Best minimal-sample plane by MSAC score (truncated squared residual, optionally
     weighted per point by ``weights``).
 
@@ -301,6 +309,8 @@ def fit_ground_plane(u, v, d, *, cam: StereoCamera | None = None, method: str = 
             return None
     mask = np.zeros(n, bool)
     mask[np.flatnonzero(finite)[inl]] = True
+    res = df[inl] - (abc[0] * uf[inl] + abc[1] * vf[inl] + abc[2])
+    sigma = float(1.4826 * np.median(np.abs(res - np.median(res))))
     return PlaneFit(abc=np.asarray(abc, np.float64), cov=np.asarray(cov, np.float64),
                     num_features=int(inl.sum()), residual_rms=float(rms), inliers=mask,
-                    metric=metric)
+                    metric=metric, residual_sigma=sigma)

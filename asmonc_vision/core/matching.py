@@ -1,4 +1,4 @@
-"""Row-wise stereo matching of vertical edges with PMF-style support.
+"""Row-wise stereo matching of vertical edges with PMF (Pollard, Mayhew & Frisby 1985).
 
 After Pollard, Mayhew & Frisby (PMF, 1985), as used by GPOD (Molton et al. 1998, Sec. 2.1):
 
@@ -7,25 +7,21 @@ After Pollard, Mayhew & Frisby (PMF, 1985), as used by GPOD (Molton et al. 1998,
    of the same polarity, with compatible strength (ratio of the weaker to the stronger at
    least ``min_strength_ratio``) and orientation (gradient directions within
    ``max_orientation_diff_deg``).
-2. Support (:func:`support_links`, :func:`pmf_support`): a candidate c = (e, r) gets
-   support from every *other* left edge e' within ``support_radius`` pixels of e (left
-   image) that has a live match (e', r') compatible with c under the disparity-gradient
-   limit ``|d' - d| <= limit * |cyclopean separation|``. Each neighbouring edge
-   contributes once (PMF counts only the best match of each neighbour), with weight
-   ``1 / distance`` between e and e'. The compatible right edges r' of a neighbour
-   lie in an interval of columns on its row (the disparity-gradient limit solved
-   exactly for the sub-pixel positions), so each (candidate, neighbour edge) link looks
-   only at the one or two right edges of the right polarity in that interval, found in
-   O(1) from a (polarity, row, column) table, instead of testing every pair of
-   candidates; those must pass the candidate tests too. Neighbourhoods are on integer
-   pixel positions (a disc of ``support_radius``).
-3. Selection (:func:`select_matches`): winner-take-all with uniqueness in both images:
+2. Support (:func:`support_links`, :func:`pmf_support`), as published: a candidate
+   c = (e, r) is supported by the candidates c' of the *other* left edges whose
+   cyclopean positions ``((u_left + u_right) / 2, v)`` lie within ``support_radius`` of
+   c's (the cyclopean image) and that satisfy the disparity-gradient limit with it,
+   ``|d' - d| <= limit * |cyclopean separation|`` (limit 1 in PMF); each contributes
+   ``1 / separation``, and each neighbouring left edge contributes at most once, with its
+   best such match. (Candidates sharing an edge with c have a disparity gradient of 2
+   and never support it.)
+3. Selection (:func:`select_matches`), PMF's iterative winner-take-all with uniqueness:
    a candidate is accepted when its support is above ``min_support`` and strictly the
-   largest among the live candidates of both its left and its right edge. Competitors of
-   accepted matches die, support is recomputed from the survivors (a neighbour edge that
-   has been matched now supports only through its accepted match), for ``iterations``
-   rounds (1 = one-pass). This is iterative PMF in outline; a fuller version (relaxation,
-   string-level consistency) can replace :func:`select_matches` alone.
+   largest among the live candidates of both its left and its right edge; the
+   competitors of accepted matches (other candidates of their left or right edge) are
+   removed, and the support is recomputed from what is left -- a neighbouring edge that
+   has been matched supports only through its accepted match -- for ``iterations``
+   rounds.
 
 Disparities are sub-pixel, from the sub-pixel edge positions in both images.
 """
@@ -60,27 +56,35 @@ class Candidates:
 class SupportLinks:
     """PMF neighbourhood: one link per (candidate, neighbouring left edge).
 
-    Link q says: candidate ``cand[q]`` is supported, with weight ``weight[q]``, by its
-    neighbouring left edge if any of the link's *supporters* is alive. Supporter pair p
-    belongs to link ``pair_link[p]``: (``pair_edge[p]``, ``pair_right[p]``) is an
-    admissible candidate of the neighbouring edge compatible with ``cand[q]`` under the
-    disparity-gradient limit. Links without supporters are not stored.
+    Link q says: candidate ``cand[q]`` is supported by one neighbouring left edge, with
+    the weight of the best *alive* one of the link's supporters. Supporter p belongs
+    to link ``pair_link[p]`` (the supporters of a link are contiguous, from
+    ``start[q]``): candidate ``pair_cand[p]`` = (``pair_edge[p]``, ``pair_right[p]``)
+    of the neighbouring edge, whose cyclopean position is within the support radius of
+    the supported candidate's and which satisfies the disparity-gradient limit with it;
+    ``weight[p]`` is ``1 / cyclopean separation``. Links without supporters are not
+    stored.
 
     Attributes:
         num_candidates: M.
         cand: (Q,) int32 supported candidate.
-        weight: (Q,) float32 ``1 / distance`` between the two left edges, 1/pixels.
-        pair_link: (P,) int32 link of each supporter.
-        pair_edge: (P,) int32 supporting left edge (index into the left EdgeMap).
-        pair_right: (P,) int32 supporting right edge (index into the right EdgeMap).
+        start: (Q,) int64 index of the link's first supporter (ascending).
+        pair_link: (P,) int32 link of each supporter (ascending).
+        pair_cand: (P,) int32 supporting candidate (index into the Candidates).
+        pair_edge: (P,) int32 its left edge (index into the left EdgeMap).
+        pair_right: (P,) int32 its right edge (index into the right EdgeMap).
+        weight: (P,) float64 ``1 / distance`` between the two candidates' cyclopean
+            positions, 1/pixels.
     """
 
     num_candidates: int
     cand: np.ndarray
-    weight: np.ndarray
+    start: np.ndarray
     pair_link: np.ndarray
+    pair_cand: np.ndarray
     pair_edge: np.ndarray
     pair_right: np.ndarray
+    weight: np.ndarray
 
     def __len__(self) -> int:
         return int(self.cand.shape[0])
@@ -100,6 +104,9 @@ class Matches:
         left_index: (K,) int32 index into the left EdgeMap.
         right_index: (K,) int32 index into the right EdgeMap.
         support: (K,) float32 final PMF support.
+        precision: (K,) float32 ``1 / sqrt(1/cL^2 + 1/cR^2)`` of the left and right edges'
+            curvatures c (``EdgeMap.curvature``): the disparity's noise is about
+            ``0.7 * gradient noise / precision`` pixels. None if unknown.
     """
 
     u_left: np.ndarray
@@ -111,6 +118,7 @@ class Matches:
     left_index: np.ndarray
     right_index: np.ndarray
     support: np.ndarray
+    precision: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.v.shape[0])
@@ -216,57 +224,44 @@ def disparity_gradient_interval(du_left, dv, limit: float) -> tuple[np.ndarray, 
     return (-qb - root) / (2.0 * qa), (-qb + root) / (2.0 * qa)
 
 
+#: Relative slack of the single-precision disparity pre-filter of :func:`support_links`.
+_SLACK = 1.0 + 1e-4
+
+
 def _empty_links(m: int) -> SupportLinks:
     zi = np.zeros(0, np.int32)
-    return SupportLinks(num_candidates=m, cand=zi, weight=np.zeros(0, np.float32),
-                        pair_link=zi, pair_edge=zi, pair_right=zi)
+    return SupportLinks(num_candidates=m, cand=zi, start=np.zeros(0, np.int64), pair_link=zi,
+                        pair_cand=zi, pair_edge=zi, pair_right=zi, weight=np.zeros(0))
 
 
-def _polarity_row_table(edges: EdgeMap) -> tuple[np.ndarray, np.ndarray]:
-    """Lookup of the edges of one polarity on one row by column.
-
-    Args:
-        edges: an EdgeMap (sorted by row, then column).
-    Returns:
-        (table, order): ``order`` (N,) int64 lists the edge indices of polarity +1, then
-        those of polarity -1, each sorted by (row, column); ``table`` (2 * H * (W + 1),)
-        int64 holds at ``(p * H + v) * (W + 1) + c`` the position in ``order`` of the
-        first edge of polarity plane p (0: +1, 1: -1) on row v with column >= c. The
-        edges of plane p, row v, columns c0..c1 are
-        ``order[table[base + c0] : table[base + c1 + 1]]``, base = (p * H + v) * (W + 1).
-    """
-    h, w = edges.shape
-    plane = (edges.polarity < 0).astype(np.int64)
-    occ = np.zeros(2 * h * (w + 1), np.int64)
-    occ[(plane * h + edges.v) * (w + 1) + edges.u_int + 1] = 1
-    order = np.r_[np.flatnonzero(plane == 0), np.flatnonzero(plane == 1)]
-    return np.cumsum(occ), order
-
-
-def support_links(left: EdgeMap, right: EdgeMap, cand: Candidates, d_min: float,
-                  d_max: float, *, support_radius: float = 3.0,
+def support_links(left: EdgeMap, right: EdgeMap, cand: Candidates, d_min: float = 0.0,
+                  d_max: float = np.inf, *, support_radius: float = 3.0,
                   disparity_gradient_limit: float = 1.0, min_strength_ratio: float = 0.5,
                   max_orientation_diff_deg: float = 30.0) -> SupportLinks:
-    """Links from every candidate to the neighbouring left edges that may support it.
+    """The PMF neighbourhood of every candidate (Pollard, Mayhew & Frisby 1985).
 
-    For candidate c = (e, r) with disparity d and a left edge e' (with candidates)
-    within ``support_radius`` of e (integer pixel positions, e' != e), offset
-    ``(du, dv)`` with sub-pixel du, a candidate (e', r') is compatible when
-    ``d' = d + x`` with x in :func:`disparity_gradient_interval` (exact, sub-pixel), i.e.
-    ``u_right(r')`` in ``[u_right(r) + du - x_hi, u_right(r) + du - x_lo]``, d' in
-    ``[d_min, d_max]``, and (e', r') passes the candidate tests (polarity, strength,
-    orientation; use the same settings as :func:`candidate_matches`). Only the few right
-    edges of the right polarity in that interval are looked at, found in O(1) from a
-    (polarity, row, column) table.
+    Candidate c' = (e', r') of another left edge e' supports c = (e, r) when their
+    cyclopean positions ``((u_left + u_right) / 2, v)`` (sub-pixel) are at most
+    ``support_radius`` apart and their disparity gradient
+    ``|d' - d| / cyclopean separation`` is at most ``disparity_gradient_limit``, with
+    weight ``1 / cyclopean separation``. Candidates sharing an edge with c have a
+    disparity gradient of 2 and never support it. The supporters are grouped into one
+    link per (c, e'): a neighbouring edge contributes only its best compatible match
+    (see :func:`pmf_support`). Supporters are candidates themselves, so they passed
+    the candidate tests (polarity, strength, orientation, disparity range).
+
+    The neighbours are found in the cyclopean image directly: candidates are bucketed by
+    (row, cyclopean column); each pair is found once and used both ways (support is
+    symmetric), after a single-precision disparity pre-test and the exact tests in
+    double precision.
 
     Args:
         left, right: the EdgeMaps the candidates index.
         cand: candidates from :func:`candidate_matches`.
-        d_min, d_max: the disparity range used for the candidates, pixels.
-        support_radius: neighbourhood radius, pixels (>= 1).
+        d_min, d_max, min_strength_ratio, max_orientation_diff_deg: not used (the
+            candidates already obey them); kept for the call signature.
+        support_radius: neighbourhood radius in the cyclopean image, pixels (>= 1).
         disparity_gradient_limit: PMF disparity-gradient limit, in (0, 2).
-        min_strength_ratio, max_orientation_diff_deg: candidate tests, as for
-            :func:`candidate_matches`.
     Returns:
         The SupportLinks.
     """
@@ -276,87 +271,98 @@ def support_links(left: EdgeMap, right: EdgeMap, cand: Candidates, d_min: float,
         raise ValueError(f'disparity_gradient_limit must be in (0, 2), got {lim}')
     if m == 0:
         return _empty_links(0)
-    # Left edges that have candidates (ranks k), each one's range of candidates.
-    new_edge = np.ones(m, bool)
-    new_edge[1:] = cand.left[1:] != cand.left[:-1]
-    first_cand = np.flatnonzero(new_edge)
-    edges = cand.left[first_cand].astype(np.int64)
-    n_e = edges.size
-    count = np.diff(np.r_[first_cand, m])
-    # Neighbouring edge pairs (k1, k2) from an index image padded by the radius.
-    du_o, dv_o = disc_offsets(support_radius)
-    pad = int(np.floor(support_radius))
+    rad = float(support_radius)
+    # Candidates as points (v, cyclopean u, d), sorted by (v, u). For every candidate and
+    # row offset, the candidates in the columns that the radius may reach come from a
+    # (row, column) table of positions in the sorted order; a cheap disparity test
+    # thins them before the exact one. The work is done in the sorted order (contiguous
+    # reads) and mapped back at the end.
     h, w = left.shape
-    wp = w + 2 * pad
-    rank_img = np.full((h + 2 * pad) * wp, -1, np.int32)
-    flat = (left.v[edges].astype(np.int64) + pad) * wp + left.u_int[edges] + pad
-    rank_img[flat] = np.arange(n_e, dtype=np.int32)
-    nb = rank_img[flat[:, None] + (dv_o * wp + du_o)[None, :]]
-    k1, j = np.nonzero(nb >= 0)
-    e2 = edges[nb[k1, j]]
-    ul = left.u.astype(np.float64)
-    du = ul[e2] - ul[edges[k1]]
-    dv = dv_o[j].astype(np.float64)
-    x_lo, x_hi = disparity_gradient_interval(du, dv, lim)
-    wgt = (1.0 / np.sqrt(du * du + dv * dv)).astype(np.float32)
-    # Per edge pair: u_right(r') bounds relative to u_right(r), and absolute bounds
-    # from the disparity range, and the table base of the neighbour's polarity and row.
-    off_lo = (du - x_hi).astype(np.float32)
-    off_hi = (du - x_lo).astype(np.float32)
-    ul2 = ul[e2]
-    abs_lo = (ul2 - d_max).astype(np.float32)
-    abs_hi = (ul2 - d_min).astype(np.float32)
-    base = (((left.polarity[e2] < 0).astype(np.int64) * h + left.v[e2]) * (w + 1))
-    # One link per (candidate of k1, edge pair).
-    pair, c = _expand(first_cand[k1], first_cand[k1] + count[k1])
-    ur_c = right.u[cand.right[c]]
-    a = np.maximum(ur_c + off_lo[pair], abs_lo[pair])
-    b = np.minimum(ur_c + off_hi[pair], abs_hi[pair])
-    # Right edges of the neighbour's polarity whose integer column may hold [a, b].
-    col_lo = np.clip(np.ceil(a - 0.5), 0, w).astype(np.int64)
-    col_hi = np.clip(np.floor(b + 0.5) + 1, 0, w).astype(np.int64)
-    table, order = _polarity_row_table(right)
-    bp = base[pair]
-    lo = table[bp + col_lo]
-    n_in = table[bp + np.maximum(col_hi, col_lo)] - lo
-    q = np.flatnonzero(n_in > 0)
-    pair, c, a, b, lo, n_in = pair[q], c[q], a[q], b[q], lo[q], n_in[q]
-    e2c = e2[pair]
-    # Enumerate those right edges (rarely more than one or two per link).
-    links, rights = [], []
-    sel = np.arange(q.size)
-    for k in range(int(n_in.max()) if q.size else 0):
-        sel = sel[n_in[sel] > k]
-        links.append(sel)
-        rights.append(order[lo[sel] + k])
-    link = np.concatenate(links) if links else np.zeros(0, np.int64)
-    r2 = np.concatenate(rights) if rights else np.zeros(0, np.int64)
-    e2p = e2c[link]
-    ur2 = right.u[r2]
-    ok = (ur2 >= a[link]) & (ur2 <= b[link])
-    sl = left.strength[e2p]
-    sr = right.strength[r2]
-    ok &= np.minimum(sl, sr) >= min_strength_ratio * np.maximum(sl, sr)
-    dori = np.abs(left.orientation[e2p] - right.orientation[r2])
-    ok &= np.minimum(dori, 2.0 * np.pi - dori) <= np.deg2rad(max_orientation_diff_deg)
-    link, r2, e2p = link[ok], r2[ok], e2p[ok]
-    if link.size == 0:
+    uc = 0.5 * (left.u[cand.left].astype(np.float64) + right.u[cand.right])
+    vc = left.v[cand.left].astype(np.int64)
+    col = np.clip(np.floor(uc).astype(np.int64), 0, w - 1)
+    cell = vc * w + col
+    order = np.argsort(cell * 2.0 + (uc - col), kind='stable')
+    s_cell = cell[order]
+    s_uc64 = uc[order]
+    s_d64 = cand.d[order].astype(np.float64)
+    s_d = s_d64.astype(np.float32)
+    table = np.zeros(h * w + 1, np.int64)
+    np.cumsum(np.bincount(s_cell, minlength=h * w), out=table[1:])
+    r_int = int(np.floor(rad))
+    s_v = vc[order]
+    c_lo = np.maximum(np.floor(s_uc64 - rad).astype(np.int64), 0)
+    c_hi = np.minimum(np.floor(s_uc64 + rad).astype(np.int64), w - 1)
+    lim2 = lim * lim
+    rad2 = rad * rad
+    dmax = lim * rad
+    # Support is symmetric: pairs are found once (rows below, or to the right on the
+    # same row) and used both ways.
+    own, oth, sep = [], [], []
+    for dv in range(0, r_int + 1):
+        row = s_v + dv
+        inside = row < h
+        base = np.where(inside, row, 0) * w
+        lo = np.where(inside, table[base + c_lo], 0)
+        hi = np.where(inside, table[base + c_hi + 1], 0)
+        if dv == 0:
+            lo = np.maximum(lo, np.arange(m) + 1)
+        i, j = _expand(lo, hi)
+        if i.size == 0:
+            continue
+        dd = s_d[j] - s_d[i]
+        near = np.abs(dd) <= dmax * _SLACK
+        i, j = i[near], j[near]
+        # Exact tests in double precision on the few that are left.
+        dcu = s_uc64[j] - s_uc64[i]
+        s2 = dcu * dcu + float(dv * dv)
+        dd = s_d64[j] - s_d64[i]
+        ok = (s2 <= rad2) & (dd * dd <= lim2 * s2) & (s2 > 0.0)
+        own.append(i[ok])
+        oth.append(j[ok])
+        sep.append(s2[ok])
+    if not own:
         return _empty_links(m)
-    # Keep links with supporters; renumber the supporters' links.
-    has = np.zeros(q.size, bool)
-    has[link] = True
-    new_index = np.cumsum(has) - 1
-    return SupportLinks(num_candidates=m, cand=c[has].astype(np.int32),
-                        weight=wgt[pair[has]], pair_link=new_index[link].astype(np.int32),
-                        pair_edge=e2p.astype(np.int32), pair_right=r2.astype(np.int32))
+    i = np.concatenate(own)
+    j = np.concatenate(oth)
+    c = order[np.r_[i, j]]
+    c2 = order[np.r_[j, i]]
+    sep2 = np.tile(np.concatenate(sep), 2)
+    if c.size == 0:
+        return _empty_links(m)
+    # Links: supporters grouped by (supported candidate, supporter's left edge).
+    e2 = cand.left[c2].astype(np.int64)
+    srt = _lexsort_small(e2, c, len(left), m)
+    c, c2, sep2, e2 = c[srt], c2[srt], sep2[srt], e2[srt]
+    gkey = c * (len(left) + 1) + e2
+    first = np.ones(c.size, bool)
+    first[1:] = gkey[1:] != gkey[:-1]
+    start = np.flatnonzero(first)
+    pair_link = (np.cumsum(first) - 1).astype(np.int32)
+    return SupportLinks(num_candidates=m, cand=c[start].astype(np.int32), start=start,
+                        pair_link=pair_link, pair_cand=c2.astype(np.int32),
+                        pair_edge=cand.left[c2].astype(np.int32),
+                        pair_right=cand.right[c2].astype(np.int32),
+                        weight=1.0 / np.sqrt(sep2))
+
+
+def _lexsort_small(minor: np.ndarray, major: np.ndarray, n_minor: int,
+                   n_major: int) -> np.ndarray:
+    """Permutation sorting by (major, minor), both non-negative ints below n_major,
+    n_minor; two stable radix sorts when they fit in 16 bits."""
+    if n_minor < 65536 and n_major < 65536:
+        p = np.argsort(minor.astype(np.uint16), kind='stable')
+        return p[np.argsort(major[p].astype(np.uint16), kind='stable')]
+    return np.lexsort((minor, major))
 
 
 def pmf_support(links: SupportLinks, taken_right: np.ndarray | None = None,
                 left_match: np.ndarray | None = None) -> np.ndarray:
-    """Support of every candidate from the live matches of its neighbouring edges.
+    """PMF support of every candidate: the sum over its neighbouring edges of the
+    weight of each one's best alive compatible match.
 
     A supporter (e', r') is alive when it is an accepted match, or when neither e' nor r'
-    is used by an accepted match. A link gives its weight when any supporter is alive.
+    is used by an accepted match (a competitor of an accepted match has been removed).
 
     Args:
         links: the SupportLinks of M candidates.
@@ -369,12 +375,13 @@ def pmf_support(links: SupportLinks, taken_right: np.ndarray | None = None,
     m = links.num_candidates
     if len(links) == 0:
         return np.zeros(m)
-    if left_match is None or taken_right is None:
-        return np.bincount(links.cand, weights=links.weight, minlength=m)
-    lm = left_match[links.pair_edge]
-    alive = np.where(lm >= 0, lm == links.pair_right, ~taken_right[links.pair_right])
-    live = np.bincount(links.pair_link[alive], minlength=len(links)) > 0
-    return np.bincount(links.cand, weights=np.where(live, links.weight, 0.0), minlength=m)
+    w = links.weight
+    if left_match is not None and taken_right is not None:
+        lm = left_match[links.pair_edge]
+        alive = np.where(lm >= 0, lm == links.pair_right, ~taken_right[links.pair_right])
+        w = np.where(alive, w, 0.0)
+    best = np.maximum.reduceat(w, links.start)
+    return np.bincount(links.cand, weights=best, minlength=m)
 
 
 def _unique_max(values: np.ndarray, group: np.ndarray, order: np.ndarray,
@@ -400,7 +407,7 @@ def _unique_max(values: np.ndarray, group: np.ndarray, order: np.ndarray,
 
 
 def select_matches(cand: Candidates, links: SupportLinks, left: EdgeMap, right: EdgeMap, *,
-                   iterations: int = 2, min_support: float = 0.5
+                   iterations: int = 3, min_support: float = 0.5
                    ) -> tuple[np.ndarray, np.ndarray]:
     """Winner-take-all with uniqueness in both images, iterated PMF-style.
 
@@ -441,37 +448,62 @@ def select_matches(cand: Candidates, links: SupportLinks, left: EdgeMap, right: 
     return accepted, support
 
 
+def pmf_match(left: EdgeMap, right: EdgeMap, d_min: float, d_max: float, *,
+              min_strength_ratio: float = 0.5, max_orientation_diff_deg: float = 30.0,
+              support_radius: float = 3.0, disparity_gradient_limit: float = 1.0,
+              iterations: int = 3, min_support: float = 0.5
+              ) -> tuple[Matches, Candidates, np.ndarray]:
+    """:func:`match_edges`, also returning every candidate and its final support.
+
+    Returns:
+        (matches, candidates, support (M,) float64 of each candidate in the last round).
+    """
+    cand = candidate_matches(left, right, d_min, d_max, min_strength_ratio=min_strength_ratio,
+                             max_orientation_diff_deg=max_orientation_diff_deg)
+    links = support_links(left, right, cand, d_min, d_max, support_radius=support_radius,
+                          disparity_gradient_limit=disparity_gradient_limit)
+    acc, support = select_matches(cand, links, left, right, iterations=iterations,
+                                  min_support=min_support)
+    li = cand.left[acc]
+    rj = cand.right[acc]
+    m = Matches(u_left=left.u[li].astype(np.float32), u_right=right.u[rj].astype(np.float32),
+                v=left.v[li].astype(np.int32), d=cand.d[acc].astype(np.float32),
+                strength=(0.5 * (left.strength[li] + right.strength[rj])).astype(np.float32),
+                string_id=left.string_id[li].astype(np.int32),
+                left_index=li.astype(np.int32), right_index=rj.astype(np.int32),
+                support=support[acc].astype(np.float32), precision=_precision(left, right, li, rj))
+    return m, cand, support
+
+
+def _precision(left: EdgeMap, right: EdgeMap, li: np.ndarray, rj: np.ndarray) -> np.ndarray | None:
+    """Combined curvature ``1 / sqrt(1/cL^2 + 1/cR^2)`` of matched edges (see Matches)."""
+    if left.curvature is None or right.curvature is None:
+        return None
+    cl = np.maximum(left.curvature[li].astype(np.float64), 1e-6)
+    cr = np.maximum(right.curvature[rj].astype(np.float64), 1e-6)
+    return (1.0 / np.sqrt(1.0 / (cl * cl) + 1.0 / (cr * cr))).astype(np.float32)
+
+
 def match_edges(left: EdgeMap, right: EdgeMap, d_min: float, d_max: float, *,
                 min_strength_ratio: float = 0.5, max_orientation_diff_deg: float = 30.0,
                 support_radius: float = 3.0, disparity_gradient_limit: float = 1.0,
-                iterations: int = 2, min_support: float = 0.5) -> Matches:
-    """Match left edges to right edges row by row (candidates, PMF support, selection).
+                iterations: int = 3, min_support: float = 0.5) -> Matches:
+    """Match left edges to right edges row by row: candidates, PMF support, selection.
 
     Args:
         left, right: EdgeMaps of the rectified left and right images (same shape).
         d_min, d_max: disparity range, pixels (e.g. ``f*B / max_range``, ``f*B / min_range``).
         min_strength_ratio: least ratio weaker/stronger edge strength, 0..1.
         max_orientation_diff_deg: largest gradient-direction difference, degrees.
-        support_radius: PMF neighbourhood radius in the left image, pixels.
+        support_radius: PMF neighbourhood radius in the cyclopean image, pixels.
         disparity_gradient_limit: PMF disparity-gradient limit, in (0, 2).
-        iterations: PMF selection rounds (>= 1).
+        iterations: PMF winner-take-all rounds (>= 1).
         min_support: least support of an accepted match (>= 0).
     Returns:
         Matches sorted by (v, u_left).
     """
-    cand = candidate_matches(left, right, d_min, d_max, min_strength_ratio=min_strength_ratio,
-                             max_orientation_diff_deg=max_orientation_diff_deg)
-    links = support_links(left, right, cand, d_min, d_max, support_radius=support_radius,
-                          disparity_gradient_limit=disparity_gradient_limit,
-                          min_strength_ratio=min_strength_ratio,
-                          max_orientation_diff_deg=max_orientation_diff_deg)
-    acc, support = select_matches(cand, links, left, right, iterations=iterations,
-                                  min_support=min_support)
-    li = cand.left[acc]
-    rj = cand.right[acc]
-    return Matches(u_left=left.u[li].astype(np.float32), u_right=right.u[rj].astype(np.float32),
-                   v=left.v[li].astype(np.int32), d=cand.d[acc].astype(np.float32),
-                   strength=(0.5 * (left.strength[li] + right.strength[rj])).astype(np.float32),
-                   string_id=left.string_id[li].astype(np.int32),
-                   left_index=li.astype(np.int32), right_index=rj.astype(np.int32),
-                   support=support[acc].astype(np.float32))
+    return pmf_match(left, right, d_min, d_max, min_strength_ratio=min_strength_ratio,
+                     max_orientation_diff_deg=max_orientation_diff_deg,
+                     support_radius=support_radius,
+                     disparity_gradient_limit=disparity_gradient_limit,
+                     iterations=iterations, min_support=min_support)[0]
