@@ -211,3 +211,9 @@ def test_eval_refuses_bad_input(tmp_path, capsys):
     assert main(['eval', str(STATIC), '--threshold-px', '0']) == 2
     err = capsys.readouterr().err
     assert 'one --outputs per BAG' in err and 'does not exist' in err
+
+
+def test_threshold_px_selects_gpod_fixed_threshold():
+    from asmonc_vision.cli.bench import make_method
+    det = make_method('gpod', 1.2)
+    assert det.config.threshold_mode == 'fixed' and det.config.threshold_px == 1.2

@@ -190,10 +190,12 @@ class FrameRun:
 
 def make_method(method: str, threshold_px: float | None = None):
     """A fresh detector: 'gpod' (GpodDetector, default GpodConfig) or 'sgbm' (SgbmBaseline,
-    default SgbmConfig); threshold_px overrides the obstacle threshold of either."""
+    default SgbmConfig); threshold_px overrides the obstacle threshold of either (for GPOD
+    it selects the fixed threshold, instead of the default k*sigma one)."""
     if method == 'gpod':
         from asmonc_vision.core.gpod import GpodConfig, GpodDetector
-        cfg = GpodConfig() if threshold_px is None else GpodConfig(threshold_px=threshold_px)
+        cfg = GpodConfig() if threshold_px is None else GpodConfig(
+            threshold_px=threshold_px, threshold_mode='fixed')
         return GpodDetector(cfg)
     if method == 'sgbm':
         from asmonc_vision.core.baseline import SgbmBaseline, SgbmConfig
