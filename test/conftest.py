@@ -37,3 +37,67 @@ def spin_until(executor, predicate, timeout=10.0, step=0.05):
             return True
         executor.spin_once(timeout_sec=step)
     return bool(predicate())
+
+
+class RosGraph:
+    """An rclpy Context on a domain of its own, a single-threaded executor, and the
+    nodes added to it (destroyed at `close`). For node tests over real topics."""
+
+    def __init__(self, domain_id: int, deadline: float = 15.0):
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+
+        self.ctx = rclpy.Context()
+        rclpy.init(context=self.ctx, domain_id=domain_id)
+        self.executor = SingleThreadedExecutor(context=self.ctx)
+        self.deadline = deadline
+        self.nodes = []
+
+    def add(self, node):
+        self.nodes.append(node)
+        self.executor.add_node(node)
+        return node
+
+    def spin_until(self, pred, what, deadline=None, each=None, period=0.05):
+        """Spin until pred(); call each() every `period` s meanwhile; fail after the
+        deadline (a generous bound so a broken node fails the test instead of hanging it,
+        not a speed test)."""
+        import time
+
+        end = time.monotonic() + (self.deadline if deadline is None else deadline)
+        nxt = time.monotonic()
+        while time.monotonic() < end:
+            if each is not None and time.monotonic() >= nxt:
+                each()
+                nxt = time.monotonic() + period
+            self.executor.spin_once(timeout_sec=0.01)
+            if pred():
+                return
+        raise AssertionError(f'timed out waiting for {what}')
+
+    def spin_for(self, seconds: float) -> None:
+        import time
+
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.executor.spin_once(timeout_sec=0.01)
+
+    def close(self) -> None:
+        import rclpy
+
+        for n in self.nodes:
+            self.executor.remove_node(n)
+            n.destroy_node()
+        self.executor.shutdown()
+        rclpy.try_shutdown(context=self.ctx)
+
+
+@pytest.fixture
+def ros(request):
+    """A RosGraph on a domain id of the test module's own (its ROS_DOMAIN_OFFSET) and
+    with its DEADLINE (s); 0..101 are safe DDS domain ids on Linux, 0 is avoided."""
+    offset = getattr(request.module, 'ROS_DOMAIN_OFFSET', 0)
+    graph = RosGraph(1 + (os.getpid() * 3 + offset) % 100,
+                     getattr(request.module, 'DEADLINE', 15.0))
+    yield graph
+    graph.close()

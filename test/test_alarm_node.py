@@ -2,14 +2,11 @@
 from __future__ import annotations
 
 import os
-import time
 
 import pytest
 
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
-import rclpy  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 
@@ -24,42 +21,8 @@ FRAME = 'stereo_left_optical_frame'
 DEADLINE = 15.0
 
 
-def _domain_id(offset: int) -> int:
-    # 0..101 are safe DDS domain ids on Linux; keep clear of 0 (the default)
-    return 1 + (os.getpid() * 3 + offset) % 100
-
-
-@pytest.fixture
-def ros():
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=_domain_id(11))
-    ex = SingleThreadedExecutor(context=ctx)
-    nodes = []
-
-    def add(node):
-        nodes.append(node)
-        ex.add_node(node)
-        return node
-
-    def spin_until(pred, what, deadline=DEADLINE, each=None):
-        """Spin until pred(); call each() every 50 ms meanwhile (a 20 Hz detector)."""
-        end = time.monotonic() + deadline
-        next_each = time.monotonic()
-        while time.monotonic() < end:
-            if each is not None and time.monotonic() >= next_each:
-                each()
-                next_each = time.monotonic() + 0.05
-            ex.spin_once(timeout_sec=0.01)
-            if pred():
-                return
-        raise AssertionError(f'timed out waiting for {what}')
-
-    yield ctx, add, spin_until
-    for n in nodes:
-        ex.remove_node(n)
-        n.destroy_node()
-    ex.shutdown()
-    rclpy.try_shutdown(context=ctx)
+#: this module's DDS domain id offset (see conftest.ros)
+ROS_DOMAIN_OFFSET = 11
 
 
 def _array(stamp_ns: int, ranges, heights=None) -> ObstacleArray:
@@ -79,7 +42,7 @@ def _array(stamp_ns: int, ranges, heights=None) -> ObstacleArray:
 
 
 def test_alarms_follow_obstacles_fault_on_silence_and_latch(ros):
-    ctx, add, spin_until = ros
+    ctx, add, spin_until = ros.ctx, ros.add, ros.spin_until
     probe = add(Node('alarm_probe', context=ctx))
     alarms: list[Alarm] = []
     diags: list = []
@@ -151,7 +114,7 @@ def test_alarms_follow_obstacles_fault_on_silence_and_latch(ros):
 
 
 def test_bad_parameter_change_is_refused(ros):
-    ctx, add, _ = ros
+    ctx, add = ros.ctx, ros.add
     node = add(AlarmNode(context=ctx))
     res = node.set_parameters([Parameter('stop_range', value=3.0)])[0]
     assert not res.successful and 'stop_range' in res.reason

@@ -5,16 +5,13 @@ from __future__ import annotations
 import math
 import os
 import tempfile
-import time
 
 import numpy as np
 import pytest
 
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
-import rclpy  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from sensor_msgs.msg import Imu  # noqa: E402
@@ -27,40 +24,8 @@ from asmonc_vision.nodes.compass_node import CompassNode  # noqa: E402
 DEADLINE = 15.0
 
 
-def _domain_id(offset: int) -> int:
-    return 1 + (os.getpid() * 3 + offset) % 100
-
-
-@pytest.fixture
-def ros():
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=_domain_id(41))
-    ex = SingleThreadedExecutor(context=ctx)
-    nodes = []
-
-    def add(node):
-        nodes.append(node)
-        ex.add_node(node)
-        return node
-
-    def spin_until(pred, what, deadline=DEADLINE, each=None, period=0.05):
-        end = time.monotonic() + deadline
-        nxt = time.monotonic()
-        while time.monotonic() < end:
-            if each is not None and time.monotonic() >= nxt:
-                each()
-                nxt = time.monotonic() + period
-            ex.spin_once(timeout_sec=0.01)
-            if pred():
-                return
-        raise AssertionError(f'timed out waiting for {what}')
-
-    yield ctx, add, spin_until
-    for n in nodes:
-        ex.remove_node(n)
-        n.destroy_node()
-    ex.shutdown()
-    rclpy.try_shutdown(context=ctx)
+#: this module's DDS domain id offset (see conftest.ros)
+ROS_DOMAIN_OFFSET = 41
 
 
 class Device:
@@ -90,7 +55,7 @@ class Device:
 
 
 def test_stream_with_bad_lines_silence_and_reconnect(ros):
-    ctx, add, spin_until = ros
+    ctx, add, spin_until = ros.ctx, ros.add, ros.spin_until
     with tempfile.TemporaryDirectory() as d:
         dev = Device(os.path.join(d, 'compass'))
         probe = add(Node('compass_probe', context=ctx))
@@ -177,7 +142,7 @@ def test_stream_with_bad_lines_silence_and_reconnect(ros):
 
 
 def test_missing_port_is_an_error_not_a_crash(ros):
-    ctx, add, spin_until = ros
+    ctx, add, spin_until = ros.ctx, ros.add, ros.spin_until
     probe = add(Node('compass_probe2', context=ctx))
     diags: list = []
     probe.create_subscription(

@@ -4,17 +4,14 @@ rate, /gait/predicted_motion, out-of-order stamps, a silent sensor."""
 from __future__ import annotations
 
 import os
-import time
 
 import numpy as np
 import pytest
 
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
-import rclpy  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from geometry_msgs.msg import TransformStamped  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from sensor_msgs.msg import Imu  # noqa: E402
@@ -32,41 +29,8 @@ DEADLINE = 20.0
 T0_NS = 1_700_000_000_000_000_000
 
 
-def _domain_id(offset: int) -> int:
-    return 1 + (os.getpid() * 3 + offset) % 100
-
-
-@pytest.fixture
-def ros():
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=_domain_id(53))
-    ex = SingleThreadedExecutor(context=ctx)
-    nodes = []
-
-    def add(node):
-        nodes.append(node)
-        ex.add_node(node)
-        return node
-
-    def spin_until(pred, what, deadline=DEADLINE):
-        end = time.monotonic() + deadline
-        while time.monotonic() < end:
-            ex.spin_once(timeout_sec=0.01)
-            if pred():
-                return
-        raise AssertionError(f'timed out waiting for {what}')
-
-    def spin_for(seconds):
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            ex.spin_once(timeout_sec=0.01)
-
-    yield ctx, add, spin_until, spin_for
-    for n in nodes:
-        ex.remove_node(n)
-        n.destroy_node()
-    ex.shutdown()
-    rclpy.try_shutdown(context=ctx)
+#: this module's DDS domain id offset (see conftest.ros)
+ROS_DOMAIN_OFFSET = 53
 
 
 def _imu(t: float, rpy, var: float) -> Imu:
@@ -76,7 +40,7 @@ def _imu(t: float, rpy, var: float) -> Imu:
 
 @pytest.mark.parametrize('qos_name', ['best_effort', 'reliable'])
 def test_walk_stream_gives_gait_state_and_predicted_motion(ros, qos_name):
-    ctx, add, spin_until, spin_for = ros
+    ctx, add, spin_until, spin_for = ros.ctx, ros.add, ros.spin_until, ros.spin_for
     probe = add(Node('gait_probe', context=ctx))
     states: list[GaitState] = []
     motions: list[TransformStamped] = []
@@ -147,7 +111,7 @@ def test_walk_stream_gives_gait_state_and_predicted_motion(ros, qos_name):
 
 
 def test_imu_without_orientation_is_ignored(ros):
-    ctx, add, spin_until, spin_for = ros
+    ctx, add, spin_until, spin_for = ros.ctx, ros.add, ros.spin_until, ros.spin_for
     probe = add(Node('gait_probe2', context=ctx))
     pub = probe.create_publisher(Imu, '/inclinometer/imu', SENSOR_QOS)
     node = add(GaitFilterNode(context=ctx))
