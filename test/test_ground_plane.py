@@ -44,6 +44,7 @@ def test_recovers_plane_with_20_percent_outliers(method):
     assert np.mean(fit.inliers == ~out) > 0.97
     assert fit.num_features == int(fit.inliers.sum())
     assert 0.2 < fit.residual_rms < 0.4
+    assert 0.2 < fit.residual_sigma < 0.4        # robust spread of the inlier residuals
     assert fit.metric is not None
     assert abs(fit.metric.height - plane.height) < 0.03
     assert np.degrees(np.arccos(np.clip(fit.metric.normal_up @ plane.normal_up, -1, 1))) < 1.0
