@@ -57,8 +57,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .camera import MetricPlane, StereoCamera, ground_range_bearing, metric_from_plane
+from .camera import MetricPlane, StereoCamera, ground_range_bearing
 from .config import check_fields, param
+from .ground_plane import plane_is_plausible
 
 #: StereoSGBM modes by name.
 SGBM_MODES = ('sgbm', 'hh', '3way', 'hh4')
@@ -350,8 +351,10 @@ class SgbmBaseline:
                                   max_points=c.fit_max_points)
         plane = None
         if fit is not None and int(fit[1].sum()) >= c.min_plane_inliers:
-            metric = metric_from_plane(cam, fit[0])
-            if metric is not None and self._plausible(metric):
+            metric = plane_is_plausible(cam, fit[0], min_height_m=c.min_camera_height_m,
+                                        max_height_m=c.max_camera_height_m,
+                                        max_tilt_deg=c.max_plane_tilt_deg)
+            if metric is not None:
                 plane = SgbmPlane(abc=np.asarray(fit[0], float), metric=metric,
                                   num_inliers=int(fit[1].sum()), residual_rms=fit[2])
         t2 = time.perf_counter()
@@ -364,12 +367,6 @@ class SgbmBaseline:
         return SgbmResult(status='tracking' if plane is not None else 'lost',
                           obstacles=obstacles, plane=plane, disparity=disp,
                           num_disparities=nd, timings_ms=timings)
-
-    def _plausible(self, metric: MetricPlane) -> bool:
-        c = self.config
-        tilt = math.degrees(math.acos(min(1.0, max(-1.0, -float(metric.normal_up[1])))))
-        return (c.min_camera_height_m <= metric.height <= c.max_camera_height_m
-                and tilt <= c.max_plane_tilt_deg)
 
     def _obstacles(self, disp, valid, uc, vv, cam: StereoCamera, plane: SgbmPlane, cv2
                    ) -> tuple[SgbmObstacle, ...]:
