@@ -71,6 +71,9 @@ class Frame:
         cam: the rectified stereo camera from the pair's CameraInfos.
         truth: true obstacles (core.evaluation.FrameObstacles), or None.
         truth_plane: the true ground plane (core.camera.MetricPlane), or None.
+        pose: the true pose (R (3, 3), t (3,)) of the left optical frame in the world,
+            from /ground_truth/camera_pose, or None.
+        frame_id: the left image's frame id.
     """
 
     stamp_ns: int
@@ -79,6 +82,8 @@ class Frame:
     cam: object
     truth: object = None
     truth_plane: object = None
+    pose: tuple | None = None
+    frame_id: str = ''
 
 
 def plane_from_msg(msg, cam=None):
@@ -111,14 +116,24 @@ def load_frames(bag: Path, limit: int = 0, images: bool = True) -> list[Frame]:
     """
     from asmonc_vision.cli.run import frame_from_obstacle_array
     from asmonc_vision.core.camera import StereoCamera
+    from asmonc_vision.core.rotations import quaternion_to_matrix
 
     T = {k: bagio.TOPICS[k][0] for k in ('left_image', 'right_image', 'left_info', 'right_info',
-                                         'gt_obstacles', 'gt_ground_plane')}
+                                         'gt_obstacles', 'gt_ground_plane', 'gt_camera_pose')}
     need = ['left_info', 'right_info'] + (['left_image', 'right_image'] if images else [])
-    topics = [T[k] for k in need] + [T['gt_obstacles'], T['gt_ground_plane']]
+    need_topics = {T[k] for k in need}
+    topics = [T[k] for k in need] + [T['gt_obstacles'], T['gt_ground_plane'],
+                                     T['gt_camera_pose']]
     by_stamp: dict[int, dict] = {}
+    complete = 0
     for topic, _, m in bagio.read_messages(bag, topics):
-        by_stamp.setdefault(bagio.header_stamp_ns(m), {})[topic] = m
+        s = by_stamp.setdefault(bagio.header_stamp_ns(m), {})
+        s[topic] = m
+        if topic in need_topics and need_topics <= s.keys():
+            complete += 1
+            # messages come in time order: a pair beyond the limit means all are in
+            if limit and complete > limit:
+                break
     frames: list[Frame] = []
     for stamp in sorted(by_stamp):
         s = by_stamp[stamp]
@@ -135,7 +150,14 @@ def load_frames(bag: Path, limit: int = 0, images: bool = True) -> list[Frame]:
                  if T['gt_obstacles'] in s else None)
         tplane = (plane_from_msg(s[T['gt_ground_plane']], cam)
                   if T['gt_ground_plane'] in s else None)
-        frames.append(Frame(stamp, left, right, cam, truth, tplane))
+        pose = None
+        if T['gt_camera_pose'] in s:
+            p = s[T['gt_camera_pose']].pose
+            pose = (quaternion_to_matrix([p.orientation.x, p.orientation.y, p.orientation.z,
+                                          p.orientation.w]),
+                    np.array([p.position.x, p.position.y, p.position.z]))
+        frame_id = s[T['left_image']].header.frame_id if images else ''
+        frames.append(Frame(stamp, left, right, cam, truth, tplane, pose, frame_id))
         if limit and len(frames) >= limit:
             break
     return frames

@@ -191,49 +191,16 @@ def run_tables(args) -> int:
 def load_sequence(bag: Path, limit: int = 0) -> list[dict]:
     """The stereo pairs of a bag in stamp order: dicts with stamp_ns, left, right (uint8),
     cam (StereoCamera), frame_id, and pose (R (3,3), t (3,)) of the left optical frame in
-    the world when the bag has /ground_truth/camera_pose, else None.
+    the world when the bag has /ground_truth/camera_pose, else None (see
+    `cli.bench.load_frames`).
 
     Raises:
         bagio.BagError: unreadable bag.
     """
-    from asmonc_vision import bagio
-    from asmonc_vision.core.camera import StereoCamera
-    from asmonc_vision.core.motion.geometry import quaternion_to_matrix
+    from asmonc_vision.cli.bench import load_frames
 
-    T = {k: bagio.TOPICS[k][0] for k in ('left_image', 'right_image', 'left_info', 'right_info',
-                                         'gt_camera_pose')}
-    need = [T[k] for k in ('left_image', 'right_image', 'left_info', 'right_info')]
-    by_stamp: dict[int, dict] = {}
-    complete = 0
-    for topic, _, m in bagio.read_messages(bag, list(T.values())):
-        s = by_stamp.setdefault(bagio.header_stamp_ns(m), {})
-        s[topic] = m
-        if all(t in s for t in need) and (topic in need):
-            complete += 1
-            # messages come in time order: a pair after the limit means all are in
-            if limit and complete > limit:
-                break
-    out = []
-    for stamp in sorted(by_stamp):
-        s = by_stamp[stamp]
-        if any(t not in s for t in need):
-            continue
-        li, ri = s[T['left_info']], s[T['right_info']]
-        lm, rm = s[T['left_image']], s[T['right_image']]
-        pose = None
-        if T['gt_camera_pose'] in s:
-            p = s[T['gt_camera_pose']].pose
-            pose = (quaternion_to_matrix([p.orientation.x, p.orientation.y, p.orientation.z,
-                                          p.orientation.w]),
-                    np.array([p.position.x, p.position.y, p.position.z]))
-        gray = [bagio.image_to_gray(m.encoding, m.height, m.width, m.step, m.data)
-                for m in (lm, rm)]
-        out.append({'stamp_ns': stamp, 'left': gray[0], 'right': gray[1],
-                    'cam': StereoCamera.from_projection(li.p, ri.p, li.width, li.height),
-                    'frame_id': lm.header.frame_id, 'pose': pose})
-        if limit and len(out) >= limit:
-            break
-    return out
+    return [{'stamp_ns': f.stamp_ns, 'left': f.left, 'right': f.right, 'cam': f.cam,
+             'frame_id': f.frame_id, 'pose': f.pose} for f in load_frames(bag, limit)]
 
 
 def config_from_params(path: Path | None, method: str | None = None):
