@@ -90,7 +90,7 @@ class DetectorNode(StereoInputNode):
         header = pair.left.header
         self.pub_obstacles.publish(obstacles_to_msg(result, header))
         self.pub_plane.publish(plane_to_msg(result, cam, header))
-        if self.node_config.publish_markers:
+        if self.node_config.publish_markers and self.pub_markers.get_subscription_count() > 0:
             self.pub_markers.publish(markers_msg(result, header))
         if self.node_config.publish_debug_image and self.pub_debug.get_subscription_count() > 0:
             self.pub_debug.publish(array_to_image_msg(draw_debug(left, result), header))
