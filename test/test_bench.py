@@ -17,13 +17,15 @@ def test_bench_prints_both_methods_at_both_sizes(tmp_path, capsys):
     gpod = [ln for ln in lines if ln.strip().startswith('gpod ')]
     sgbm = [ln for ln in lines if ln.strip().startswith('sgbm ')]
     assert len(gpod) == 2 and len(sgbm) == 2, lines
-    assert all('median' in ln and 'recall' in ln for ln in gpod + sgbm)
+    assert all('median' in ln and 'recall' in ln and 'CPU median' in ln for ln in gpod + sgbm)
+    assert lines[0].startswith('load average')
     assert sum('ratio gpod/sgbm' in ln for ln in lines) == 2
     assert any('640x480' in ln for ln in lines)
     doc = json.loads(out.read_text())
     small = next(iter(doc['320x240'].values()))
     assert small['gpod']['frames'] == 4 and small['gpod']['size'] == '320x240'
     assert small['sgbm']['median_ms'] > 0 and small['ratio_gpod_over_sgbm'] > 0
+    assert 0 < small['gpod']['median_cpu_ms'] <= small['gpod']['p90_cpu_ms']
     large = doc['640x480']['static_obstacles (rendered, seed 0)']
     assert large['gpod']['size'] == '640x480' and large['sgbm']['frames'] == 1
     assert large['sgbm']['eligible'] > 0          # the obstacles are in the rendered frame

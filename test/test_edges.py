@@ -128,3 +128,22 @@ def test_blank_and_tiny_images_give_no_edges():
     assert isinstance(e, EdgeMap) and len(e) == 0 and e.num_strings == 0
     with pytest.raises(ValueError):
         detect_vertical_edges(np.zeros((4, 4, 3), np.uint8))
+
+
+@pytest.mark.parametrize('kw', [dict(), dict(abs_threshold=4.1, max_angle_deg=70.0,
+                                             min_string_length=3),
+                                dict(abs_threshold=0.0, rel_threshold=1.3),
+                                dict(abs_threshold=3.3, rel_threshold=0.7, min_string_length=5)])
+def test_uint8_integer_path_equals_the_float_path(kw):
+    """A uint8 image (integer Sobel sums) gives exactly the edges of its float copy."""
+    rng = np.random.default_rng(7)
+    img = _step_image(60, 90, 40.3) + _step_image(60, 90, 60.0, 0.0, 80.0, slope=0.4)
+    img = np.clip(img + rng.normal(0.0, 6.0, img.shape), 0, 255).astype(np.uint8)
+    a = detect_vertical_edges(img, **kw)
+    b = detect_vertical_edges(img.astype(np.float32), **kw)
+    assert len(a) > 50 and a.threshold == b.threshold and a.shape == b.shape
+    for name in ('v', 'u_int', 'u', 'strength', 'polarity', 'orientation', 'string_id',
+                 'string_prev', 'string_length', 'curvature'):
+        x, y = getattr(a, name), getattr(b, name)
+        assert x.dtype == y.dtype, name
+        np.testing.assert_array_equal(x, y, err_msg=name)

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from asmonc_vision.core.camera import MetricPlane, StereoCamera, plane_from_metric
-from asmonc_vision.core.ground_plane import (PlaneFit, fit_ground_plane, lsq_plane,
+from asmonc_vision.core.ground_plane import (PlaneFit, _median, fit_ground_plane, lsq_plane,
                                              plane_is_plausible)
 
 CAM = StereoCamera(f=300.0, cx=159.5, cy=119.5, baseline=0.35, width=320, height=240)
@@ -151,3 +151,9 @@ def test_weights_prefer_the_near_surface():
     assert near.inliers[:150].mean() > 0.95
     with pytest.raises(ValueError):
         fit_ground_plane(u, v, d, weights=np.ones(3))
+
+
+@pytest.mark.parametrize('n', [1, 2, 3, 10, 101, 1000])
+def test_median_is_numpy_median(n):
+    x = np.random.default_rng(n).normal(0.0, 1.0, n)
+    assert _median(x) == float(np.median(x))

@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 
 from asmonc_vision.core.edges import detect_vertical_edges
-from asmonc_vision.core.matching import (candidate_matches, disparity_gradient_interval,
-                                         match_edges, pmf_support, support_links)
+from asmonc_vision.core.matching import (Candidates, candidate_matches,
+                                         disparity_gradient_interval, match_edges, pmf_match,
+                                         pmf_support, select_matches, support_links)
 
 
 def _texture(rng, h, w, blur=1.5, contrast=40.0):
@@ -167,6 +168,38 @@ def test_support_is_pmf_as_published(radius, limit):
     np.testing.assert_allclose(pmf_support(links, taken, left_match),
                                _brute_force_support(el, er, c, radius, limit, alive),
                                atol=1e-6)
+
+
+def test_support_with_candidates_in_any_order_of_right_edge():
+    """The links are right when the disparities of a left edge's candidates are not
+    monotonic (candidates not sorted by right edge): every sibling may share a link."""
+    left, right = _warped_pair((0.02, 0.1, 5.0), h=40, w=90, seed=4)
+    el = detect_vertical_edges(left, min_string_length=2)
+    er = detect_vertical_edges(right, min_string_length=2)
+    c = candidate_matches(el, er, 0.5, 40.0, min_strength_ratio=0.2,
+                          max_orientation_diff_deg=60.0)
+    rng = np.random.default_rng(2)
+    o = np.lexsort((rng.random(len(c)), c.left))          # shuffled within each left edge
+    c2 = Candidates(c.left[o], c.right[o], c.d[o])
+    links = support_links(el, er, c2, 0.5, 40.0, support_radius=3.0)
+    assert links.num_single < len(links)                   # some links are grouped
+    np.testing.assert_allclose(pmf_support(links),
+                               _brute_force_support(el, er, c2, 3.0, 1.0), atol=1e-6)
+    acc, _ = select_matches(c2, links, el, er, iterations=2)
+    acc0, _ = select_matches(c, support_links(el, er, c, 0.5, 40.0), el, er, iterations=2)
+    np.testing.assert_array_equal(np.sort(c2.left[acc] * 10000 + c2.right[acc]),
+                                  np.sort(c.left[acc0] * 10000 + c.right[acc0]))
+
+
+def test_pmf_match_returns_the_candidates_and_their_support(plane_pair):
+    _, el, er = plane_pair
+    m, cand, support = pmf_match(el, er, 0.5, 80.0, iterations=2)
+    assert support.shape == (len(cand),) and cand.left.dtype == np.intp
+    assert np.all(np.diff(cand.left) >= 0)
+    key = cand.left * 100000 + cand.right
+    assert np.all(np.diff(key) > 0)                          # sorted by (left, right)
+    np.testing.assert_array_equal(m.d, (el.u[m.left_index] - er.u[m.right_index])
+                                  .astype(np.float32))
 
 
 def test_support_prefers_true_matches(plane_pair):

@@ -110,6 +110,9 @@ def detect_vertical_edges(image: np.ndarray, *, abs_threshold: float = 4.0,
     ``max_angle_deg`` of vertical (gradient within that angle of horizontal). The first
     and last rows, and the first and last two columns, are never edges.
 
+    A uint8 image without blur takes an integer path (16-bit Sobel sums, exactly 8 times
+    the float derivatives) with the same result as the float path.
+
     Args:
         image: (H, W) grey image (uint8 or float).
         abs_threshold: absolute magnitude threshold, grey levels per pixel (>= 0).
@@ -121,60 +124,101 @@ def detect_vertical_edges(image: np.ndarray, *, abs_threshold: float = 4.0,
     Returns:
         The EdgeMap, sorted by (v, u_int), string ids relabelled 0..S-1.
     """
-    gx, gy = horizontal_gradient(image, blur_sigma)
-    h, w = gx.shape
-    mag = np.abs(gx)
+    img = np.asarray(image)
+    if img.ndim != 2:
+        raise ValueError(f'image must be 2-D (H, W), got shape {img.shape}')
     thr = float(abs_threshold)
-    if rel_threshold > 0:
-        thr = max(thr, float(rel_threshold) * float(mag.mean()))
+    if img.dtype == np.uint8 and not blur_sigma > 0:
+        # Integer Sobel sums (|sum| <= 1020): the float derivative is sum / 8 exactly.
+        sx = cv2.Sobel(img, cv2.CV_16S, 1, 0, ksize=3, borderType=cv2.BORDER_REFLECT_101)
+        amag = np.abs(sx)
+        gx_flat, gy_src, mag_flat, scale = sx.ravel(), img, amag.ravel(), np.float32(_SOBEL_NORM)
+        if rel_threshold > 0:
+            thr = max(thr, float(rel_threshold) * float((amag * scale).mean()))
+    else:
+        gx, gy = horizontal_gradient(img, blur_sigma)
+        amag = np.abs(gx)
+        gx_flat, gy_src, mag_flat, scale = gx.ravel(), gy, amag.ravel(), None
+        if rel_threshold > 0:
+            thr = max(thr, float(rel_threshold) * float(amag.mean()))
+    h, w = img.shape
     if h < 3 or w < 3:
         return _empty(h, w, thr)
     # Non-maximum suppression along rows. The Sobel response of the first and last two
     # columns is distorted by the border reflection, so edges start at column 2.
     if w < 5:
         return _empty(h, w, thr)
-    c = mag[1:-1, 2:-2]
-    left = mag[1:-1, 1:-3]
-    right = mag[1:-1, 3:-1]
-    cand = (c > left) & (c >= right) & (c >= thr)
-    vv, uu = np.nonzero(cand)
-    vv = vv.astype(np.int32) + 1
-    uu = uu.astype(np.int32) + 2
-    gxe = gx[vv, uu]
-    gye = gy[vv, uu]
+    c = amag[1:-1, 2:-2]
+    left = amag[1:-1, 1:-3]
+    right = amag[1:-1, 3:-1]
+    if scale is not None:
+        # |sum| / 8 >= float32(thr)  <=>  |sum| >= ceil(8 * float32(thr)) (as the float
+        # path compares in single precision).
+        t8 = np.float32(thr) * np.float32(8.0)
+        thr_c = 1021 if np.isnan(t8) else int(np.clip(np.ceil(t8), -1, 1021))
+    else:
+        thr_c = thr
+    k = np.flatnonzero((c > left) & (c >= right) & (c >= thr_c))
+    vv = (k // (w - 4) + 1).astype(np.int32)
+    uu = (k % (w - 4) + 2).astype(np.int32)
+    flat = vv.astype(np.intp) * w + uu
+    if scale is not None:
+        gxe = gx_flat[flat] * scale
+        gye = _sobel_v_at(gy_src, vv, uu) * scale
+        ml = mag_flat[flat - 1] * scale
+        mr = mag_flat[flat + 1] * scale
+    else:
+        gxe = gx_flat[flat]
+        gye = gy_src.ravel()[flat]
+        ml = mag_flat[flat - 1]
+        mr = mag_flat[flat + 1]
     # Angle of the edge from the vertical = angle of the gradient from the horizontal.
     cos_max = np.cos(np.deg2rad(min(max(max_angle_deg, 0.0), 90.0)))
     keep = gxe * gxe >= (cos_max * cos_max) * (gxe * gxe + gye * gye)
     if not keep.all():
-        vv, uu, gxe, gye = vv[keep], uu[keep], gxe[keep], gye[keep]
-    ml = mag[vv, uu - 1]
+        sel = np.flatnonzero(keep)
+        vv, uu, gxe, gye, ml, mr = (a[sel] for a in (vv, uu, gxe, gye, ml, mr))
     mc = np.abs(gxe)
-    mr = mag[vv, uu + 1]
     denom = ml - 2.0 * mc + mr          # < 0 at a strict maximum
     with np.errstate(divide='ignore', invalid='ignore'):
         off = np.where(denom < 0, 0.5 * (ml - mr) / denom, 0.0)
     off = np.clip(off, -0.5, 0.5).astype(np.float32)
-    curv = np.maximum(-denom, 0.0).astype(np.float32)
-    peak = (mc - 0.25 * (ml - mr) * off).astype(np.float32)
     u_sub = uu.astype(np.float32) + off
     pol = np.where(gxe >= 0, 1, -1).astype(np.int8)
-    ori = np.arctan2(gye, gxe).astype(np.float32)
     sid, slen, prev = _link_strings(vv, uu, u_sub, pol, h, w)
     if min_string_length > 1 and sid.size:
         keep = slen[sid] >= min_string_length
-        kept_strings = np.zeros(slen.shape[0], bool)
-        kept_strings[sid[keep]] = True
-        new_id = np.cumsum(kept_strings, dtype=np.int32) - 1
-        new_index = np.cumsum(keep, dtype=np.int32) - 1
-        vv, uu, u_sub, peak, pol, ori, prev, curv = (
-            a[keep] for a in (vv, uu, u_sub, peak, pol, ori, prev, curv))
-        prev = np.where(prev >= 0, new_index[np.maximum(prev, 0)], -1).astype(np.int32)
-        sid = new_id[sid[keep]]
-        slen = slen[kept_strings]
+        if not keep.all():
+            sel = np.flatnonzero(keep)
+            kept_strings = np.zeros(slen.shape[0], bool)
+            kept_strings[sid[sel]] = True
+            new_id = np.cumsum(kept_strings, dtype=np.int32) - 1
+            new_index = np.full(keep.shape[0], -1, np.int32)
+            new_index[sel] = np.arange(sel.size, dtype=np.int32)
+            vv, uu, u_sub, pol, prev, gxe, gye, ml, mr, mc, denom, off = (
+                a[sel] for a in (vv, uu, u_sub, pol, prev, gxe, gye, ml, mr, mc, denom, off))
+            prev = np.where(prev >= 0, new_index[np.maximum(prev, 0)], -1).astype(np.int32)
+            sid = new_id[sid[sel]]
+            slen = slen[kept_strings]
+    curv = np.maximum(-denom, 0.0).astype(np.float32)
+    peak = (mc - 0.25 * (ml - mr) * off).astype(np.float32)
+    ori = np.arctan2(gye, gxe).astype(np.float32)
     return EdgeMap(v=vv, u_int=uu, u=u_sub, strength=peak, polarity=pol, orientation=ori,
                    string_id=sid.astype(np.int32), string_prev=prev.astype(np.int32),
                    string_length=slen.astype(np.int32), shape=(h, w), threshold=thr,
                    curvature=curv)
+
+
+def _sobel_v_at(img: np.ndarray, v: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """The 3x3 Sobel sum along v (8 * dI/dv) of a uint8 image at interior pixels,
+    float32 (exact)."""
+    w = img.shape[1]
+    f = img.ravel()
+    below = (v.astype(np.intp) + 1) * w + u
+    above = below - 2 * w
+    lo = f[below - 1].astype(np.int16) + 2 * f[below].astype(np.int16) + f[below + 1]
+    hi = f[above - 1].astype(np.int16) + 2 * f[above].astype(np.int16) + f[above + 1]
+    return (lo - hi).astype(np.float32)
 
 
 def _empty(h: int, w: int, thr: float) -> EdgeMap:
@@ -201,22 +245,19 @@ def _link_strings(v: np.ndarray, u: np.ndarray, u_sub: np.ndarray, pol: np.ndarr
     n = v.shape[0]
     if n == 0:
         return np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros(0, np.int32)
-    idx = np.full((h, w), -1, np.int32)
-    idx[v, u] = np.arange(n, dtype=np.int32)
+    # Edge index + 1 per pixel (0: none), padded by a row above and a column each side,
+    # one plane per polarity (parents share the child's polarity).
+    wp = w + 2
+    size = (h + 1) * wp
+    idx = np.zeros(2 * size, np.int32)
+    flat = (v.astype(np.intp) + 1) * wp + u + 1 + size * (pol < 0)
+    idx[flat] = np.arange(1, n + 1, dtype=np.int32)
     # Candidate parents in the row above: same column first, then the nearer diagonal.
-    vp = np.maximum(v - 1, 0)
-    ul = np.maximum(u - 1, 0)
-    ur = np.minimum(u + 1, w - 1)
-    above = v > 0
-    p0 = np.where(above, idx[vp, u], -1)
-    pl = np.where(above, idx[vp, ul], -1)
-    pr = np.where(above, idx[vp, ur], -1)
-
-    def valid(p: np.ndarray) -> np.ndarray:
-        """Parent candidates that exist and share the child's polarity."""
-        return (p >= 0) & (pol[np.maximum(p, 0)] == pol)
-
-    ok0, okl, okr = valid(p0), valid(pl), valid(pr)
+    up = flat - wp
+    p0 = idx[up].astype(np.intp) - 1
+    pl = idx[up - 1].astype(np.intp) - 1
+    pr = idx[up + 1].astype(np.intp) - 1
+    ok0, okl, okr = p0 >= 0, pl >= 0, pr >= 0
     dl = np.abs(u_sub[np.maximum(pl, 0)] - u_sub)
     dr = np.abs(u_sub[np.maximum(pr, 0)] - u_sub)
     use_l = okl & (~okr | (dl <= dr))
@@ -235,7 +276,7 @@ def _link_strings(v: np.ndarray, u: np.ndarray, u_sub: np.ndarray, pol: np.ndarr
     lose_r = via_r & (straight[pr] | (cost_l[pr] <= cost_r[pr]))
     parent[lose_l | lose_r] = -1
     # Root of every chain by pointer jumping.
-    root = np.where(parent >= 0, parent, np.arange(n, dtype=np.int32)).astype(np.int32)
+    root = np.where(parent >= 0, parent, np.arange(n))
     while True:
         nxt = root[root]
         if np.array_equal(nxt, root):

@@ -138,20 +138,31 @@ def _ransac_best(u: np.ndarray, v: np.ndarray, d: np.ndarray, threshold: float,
         k = int(min(batch, iterations - drawn))
         drawn += k
         idx = rng.integers(0, n, size=(k, 3))
-        p = np.stack([u[idx], v[idx], d[idx]], axis=-1)      # (k, 3, 3)
-        nrm = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])  # (nu, nv, nd)
-        good = np.abs(nrm[:, 2]) > 1.0                        # (u, v) triangle area > 0.5 px^2
-        nrm, p0 = nrm[good], p[good, 0]
-        a = -nrm[:, 0] / nrm[:, 2]
-        b = -nrm[:, 1] / nrm[:, 2]
-        c = p0[:, 2] - a * p0[:, 0] - b * p0[:, 1]
+        pu, pv, pd = u[idx], v[idx], d[idx]                   # (k, 3) each
+        u0, v0, d0 = pu[:, 0], pv[:, 0], pd[:, 0]
+        au, av, ad = pu[:, 1] - u0, pv[:, 1] - v0, pd[:, 1] - d0
+        bu, bv, bd = pu[:, 2] - u0, pv[:, 2] - v0, pd[:, 2] - d0
+        # Normal (nu, nv, nd) = cross product of the two edges (as np.cross).
+        nu = av * bd - ad * bv
+        nv = ad * bu - au * bd
+        nd = au * bv - av * bu
+        good = np.abs(nd) > 1.0                               # (u, v) triangle area > 0.5 px^2
+        if not good.all():
+            nu, nv, nd, u0, v0, d0 = nu[good], nv[good], nd[good], u0[good], v0[good], d0[good]
+        a = -nu / nd
+        b = -nv / nd
+        c = d0 - a * u0 - b * v0
         if cam is not None and a.size:
             ok = _plausible_mask(cam, a, b, c, *bounds)
             a, b, c = a[ok], b[ok], c[ok]
         if a.size == 0:
             continue
-        res = ds[None, :] - (a[:, None] * us[None, :] + b[:, None] * vs[None, :] + c[:, None])
-        sq = res * res
+        # res = ds - (a*us + b*vs + c), sq = res^2, in place (the same arithmetic).
+        sq = np.multiply(a[:, None], us[None, :])
+        sq += b[:, None] * vs[None, :]
+        sq += c[:, None]
+        np.subtract(ds[None, :], sq, out=sq)
+        np.multiply(sq, sq, out=sq)
         trunc = np.minimum(sq, t2)
         score = trunc.sum(axis=1) if ws is None else trunc @ ws
         j = int(np.argmin(score))
@@ -164,6 +175,17 @@ def _ransac_best(u: np.ndarray, v: np.ndarray, d: np.ndarray, threshold: float,
             elif w > 0.0:
                 needed = math.log(1.0 - confidence) / math.log(1.0 - w ** 3)
     return best
+
+
+def _median(x: np.ndarray) -> float:
+    """``np.median`` of a non-empty 1-D array of finite values (the same arithmetic,
+    without its overhead)."""
+    n = x.shape[0]
+    k = n // 2
+    if n % 2:
+        return float(np.partition(x, k)[k])
+    p = np.partition(x, (k - 1, k))
+    return float((p[k - 1] + p[k]) / 2.0)
 
 
 def plane_is_plausible(cam: StereoCamera, abc: np.ndarray, *, min_height_m: float = 0.1,
@@ -243,15 +265,18 @@ def fit_ground_plane(u, v, d, *, cam: StereoCamera | None = None, method: str = 
     n = u.shape[0]
     min_features = max(int(min_features), 3)
     finite = np.isfinite(u) & np.isfinite(v) & np.isfinite(d)
-    if int(finite.sum()) < min_features:
+    n_finite = int(np.count_nonzero(finite))
+    if n_finite < min_features:
         return None
-    uf, vf, df = u[finite], v[finite], d[finite]
+    everything = n_finite == n
+    uf, vf, df = (u, v, d) if everything else (u[finite], v[finite], d[finite])
     wf = None
     if weights is not None:
         w_all = np.asarray(weights, np.float64).ravel()
         if w_all.shape != u.shape:
             raise ValueError(f'weights must have the length of u, got {w_all.shape} vs {u.shape}')
-        wf = np.where(np.isfinite(w_all[finite]), np.maximum(w_all[finite], 0.0), 0.0)
+        w_f = w_all if everything else w_all[finite]
+        wf = np.where(np.isfinite(w_f), np.maximum(w_f, 0.0), 0.0)
     thr = float(inlier_threshold_px)
     if method == 'ransac':
         gen = np.random.default_rng(rng)
@@ -262,9 +287,10 @@ def fit_ground_plane(u, v, d, *, cam: StereoCamera | None = None, method: str = 
         inl = np.abs(df - (abc[0] * uf + abc[1] * vf + abc[2])) <= thr
         rounds = max(int(refine_iterations), 0) + 1
         for it in range(rounds):
-            if int(inl.sum()) < min_features:
+            sel = np.flatnonzero(inl)
+            if sel.size < min_features:
                 return None
-            fit = lsq_plane(uf[inl], vf[inl], df[inl], None if wf is None else wf[inl])
+            fit = lsq_plane(uf[sel], vf[sel], df[sel], None if wf is None else wf[sel])
             if fit is None:
                 return None
             abc = fit[0]
@@ -308,9 +334,10 @@ def fit_ground_plane(u, v, d, *, cam: StereoCamera | None = None, method: str = 
         if metric is None:
             return None
     mask = np.zeros(n, bool)
-    mask[np.flatnonzero(finite)[inl]] = True
-    res = df[inl] - (abc[0] * uf[inl] + abc[1] * vf[inl] + abc[2])
-    sigma = float(1.4826 * np.median(np.abs(res - np.median(res))))
+    sel = np.flatnonzero(inl)
+    mask[np.flatnonzero(finite)[sel]] = True
+    res = df[sel] - (abc[0] * uf[sel] + abc[1] * vf[sel] + abc[2])
+    sigma = float(1.4826 * _median(np.abs(res - _median(res))))
     return PlaneFit(abc=np.asarray(abc, np.float64), cov=np.asarray(cov, np.float64),
                     num_features=int(inl.sum()), residual_rms=float(rms), inliers=mask,
                     metric=metric, residual_sigma=sigma)

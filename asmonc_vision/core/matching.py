@@ -29,6 +29,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from .edges import EdgeMap
@@ -39,8 +40,8 @@ class Candidates:
     """Candidate matches, grouped by left edge (sorted by left index, then right index).
 
     Attributes:
-        left: (M,) int32 index into the left EdgeMap.
-        right: (M,) int32 index into the right EdgeMap.
+        left: (M,) int64 (intp) index into the left EdgeMap.
+        right: (M,) int64 (intp) index into the right EdgeMap.
         d: (M,) float64 sub-pixel disparity, pixels.
     """
 
@@ -63,18 +64,20 @@ class SupportLinks:
     of the neighbouring edge, whose cyclopean position is within the support radius of
     the supported candidate's and which satisfies the disparity-gradient limit with it;
     ``weight[p]`` is ``1 / cyclopean separation``. Links without supporters are not
-    stored.
+    stored. The first ``num_single`` links have one supporter each (link q is supporter
+    q); links are in no particular order of candidate.
 
     Attributes:
         num_candidates: M.
-        cand: (Q,) int32 supported candidate.
+        cand: (Q,) int64 supported candidate.
         start: (Q,) int64 index of the link's first supporter (ascending).
-        pair_link: (P,) int32 link of each supporter (ascending).
-        pair_cand: (P,) int32 supporting candidate (index into the Candidates).
-        pair_edge: (P,) int32 its left edge (index into the left EdgeMap).
-        pair_right: (P,) int32 its right edge (index into the right EdgeMap).
+        pair_link: (P,) int64 link of each supporter (ascending).
+        pair_cand: (P,) int64 supporting candidate (index into the Candidates).
+        pair_edge: (P,) int64 its left edge (index into the left EdgeMap).
+        pair_right: (P,) int64 its right edge (index into the right EdgeMap).
         weight: (P,) float64 ``1 / distance`` between the two candidates' cyclopean
             positions, 1/pixels.
+        num_single: how many of the links, first, have a single supporter (0: unknown).
     """
 
     num_candidates: int
@@ -85,6 +88,7 @@ class SupportLinks:
     pair_edge: np.ndarray
     pair_right: np.ndarray
     weight: np.ndarray
+    num_single: int = 0
 
     def __len__(self) -> int:
         return int(self.cand.shape[0])
@@ -162,7 +166,7 @@ def candidate_matches(left: EdgeMap, right: EdgeMap, d_min: float, d_max: float,
     if left.shape != right.shape:
         raise ValueError(f'left and right edge maps differ in shape: {left.shape} vs {right.shape}')
     if len(left) == 0 or len(right) == 0 or d_max < d_min:
-        z = np.zeros(0, np.int32)
+        z = np.zeros(0, np.intp)
         return Candidates(z, z, np.zeros(0))
     # Right edges of the same polarity and row, within the disparity range: one
     # contiguous range of the right edges sorted by (polarity, row, column).
@@ -171,9 +175,14 @@ def candidate_matches(left: EdgeMap, right: EdgeMap, d_min: float, d_max: float,
     plane_r = (right.polarity < 0).astype(np.int64)
     order_r = np.r_[np.flatnonzero(plane_r == 0), np.flatnonzero(plane_r == 1)]
     key_r = ((plane_r * h + right.v) * span + right.u)[order_r]
-    key_l = ((left.polarity < 0).astype(np.int64) * h + left.v) * span + left.u
-    lo = np.searchsorted(key_r, key_l - d_max, side='left')
-    hi = np.searchsorted(key_r, key_l - d_min, side='right')
+    plane_l = (left.polarity < 0).astype(np.int64)
+    order_l = np.r_[np.flatnonzero(plane_l == 0), np.flatnonzero(plane_l == 1)]
+    key_l = (((plane_l * h + left.v) * span + left.u)[order_l])
+    # Queries in ascending order (numpy's binary search is much faster on sorted keys).
+    lo = np.empty(len(left), np.intp)
+    hi = np.empty(len(left), np.intp)
+    lo[order_l] = np.searchsorted(key_r, key_l - d_max, side='left')
+    hi[order_l] = np.searchsorted(key_r, key_l - d_min, side='right')
     li, pos = _expand(lo, hi)
     rj = order_r[pos]
     sl = left.strength[li]
@@ -182,9 +191,9 @@ def candidate_matches(left: EdgeMap, right: EdgeMap, d_min: float, d_max: float,
     dori = np.abs(left.orientation[li] - right.orientation[rj])
     dori = np.minimum(dori, 2.0 * np.pi - dori)
     ok &= dori <= np.deg2rad(max_orientation_diff_deg)
-    li, rj = li[ok], rj[ok]
-    return Candidates(left=li.astype(np.int32), right=rj.astype(np.int32),
-                      d=left.u[li].astype(np.float64) - right.u[rj])
+    keep = np.flatnonzero(ok)
+    li, rj = li[keep], rj[keep]
+    return Candidates(left=li, right=rj, d=left.u[li].astype(np.float64) - right.u[rj])
 
 
 def disc_offsets(radius: float) -> tuple[np.ndarray, np.ndarray]:
@@ -229,9 +238,41 @@ _SLACK = 1.0 + 1e-4
 
 
 def _empty_links(m: int) -> SupportLinks:
-    zi = np.zeros(0, np.int32)
-    return SupportLinks(num_candidates=m, cand=zi, start=np.zeros(0, np.int64), pair_link=zi,
-                        pair_cand=zi, pair_edge=zi, pair_right=zi, weight=np.zeros(0))
+    zi = np.zeros(0, np.int64)
+    return SupportLinks(num_candidates=m, cand=zi, start=zi, pair_link=zi, pair_cand=zi,
+                        pair_edge=zi, pair_right=zi, weight=np.zeros(0))
+
+
+def _cell_table(s_cell: np.ndarray, size: int) -> np.ndarray:
+    """(size + 1,) int: ``table[k]`` = number of the sorted cells ``s_cell`` below k."""
+    m = s_cell.shape[0]
+    first = np.ones(m, bool)
+    first[1:] = s_cell[1:] != s_cell[:-1]
+    at = np.flatnonzero(first)
+    count = np.diff(np.append(at, m))
+    if m < 2 ** 31 and (count.size == 0 or int(count.max()) <= 255):
+        # A one-row integral image is a fast prefix sum (numpy's cumsum is not).
+        hist = np.zeros((1, size), np.uint8)
+        hist[0, s_cell[at]] = count
+        return cv2.integral(hist)[1]
+    table = np.zeros(size + 1, np.int64)
+    np.cumsum(np.bincount(s_cell, minlength=size), out=table[1:])
+    return table
+
+
+def _sibling_disparities(cand: Candidates) -> tuple[np.ndarray, np.ndarray, bool]:
+    """(M,) float64 disparities of the previous and the next candidate of the same left
+    edge (NaN if none), and whether the disparities are monotonic within each left edge
+    (they are when the right edges are sorted by column): then these are a candidate's
+    nearest siblings in disparity on either side."""
+    m = len(cand)
+    same = cand.left[1:] == cand.left[:-1]
+    step = np.diff(cand.d)
+    d_prev = np.full(m, np.nan)
+    d_next = np.full(m, np.nan)
+    d_prev[1:] = np.where(same, cand.d[:-1], np.nan)
+    d_next[:-1] = np.where(same, cand.d[1:], np.nan)
+    return d_prev, d_next, bool(np.all(step[same] <= 0.0) or np.all(step[same] >= 0.0))
 
 
 def support_links(left: EdgeMap, right: EdgeMap, cand: Candidates, d_min: float = 0.0,
@@ -253,7 +294,10 @@ def support_links(left: EdgeMap, right: EdgeMap, cand: Candidates, d_min: float 
     The neighbours are found in the cyclopean image directly: candidates are bucketed by
     (row, cyclopean column); each pair is found once and used both ways (support is
     symmetric), after a single-precision disparity pre-test and the exact tests in
-    double precision.
+    double precision. Two supporters of one candidate can share their left edge only if
+    their disparities are within ``2 * limit * radius``: supporters without such a
+    sibling make single-supporter links (the first ``num_single``), only the others are
+    grouped by sorting.
 
     Args:
         left, right: the EdgeMaps the candidates index.
@@ -272,78 +316,120 @@ def support_links(left: EdgeMap, right: EdgeMap, cand: Candidates, d_min: float 
     if m == 0:
         return _empty_links(0)
     rad = float(support_radius)
+    a, b, s2 = _neighbour_pairs(left, right, cand, rad, lim)
+    if a.size == 0:
+        return _empty_links(m)
+    return _group_links(cand, len(left), a, b, s2, lim * rad * _SLACK)
+
+
+def _neighbour_pairs(left: EdgeMap, right: EdgeMap, cand: Candidates, rad: float,
+                     lim: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every unordered pair of candidates that support each other (:func:`support_links`):
+    (a, b) candidate indices, a's left edge not b's, and their squared cyclopean
+    separation s2 (px^2)."""
+    m = len(cand)
     # Candidates as points (v, cyclopean u, d), sorted by (v, u). For every candidate and
     # row offset, the candidates in the columns that the radius may reach come from a
     # (row, column) table of positions in the sorted order; a cheap disparity test
     # thins them before the exact one. The work is done in the sorted order (contiguous
     # reads) and mapped back at the end.
     h, w = left.shape
+    r_int = int(np.floor(rad))
     uc = 0.5 * (left.u[cand.left].astype(np.float64) + right.u[cand.right])
     vc = left.v[cand.left].astype(np.int64)
     col = np.clip(np.floor(uc).astype(np.int64), 0, w - 1)
-    cell = vc * w + col
-    order = np.argsort(cell * 2.0 + (uc - col), kind='stable')
-    s_cell = cell[order]
+    order = np.argsort((vc * w + col) * 2.0 + (uc - col))
     s_uc64 = uc[order]
     s_d64 = cand.d[order].astype(np.float64)
     s_d = s_d64.astype(np.float32)
-    table = np.zeros(h * w + 1, np.int64)
-    np.cumsum(np.bincount(s_cell, minlength=h * w), out=table[1:])
-    r_int = int(np.floor(rad))
     s_v = vc[order]
-    c_lo = np.maximum(np.floor(s_uc64 - rad).astype(np.int64), 0)
-    c_hi = np.minimum(np.floor(s_uc64 + rad).astype(np.int64), w - 1)
-    lim2 = lim * lim
-    rad2 = rad * rad
-    dmax = lim * rad
     # Support is symmetric: pairs are found once (rows below, or to the right on the
-    # same row) and used both ways.
-    own, oth, sep = [], [], []
-    for dv in range(0, r_int + 1):
-        row = s_v + dv
-        inside = row < h
-        base = np.where(inside, row, 0) * w
-        lo = np.where(inside, table[base + c_lo], 0)
-        hi = np.where(inside, table[base + c_hi + 1], 0)
-        if dv == 0:
-            lo = np.maximum(lo, np.arange(m) + 1)
-        i, j = _expand(lo, hi)
-        if i.size == 0:
-            continue
-        dd = s_d[j] - s_d[i]
-        near = np.abs(dd) <= dmax * _SLACK
-        i, j = i[near], j[near]
-        # Exact tests in double precision on the few that are left.
-        dcu = s_uc64[j] - s_uc64[i]
-        s2 = dcu * dcu + float(dv * dv)
-        dd = s_d64[j] - s_d64[i]
-        ok = (s2 <= rad2) & (dd * dd <= lim2 * s2) & (s2 > 0.0)
-        own.append(i[ok])
-        oth.append(j[ok])
-        sep.append(s2[ok])
-    if not own:
-        return _empty_links(m)
-    i = np.concatenate(own)
-    j = np.concatenate(oth)
-    c = order[np.r_[i, j]]
-    c2 = order[np.r_[j, i]]
-    sep2 = np.tile(np.concatenate(sep), 2)
-    if c.size == 0:
-        return _empty_links(m)
-    # Links: supporters grouped by (supported candidate, supporter's left edge).
-    e2 = cand.left[c2].astype(np.int64)
-    srt = _lexsort_small(e2, c, len(left), m)
-    c, c2, sep2, e2 = c[srt], c2[srt], sep2[srt], e2[srt]
-    gkey = c * (len(left) + 1) + e2
-    first = np.ones(c.size, bool)
-    first[1:] = gkey[1:] != gkey[:-1]
-    start = np.flatnonzero(first)
-    pair_link = (np.cumsum(first) - 1).astype(np.int32)
-    return SupportLinks(num_candidates=m, cand=c[start].astype(np.int32), start=start,
-                        pair_link=pair_link, pair_cand=c2.astype(np.int32),
-                        pair_edge=cand.left[c2].astype(np.int32),
-                        pair_right=cand.right[c2].astype(np.int32),
-                        weight=1.0 / np.sqrt(sep2))
+    # same row) and used both ways. All row offsets at once: window (dv, i) is the
+    # range [lo, hi) of positions in row s_v[i] + dv within sqrt(rad^2 - dv^2) columns
+    # (a hair more) of s_uc[i], from a table with r_int empty rows below the image.
+    table = _cell_table(s_v * w + col[order], (h + r_int) * w)
+    nd = r_int + 1
+    dvs = np.arange(nd)
+    half = (np.sqrt(np.maximum(rad * rad - dvs * dvs, 0.0)) + 1e-6)[:, None]
+    base = (s_v * w)[None, :] + (dvs * w)[:, None]
+    lo = table[base + np.maximum(np.floor(s_uc64[None, :] - half).astype(np.int64), 0)]
+    hi = table[base + np.minimum(np.floor(s_uc64[None, :] + half).astype(np.int64), w - 1)
+               + 1]
+    del table, base
+    pos = np.arange(m)
+    lo[0] = np.maximum(lo[0], pos + 1)
+    cnt = np.maximum(hi - lo, 0).ravel()
+    tot = int(cnt.sum())
+    if tot == 0:
+        z = np.zeros(0, np.intp)
+        return z, z, np.zeros(0)
+    # The expanded pairs are the bulk of the memory: few, small temporaries, in place
+    # (fresh pages cost more than the arithmetic).
+    j = np.repeat(lo.ravel() - (np.cumsum(cnt) - cnt), cnt)
+    j += np.arange(tot)
+    # Cheap single-precision pre-test (index lists: boolean masks are slow).
+    dd = s_d[j]
+    dd -= np.repeat(np.tile(s_d, nd), cnt)
+    keep = np.flatnonzero(np.abs(dd, out=dd) <= np.float32(lim * rad * _SLACK))
+    del dd
+    j = j[keep]
+    i = np.repeat(np.tile(pos.astype(np.int32), nd), cnt)[keep].astype(np.intp)
+    del keep
+    # Exact tests in double precision on the few that are left.
+    dcu = s_uc64[j] - s_uc64[i]
+    dv = (s_v[j] - s_v[i]).astype(np.float64)
+    s2 = dcu * dcu + dv * dv
+    dd = s_d64[j] - s_d64[i]
+    keep = np.flatnonzero((s2 <= rad * rad) & (dd * dd <= (lim * lim) * s2) & (s2 > 0.0))
+    return order[i[keep]], order[j[keep]], s2[keep]
+
+
+def _group_links(cand: Candidates, n_left: int, a: np.ndarray, b: np.ndarray,
+                 s2: np.ndarray, tol: float) -> SupportLinks:
+    """The SupportLinks of the mutually supporting candidate pairs (a, b) at squared
+    separations s2 (``tol``: lim * rad, with slack)."""
+    m = len(cand)
+    # Each pair (a, b) is used both ways: a supported by b, and b by a. Links group the
+    # supporters by (supported candidate, supporter's left edge). Two supporters of c
+    # on one left edge both lie within lim * rad of c's disparity, so a supporter can
+    # share its link only if a sibling next to it in disparity does too (disparities
+    # are monotonic along a left edge's candidates); the others are single-supporter
+    # links, stored first, unsorted, and only the rest are sorted into groups.
+    d_prev, d_next, monotonic = _sibling_disparities(cand)
+    if monotonic:
+        da, db = cand.d[a], cand.d[b]
+        with np.errstate(invalid='ignore'):
+            multi_ab = (np.abs(d_prev[b] - da) <= tol) | (np.abs(d_next[b] - da) <= tol)
+            multi_ba = (np.abs(d_prev[a] - db) <= tol) | (np.abs(d_next[a] - db) <= tol)
+        del da, db
+    else:           # any supporter with a sibling may share a link
+        sib = ~np.isnan(d_prev) | ~np.isnan(d_next)
+        multi_ab, multi_ba = sib[b], sib[a]
+    c = np.concatenate((a, b))          # supported
+    c2 = np.concatenate((b, a))         # supporter
+    sep2 = np.concatenate((s2, s2))
+    multi = np.concatenate((multi_ab, multi_ba))
+    del multi_ab, multi_ba
+    n1 = c.size
+    start = np.arange(n1)
+    pair_link = start
+    grp = np.flatnonzero(multi)
+    if grp.size:
+        one = np.flatnonzero(~multi)
+        n1 = one.size
+        e2 = cand.left[c2[grp]]
+        grp = grp[_lexsort_small(e2, c[grp], n_left, m)]
+        sel = np.concatenate((one, grp))
+        c, c2, sep2 = c[sel], c2[sel], sep2[sel]
+        cg, e2 = c[n1:], cand.left[c2[n1:]]
+        first = np.ones(cg.size, bool)
+        first[1:] = (cg[1:] != cg[:-1]) | (e2[1:] != e2[:-1])
+        start = np.concatenate((start[:n1], n1 + np.flatnonzero(first)))
+        pair_link = np.concatenate((pair_link[:n1], n1 + np.cumsum(first) - 1))
+    np.sqrt(sep2, out=sep2)
+    return SupportLinks(num_candidates=m, cand=c[start], start=start, pair_link=pair_link,
+                        pair_cand=c2, pair_edge=cand.left[c2], pair_right=cand.right[c2],
+                        weight=np.divide(1.0, sep2, out=sep2), num_single=n1)
 
 
 def _lexsort_small(minor: np.ndarray, major: np.ndarray, n_minor: int,
@@ -354,6 +440,21 @@ def _lexsort_small(minor: np.ndarray, major: np.ndarray, n_minor: int,
         p = np.argsort(minor.astype(np.uint16), kind='stable')
         return p[np.argsort(major[p].astype(np.uint16), kind='stable')]
     return np.lexsort((minor, major))
+
+
+def _link_support(links: SupportLinks, w: np.ndarray) -> np.ndarray:
+    """Support of every candidate from the (alive-masked) weights of the supporters."""
+    m = links.num_candidates
+    if len(links) == 0:
+        return np.zeros(m)
+    s = min(int(links.num_single), w.size)
+    if s == w.size:
+        best = w
+    elif s == 0:
+        best = np.maximum.reduceat(w, links.start)
+    else:
+        best = np.concatenate((w[:s], np.maximum.reduceat(w[s:], links.start[s:] - s)))
+    return np.bincount(links.cand, weights=best, minlength=m)
 
 
 def pmf_support(links: SupportLinks, taken_right: np.ndarray | None = None,
@@ -372,38 +473,49 @@ def pmf_support(links: SupportLinks, taken_right: np.ndarray | None = None,
     Returns:
         (M,) float64 support.
     """
-    m = links.num_candidates
-    if len(links) == 0:
-        return np.zeros(m)
     w = links.weight
-    if left_match is not None and taken_right is not None:
+    if len(links) and left_match is not None and taken_right is not None:
         lm = left_match[links.pair_edge]
         alive = np.where(lm >= 0, lm == links.pair_right, ~taken_right[links.pair_right])
         w = np.where(alive, w, 0.0)
-    best = np.maximum.reduceat(w, links.start)
-    return np.bincount(links.cand, weights=best, minlength=m)
+    return _link_support(links, w)
 
 
-def _unique_max(values: np.ndarray, group: np.ndarray, order: np.ndarray,
-                num_groups: int) -> np.ndarray:
-    """Whether each element is strictly the largest of its group.
+class _Groups:
+    """Candidates grouped by one of their edges, for strict-maximum tests per group.
+    Only groups of two or more are kept: the single candidate of a group is always its
+    strict maximum."""
 
-    Args:
-        values: (M,) float64 (use -inf for excluded elements).
-        group: (M,) int group of each element.
-        order: (M,) permutation sorting ``group`` ascending.
-        num_groups: number of groups G (> max(group)).
-    Returns:
-        (M,) bool.
-    """
-    best = np.full(num_groups, -np.inf)
-    if values.size:
-        g = group[order]
-        starts = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])
-        best[g[starts]] = np.maximum.reduceat(values[order], starts)
-    at_best = values == best[group]
-    n_best = np.bincount(group[at_best], minlength=num_groups)
-    return at_best & (n_best[group] == 1)
+    def __init__(self, group: np.ndarray, num_groups: int) -> None:
+        g = np.asarray(group)
+        n = g.shape[0]
+        order = None
+        if n > 1 and not np.all(g[1:] >= g[:-1]):
+            order = (np.argsort(g.astype(np.uint16), kind='stable') if num_groups <= 65536
+                     else np.argsort(g, kind='stable'))
+            g = g[order]
+        first = np.ones(n, bool)
+        first[1:] = g[1:] != g[:-1]
+        starts = np.flatnonzero(first)
+        sizes = np.diff(np.append(starts, n))
+        multi = sizes > 1
+        # Members of the groups of two or more, in group order (indices into the input).
+        pos = np.repeat(multi, sizes)
+        idx = np.flatnonzero(pos)
+        self.members = idx if order is None else order[idx]
+        self.sizes = sizes[multi]
+        self.starts = np.cumsum(self.sizes) - self.sizes
+        self.n = n
+
+    def unique_max(self, values: np.ndarray) -> np.ndarray:
+        """(M,) bool: whether each element is strictly the largest of its group."""
+        out = np.ones(self.n, bool)
+        if self.members.size:
+            x = values[self.members]
+            at_best = x == np.repeat(np.maximum.reduceat(x, self.starts), self.sizes)
+            n_best = np.add.reduceat(at_best.astype(np.int32), self.starts)
+            out[self.members] = at_best & np.repeat(n_best == 1, self.sizes)
+        return out
 
 
 def select_matches(cand: Candidates, links: SupportLinks, left: EdgeMap, right: EdgeMap, *,
@@ -427,24 +539,32 @@ def select_matches(cand: Candidates, links: SupportLinks, left: EdgeMap, right: 
         return accepted, support
     n_l, n_r = len(left), len(right)
     alive = np.ones(m, bool)
-    order_l = np.arange(m)                                   # grouped by left already
-    order_r = np.argsort(cand.right, kind='stable')
-    taken_r = None
-    left_match = None
-    for _ in range(max(int(iterations), 1)):
-        support = pmf_support(links, taken_r, left_match)
-        val = np.where(alive, support, -np.inf)
-        win = (alive & (support > min_support)
-               & _unique_max(val, cand.left, order_l, n_l)
-               & _unique_max(val, cand.right, order_r, n_r))
+    by_left = _Groups(cand.left, n_l)
+    by_right = _Groups(cand.right, n_r)
+    taken_r = np.zeros(n_r, bool)
+    matched_l = np.zeros(n_l, bool)
+    rounds = max(int(iterations), 1)
+    for it in range(rounds):
+        # A supporter is alive when it is an accepted match or neither of its edges is
+        # used by one: exactly the candidates still alive here.
+        if it == 0:
+            support = _link_support(links, links.weight)
+            val = support
+        else:
+            support = _link_support(links, np.where(alive[links.pair_cand], links.weight, 0.0))
+            val = np.where(alive, support, -np.inf)
+        win = alive & (support > min_support) & by_left.unique_max(val)
+        if win.any():
+            win &= by_right.unique_max(val)
         if not (win & ~accepted).any():
             break
         accepted |= win
-        taken_r = np.zeros(n_r, bool)
-        taken_r[cand.right[accepted]] = True
-        left_match = np.full(n_l, -1, np.int64)
-        left_match[cand.left[accepted]] = cand.right[accepted]
-        alive &= accepted | ~((left_match[cand.left] >= 0) | taken_r[cand.right])
+        if it == rounds - 1:
+            break
+        k = np.flatnonzero(win)
+        taken_r[cand.right[k]] = True
+        matched_l[cand.left[k]] = True
+        alive &= accepted | ~(matched_l[cand.left] | taken_r[cand.right])
     return accepted, support
 
 
@@ -464,14 +584,15 @@ def pmf_match(left: EdgeMap, right: EdgeMap, d_min: float, d_max: float, *,
                           disparity_gradient_limit=disparity_gradient_limit)
     acc, support = select_matches(cand, links, left, right, iterations=iterations,
                                   min_support=min_support)
-    li = cand.left[acc]
-    rj = cand.right[acc]
+    k = np.flatnonzero(acc)
+    li = cand.left[k]
+    rj = cand.right[k]
     m = Matches(u_left=left.u[li].astype(np.float32), u_right=right.u[rj].astype(np.float32),
-                v=left.v[li].astype(np.int32), d=cand.d[acc].astype(np.float32),
+                v=left.v[li].astype(np.int32), d=cand.d[k].astype(np.float32),
                 strength=(0.5 * (left.strength[li] + right.strength[rj])).astype(np.float32),
                 string_id=left.string_id[li].astype(np.int32),
                 left_index=li.astype(np.int32), right_index=rj.astype(np.int32),
-                support=support[acc].astype(np.float32), precision=_precision(left, right, li, rj))
+                support=support[k].astype(np.float32), precision=_precision(left, right, li, rj))
     return m, cand, support
 
 
