@@ -6,6 +6,7 @@
     asmonc fig5 [--empirical]                  the paper's Fig. 5, model and measured
     asmonc motion {tables,eval,corners}        visual egomotion: Tables 2-3, bag errors
     asmonc gait {sim,fusion,real,figs}         the walk model: errors, real walking, Figs. 13-15
+    asmonc smallbox [--heights ..] [--ranges ..]  small boxes standing still: GPOD vs SGBM
 """
 from __future__ import annotations
 
@@ -39,6 +40,10 @@ def build_parser() -> argparse.ArgumentParser:
     gait.add_arguments(sub.add_parser(
         'gait', help='evaluate the walk model: sim, fusion, real walking, Figs. 13-15',
         description=gait.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
+    from asmonc_vision.cli import smallbox
+    smallbox.add_arguments(sub.add_parser(
+        'smallbox', help='small boxes seen standing still: GPOD against the SGBM baseline',
+        description=smallbox.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
     return parser
 
 

@@ -36,7 +36,19 @@ Per stereo pair:
    threshold (a disparity deficit where the ground should be) make drop-offs: hazards
    with negative height. Obstacle strings are clustered by the proximity of their feet
    on the ground, and each cluster is reported with its top, height, range and bearing
-   of its near part, width, disparity excess, confidence and image region.
+   of its nearest point, width, disparity excess, confidence and image region.
+6. The nearest point of an obstacle (range and bearing of one point): each obstacle
+   string's matched run is followed down to where it meets the ground (its excess falls
+   to the noise), giving one ground foot per string. A foot nearer than the outermost
+   two (in bearing) is the near corner. Otherwise the near corner may have no vertical
+   edge (two faces of one shade): if the outermost feet L and R are corners of a
+   rectangular footprint, the corner N between them sees them at a right angle, so N
+   lies on the circle with diameter LR (Thales); of the candidates on its near arc, those
+   whose triangle L-N-R contains visible ground (ground features: free space) are
+   impossible, and the one whose contact polyline L-N-R follows the image's intensity
+   edges best is taken -- unless it hardly bulges from the chord LR (a frontal face),
+   when the feet's probably nearest point is reported (their mean weighted by the
+   probability of being the nearest: the middle of a frontal face).
 
 Status per frame: ``'initialising'`` (not enough calibration frames yet), ``'tracking'``
 (a plane is valid for this frame, refitted or carried over for up to
@@ -63,12 +75,29 @@ from .matching import Candidates, Matches, pmf_match
 #: period off; genuine small obstacles are never this far above the plane.
 _AMBIGUOUS_EXCESS_PX = 3.0
 
-#: An obstacle's reported foot is at its nearest range, in the median direction of the
+#: A drop-off's reported foot is at its nearest range, in the median direction of the
 #: nearest feet of its edge strings (one per string) that lie within this distance
-#: (metres) or this fraction of the nearest range, whichever is larger, of it: the near
-#: part of the obstacle (its nearest point itself often has no vertical edge).
+#: (metres) or this fraction of the nearest range, whichever is larger, of it.
 _NEAR_ZONE_M = 0.5
 _NEAR_ZONE_FRACTION = 0.1
+
+#: An obstacle string's foot is where its matched run, followed down the image from its
+#: lowest obstacle pixel, comes within this many noise sigmas of the ground plane.
+_FOOT_SIGMAS = 1.0
+#: Least uncertainty of a foot's image row, rows (the row is found to a pixel).
+_FOOT_MIN_ROWS = 0.5
+#: Candidate positions of a hidden near corner on the Thales arc (`hidden_corner`).
+_CORNER_ARC_POINTS = 33
+#: A hidden corner must bulge beyond the chord between its neighbours by more than this
+#: many range sigmas of their feet (else the straight face explains the image as well).
+_CORNER_SIGMAS = 2.0
+#: Edge strings within this many pixels of the left or right image border may be the
+#: view's edge rather than an obstacle's silhouette.
+_BORDER_PX = 3.0
+#: A ground feature must lie this far (metres) inside a hypothesised footprint to rule
+#: it out (features on its sides are its own contact edges; feet and ground features are
+#: located to a few centimetres).
+_FREE_SPACE_MARGIN_M = 0.05
 
 #: The residual spread sigma of the initial fit is taken over the calibration features
 #: within this many ``plane_inlier_px`` of the fitted plane.
@@ -643,6 +672,243 @@ def smooth_along_runs(x: np.ndarray, prev: np.ndarray, window: int) -> np.ndarra
     return total / count
 
 
+class _FrameContext:
+    """What describing one frame's obstacles needs: the matches' smoothed excess, noise
+    and run links, the plane, the visible ground and the left image (internal).
+
+    Ground coordinates (``xy``): metres on the ground plane from the point below the left
+    camera, x along the walking direction (the optical axis projected on the plane), y to
+    the left, as range and bearing (`core.camera.ground_range_bearing`) measure them.
+    """
+
+    def __init__(self, cam: StereoCamera, metric: MetricPlane, abc: np.ndarray, u, v, pd,
+                 excess_mean, sigma, prev, ground_points, left) -> None:
+        self.cam, self.metric, self.abc = cam, metric, abc
+        self.u, self.v, self.pd = u, v, pd
+        self.excess_mean, self.sigma, self.prev = excess_mean, sigma, prev
+        n = metric.normal_up
+        fwd = np.array([0.0, 0.0, 1.0]) - n[2] * n
+        self.fwd = fwd / np.linalg.norm(fwd)
+        self.lft = np.cross(n, self.fwd)
+        self.origin = -metric.height * n
+        self._ground_points = ground_points
+        self._ground_xy: np.ndarray | None = None
+        self._left = left
+
+    def to_xy(self, points: np.ndarray) -> np.ndarray:
+        """(N, 2) ground coordinates of the feet (projections on the plane) of (N, 3)
+        points of the left optical frame."""
+        n = self.metric.normal_up
+        g = points - self.metric.signed_height(points)[:, None] * n[None, :] - self.origin
+        return np.stack([g @ self.fwd, g @ self.lft], axis=1)
+
+    def to_image(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Left-image (u, v) of ground points (N, 2)."""
+        p = (self.origin[None, :] + xy[:, :1] * self.fwd[None, :]
+             + xy[:, 1:2] * self.lft[None, :])
+        z = np.maximum(p[:, 2], 1e-6)
+        return self.cam.f * p[:, 0] / z + self.cam.cx, self.cam.f * p[:, 1] / z + self.cam.cy
+
+    @property
+    def ground_xy(self) -> np.ndarray:
+        """(G, 2) ground coordinates of the frame's ground features (visible ground)."""
+        if self._ground_xy is None:
+            self._ground_xy = self.to_xy(self._ground_points)
+        return self._ground_xy
+
+    def contact_edge_score(self, a: np.ndarray, n: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """How well the left image's intensity edges follow the ground polylines
+        a -> n[k] -> b (a, b (2,), n (M, 2) ground points): the mean over each polyline of
+        the image gradient across it (the largest within one pixel), grey levels per
+        pixel, (M,). An obstacle standing on the ground meets it along such an edge (its
+        silhouette edges show that it contrasts with the ground)."""
+        import cv2
+
+        m = n.shape[0]
+        # Both segments of every polyline at once: a -> n[k] and b -> n[k].
+        u0, v0 = self.to_image(np.concatenate([np.broadcast_to(a, n.shape),
+                                               np.broadcast_to(b, n.shape)]))
+        u1, v1 = self.to_image(np.concatenate([n, n]))
+        # The Sobel gradient of the image patch around them (grey levels per pixel).
+        img_h, img_w = self._left.shape
+        x0 = min(max(int(math.floor(min(u0.min(), u1.min()))) - 3, 0), img_w - 1)
+        x1 = min(max(int(math.ceil(max(u0.max(), u1.max()))) + 4, x0 + 1), img_w)
+        y0 = min(max(int(math.floor(min(v0.min(), v1.min()))) - 3, 0), img_h - 1)
+        y1 = min(max(int(math.ceil(max(v0.max(), v1.max()))) + 4, y0 + 1), img_h)
+        patch = self._left[y0:y1, x0:x1].astype(np.float32)
+        gx = cv2.Sobel(patch, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
+        gy = cv2.Sobel(patch, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+        h, w = gx.shape
+        u0, u1, v0, v1 = u0 - x0, u1 - x0, v0 - y0, v1 - y0
+        du, dv = u1 - u0, v1 - v0
+        length = np.hypot(du, dv)
+        nu = (-dv / np.maximum(length, 1e-9))[:, None]
+        nv = (du / np.maximum(length, 1e-9))[:, None]
+        t = (np.arange(16) + 0.5) / 16.0
+        uu = u0[:, None] + t[None, :] * du[:, None]
+        vv = v0[:, None] + t[None, :] * dv[:, None]
+        best = np.zeros(uu.shape, np.float32)
+        for off in (-1.0, 0.0, 1.0):
+            ui = np.minimum(np.maximum(np.rint(uu + off * nu).astype(np.int64), 0), w - 1)
+            vi = np.minimum(np.maximum(np.rint(vv + off * nv).astype(np.int64), 0), h - 1)
+            best = np.maximum(best, np.abs(gx[vi, ui] * nu + gy[vi, ui] * nv))
+        total = best.mean(axis=1) * length
+        return (total[:m] + total[m:]) / np.maximum(length[:m] + length[m:], 1e-9)
+
+
+def string_feet(ctx: _FrameContext, start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The ground foot of edge strings, from their lowest obstacle pixels ``start``.
+
+    Each string's matched run is followed down the image (one row at a time, only while
+    the disparity stays consistent, :func:`run_links`) from its start until its smoothed
+    disparity excess is within ``_FOOT_SIGMAS`` noise sigmas of the plane: there the edge
+    meets the ground (an edge standing on the ground loses |b| px of excess per row).
+    The foot is the projection on the plane of that pixel's point (its disparity the
+    plane's plus the remaining excess; on the plane when the run ended on it). Its range
+    uncertainty: the range spanned by one image row there, times the row's uncertainty
+    (noise sigma / |b|, at least ``_FOOT_MIN_ROWS``).
+
+    Returns:
+        ((S, 2) ground coordinates of the feet, (S,) range sigma, metres).
+    """
+    k = ctx.prev.shape[0]
+    nxt = np.full(k, -1, np.int64)
+    has = ctx.prev >= 0
+    nxt[ctx.prev[has]] = np.flatnonzero(has)
+    cur = np.asarray(start, np.int64)
+    exm, sig = ctx.excess_mean, ctx.sigma
+    for _ in range(int(ctx.cam.height)):
+        n = nxt[cur]
+        go = (n >= 0) & (exm[cur] > _FOOT_SIGMAS * sig[cur])
+        if not go.any():
+            break
+        cur = np.where(go, n, cur)
+    u, v = ctx.u[cur], ctx.v[cur]
+    p = ctx.cam.triangulate(u, v, ctx.pd[cur] + np.maximum(exm[cur], 0.0))
+    xy = ctx.to_xy(p)
+    slope = max(abs(float(ctx.abc[1])), 1e-3)
+
+    def ground_range(dv: float) -> np.ndarray:
+        d = np.maximum(plane_disparity(ctx.abc, u, v + dv), 1e-3)
+        g = ctx.to_xy(ctx.cam.triangulate(u, v + dv, d))
+        return np.hypot(g[:, 0], g[:, 1])
+
+    rows = np.maximum(sig[cur] / slope, _FOOT_MIN_ROWS)
+    return xy, np.abs(ground_range(0.5) - ground_range(-0.5)) * rows
+
+
+def soft_nearest(xy: np.ndarray, sr: np.ndarray) -> np.ndarray:
+    """The expected nearest of points with uncertain ranges: their mean weighted by
+    ``exp(-dr^2 / 2(s_i^2 + s_0^2))``, dr the range beyond the nearest point's (whose
+    sigma is s_0). Points as near as the nearest to within their noise share the weight
+    (a frontal face: its middle), clearly farther ones do not count."""
+    r = np.hypot(xy[:, 0], xy[:, 1])
+    j = int(np.argmin(r))
+    w = np.exp(-0.5 * (r - r[j]) ** 2 / np.maximum(sr ** 2 + sr[j] ** 2, 1e-12))
+    return (w[:, None] * xy).sum(axis=0) / w.sum()
+
+
+def _ground_inside(g: np.ndarray, a: np.ndarray, n: np.ndarray, b: np.ndarray,
+                   margin: float) -> np.ndarray:
+    """(M,) bool: whether any of the points g (G, 2) lies inside the triangle a-n[k]-b by
+    more than ``margin`` from each side (never for a degenerate triangle)."""
+    if g.shape[0] == 0:
+        return np.zeros(n.shape[0], bool)
+
+    def side(p0: np.ndarray, p1: np.ndarray) -> np.ndarray:
+        """(M, G) signed distance of g from the line p0 -> p1 (left positive)."""
+        e = p1 - p0
+        length = np.maximum(np.hypot(e[..., 0], e[..., 1]), 1e-12)[..., None]
+        return (e[..., :1] * (g[None, :, 1] - p0[..., 1:2])
+                - e[..., 1:2] * (g[None, :, 0] - p0[..., :1])) / length
+
+    aa = np.broadcast_to(a, n.shape)
+    bb = np.broadcast_to(b, n.shape)
+    area2 = (n[:, 0] - a[0]) * (b[1] - a[1]) - (n[:, 1] - a[1]) * (b[0] - a[0])
+    sgn = np.where(area2 > 0, 1.0, -1.0)[:, None]
+    inside = ((sgn * side(aa, n) > margin) & (sgn * side(n, bb) > margin)
+              & (sgn * side(bb, aa) > margin))
+    return inside.any(axis=1) & (np.abs(area2) > 1e-12)
+
+
+def hidden_corner(a: np.ndarray, b: np.ndarray, sigma: float, ground_xy: np.ndarray,
+                  score) -> np.ndarray | None:
+    """The near corner hidden between the silhouette feet a and b (ground, (2,) each).
+
+    If a and b are corners of a rectangular footprint whose corner n between them has no
+    vertical edge, the angle a-n-b is right: n lies on the near half of the circle with
+    diameter ab (Thales). Of ``_CORNER_ARC_POINTS`` candidates on that arc, those whose
+    triangle a-n-b holds visible ground (a ground feature more than
+    ``_FREE_SPACE_MARGIN_M`` inside: free space seen through it) are impossible; of the
+    others the one whose contact polyline a-n-b the image's edges follow best
+    (``score``) is taken. None when the camera's foot is inside the circle, no candidate
+    is possible, or the best one lies within ``_CORNER_SIGMAS`` ``sigma`` (the feet's
+    range sigma) of the chord ab: the straight face ab explains the image as well (a
+    frontal face, no hidden corner).
+    """
+    c = 0.5 * (a + b)
+    rho = 0.5 * float(np.hypot(*(b - a)))
+    cn = float(np.hypot(*c))
+    if rho <= _CORNER_SIGMAS * sigma or cn <= rho:     # no corner could bulge enough
+        return None
+    a0 = math.atan2(a[1] - c[1], a[0] - c[0])
+    span = (math.atan2(b[1] - c[1], b[0] - c[0]) - a0) % (2 * math.pi)   # a -> b, ccw
+    if (math.atan2(-c[1], -c[0]) - a0) % (2 * math.pi) > span:   # the near half is cw
+        span -= 2 * math.pi
+    ang = a0 + np.linspace(0.0, 1.0, _CORNER_ARC_POINTS) * span
+    n = c[None, :] + rho * np.stack([np.cos(ang), np.sin(ang)], axis=1)
+    margin = _FREE_SPACE_MARGIN_M
+    g = ground_xy
+    if g.size:
+        lo = np.minimum(np.minimum(a, b), n.min(axis=0)) - margin
+        hi = np.maximum(np.maximum(a, b), n.max(axis=0)) + margin
+        g = g[np.all((g >= lo) & (g <= hi), axis=1)]
+    ok = ~_ground_inside(g, a, n, b, margin)
+    if not ok.any():
+        return None
+    cand = n[ok]
+    q = cand[int(np.argmax(score(a, cand, b)))]
+    e = b - a
+    bulge = abs(e[0] * (q[1] - a[1]) - e[1] * (q[0] - a[0])) / (2.0 * rho)
+    return q if bulge > _CORNER_SIGMAS * sigma else None
+
+
+def nearest_point(xy: np.ndarray, sr: np.ndarray, ground_xy: np.ndarray,
+                  score=None, at_border: np.ndarray | None = None) -> np.ndarray:
+    """The nearest point on the ground of an obstacle from the feet of its edge strings.
+
+    Args:
+        xy: (S, 2) ground coordinates of the feet (`string_feet`), S >= 1.
+        sr: (S,) their range sigmas, metres.
+        ground_xy: (G, 2) visible ground (ground features).
+        score: the contact-edge score ``score(a, n, b) -> (M,)``
+            (`_FrameContext.contact_edge_score`), or None to skip the hidden-corner search.
+        at_border: (S,) bool, feet of strings at the image's left or right border (the
+            view's edge, not the obstacle's silhouette: no hidden corner next to them).
+    Returns:
+        (2,) ground coordinates: the nearest foot when it lies between the outermost
+        feet in bearing and is clearly (``_CORNER_SIGMAS``) nearer than both (the near
+        corner is seen; `soft_nearest`); else the hidden corner between the outermost
+        feet, if there is one (`hidden_corner`); else `soft_nearest` of the feet.
+    """
+    if xy.shape[0] == 1:
+        return xy[0]
+    brg = np.arctan2(xy[:, 1], xy[:, 0])
+    i, j = int(np.argmax(brg)), int(np.argmin(brg))
+    r = np.hypot(xy[:, 0], xy[:, 1])
+    k = int(np.argmin(r))
+    # A foot between the outermost ones and clearly nearer than both is the near corner
+    # (a foot on a frontal face, e.g. of a texture stripe, is not clearly nearer).
+    seen = k not in (i, j) and (min(r[i], r[j]) - r[k]
+                                > _CORNER_SIGMAS * math.hypot(sr[k], max(sr[i], sr[j])))
+    border = at_border is not None and bool(at_border[i] or at_border[j])
+    if score is not None and not seen and not border and i != j:
+        q = hidden_corner(xy[i], xy[j], float(max(sr[i], sr[j])), ground_xy, score)
+        if q is not None:
+            return q
+    return soft_nearest(xy, sr)
+
+
 class GpodDetector:
     """The GPOD obstacle detector with ground-plane calibration and per-frame refit.
 
@@ -675,6 +941,9 @@ class GpodDetector:
         self._prev_edges: np.ndarray | None = None
         self._acc: tuple[np.ndarray, np.ndarray] | None = None
         self._frame_thr = np.zeros(0)
+        #: the current left image and the current frame's context for describing obstacles
+        self._left: np.ndarray | None = None
+        self._ctx: _FrameContext | None = None
 
     @property
     def calibrated_plane(self) -> PlaneFit | None:
@@ -878,6 +1147,7 @@ class GpodDetector:
         """
         t_start = time.perf_counter()
         self._check_images(left, right, cam)
+        self._left = left
         if self._cam is not None and cam != self._cam:
             self.reset()
         self._cam = cam
@@ -1057,6 +1327,11 @@ class GpodDetector:
         features = _features(m, excess.astype(np.float32), obst, drop, sclass,
                              ex_mean.astype(np.float32), thr.astype(np.float32))
         self._frame_thr = thr
+        # Ground features: reliably matched edge pixels on the plane (free space).
+        ground = (np.abs(ex_mean) <= thr) & usable & ~obst_string[sid]
+        self._ctx = _FrameContext(cam=cam, metric=metric, abc=self._abc.copy(), u=u, v=v,
+                                  pd=pd, excess_mean=ex_mean, sigma=thr / c.threshold_k,
+                                  prev=prev, ground_points=pts[ground], left=self._left)
         found: list[GpodObstacle] = []
         for sel, sign, radius, min_px in (
                 (obst, 1.0, c.cluster_radius_m, 1),
@@ -1089,7 +1364,6 @@ class GpodDetector:
                   cam: StereoCamera, metric: MetricPlane) -> list[GpodObstacle]:
         """Cluster the selected pixels (by string, feet proximity) into obstacles; drop
         clusters of fewer than ``min_pixels`` pixels."""
-        c = self.config
         n_up = metric.normal_up
         p = pts[idx]
         hh = h[idx]
@@ -1104,34 +1378,76 @@ class GpodDetector:
         return self._describe(idx, label, sign, min_pixels, hh, g2, m, excess, cam, metric,
                               fwd, lft)
 
+    def _obstacle_feet(self, idx: np.ndarray, label: np.ndarray, sid: np.ndarray, n_c: int,
+                       m: Matches) -> tuple[np.ndarray, np.ndarray]:
+        """Range and bearing (n_c,) of the nearest point of each obstacle cluster.
+
+        Every edge string of a cluster gives one ground foot (`string_feet`): its matched
+        run followed down to where it meets the ground. The cluster's nearest point is
+        then (`nearest_point`): the near corner when one of the feet is nearer than the
+        two outermost ones (in bearing); else, when the outermost feet L and R are the
+        silhouette of a body whose near corner has no vertical edge (two faces of one
+        shade), the hidden corner on the Thales circle over LR that the image's edges
+        and the visible ground support (`hidden_corner`); else the probably nearest foot.
+        """
+        ctx = self._ctx
+        # The lowest obstacle pixel of each (cluster, string): where its foot search starts.
+        vv = m.v[idx].astype(np.int64)
+        o = np.lexsort((-vv, sid, label))
+        lab_o, sid_o = label[o], sid[o]
+        head = np.r_[True, (lab_o[1:] != lab_o[:-1]) | (sid_o[1:] != sid_o[:-1])]
+        start = idx[o][head]
+        xy, sr = string_feet(ctx, start)
+        g_lab = lab_o[head]
+        ul = m.u_left[start]
+        at_border = (ul < _BORDER_PX) | (ul > ctx.cam.width - 1 - _BORDER_PX)
+        rng = np.empty(n_c)
+        brg = np.empty(n_c)
+        for k in range(n_c):
+            sel = g_lab == k
+            if not sel.any():
+                rng[k] = brg[k] = np.nan
+                continue
+            q = nearest_point(xy[sel], sr[sel], ctx.ground_xy, ctx.contact_edge_score,
+                              at_border[sel])
+            rng[k] = math.hypot(q[0], q[1])
+            brg[k] = math.atan2(q[1], q[0])
+        return rng, brg
+
     def _describe(self, idx, label, sign, min_pixels, hh, g2, m: Matches, excess, cam,
                   metric, fwd, lft) -> list[GpodObstacle]:
         """GpodObstacles of the clusters ``label`` (0..C-1) of the pixels ``idx``, all at
         once (per-cluster quantiles from one sort by (cluster, value)).
 
-        Height: the 90th percentile of the pixels' heights (10th for a drop). Foot: at the
-        cluster's nearest range (5th percentile of the feet's ranges; 2nd for a drop --
-        it starts at its near edge), in the median direction of the nearest feet of its
-        edge strings (one vote per string) within
+        Height: the 90th percentile of the pixels' heights (10th for a drop). Foot of an
+        obstacle: its nearest point on the ground estimated from the ground feet of its
+        edge strings (:meth:`_obstacle_feet`); range and bearing are those of that one
+        point. Foot of a drop: at its 2nd-percentile range, in the median direction of
+        the nearest feet of its edge strings (one vote per string) within
         ``max(_NEAR_ZONE_M, _NEAR_ZONE_FRACTION * range)`` of that range.
         """
         c = self.config
         n_c = int(label.max()) + 1
         count = np.bincount(label, minlength=n_c)
-        rng_px = np.hypot(g2[:, 0], g2[:, 1])
         height = _group_quantile(label, hh, 0.9 if sign > 0 else 0.1, n_c)
-        r_near = _group_quantile(label, rng_px, 0.05 if sign > 0 else 0.02, n_c)
-        # Each edge string votes once, with its nearest foot, if that is within the near
-        # zone of the cluster's nearest range.
         sid_all = m.string_id[idx]
-        o3 = np.lexsort((rng_px, sid_all, label))
-        lab3, sid3 = label[o3], sid_all[o3]
-        head = np.r_[True, (lab3[1:] != lab3[:-1]) | (sid3[1:] != sid3[:-1])]
-        s_lab, s_rng, s_g = lab3[head], rng_px[o3][head], g2[o3][head]
-        zone = s_rng <= (r_near + np.maximum(_NEAR_ZONE_M, _NEAR_ZONE_FRACTION * r_near))[s_lab]
-        zx = _group_quantile(s_lab[zone], s_g[zone, 0], 0.5, n_c)
-        zy = _group_quantile(s_lab[zone], s_g[zone, 1], 0.5, n_c)
-        bearing = np.arctan2(zy, zx)
+        if sign > 0:
+            r_near, bearing = self._obstacle_feet(idx, label, sid_all, n_c, m)
+        else:
+            # A drop starts at its near edge: its 2nd-percentile range, in the median
+            # direction of the nearest feet of its strings (one vote per string) within
+            # the near zone of that range.
+            rng_px = np.hypot(g2[:, 0], g2[:, 1])
+            r_near = _group_quantile(label, rng_px, 0.02, n_c)
+            o3 = np.lexsort((rng_px, sid_all, label))
+            lab3, sid3 = label[o3], sid_all[o3]
+            head = np.r_[True, (lab3[1:] != lab3[:-1]) | (sid3[1:] != sid3[:-1])]
+            s_lab, s_rng, s_g = lab3[head], rng_px[o3][head], g2[o3][head]
+            zone = s_rng <= (r_near + np.maximum(_NEAR_ZONE_M,
+                                                 _NEAR_ZONE_FRACTION * r_near))[s_lab]
+            zx = _group_quantile(s_lab[zone], s_g[zone, 0], 0.5, n_c)
+            zy = _group_quantile(s_lab[zone], s_g[zone, 1], 0.5, n_c)
+            bearing = np.arctan2(zy, zx)
         foot = (-metric.height * metric.normal_up[None, :]
                 + r_near[:, None] * (np.cos(bearing)[:, None] * fwd[None, :]
                                      + np.sin(bearing)[:, None] * lft[None, :]))
