@@ -99,6 +99,10 @@ _BORDER_PX = 3.0
 #: located to a few centimetres).
 _FREE_SPACE_MARGIN_M = 0.05
 
+#: `cluster_points_2d` links up to this many (thinned) points by testing all pairs, more
+#: on a grid.
+_PAIRWISE_POINTS = 256
+
 #: The residual spread sigma of the initial fit is taken over the calibration features
 #: within this many ``plane_inlier_px`` of the fitted plane.
 _SIGMA_GATE = 3.0
@@ -511,6 +515,24 @@ def _components(n: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     Returns:
         (n,) int64 label of each node, 0..C-1 in order of first node.
     """
+    if a.size <= _PAIRWISE_POINTS:
+        # Few edges: union-find in Python (labels as below: by each component's first node).
+        parent = list(range(n))
+
+        def root(x: int) -> int:
+            while parent[x] != x:
+                parent[x] = parent[parent[x]]
+                x = parent[x]
+            return x
+
+        for x, y in zip(a.tolist(), b.tolist()):
+            rx, ry = root(x), root(y)
+            if rx != ry:
+                parent[max(rx, ry)] = min(rx, ry)
+        out, names = [], {}
+        for x in range(n):
+            out.append(names.setdefault(root(x), len(names)))
+        return np.array(out, np.int64)
     label = np.arange(n, dtype=np.int64)
     if a.size:
         while True:
@@ -557,6 +579,16 @@ def cluster_points_2d(points: np.ndarray, group: np.ndarray, radius: float) -> n
     _, rep = np.unique(fkey, return_index=True)
     pts, gr = points[rep], g[rep]
     nr = pts.shape[0]
+    if nr <= _PAIRWISE_POINTS:
+        # Few points: all pairs at once (the same links as the grid search below).
+        pi, pj = np.nonzero(gr[:, None] != gr[None, :])
+        diff = pts[pi] - pts[pj]
+        close = np.einsum('ij,ij->i', diff, diff) <= radius * radius
+        a, b = gr[pi[close]], gr[pj[close]]
+        if a.size:
+            pair = np.unique(a * n_g + b)
+            a, b = pair // n_g, pair % n_g
+        return _components(n_g, a, b)[g]
     cell = np.floor((pts - pts.min(axis=0)) / radius).astype(np.int64) + 1
     span = int(cell[:, 1].max()) + 3
     key = cell[:, 0] * span + cell[:, 1]
@@ -722,38 +754,74 @@ class _FrameContext:
         the image gradient across it (the largest within one pixel), grey levels per
         pixel, (M,). An obstacle standing on the ground meets it along such an edge (its
         silhouette edges show that it contrasts with the ground)."""
+        return self.contact_edge_scores(a[None], n[None], b[None],
+                                        np.ones((1, n.shape[0]), bool))[0]
+
+    def contact_edge_scores(self, a: np.ndarray, n: np.ndarray, b: np.ndarray,
+                            ok: np.ndarray) -> np.ndarray:
+        """`contact_edge_score` of several searches at once: a, b (T, 2), n (T, M, 2);
+        only the candidates ``ok`` (T, M) are scored (-inf elsewhere), (T, M).
+
+        Each search samples the image gradient in the frame of its own patch (the
+        bounding box of its points and candidates, 3-4 pixels wider), as one search alone
+        would; the gradient is computed once on the union of the patches (a sample lies
+        at least two pixels inside its patch, or on the image border: the same values).
+        """
         import cv2
 
-        m = n.shape[0]
-        # Both segments of every polyline at once: a -> n[k] and b -> n[k].
-        u0, v0 = self.to_image(np.concatenate([np.broadcast_to(a, n.shape),
-                                               np.broadcast_to(b, n.shape)]))
-        u1, v1 = self.to_image(np.concatenate([n, n]))
-        # The Sobel gradient of the image patch around them (grey levels per pixel).
+        t_n, m = ok.shape
         img_h, img_w = self._left.shape
-        x0 = min(max(int(math.floor(min(u0.min(), u1.min()))) - 3, 0), img_w - 1)
-        x1 = min(max(int(math.ceil(max(u0.max(), u1.max()))) + 4, x0 + 1), img_w)
-        y0 = min(max(int(math.floor(min(v0.min(), v1.min()))) - 3, 0), img_h - 1)
-        y1 = min(max(int(math.ceil(max(v0.max(), v1.max()))) + 4, y0 + 1), img_h)
-        patch = self._left[y0:y1, x0:x1].astype(np.float32)
+        ua, va = self.to_image(a)
+        ub, vb = self.to_image(b)
+        un, vn = self.to_image(n.reshape(-1, 2))
+        un, vn = un.reshape(t_n, m), vn.reshape(t_n, m)
+        inf = np.inf
+        u_lo = np.minimum(np.minimum(ua, ub), np.where(ok, un, inf).min(axis=1))
+        u_hi = np.maximum(np.maximum(ua, ub), np.where(ok, un, -inf).max(axis=1))
+        v_lo = np.minimum(np.minimum(va, vb), np.where(ok, vn, inf).min(axis=1))
+        v_hi = np.maximum(np.maximum(va, vb), np.where(ok, vn, -inf).max(axis=1))
+        x0 = np.clip(np.floor(u_lo).astype(np.int64) - 3, 0, img_w - 1)
+        x1 = np.minimum(np.maximum(np.ceil(u_hi).astype(np.int64) + 4, x0 + 1), img_w)
+        y0 = np.clip(np.floor(v_lo).astype(np.int64) - 3, 0, img_h - 1)
+        y1 = np.minimum(np.maximum(np.ceil(v_hi).astype(np.int64) + 4, y0 + 1), img_h)
+        gx0, gx1, gy0, gy1 = int(x0.min()), int(x1.max()), int(y0.min()), int(y1.max())
+        patch = self._left[gy0:gy1, gx0:gx1].astype(np.float32)
         gx = cv2.Sobel(patch, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
         gy = cv2.Sobel(patch, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
-        h, w = gx.shape
-        u0, u1, v0, v1 = u0 - x0, u1 - x0, v0 - y0, v1 - y0
+        # Segments (T, 2, M): a -> n and b -> n, in each search's patch coordinates.
+        fx, fy = x0.astype(np.float64)[:, None, None], y0.astype(np.float64)[:, None, None]
+        u0 = np.stack([ua, ub], axis=1)[:, :, None] - fx
+        v0 = np.stack([va, vb], axis=1)[:, :, None] - fy
+        u1 = un[:, None, :] - fx
+        v1 = vn[:, None, :] - fy
         du, dv = u1 - u0, v1 - v0
         length = np.hypot(du, dv)
-        nu = (-dv / np.maximum(length, 1e-9))[:, None]
-        nv = (du / np.maximum(length, 1e-9))[:, None]
+        nu = (-dv / np.maximum(length, 1e-9))[..., None]
+        nv = (du / np.maximum(length, 1e-9))[..., None]
         t = (np.arange(16) + 0.5) / 16.0
-        uu = u0[:, None] + t[None, :] * du[:, None]
-        vv = v0[:, None] + t[None, :] * dv[:, None]
-        best = np.zeros(uu.shape, np.float32)
+        uu = u0[..., None] + t * du[..., None]
+        vv = v0[..., None] + t * dv[..., None]
+        # Clipping to each patch, then the offset into the union patch (flat index).
+        pw = gx.shape[1]
+        w_max = (x1 - x0 - 1)[:, None, None, None]
+        h_max = (y1 - y0 - 1)[:, None, None, None]
+        ox = (x0 - gx0)[:, None, None, None]
+        oy = (y0 - gy0)[:, None, None, None]
+        gxf, gyf = gx.ravel(), gy.ravel()
+        best = None
         for off in (-1.0, 0.0, 1.0):
-            ui = np.minimum(np.maximum(np.rint(uu + off * nu).astype(np.int64), 0), w - 1)
-            vi = np.minimum(np.maximum(np.rint(vv + off * nv).astype(np.int64), 0), h - 1)
-            best = np.maximum(best, np.abs(gx[vi, ui] * nu + gy[vi, ui] * nv))
-        total = best.mean(axis=1) * length
-        return (total[:m] + total[m:]) / np.maximum(length[:m] + length[m:], 1e-9)
+            ui = np.rint(uu + off * nu).astype(np.int64)
+            vi = np.rint(vv + off * nv).astype(np.int64)
+            np.maximum(ui, 0, out=ui)
+            np.minimum(ui, w_max, out=ui)
+            np.maximum(vi, 0, out=vi)
+            np.minimum(vi, h_max, out=vi)
+            flat = (vi + oy) * pw + (ui + ox)
+            val = np.abs(gxf[flat] * nu + gyf[flat] * nv)
+            best = val if best is None else np.maximum(best, val)
+        total = best.mean(axis=-1) * length
+        score = (total[:, 0] + total[:, 1]) / np.maximum(length[:, 0] + length[:, 1], 1e-9)
+        return np.where(ok, score, -inf)
 
 
 def string_feet(ctx: _FrameContext, start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -809,26 +877,125 @@ def soft_nearest(xy: np.ndarray, sr: np.ndarray) -> np.ndarray:
 
 
 def _ground_inside(g: np.ndarray, a: np.ndarray, n: np.ndarray, b: np.ndarray,
-                   margin: float) -> np.ndarray:
-    """(M,) bool: whether any of the points g (G, 2) lies inside the triangle a-n[k]-b by
-    more than ``margin`` from each side (never for a degenerate triangle)."""
+                   margin: float, job: np.ndarray | None = None) -> np.ndarray:
+    """(T, M) bool: whether any of the ground points g (P, 2) of search ``job[p]`` lies
+    inside the triangle a[t]-n[t, k]-b[t] by more than ``margin`` from each side (never
+    for a degenerate triangle); a, b (T, 2), n (T, M, 2), job (P,) (None: all points
+    belong to every search)."""
+    t_n, m = n.shape[:2]
+    out = np.zeros((t_n, m), bool)
     if g.shape[0] == 0:
-        return np.zeros(n.shape[0], bool)
+        return out
+    if job is None:
+        job = np.repeat(np.arange(t_n), g.shape[0])
+        g = np.tile(g, (t_n, 1))
+    gx, gy = g[:, None, 0], g[:, None, 1]
 
     def side(p0: np.ndarray, p1: np.ndarray) -> np.ndarray:
-        """(M, G) signed distance of g from the line p0 -> p1 (left positive)."""
+        """(P, M) signed distance of each point from the line p0 -> p1 of its search
+        (left positive); p0, p1 (T, M, 2)."""
         e = p1 - p0
-        length = np.maximum(np.hypot(e[..., 0], e[..., 1]), 1e-12)[..., None]
-        return (e[..., :1] * (g[None, :, 1] - p0[..., 1:2])
-                - e[..., 1:2] * (g[None, :, 0] - p0[..., :1])) / length
+        length = np.maximum(np.hypot(e[..., 0], e[..., 1]), 1e-12)[job]
+        ex, ey = e[job, :, 0], e[job, :, 1]
+        return (ex * (gy - p0[job, :, 1]) - ey * (gx - p0[job, :, 0])) / length
 
-    aa = np.broadcast_to(a, n.shape)
-    bb = np.broadcast_to(b, n.shape)
-    area2 = (n[:, 0] - a[0]) * (b[1] - a[1]) - (n[:, 1] - a[1]) * (b[0] - a[0])
-    sgn = np.where(area2 > 0, 1.0, -1.0)[:, None]
+    aa = np.broadcast_to(a[:, None, :], n.shape)
+    bb = np.broadcast_to(b[:, None, :], n.shape)
+    area2 = ((n[..., 0] - a[:, None, 0]) * (b[:, None, 1] - a[:, None, 1])
+             - (n[..., 1] - a[:, None, 1]) * (b[:, None, 0] - a[:, None, 0]))
+    sgn = np.where(area2 > 0, 1.0, -1.0)[job]
     inside = ((sgn * side(aa, n) > margin) & (sgn * side(n, bb) > margin)
               & (sgn * side(bb, aa) > margin))
-    return inside.any(axis=1) & (np.abs(area2) > 1e-12)
+    np.logical_or.at(out, job, inside)
+    return out & (np.abs(area2) > 1e-12)
+
+
+def hidden_corners(a: np.ndarray, b: np.ndarray, sigma: np.ndarray, ground_xy,
+                   score) -> np.ndarray:
+    """`hidden_corner` of several pairs of silhouette feet at once.
+
+    Args:
+        a, b: (T, 2) ground coordinates of the silhouette feet of each search.
+        sigma: (T,) their range sigmas, metres.
+        ground_xy: (G, 2) visible ground, or a callable returning it (only called when
+            a search gets that far).
+        score: ``score(a (T', 2), n (T', M, 2), b (T', 2), ok (T', M)) -> (T', M)``, the
+            contact-edge score of the candidates ``ok`` (others -inf)
+            (`_FrameContext.contact_edge_scores`).
+    Returns:
+        (T, 2) the hidden corner of each search, NaN where there is none.
+    """
+    t_n = a.shape[0]
+    out = np.full((t_n, 2), np.nan)
+    jobs, cs, rhos, a0s, spans = [], [], [], [], []
+    for t in range(t_n):
+        at, bt = a[t], b[t]
+        c = 0.5 * (at + bt)
+        rho = 0.5 * float(np.hypot(*(bt - at)))
+        cn = float(np.hypot(*c))
+        if rho <= _CORNER_SIGMAS * sigma[t] or cn <= rho:   # no corner could bulge enough
+            continue
+        a0 = math.atan2(at[1] - c[1], at[0] - c[0])
+        span = (math.atan2(bt[1] - c[1], bt[0] - c[0]) - a0) % (2 * math.pi)   # a -> b, ccw
+        if (math.atan2(-c[1], -c[0]) - a0) % (2 * math.pi) > span:   # the near half is cw
+            span -= 2 * math.pi
+        jobs.append(t)
+        cs.append(c)
+        rhos.append(rho)
+        a0s.append(a0)
+        spans.append(span)
+    if not jobs:
+        return out
+    jobs = np.array(jobs)
+    aj, bj = a[jobs], b[jobs]
+    lin = np.linspace(0.0, 1.0, _CORNER_ARC_POINTS)
+    ang = np.array(a0s)[:, None] + lin * np.array(spans)[:, None]
+    n = (np.array(cs)[:, None, :]
+         + np.array(rhos)[:, None, None] * np.stack([np.cos(ang), np.sin(ang)], axis=2))
+    margin = _FREE_SPACE_MARGIN_M
+    g = ground_xy() if callable(ground_xy) else ground_xy
+    if g.size:
+        # Only ground inside a search's circle (its triangles are inscribed) and off its
+        # chord by more than the margin can be inside one of its triangles (a cheap test
+        # of every ground point, the exact one of the few left).
+        cj = np.array(cs)
+        rj = np.array(rhos)
+        # Ground within the bounding box of all the circles first (one cheap pass).
+        lo = (cj - rj[:, None]).min(axis=0) - margin
+        hi = (cj + rj[:, None]).max(axis=0) + margin
+        g = g[(g[:, 0] >= lo[0]) & (g[:, 0] <= hi[0]) & (g[:, 1] >= lo[1]) & (g[:, 1] <= hi[1])]
+        ex, ey = (aj - bj)[:, 0:1], (aj - bj)[:, 1:2]
+        chord = np.maximum(np.hypot(ex, ey), 1e-12)
+        off = np.abs(ex * (g[None, :, 1] - bj[:, 1:2]) - ey * (g[None, :, 0] - bj[:, 0:1]))
+        dx, dy = g[None, :, 0] - cj[:, 0:1], g[None, :, 1] - cj[:, 1:2]
+        near = ((off > (margin * 0.999) * chord)
+                & (dx * dx + dy * dy < (rj[:, None] * 1.001) ** 2))
+        job, gi = np.nonzero(near)
+        ok = ~_ground_inside(g[gi], aj, n, bj, margin, job)
+    else:
+        ok = np.ones(n.shape[:2], bool)
+    live = ok.any(axis=1)
+    if not live.any():
+        return out
+    jobs, aj, bj, n, ok = jobs[live], aj[live], bj[live], n[live], ok[live]
+    best = np.argmax(score(aj, n, bj, ok), axis=1)
+    q = n[np.arange(jobs.size), best]
+    e = bj - aj
+    rho = np.array(rhos)[live]
+    bulge = np.abs(e[:, 0] * (q[:, 1] - aj[:, 1]) - e[:, 1] * (q[:, 0] - aj[:, 0])) / (2.0 * rho)
+    keep = bulge > _CORNER_SIGMAS * sigma[jobs]
+    out[jobs[keep]] = q[keep]
+    return out
+
+
+def _single_score(score):
+    """A batched score (`hidden_corners`) from a single one ``score(a, n, b) -> (M,)``."""
+    def batched(a, n, b, ok):
+        out = np.full(ok.shape, -np.inf)
+        for t in range(ok.shape[0]):
+            out[t, ok[t]] = score(a[t], n[t][ok[t]], b[t])
+        return out
+    return batched
 
 
 def hidden_corner(a: np.ndarray, b: np.ndarray, sigma: float, ground_xy: np.ndarray,
@@ -841,36 +1008,74 @@ def hidden_corner(a: np.ndarray, b: np.ndarray, sigma: float, ground_xy: np.ndar
     triangle a-n-b holds visible ground (a ground feature more than
     ``_FREE_SPACE_MARGIN_M`` inside: free space seen through it) are impossible; of the
     others the one whose contact polyline a-n-b the image's edges follow best
-    (``score``) is taken. None when the camera's foot is inside the circle, no candidate
-    is possible, or the best one lies within ``_CORNER_SIGMAS`` ``sigma`` (the feet's
-    range sigma) of the chord ab: the straight face ab explains the image as well (a
-    frontal face, no hidden corner).
+    (``score(a, n, b) -> (M,)``) is taken. None when the camera's foot is inside the
+    circle, no candidate is possible, or the best one lies within ``_CORNER_SIGMAS``
+    ``sigma`` (the feet's range sigma) of the chord ab: the straight face ab explains the
+    image as well (a frontal face, no hidden corner). See `hidden_corners` (batched).
     """
-    c = 0.5 * (a + b)
-    rho = 0.5 * float(np.hypot(*(b - a)))
-    cn = float(np.hypot(*c))
-    if rho <= _CORNER_SIGMAS * sigma or cn <= rho:     # no corner could bulge enough
-        return None
-    a0 = math.atan2(a[1] - c[1], a[0] - c[0])
-    span = (math.atan2(b[1] - c[1], b[0] - c[0]) - a0) % (2 * math.pi)   # a -> b, ccw
-    if (math.atan2(-c[1], -c[0]) - a0) % (2 * math.pi) > span:   # the near half is cw
-        span -= 2 * math.pi
-    ang = a0 + np.linspace(0.0, 1.0, _CORNER_ARC_POINTS) * span
-    n = c[None, :] + rho * np.stack([np.cos(ang), np.sin(ang)], axis=1)
-    margin = _FREE_SPACE_MARGIN_M
-    g = ground_xy
-    if g.size:
-        lo = np.minimum(np.minimum(a, b), n.min(axis=0)) - margin
-        hi = np.maximum(np.maximum(a, b), n.max(axis=0)) + margin
-        g = g[np.all((g >= lo) & (g <= hi), axis=1)]
-    ok = ~_ground_inside(g, a, n, b, margin)
-    if not ok.any():
-        return None
-    cand = n[ok]
-    q = cand[int(np.argmax(score(a, cand, b)))]
-    e = b - a
-    bulge = abs(e[0] * (q[1] - a[1]) - e[1] * (q[0] - a[0])) / (2.0 * rho)
-    return q if bulge > _CORNER_SIGMAS * sigma else None
+    q = hidden_corners(np.asarray(a, np.float64)[None], np.asarray(b, np.float64)[None],
+                       np.array([float(sigma)]), ground_xy, _single_score(score))[0]
+    return None if np.isnan(q[0]) else q
+
+
+def nearest_points(xy: np.ndarray, sr: np.ndarray, group: np.ndarray, n_groups: int,
+                   ground_xy, score=None, at_border: np.ndarray | None = None
+                   ) -> np.ndarray:
+    """`nearest_point` of the feet of several obstacles at once (their hidden-corner
+    searches batched, `hidden_corners`).
+
+    Args:
+        xy: (S, 2) ground coordinates of the feet, sr (S,) their range sigmas.
+        group: (S,) obstacle of each foot, 0..n_groups-1.
+        ground_xy: (G, 2) visible ground, or a callable returning it.
+        score: batched contact-edge score (`hidden_corners`), or None (no search).
+        at_border: (S,) bool, feet of strings at the image's left or right border.
+    Returns:
+        (n_groups, 2) ground coordinates of each obstacle's nearest point (NaN without
+        feet).
+    """
+    out = np.full((n_groups, 2), np.nan)
+    if xy.shape[0] == 0:
+        return out
+    order = np.argsort(group, kind='stable')
+    g_s = group[order]
+    first = np.searchsorted(g_s, np.arange(n_groups), side='left')
+    last = np.searchsorted(g_s, np.arange(n_groups), side='right')
+    brg_all = np.arctan2(xy[:, 1], xy[:, 0])
+    r_all = np.hypot(xy[:, 0], xy[:, 1])
+    search, pair, soft = [], [], []
+    for k in range(n_groups):
+        sel = order[first[k]:last[k]]
+        if sel.size == 0:
+            continue
+        if sel.size == 1:
+            out[k] = xy[sel[0]]
+            continue
+        brg, r, s = brg_all[sel], r_all[sel], sr[sel]
+        i, j = int(np.argmax(brg)), int(np.argmin(brg))
+        kk = int(np.argmin(r))
+        # A foot between the outermost ones and clearly nearer than both is the near
+        # corner (a foot on a frontal face, e.g. of a texture stripe, is not clearly nearer).
+        seen = kk not in (i, j) and (min(r[i], r[j]) - r[kk]
+                                     > _CORNER_SIGMAS * math.hypot(s[kk], max(s[i], s[j])))
+        border = at_border is not None and bool(at_border[sel[i]] or at_border[sel[j]])
+        if score is not None and not seen and not border and i != j:
+            search.append(k)
+            pair.append((sel[i], sel[j], float(max(s[i], s[j]))))
+        else:
+            soft.append(k)
+    if search:
+        ii, jj, sg = (np.array(x) for x in zip(*pair))
+        q = hidden_corners(xy[ii], xy[jj], sg, ground_xy, score)
+        for k, qk in zip(search, q):
+            if np.isnan(qk[0]):
+                soft.append(k)
+            else:
+                out[k] = qk
+    for k in soft:
+        sel = order[first[k]:last[k]]
+        out[k] = soft_nearest(xy[sel], sr[sel])
+    return out
 
 
 def nearest_point(xy: np.ndarray, sr: np.ndarray, ground_xy: np.ndarray,
@@ -890,23 +1095,10 @@ def nearest_point(xy: np.ndarray, sr: np.ndarray, ground_xy: np.ndarray,
         feet in bearing and is clearly (``_CORNER_SIGMAS``) nearer than both (the near
         corner is seen; `soft_nearest`); else the hidden corner between the outermost
         feet, if there is one (`hidden_corner`); else `soft_nearest` of the feet.
+        See `nearest_points` (batched).
     """
-    if xy.shape[0] == 1:
-        return xy[0]
-    brg = np.arctan2(xy[:, 1], xy[:, 0])
-    i, j = int(np.argmax(brg)), int(np.argmin(brg))
-    r = np.hypot(xy[:, 0], xy[:, 1])
-    k = int(np.argmin(r))
-    # A foot between the outermost ones and clearly nearer than both is the near corner
-    # (a foot on a frontal face, e.g. of a texture stripe, is not clearly nearer).
-    seen = k not in (i, j) and (min(r[i], r[j]) - r[k]
-                                > _CORNER_SIGMAS * math.hypot(sr[k], max(sr[i], sr[j])))
-    border = at_border is not None and bool(at_border[i] or at_border[j])
-    if score is not None and not seen and not border and i != j:
-        q = hidden_corner(xy[i], xy[j], float(max(sr[i], sr[j])), ground_xy, score)
-        if q is not None:
-            return q
-    return soft_nearest(xy, sr)
+    return nearest_points(xy, sr, np.zeros(xy.shape[0], np.int64), 1, ground_xy,
+                          None if score is None else _single_score(score), at_border)[0]
 
 
 class GpodDetector:
@@ -1401,17 +1593,10 @@ class GpodDetector:
         g_lab = lab_o[head]
         ul = m.u_left[start]
         at_border = (ul < _BORDER_PX) | (ul > ctx.cam.width - 1 - _BORDER_PX)
-        rng = np.empty(n_c)
-        brg = np.empty(n_c)
-        for k in range(n_c):
-            sel = g_lab == k
-            if not sel.any():
-                rng[k] = brg[k] = np.nan
-                continue
-            q = nearest_point(xy[sel], sr[sel], ctx.ground_xy, ctx.contact_edge_score,
-                              at_border[sel])
-            rng[k] = math.hypot(q[0], q[1])
-            brg[k] = math.atan2(q[1], q[0])
+        q = nearest_points(xy, sr, g_lab, n_c, lambda: ctx.ground_xy,
+                           ctx.contact_edge_scores, at_border)
+        rng = np.array([math.hypot(x, y) for x, y in q.tolist()])
+        brg = np.array([math.atan2(y, x) for x, y in q.tolist()])
         return rng, brg
 
     def _describe(self, idx, label, sign, min_pixels, hh, g2, m: Matches, excess, cam,
