@@ -24,10 +24,13 @@ DGPR needs), for the inclinometer alone, visual motion alone and both, and with 
 source dropped for 4 s.
 
 real: the Mobilise-D lower-back IMU recordings (../shared/data/gait_lowback): attitude
-at 100 Hz by a complementary filter, decimated to 16 Hz as a compass would give it, the
-walk model run on it; the 0.5 s-ahead pitch prediction against "hold the last value" on
+at 100 Hz by a complementary filter (3 s), decimated to 16 Hz as a compass would give it,
+the walk model run on it; the 0.5 s-ahead prediction against "hold the last value" on
 the straight walks (Test5) within the reference walking bouts, the daily-living walk
-(Test11) likewise, and walk starts/stops against the reference bouts (INDIP MicroWB).
+(Test11) likewise, with two bounds (a Fourier-combiner Kalman filter given each bout's own
+stride frequency; a non-causal fit of each bout); walk starts/stops against the reference
+bouts (INDIP MicroWB: precision and recall within 0.5 s and 1 s); the tracked step
+frequency against the reference cadence.
 
 figs: the paper's Figs. 13-15 redrawn from these runs (docs/gait_fig13.png, ...).
 """
@@ -275,6 +278,17 @@ def run_tracker(times, rpy, variance, config: GaitConfig | None = None,
         egomotion_used=tr.stats.egomotion)
 
 
+def motion_increments(run: TrackerRun) -> np.ndarray:
+    """(N, 3) the published predicted rig rotation over the horizon (``motion``) as
+    attitude increments: rpy(R(attitude) motion) - attitude, rad (yaw wrapped)."""
+    from asmonc_vision.core.gait.rotations import matrix_to_rpy, wrap_angle
+
+    d = matrix_to_rpy(rpy_to_matrix(run.attitude) @ run.motion) - run.attitude
+    d[:, 0] = wrap_angle(d[:, 0])
+    d[:, 2] = wrap_angle(d[:, 2])
+    return d
+
+
 def _truth_walking(walker, t) -> np.ndarray:
     return walker.speed(np.asarray(t, float)) >= WALK_SPEED
 
@@ -309,7 +323,7 @@ def score_sim(case: SimCase, run: TrackerRun, horizon: float = HORIZON) -> dict:
     stops = scoring.match_events(down_true, down_det)
     # the predicted change of attitude over the horizon (what DGPR needs) against the
     # true change: (pred - est. now) - (truth(t + h) - truth(t))
-    rel_err = scoring.angle_errors_deg(run.predicted - run.attitude, truth_h - truth_now)
+    rel_err = scoring.angle_errors_deg(motion_increments(run), truth_h - truth_now)
     return {
         'pred_err': pred_err[valid], 'hold_err': hold_err[valid],
         'pred_err_walk': pred_err[steady], 'hold_err_walk': hold_err[steady],
@@ -440,7 +454,7 @@ def evaluate_fusion(seeds=range(5), sigma_deg: float = 0.5, config: GaitConfig |
                     sc['pred_err_walk'] = scoring.angle_errors_deg(run.predicted, th)[sel]
                     _, tn = case.walker.states(t)
                     sc['motion_err_walk'] = scoring.angle_errors_deg(
-                        run.predicted - run.attitude, th - tn)[sel]
+                        motion_increments(run), th - tn)[sel]
                 acc[m].append(sc)
             if progress:
                 progress(f'  fusion {name} seed {seed} done')
@@ -570,6 +584,12 @@ def run(args) -> int:
 REAL_RATE = 100.0
 #: "steady" part of a reference bout: without its first and last second
 REAL_TRIM = 1.0
+#: time constant of the complementary filter for the real recordings, s: long enough
+#: that walking accelerations (0.1-0.3 g at the step) leak little into the tilt (about
+#: k / omega = 1 / (tau 2 pi 1.8 Hz), 3 %), short enough for the gyroscope's drift
+REAL_ATTITUDE_TIME_CONSTANT = 3.0
+#: event tolerances of the walk start/stop precision and recall, s
+EVENT_TOLERANCES = (0.5, 1.0)
 
 
 @dataclass(frozen=True)
@@ -582,9 +602,10 @@ class RealRecording:
     bouts: list                    # reference walking bouts [(start, end)] s
     reference: str                 # 'INDIP', 'Stereophoto' or 'none'
     turns: list                    # reference turns [(start, end, angle_deg)]
+    cadence: list = dataclasses.field(default_factory=list)   # per bout, steps/s (or nan)
 
 
-def _bouts_of(standards) -> tuple[list, str, list]:
+def _bouts_of(standards) -> tuple[list, str, list, list]:
     for ref in ('INDIP', 'Stereophoto'):
         s = getattr(standards, ref, None)
         if s is None:
@@ -593,19 +614,21 @@ def _bouts_of(standards) -> tuple[list, str, list]:
         items = [m for m in mw if hasattr(m, 'Start')]
         if items:
             bouts = [(float(m.Start), float(m.End)) for m in items]
+            cadence = [float(np.nanmean(np.atleast_1d(getattr(m, 'Cadence', np.nan))))
+                       / 60.0 for m in items]
             turns = []
             for m in items:
                 ts, te, ta = (np.atleast_1d(getattr(m, k, [])).astype(float)
                               for k in ('Turn_Start', 'Turn_End', 'Turn_Angle'))
                 turns += list(zip(ts, te, ta))
-            return bouts, ref, turns
-    return [], 'none', []
+            return bouts, ref, turns, cadence
+    return [], 'none', [], []
 
 
 def load_real(data: Path, tests=('Test5', 'Test11')) -> list[RealRecording]:
     """The lower-back recordings (CSV: acc in g, gyr in deg/s, 100 Hz) with their
-    reference bouts from data.mat; attitude by the complementary filter, decimated to
-    16 Hz.
+    reference bouts from data.mat; attitude by the complementary filter
+    (``REAL_ATTITUDE_TIME_CONSTANT``), decimated to 16 Hz.
 
     Raises:
         FileNotFoundError: the data directory is missing.
@@ -627,15 +650,16 @@ def load_real(data: Path, tests=('Test5', 'Test11')) -> list[RealRecording]:
         a = np.loadtxt(f, delimiter=',', skiprows=1)
         acc = a[:, 1:4] @ MOBILISE_TO_BODY.T
         gyr = np.radians(a[:, 4:7]) @ MOBILISE_TO_BODY.T
-        rpy100 = complementary_filter(acc, gyr, REAL_RATE)
+        rpy100 = complementary_filter(acc, gyr, REAL_RATE, REAL_ATTITUDE_TIME_CONSTANT)
         t16, rpy16 = decimate_to(rpy100, REAL_RATE, 16.0)
-        bouts, ref, turns = [], 'none', []
+        bouts, ref, turns, cadence = [], 'none', [], []
         mat = mat_root / group / pid / 'data.mat'
         if mat.exists():
             d = sio.loadmat(mat, squeeze_me=True, struct_as_record=False)['data']
             tr = getattr(getattr(d.TimeMeasure1, test), trial)
-            bouts, ref, turns = _bouts_of(tr.Standards)
-        out.append(RealRecording(f'{group}/{pid} {test} {trial}', t16, rpy16, bouts, ref, turns))
+            bouts, ref, turns, cadence = _bouts_of(tr.Standards)
+        out.append(RealRecording(f'{group}/{pid} {test} {trial}', t16, rpy16, bouts, ref,
+                                 turns, cadence))
     return out
 
 
@@ -652,12 +676,11 @@ REAL_SIGMA = math.radians(0.1)
 
 def window_fit_prediction(times, rpy, horizon: float = HORIZON, window: float = 2.0,
                           config: GaitConfig | None = None) -> np.ndarray:
-    """A reference predictor: at every sample, fit the walk model's sinusoids by least
-    squares to the last `window` seconds (best step frequency on the grid, pitch with its
-    second harmonic; the trend is fitted but not extrapolated) and evaluate it
-    `horizon` ahead. No filtering, no state: what the model family can do at best with
-    that much data. NaN where the window is not full."""
-    from asmonc_vision.core.gait.detector import fit_walk
+    """A reference predictor: at every sample, fit the walk model's stride harmonics by
+    least squares to the last `window` seconds (best step frequency on the grid by the
+    lock check's criterion; the trend is fitted but not extrapolated) and evaluate it
+    `horizon` ahead. No filtering, no state. NaN where the window is not full."""
+    from asmonc_vision.core.gait.detector import LOCK_CRITERION, fit_walk
 
     cfg = config if config is not None else GaitConfig()
     freqs = np.arange(cfg.min_frequency, cfg.max_frequency + 1e-9, 0.02)
@@ -667,20 +690,83 @@ def window_fit_prediction(times, rpy, horizon: float = HORIZON, window: float = 
         if t[i] - t[0] < window:
             continue
         m = (t > t[i] - window) & (t <= t[i])
-        fit = fit_walk(t[m] - t[i], rpy[m], freqs, True)
+        fit = fit_walk(t[m] - t[i], rpy[m], freqs, cfg.harmonics, *LOCK_CRITERION)
         if fit is None:
             continue
-        w = 2.0 * np.pi * fit.frequency * horizon
-        k = np.array([0.5, 1.0, 0.5])
-        out[i] = fit.offset + fit.amplitude * np.sin(fit.phase + k * w)
-        out[i, 1] += fit.harmonic[0] * np.sin(fit.harmonic[1] + 2.0 * w)
+        for a in range(3):
+            c = fit.coefficients[a]
+            k = np.arange(1, c.size + 1)
+            out[i, a] = fit.offset[a] + float(np.sum(np.imag(
+                c * np.exp(1j * k * np.pi * fit.frequency * horizon))))
+    return out
+
+
+def _harmonic_design(tau, f_stride: float, ks, trend: bool = False) -> np.ndarray:
+    cols = [np.ones_like(tau)] + ([tau] if trend else [])
+    for k in ks:
+        cols += [np.sin(2 * np.pi * k * f_stride * tau), np.cos(2 * np.pi * k * f_stride * tau)]
+    return np.column_stack(cols)
+
+
+def bout_stride_frequency(t, y, ks=(1, 2)) -> tuple[float, float]:
+    """Non-causal: the stride frequency (Hz, 0.6-1.3) whose harmonics ``ks`` (with
+    offset and trend) fit the whole bout best, and that fit's rms residual (rad)."""
+    tau = np.asarray(t, float) - t[0]
+    best = (np.inf, 0.0)
+    for f in np.arange(0.6, 1.3, 0.005):
+        X = _harmonic_design(tau, f, ks, trend=True)
+        r = y - X @ np.linalg.lstsq(X, y, rcond=None)[0]
+        best = min(best, (float(np.sqrt(np.mean(r * r))), float(f)))
+    return best[1], best[0]
+
+
+#: the Fourier-combiner bound's settings (the best on these recordings, pooled: an
+#: optimistic bound): stride harmonics, random walks of offset and coefficients
+#: (deg / sqrt(s)), measurement noise (deg), initial coefficient spread (deg)
+FLC_BOUND = {'ks': (1, 2, 3), 'q_offset': 2.0, 'q_coef': 0.25, 'r': 1.0, 'p0': 3.0}
+
+
+def fourier_combiner_bound(rec: RealRecording, horizon: float = HORIZON, axis: int = 1
+                           ) -> np.ndarray:
+    """An upper bound of what a causal walk model can do on a recording: a linear
+    Kalman filter of the stride harmonics (a Fourier linear combiner), started at each
+    reference bout's start and *given* the bout's own stride frequency (found
+    non-causally over the whole bout, ``bout_stride_frequency``), predicting ``horizon``
+    ahead. NaN outside the bouts."""
+    s = FLC_BOUND
+    t = rec.times
+    out = np.full(t.size, np.nan)
+    d = math.radians
+    for b0, b1 in rec.bouts:
+        m = (t >= b0) & (t <= b1)
+        if m.sum() < 8:
+            continue
+        f0, _ = bout_stride_frequency(t[m], rec.rpy[m, axis])
+        n = 1 + 2 * len(s['ks'])
+        idx = np.flatnonzero(m)
+        x = np.zeros(n)
+        x[0] = rec.rpy[idx[0], axis]
+        P = np.eye(n) * d(s['p0']) ** 2
+        P[0, 0] = d(1.0) ** 2
+        dt = 1.0 / 16.0
+        Q = np.diag([d(s['q_offset']) ** 2] + [d(s['q_coef']) ** 2] * (n - 1)) * dt
+        for i in idx:
+            tau = np.array([t[i] - t[idx[0]]])
+            H = _harmonic_design(tau, f0, s['ks'])[0]
+            P = P + Q                                      # P = P + Q (random walks)
+            S = H @ P @ H + d(s['r']) ** 2                 # S = H P H^T + R
+            K = P @ H / S                                  # K = P H^T S^-1
+            x = x + K * (rec.rpy[i, axis] - H @ x)         # x = x + K (z - H x)
+            P = P - np.outer(K, H @ P)                     # P = (I - K H) P
+            out[i] = _harmonic_design(tau + horizon, f0, s['ks'])[0] @ x
     return out
 
 
 def score_real(rec: RealRecording, run: TrackerRun, horizon: float = HORIZON) -> dict:
     """0.5 s-ahead prediction vs the later measured attitude, and vs holding the last
-    value, for samples whose t and t + horizon lie inside a reference bout; detected
-    bouts against the reference ones."""
+    value, for samples whose t and t + horizon lie inside a reference bout; reference
+    predictors; detected walk starts/stops against the reference bouts; the tracked
+    step frequency against the reference cadence."""
     t = run.times
     later = np.column_stack([np.interp(t + horizon, rec.times, rec.rpy[:, a]) for a in range(3)])
     in_bout = np.zeros(t.size, bool)
@@ -690,7 +776,6 @@ def score_real(rec: RealRecording, run: TrackerRun, horizon: float = HORIZON) ->
         steady |= (t >= s + REAL_TRIM) & (t + horizon <= e - REAL_TRIM)
     pe_all = scoring.angle_errors_deg(run.predicted, later)
     he_all = scoring.angle_errors_deg(rec.rpy[:t.size], later)
-    pred_err, hold_err = pe_all[in_bout], he_all[in_bout]
     sel = np.flatnonzero(in_bout)
     wf = np.full((t.size, 3), np.nan)
     if sel.size:
@@ -698,21 +783,40 @@ def score_real(rec: RealRecording, run: TrackerRun, horizon: float = HORIZON) ->
         wf[lo:sel[-1] + 1] = window_fit_prediction(t[lo:sel[-1] + 1],
                                                    rec.rpy[lo:sel[-1] + 1], horizon)
     fit_err = scoring.angle_errors_deg(wf, later)
+    flc = fourier_combiner_bound(rec, horizon)
+    flc_err = np.degrees(flc - later[:, 1])
+    floor = []
+    for s, e in rec.bouts:
+        m = (rec.times >= s) & (rec.times <= e)
+        if m.sum() >= 8:
+            floor.append((int(m.sum()), bout_stride_frequency(rec.times[m], rec.rpy[m, 1])[1]))
+    up, down = scoring.transitions(t, run.walking)
+    events = {}
+    for tol in EVENT_TOLERANCES:
+        events[f'start_{tol:g}s'] = scoring.event_precision_recall(
+            [b[0] for b in rec.bouts], up, tol)
+        events[f'end_{tol:g}s'] = scoring.event_precision_recall(
+            [b[1] for b in rec.bouts], down, tol)
+    cad = []
+    for (s, e), c in zip(rec.bouts, rec.cadence or [np.nan] * len(rec.bouts)):
+        m = (t >= s) & (t <= e) & run.walking
+        if m.any() and np.isfinite(c):
+            cad.append((float(np.median(run.frequency[m])), c))
     detected = scoring.bouts(t, run.walking)
-    pairs = scoring.match_bouts(rec.bouts, detected)
-    start_err = [d[0] - r[0] for r, d in pairs if d is not None]
-    end_err = [d[1] - r[1] for r, d in pairs if d is not None]
-    matched = {d for _, d in pairs if d is not None}
-    false = [d for d in detected if d not in matched
-             and not any(min(d[1], r[1]) > max(d[0], r[0]) for r in rec.bouts)]
-    walk_share = float(np.mean(run.walking[in_bout])) if in_bout.any() else float('nan')
     return {'name': rec.name, 'reference': rec.reference, 'n': int(in_bout.sum()),
-            'pred_err': pred_err, 'hold_err': hold_err, 'start_err': np.array(start_err),
+            'pred_err': pe_all[in_bout], 'hold_err': he_all[in_bout],
             'pred_err_steady': pe_all[steady], 'hold_err_steady': he_all[steady],
-            'fit_err': fit_err[in_bout], 'fit_err_steady': fit_err[steady],
-            'end_err': np.array(end_err), 'bouts': len(rec.bouts),
-            'missed': sum(1 for _, d in pairs if d is None), 'false': len(false),
-            'detected_in_bouts': walk_share}
+            'fit_err': fit_err[in_bout], 'flc_err': flc_err[in_bout],
+            'floor': floor, 'events': events, 'cadence': cad,
+            'detected_bouts': len(detected),
+            'short_bouts': sum(1 for a, b in detected if b - a < 2.0),
+            'bouts': len(rec.bouts),
+            'walking_share': float(np.mean(run.walking[in_bout])) if in_bout.any()
+            else float('nan')}
+
+
+def _gain(p, h) -> float:
+    return float(100.0 * (1.0 - p / h)) if h > 0 else float('nan')
 
 
 def evaluate_real(data: Path = DEFAULT_DATA, config: GaitConfig | None = None,
@@ -726,59 +830,73 @@ def evaluate_real(data: Path = DEFAULT_DATA, config: GaitConfig | None = None,
         rows.append(score_real(rec, run))
     out = {'recordings': []}
     for r in rows:
-        p = scoring.rms(r['pred_err']) if r['n'] else [np.nan] * 3
-        h = scoring.rms(r['hold_err']) if r['n'] else [np.nan] * 3
-        out['recordings'].append({
-            'name': r['name'], 'reference': r['reference'], 'samples': r['n'],
-            'pred_rms_deg': [float(v) for v in p], 'hold_rms_deg': [float(v) for v in h],
-            'bouts': r['bouts'], 'missed': r['missed'], 'false': r['false'],
-            'start_err_s': [float(v) for v in r['start_err']],
-            'end_err_s': [float(v) for v in r['end_err']],
-            'walking_share_in_bouts': r['detected_in_bouts']})
+        rec = {'name': r['name'], 'reference': r['reference'], 'samples': r['n'],
+               'bouts': r['bouts'], 'walking_share_in_bouts': r['walking_share']}
+        if r['n']:
+            p, h = scoring.rms(r['pred_err']), scoring.rms(r['hold_err'])
+            fl = r['flc_err'][np.isfinite(r['flc_err'])]
+            rec.update({'pred_rms_deg': _floats(p), 'hold_rms_deg': _floats(h),
+                        'pitch_gain_pct': _gain(p[1], h[1]),
+                        'bound_pitch_gain_pct': _gain(float(np.sqrt(np.mean(fl ** 2))), h[1])
+                        if fl.size else None})
+        out['recordings'].append(rec)
     for test in ('Test5', 'Test11'):
         sel = [r for r in rows if f' {test} ' in r['name'] and r['n']]
         if not sel:
             continue
-        pe = np.concatenate([r['pred_err'] for r in sel])
-        he = np.concatenate([r['hold_err'] for r in sel])
-        p, h = scoring.rms(pe), scoring.rms(he)
-        ps = np.concatenate([r['pred_err_steady'] for r in sel])
-        hs = np.concatenate([r['hold_err_steady'] for r in sel])
-        fe = np.concatenate([r['fit_err'] for r in sel])
-        fs = np.concatenate([r['fit_err_steady'] for r in sel])
-        fe, fs = fe[np.all(np.isfinite(fe), 1)], fs[np.all(np.isfinite(fs), 1)]
-        se = np.concatenate([r['start_err'] for r in sel])
-        ee = np.concatenate([r['end_err'] for r in sel])
-        out[test] = {'samples': int(pe.shape[0]), 'pred_rms_deg': [float(v) for v in p],
-                     'hold_rms_deg': [float(v) for v in h],
-                     'improvement_pct': [float(v) for v in 100.0 * (1.0 - p / h)],
-                     'steady_samples': int(ps.shape[0]),
-                     'steady_pred_rms_deg': [float(v) for v in scoring.rms(ps)],
-                     'steady_hold_rms_deg': [float(v) for v in scoring.rms(hs)],
-                     'window_fit_rms_deg': _floats(scoring.rms(fe)) if fe.size else None,
-                     'window_fit_samples': int(fe.shape[0]),
-                     'steady_window_fit_rms_deg': _floats(scoring.rms(fs)) if fs.size
-                     else None,
-                     'start_err_s': _stats(se), 'end_err_s': _stats(ee),
-                     'bouts': int(sum(r['bouts'] for r in sel)),
-                     'missed': int(sum(r['missed'] for r in sel)),
-                     'false': int(sum(r['false'] for r in sel))}
+        cat = lambda k: np.concatenate([r[k] for r in sel])  # noqa: E731
+        p, h = scoring.rms(cat('pred_err')), scoring.rms(cat('hold_err'))
+        ps, hs = scoring.rms(cat('pred_err_steady')), scoring.rms(cat('hold_err_steady'))
+        fe = cat('fit_err')
+        fe = fe[np.all(np.isfinite(fe), 1)]
+        fl = cat('flc_err')
+        fl = fl[np.isfinite(fl)]
+        floor_n = sum(n for r in sel for n, _ in r['floor'])
+        floor = math.sqrt(sum(n * v * v for r in sel for n, v in r['floor']) / floor_n)
+        ev = {}
+        for key in sel[0]['events']:
+            m = sum(r['events'][key][0] for r in sel)
+            nd = sum(r['events'][key][1] for r in sel)
+            nt = sum(r['events'][key][2] for r in sel)
+            ev[key] = {'matched': m, 'detected': nd, 'true': nt,
+                       'precision': m / nd if nd else float('nan'),
+                       'recall': m / nt if nt else float('nan')}
+        cad = [c for r in sel for c in r['cadence']]
+        out[test] = {
+            'samples': int(cat('pred_err').shape[0]), 'bouts': int(sum(r['bouts'] for r in sel)),
+            'pred_rms_deg': _floats(p), 'hold_rms_deg': _floats(h),
+            'improvement_pct': [_gain(a, b) for a, b in zip(p, h)],
+            'steady_samples': int(cat('pred_err_steady').shape[0]),
+            'steady_pred_rms_deg': _floats(ps), 'steady_hold_rms_deg': _floats(hs),
+            'steady_improvement_pct': [_gain(a, b) for a, b in zip(ps, hs)],
+            'window_fit_rms_deg': _floats(scoring.rms(fe)) if fe.size else None,
+            'bound_pitch_rms_deg': float(np.sqrt(np.mean(fl ** 2))) if fl.size else None,
+            'bound_pitch_gain_pct': _gain(float(np.sqrt(np.mean(fl ** 2))), h[1])
+            if fl.size else None,
+            'floor_pitch_rms_deg': math.degrees(floor),
+            'floor_pitch_gain_pct': _gain(math.degrees(floor), h[1]),
+            'events': ev,
+            'cadence': [{'tracked_hz': a, 'reference_hz': b} for a, b in cad],
+            'detected_bouts': int(sum(r['detected_bouts'] for r in sel)),
+            'detected_short_bouts': int(sum(r['short_bouts'] for r in sel))}
     return out
 
 
 def print_real(res: dict, file=sys.stdout) -> None:
     p = lambda s='': print(s, file=file)  # noqa: E731
-    p('Mobilise-D lower-back IMU: attitude by complementary filter, decimated to 16 Hz; '
-      '0.5 s-ahead prediction inside the reference walking bouts (RMS, degrees, roll / '
-      'pitch / yaw)')
+    p('Mobilise-D lower-back IMU: attitude by complementary filter (tau '
+      f'{REAL_ATTITUDE_TIME_CONSTANT:g} s), decimated to 16 Hz; 0.5 s-ahead prediction inside '
+      'the reference walking bouts (RMS, degrees, roll / pitch / yaw)')
     p(f'{"recording":22} {"ref":11} {"n":>4}  {"walk model":21} {"hold last":21} '
-      f'bouts  start err s / end err s')
+      f'{"pitch gain":>10} {"bound":>6} walking')
     for r in res['recordings']:
-        se = ' '.join(f'{v:+.2f}' for v in r['start_err_s'])
-        ee = ' '.join(f'{v:+.2f}' for v in r['end_err_s'])
+        if not r['samples']:
+            p(f'{r["name"]:22} {r["reference"]:11} {0:4d}  (no reference bout)')
+            continue
+        b = r['bound_pitch_gain_pct']
         p(f'{r["name"]:22} {r["reference"]:11} {r["samples"]:4d}  '
           f'{_fmt3(r["pred_rms_deg"]):21} {_fmt3(r["hold_rms_deg"]):21} '
-          f'{r["bouts"]:2d} (false {r["false"]:2d})  {se} / {ee}')
+          f'{r["pitch_gain_pct"]:+9.0f}% {b:+5.0f}% {r["walking_share_in_bouts"]:6.2f}')
     for test in ('Test5', 'Test11'):
         if test not in res:
             continue
@@ -789,19 +907,27 @@ def print_real(res: dict, file=sys.stdout) -> None:
           + ' / '.join(f'{v:+.0f}%' for v in x['improvement_pct']))
         p(f'  bouts without their first and last {REAL_TRIM:.0f} s ({x["steady_samples"]} '
           f'samples): walk model {_fmt3(x["steady_pred_rms_deg"])}, hold last '
-          f'{_fmt3(x["steady_hold_rms_deg"])}')
+          f'{_fmt3(x["steady_hold_rms_deg"])}; improvement '
+          + ' / '.join(f'{v:+.0f}%' for v in x['steady_improvement_pct']))
         if x.get('window_fit_rms_deg'):
-            p(f'  reference: least-squares fit of the model sinusoids over the last 2 s, '
-              f'no filter ({x["window_fit_samples"]} samples): '
-              f'{_fmt3(x["window_fit_rms_deg"])}; without first/last second '
-              f'{_fmt3(x["steady_window_fit_rms_deg"])}')
-        for key, label in (('start_err_s', 'start'), ('end_err_s', 'end')):
-            e = x[key]
-            if e.get('n'):
-                p(f'  walk {label} - reference: median {e["median"]:+.2f} s, range '
-                  f'{e["min"]:+.2f} .. {e["max"]:+.2f} s, {e["within_0.5s"]}/{e["n"]} '
-                  'within 0.5 s')
-        p(f'  detected bouts overlapping no reference bout: {x["false"]}')
+            p(f'  reference, causal least-squares fit of the stride harmonics over the last '
+              f'2 s: {_fmt3(x["window_fit_rms_deg"])}')
+        if x.get('bound_pitch_rms_deg') is not None:
+            p(f'  pitch bounds: causal Fourier combiner given each bout\'s own stride '
+              f'frequency {x["bound_pitch_rms_deg"]:.2f} deg ({x["bound_pitch_gain_pct"]:+.0f}%); '
+              f'non-causal fit of a whole bout (stride harmonics 1, 2, own frequency, trend) '
+              f'leaves {x["floor_pitch_rms_deg"]:.2f} deg ({x["floor_pitch_gain_pct"]:+.0f}%)')
+        ev = x['events']
+        p('  walk start / end vs reference bouts: ' + '; '.join(
+            f'{k.replace("_", " within ")}: precision {v["matched"]}/{v["detected"]}, recall '
+            f'{v["matched"]}/{v["true"]}' for k, v in ev.items()))
+        p(f'  detected bouts {x["detected_bouts"]} ({x["detected_short_bouts"]} shorter than '
+          '2 s; a reference MicroWB has at least 2 strides)')
+        if x['cadence']:
+            c = np.array([[d['tracked_hz'], d['reference_hz']] for d in x['cadence']])
+            e = c[:, 0] / c[:, 1] - 1.0
+            p(f'  tracked step frequency vs reference cadence: median error {100 * np.median(e):+.0f}%, '
+              f'{int(np.sum(np.abs(e) <= 0.1))}/{e.size} bouts within 10 %')
 
 
 # ======================================================================= figures

@@ -236,6 +236,7 @@ class GaitFilterNode(Node):
             st = self.tracker.stats
             values = dict(self.counts, walking=self.tracker.walking,
                           starts=st.starts, stops=st.stops, relocks=st.relocks,
+                          turns=st.turns,
                           egomotion_rejected=st.egomotion_rejected,
                           step_ms_median=f'{np.median(times):.3f}',
                           step_ms_max=f'{times.max():.3f}',

@@ -30,19 +30,22 @@ def tilt_from_accel(acc) -> tuple[float, float]:
     return math.atan2(ay, az), math.atan2(-ax, math.hypot(ay, az))
 
 
-def complementary_filter(acc, gyr, rate: float, time_constant: float = 1.0) -> np.ndarray:
+def complementary_filter(acc, gyr, rate: float, time_constant: float = 1.0,
+                         gate: float = 0.2) -> np.ndarray:
     """Attitude (roll, pitch, yaw) of every sample, rad, yaw continuous.
 
     The gyroscope is integrated (R <- R exp([w dt])); the accelerometer's gravity
     direction pulls roll and pitch back with time constant ``time_constant`` (Mahony's
-    proportional correction w + k (a x g_est), k = 1 / time_constant); samples whose
-    acceleration is far from 1 g (|a| outside 0.8-1.2 g) correct less.
+    proportional correction w + k (a x g_est), k = 1 / time_constant); with ``gate`` > 0,
+    samples whose acceleration is far from 1 g correct less (weight 1 - ||a| - 1| / gate,
+    at least 0).
 
     Args:
         acc: (N, 3) specific force in body axes, g.
         gyr: (N, 3) angular velocity in body axes, rad/s.
         rate: sample rate, Hz.
         time_constant: s.
+        gate: g; 0 = every sample corrects fully.
     Returns:
         (N, 3) roll, pitch, yaw, rad.
     """
@@ -62,7 +65,7 @@ def complementary_filter(acc, gyr, rate: float, time_constant: float = 1.0) -> n
         if na > 1e-6:
             g_est = R[2, :]                        # world up in body axes (R^T e_z)
             e = np.cross(a / na, g_est)
-            trust = max(0.0, 1.0 - abs(na - 1.0) / 0.2)
+            trust = max(0.0, 1.0 - abs(na - 1.0) / gate) if gate > 0 else 1.0
             w += k * trust * e
         R = R @ rotvec_to_matrix(w * dt)
         if i % 100 == 0:                           # keep R orthonormal

@@ -5,20 +5,30 @@ walk model movements exist ... to detect walk starts, stops, or non-walking move
 (such as sitting down). When no walking is detected the state estimates are frozen and
 the current position becomes the prediction."
 
-* Start: over the last ``detect_window`` seconds of prefiltered attitude, the walk model
-  (offset + trend + pitch sinusoid at f, roll and yaw sinusoids at f/2, optionally the
-  pitch harmonic at 2f) is fitted by linear least squares for every step frequency on a
-  grid (batched normal equations). Walking starts when the best fit has a pitch
-  amplitude of at least ``start_amplitude_deg`` and explains at least
-  ``start_periodicity`` of the detrended pitch variance. The fit initialises the EKF.
-* Stop: while walking, the pitch amplitude at the tracked frequency over the last
-  ``stop_window`` seconds falls below ``stop_amplitude_deg`` (two samples running), or
+* Start: over the last ``detect_window`` seconds of prefiltered attitude, offset + trend
+  + sinusoids are fitted by linear least squares for every step frequency f on a grid
+  (batched normal equations); the criterion is the paper's, pitch at the step (f), roll
+  and yaw at the stride (f/2), weighted by a broad preference for usual cadences
+  (``prior_frequency``). Walking starts when the best fit has a pitch amplitude of at
+  least ``start_amplitude_deg``, explains at least ``start_periodicity`` of the
+  detrended pitch variance, roll or yaw sway confirms it (a bend has none) and the
+  criterion does not peak at the grid's edge. A ridge refit with all the model's stride
+  harmonics initialises the EKF.
+* Lock check: while walking, over 1.5-2.5 s, the criterion with pitch at the stride and
+  the step, roll and yaw at the stride, all weighted (one stride in the window makes the
+  stride components separable from a trend); a clearly better frequency re-initialises
+  the oscillation ('relock').
+* Stop: while walking, over the last ``stop_window`` seconds, the part of roll and pitch
+  moving like the model (a matched filter) and their motion whatever its shape both fall
+  well below their running means (two samples running), or
 * non-walking movement: the EKF's mean normalised innovation over ``nis_window``
   exceeds ``nis_threshold`` (the attitude moves in a way the walk model cannot follow),
-  or the tracked frequency leaves [min_frequency, max_frequency].
+  or the tracked frequency reaches the bounds of [min_frequency, max_frequency]
+  (widened by 10 %).
 """
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass
 
@@ -35,53 +45,106 @@ RELOCK_MARGIN = 0.15
 @dataclass(frozen=True)
 class WalkFit:
     """The best least-squares walk-model fit over a window, *measured* domain (as seen
-    through the prefilter), referred to the window's last sample.
+    through the prefilter), referred to the window's last sample (stride phase 0 there).
+
+    Attitude axis a in the window (tau <= 0 s before its last sample) is modelled as
+    offset_a + trend_a tau + sum_k Im[c_ak exp(i k pi f tau)], k = 1 .. K_a (harmonics of
+    the stride frequency f / 2).
 
     Attributes:
         frequency: step frequency, Hz.
-        amplitude, phase: (3,) roll, pitch, yaw sinusoid amplitude (rad) and phase (rad)
-            at the last sample (measured = A sin(phase)).
+        coefficients: per axis (roll, pitch, yaw) a (K_a,) complex array c_ak
+            (alpha + i beta: alpha sin + beta cos).
+        coefficient_sd: per axis a (K_a,) array, the posterior standard deviation of the
+            real and imaginary parts (rad).
         offset: (3,) fitted value of the offset + trend at the last sample, rad.
         trend: (3,) fitted slope, rad/s.
-        periodicity: (3,) share of each axis's detrended variance explained by its
-            sinusoid(s).
-        harmonic: (amplitude, phase) of the pitch second harmonic (measured), rad.
+        periodicity: (3,) share of each axis's detrended variance explained by the
+            criterion's harmonics at this frequency.
         score: the grid criterion (weighted periodicity) of the best frequency.
+        residual: (3,) rms residual of the refit per axis, rad (what the model does not
+            describe, for the EKF's initial model error).
     """
 
     frequency: float
-    amplitude: np.ndarray
-    phase: np.ndarray
+    coefficients: tuple
+    coefficient_sd: tuple
     offset: np.ndarray
     trend: np.ndarray
     periodicity: np.ndarray
-    harmonic: tuple[float, float]
     score: float
+    residual: np.ndarray
+
+    def harmonic(self, axis: int, k: int) -> complex:
+        """Coefficient of harmonic k of an axis (0 if not fitted)."""
+        c = self.coefficients[axis]
+        return complex(c[k - 1]) if 1 <= k <= c.size else 0j
+
+    @property
+    def amplitude(self) -> np.ndarray:
+        """(3,) amplitude of each axis's main harmonic (roll, yaw: k = 1, the stride;
+        pitch: k = 2, the step), rad."""
+        return np.array([abs(self.harmonic(a, k)) for a, k in enumerate((1, 2, 1))])
 
 
-def fit_walk(tau: np.ndarray, z: np.ndarray, freqs: np.ndarray, harmonic: bool = True,
-             weights=(0.0, 1.0, 0.0), recency: float = 0.0, scores: dict | None = None
-             ) -> WalkFit | None:
+#: the grid criterion's harmonics: the paper's model, pitch at the step (k = 2 of the
+#: stride), roll and yaw at the stride (k = 1); only pitch is weighted by default. Right
+#: for a walk start (over a 1 s window a stride sinusoid is hardly distinguishable from
+#: a trend), but people whose pitch moves mainly at the stride lock it onto the stride.
+PAPER_CRITERION = ((1,), (2,), (1,))
+#: the criterion of the lock check over a longer window (at least 1.5 s, a stride and a
+#: half): pitch at the stride and the step, roll and yaw at the stride, equally weighted
+LOCK_CRITERION = (((1,), (1, 2), (1,)), (1.0 / 3.0, 1.0 / 3.0, 1.0 / 3.0))
+#: the least window of the lock check, s
+LOCK_MIN_WINDOW = 1.5
+#: the motion amplitude's share of its running mean below which walking may stop
+STOP_MOTION_FRACTION = 0.8
+
+
+def _explained(zr: np.ndarray, cols: list[np.ndarray], proj) -> np.ndarray:
+    """Share of the detrended samples zr (N,) explained, for every grid frequency, by the
+    columns ``cols`` (each (F, N)), after projecting the trend out (batched normal
+    equations)."""
+    X = np.stack([proj(c) for c in cols], axis=2)              # (F, N, m)
+    G = np.einsum('fni,fnj->fij', X, X)
+    G += np.eye(G.shape[1])[None] * 1e-12 * np.trace(G, axis1=1, axis2=2)[:, None, None]
+    b = np.einsum('fni,n->fi', X, zr)
+    c = np.linalg.solve(G, b[..., None])[..., 0]
+    return np.einsum('fi,fi->f', b, c)
+
+
+def fit_walk(tau: np.ndarray, z: np.ndarray, freqs: np.ndarray,
+             harmonics=(2, 4, 2), criterion=PAPER_CRITERION, weights=(0.0, 1.0, 0.0),
+             recency: float = 0.0, scores: dict | None = None,
+             prior_sd=(5.0 * _D2R, 1.0 * _D2R), noise_sd: float = 0.5 * _D2R,
+             frequency_prior: tuple[float, float] | None = None) -> WalkFit | None:
     """Fit the walk model to a window for every step frequency in ``freqs``; return the
     best fit.
 
-    Per axis the design is [1, tau, sin(2 pi k f tau), cos(2 pi k f tau)] (k = 1/2, 1,
-    1/2). The trend columns are projected out once; the sinusoid pair of every grid
-    frequency is solved in closed form (2 x 2 normal equations), from one sin/cos
-    evaluation at f/2 and the double-angle formulas. The best frequency is then refitted
-    with the pitch second harmonic (``harmonic``) for the initial values.
+    The grid criterion is the weighted share of each axis's detrended variance explained
+    by sinusoids at the ``criterion`` harmonics of the stride (batched normal equations;
+    the trend columns are projected out once). The paper's criterion (the default) is
+    pitch at the step frequency alone: over a short window a fraction of a stride looks
+    like a trend, which would favour too low frequencies. The best frequency is then
+    refitted with all model ``harmonics`` per axis by ridge regression: harmonic
+    coefficients have a zero-mean prior (``prior_sd``: main harmonics, the others),
+    samples the noise ``noise_sd``; this gives the initial values and their spread.
 
     Args:
         tau: (N,) sample times relative to the last sample (<= 0), s.
         z: (N, 3) roll, pitch, yaw (rad, yaw continuous).
         freqs: (F,) candidate step frequencies, Hz.
-        harmonic: include the pitch second harmonic.
-        weights: of each axis's periodicity in the grid criterion (default pitch only:
-            over a short window a fraction of a stride looks like a trend, which would
-            favour too low frequencies).
+        harmonics: number of stride harmonics per axis in the refit.
+        criterion: per axis, the stride harmonics of the grid criterion.
+        weights: of each axis's periodicity in the grid criterion.
         recency: if > 0, samples are weighted by exp(tau / recency) (s), so that a walk
             that is speeding up is fitted by its latest steps.
-        scores: if a dict, receives 'freqs' and 'score' (the criterion on the grid).
+        scores: if a dict, receives 'freqs', 'score', 'raw' (without the prior) and
+            'periodicity' (F, 3) on the grid.
+        prior_sd: (main, other) prior standard deviation of the coefficients, rad.
+        noise_sd: sample noise of the refit, rad.
+        frequency_prior: (mean, sd) Hz: the criterion is multiplied by the Gaussian
+            exp(-(f - mean)^2 / (2 sd^2)) (a weak preference for usual cadences).
     Returns:
         WalkFit, or None when the window is too short to fit.
     """
@@ -93,78 +156,67 @@ def fit_walk(tau: np.ndarray, z: np.ndarray, freqs: np.ndarray, harmonic: bool =
     w_axes = np.asarray(weights, float)
     freqs = np.asarray(freqs, float)
     sw = np.exp(0.5 * tau / recency) if recency > 0 else np.ones(n)   # sqrt of weights
-    z = z * sw[:, None]
+    zw = z * sw[:, None]
     base = np.column_stack([sw, tau * sw])
     q, _ = np.linalg.qr(base)                                  # orthonormal trend basis
-    zr = z - q @ (q.T @ z)                                     # detrended samples
+    zr = zw - q @ (q.T @ zw)                                   # detrended samples
     rss0 = np.maximum(np.sum(zr * zr, axis=0), 1e-18)
 
     def proj(m):                                               # m - Q Q^T m, rows of m
         return m - (m @ q) @ q.T
 
-    w = np.pi * freqs[:, None] * tau[None, :]                   # (F, N): phase at f/2
-    s1, c1 = np.sin(w) * sw, np.cos(w) * sw
-    s1u, c1u = s1 / sw, c1 / sw
-    s2, c2 = 2.0 * s1u * c1u * sw, (c1u * c1u - s1u * s1u) * sw  # at f (double angle)
-    per = np.empty((freqs.size, 3))
-    # roll and yaw share the columns at f/2: closed-form 2 x 2 normal equations
-    S, C = proj(s1), proj(c1)
-    ss, sc, cc = (S * S).sum(1), (S * C).sum(1), (C * C).sum(1)
-    det = np.maximum(ss * cc - sc * sc, 1e-30)
-    for a in (0, 2):
-        sy, cy = S @ zr[:, a], C @ zr[:, a]
-        per[:, a] = (cc * sy * sy - 2.0 * sc * sy * cy + ss * cy * cy) / det / rss0[a]
-    # pitch at f: closed form too (the grid criterion uses the fundamental only, so
-    # that f/2 cannot win by passing the pitch off as its "second harmonic")
-    S, C = proj(s2), proj(c2)
-    ss, sc, cc = (S * S).sum(1), (S * C).sum(1), (C * C).sum(1)
-    det = np.maximum(ss * cc - sc * sc, 1e-30)
-    sy, cy = S @ zr[:, 1], C @ zr[:, 1]
-    per[:, 1] = (cc * sy * sy - 2.0 * sc * sy * cy + ss * cy * cy) / det / rss0[1]
-    per = np.clip(per, 0.0, 1.0)
-    score = per @ w_axes
-    if scores is not None:
-        scores['freqs'], scores['score'] = freqs, score
-    k = int(np.argmax(score))
-    f = float(freqs[k])
-    amp, ph, off, tr = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
-    h = (0.0, 0.0)
+    w = np.pi * freqs[:, None] * tau[None, :]                   # (F, N): stride phase
+    cache: dict = {}
+
+    def cols(k):
+        if k not in cache:
+            cache[k] = (np.sin(k * w) * sw, np.cos(k * w) * sw)
+        return cache[k]
+
+    per = np.zeros((freqs.size, 3))
     for a in range(3):
-        mult = 1.0 if a == 1 else 0.5
-        wk = 2.0 * np.pi * mult * f * tau
-        cols = [np.sin(wk), np.cos(wk), np.ones(n), tau]
-        if harmonic and a == 1:
-            cols += [np.sin(2.0 * wk), np.cos(2.0 * wk)]
-        c = lstsq(np.column_stack(cols) * sw[:, None], z[:, a])
-        off[a], tr[a] = c[2], c[3]
-        # A sin(w tau + phi) = A cos(phi) sin(w tau) + A sin(phi) cos(w tau)
-        amp[a] = np.hypot(c[0], c[1])
-        ph[a] = np.arctan2(c[1], c[0])
-        if harmonic and a == 1:
-            h = (float(np.hypot(c[4], c[5])), float(np.arctan2(c[5], c[4])))
-    return WalkFit(frequency=f, amplitude=amp, phase=ph, offset=off,
-                   trend=tr, periodicity=per[k].copy(), harmonic=h, score=float(score[k]))
-
-
-def lstsq(X: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Least-squares coefficients of a small, well-posed design X (N, p) by the normal
-    equations (X^T X) c = X^T y (much faster than np.linalg.lstsq at these sizes)."""
-    xt = X.T
-    g = xt @ X
-    g.flat[::g.shape[0] + 1] *= 1.0 + 1e-12
-    return np.linalg.solve(g, xt @ y)
-
-
-def amplitude_at(tau: np.ndarray, y: np.ndarray, f: float) -> float:
-    """Least-squares amplitude (rad) of a sinusoid at f (Hz) on offset + trend in the
-    window (tau (N,) s, y (N,) rad); 0 for fewer than 4 samples."""
-    tau = np.asarray(tau, float)
-    if tau.size < 4:
-        return 0.0
-    w = 2.0 * np.pi * f * tau
-    X = np.column_stack([np.ones(tau.size), tau, np.sin(w), np.cos(w)])
-    c = lstsq(X, np.asarray(y, float))
-    return float(np.hypot(c[2], c[3]))
+        ks = criterion[a]
+        if not ks:
+            continue
+        cc = [c for k in ks for c in cols(k)]
+        per[:, a] = _explained(zr[:, a], cc, proj) / rss0[a]
+    per = np.clip(per, 0.0, 1.0)
+    raw = per @ w_axes
+    score = raw
+    if frequency_prior is not None and frequency_prior[1] > 0:
+        score = raw * np.exp(-0.5 * ((freqs - frequency_prior[0]) / frequency_prior[1]) ** 2)
+    if scores is not None:
+        scores['freqs'], scores['score'], scores['periodicity'] = freqs, score, per
+        scores['raw'] = raw
+    i = int(np.argmax(score))
+    f = float(freqs[i])
+    coef, csd = [], []
+    off, tr, res = np.empty(3), np.empty(3), np.empty(3)
+    main = (1, 2, 1)
+    for a in range(3):
+        ks = np.arange(1, harmonics[a] + 1)
+        wk = np.pi * f * tau
+        X = [np.ones(n), tau]
+        for k in ks:
+            X += [np.sin(k * wk), np.cos(k * wk)]
+        X = np.column_stack(X) * sw[:, None]
+        # ridge: (X^T X / s^2 + L) c = X^T z / s^2, L = diag(1 / prior^2) (none on the
+        # offset and trend)
+        lam = np.zeros(X.shape[1])
+        sd = np.where(ks == min(main[a], harmonics[a]), prior_sd[0], prior_sd[1])
+        lam[2::2] = lam[3::2] = (noise_sd / sd) ** 2
+        G = X.T @ X + np.diag(lam)
+        G.flat[::G.shape[0] + 1] *= 1.0 + 1e-12
+        c = np.linalg.solve(G, X.T @ zw[:, a])
+        cov = np.linalg.inv(G) * noise_sd ** 2
+        off[a], tr[a] = c[0], c[1]
+        e = X @ c - zw[:, a]
+        res[a] = math.sqrt(float(e @ e) / float(sw @ sw))
+        coef.append(c[2::2] + 1j * c[3::2])
+        csd.append(np.sqrt(0.5 * (np.diag(cov)[2::2] + np.diag(cov)[3::2])))
+    return WalkFit(frequency=f, coefficients=tuple(coef), coefficient_sd=tuple(csd),
+                   offset=off, trend=tr, periodicity=per[i].copy(), score=float(score[i]),
+                   residual=res)
 
 
 class WalkDetector:
@@ -186,15 +238,23 @@ class WalkDetector:
         self.freqs = np.arange(config.min_frequency, config.max_frequency + 1e-9, step)
         self._low_count = 0
         self._arrays = None
-        #: running mean of the pitch amplitude while walking (rad), for the stop test
+        #: (mean, sd) of the step-frequency prior of the grid criteria, Hz (or None)
+        self.frequency_prior = ((config.prior_frequency, config.prior_frequency_sd)
+                                if config.prior_frequency_sd > 0 else None)
+        #: running mean of the gait amplitude while walking (rad), for the stop test
         self.reference_amplitude = 0.0
         self._ref_t: float | None = None
+        self._reference = np.zeros(2)
+        self._started: float | None = None
 
-    def start_reference(self, amplitude: float) -> None:
-        """Seed the running mean amplitude at a walk start (true amplitude, rad)."""
-        self.reference_amplitude = float(amplitude)
+    def start_reference(self) -> None:
+        """Restart the running mean gait amplitude at a walk start (the first stop test
+        seeds it; no stop for ``stop_window`` s after the start)."""
+        self.reference_amplitude = 0.0
+        self._reference = np.zeros(2)
         self._ref_t = None
         self._low_count = 0
+        self._started = self._t[-1] if self._t else None
 
     def clear(self) -> None:
         """Forget the samples (after a stop: a new start needs a fresh window)."""
@@ -253,10 +313,15 @@ class WalkDetector:
         need = c.start_periodicity * 0.5 * (c.start_amplitude_deg * _D2R * g_max) ** 2
         if float(np.mean(zp * zp)) < need:
             return None
-        fit = fit_walk(tau, z, self.freqs, c.pitch_harmonic, recency=c.detect_recency)
+        sc: dict = {}
+        fit = fit_walk(tau, z, self.freqs, c.harmonics, recency=c.detect_recency,
+                       frequency_prior=self.frequency_prior, scores=sc)
         if fit is None:
             return None
-        edge = (fit.frequency <= self.freqs[0] + 1e-9) or (fit.frequency >= self.freqs[-1] - 1e-9)
+        # a criterion peaking at the grid's edge (without the prior) is no gait: a bend,
+        # a slow posture change
+        i = int(np.argmax(sc['raw']))
+        edge = i == 0 or i == self.freqs.size - 1
         g = prefilter.gain_phase(fit.frequency)[0]
         if (not edge and fit.amplitude[1] / g >= c.start_amplitude_deg * _D2R
                 and fit.periodicity[1] >= c.start_periodicity
@@ -270,7 +335,7 @@ class WalkDetector:
         from the tracked one ``f`` (Hz) by more than ``relock_tolerance``, else None."""
         c = self.cfg
         span = min(self.span_seconds(), c.relock_window)
-        if span < c.detect_window - 1.5 / c.sample_rate:
+        if span < max(c.detect_window, LOCK_MIN_WINDOW) - 1.5 / c.sample_rate:
             return None
         tau, z = self.window(span)
         # search near the tracked frequency (a cadence change), and at the
@@ -278,21 +343,38 @@ class WalkDetector:
         near = self.freqs[np.abs(self.freqs - f) <= 0.2]
         grid = np.unique(np.r_[near, self.freqs[::4], f])
         sc: dict = {}
-        fit = fit_walk(tau, z, grid, c.pitch_harmonic, scores=sc)
+        fit = fit_walk(tau, z, grid, c.harmonics, *LOCK_CRITERION, scores=sc,
+                       frequency_prior=self.frequency_prior)
         if fit is None:
             return None
         current = float(sc['score'][np.argmin(np.abs(sc['freqs'] - f))])
-        # relock only if the tracked frequency clearly no longer explains the pitch
-        if (fit.periodicity[1] >= c.start_periodicity
+        edge = (fit.frequency <= self.freqs[0] + 1e-9) or (fit.frequency >= self.freqs[-1] - 1e-9)
+        # relock only if the tracked frequency clearly no longer explains the gait
+        if (not edge and fit.score >= c.start_sway_periodicity
                 and abs(fit.frequency - f) > c.relock_tolerance
                 and fit.score - current > RELOCK_MARGIN):
             return fit
         return None
 
-    def check_stop(self, f: float, prefilter) -> str | None:
-        """A reason to stop walking ('stop', 'movement', 'frequency'), or None."""
+    def check_stop(self, f: float, oscillation) -> str | None:
+        """A reason to stop walking ('stop', 'movement', 'frequency'), or None.
+
+        Args:
+            f: the tracked step frequency, Hz.
+            oscillation: ``oscillation(tau) -> ((N, 3), (3,))``: the walk model's
+                oscillation (measured domain, no offsets) at the window's sample times
+                (tau <= 0 s before the latest sample), and each axis's amplitude
+                sqrt(sum_k |c_k|^2) (measured domain).
+        The stop test (``stop_amplitudes``, roll and pitch: turns bend the yaw): over the
+        window (``stop_window``) the *gait amplitude* (a matched filter with the model's
+        own oscillation, its frequency, phase and shape) below ``stop_fraction`` of its running mean (3 s),
+        and the *motion amplitude* (whatever the shape) below ``STOP_MOTION_FRACTION``
+        of its own, twice running, is a stop. The first is quick and phase-proof, the
+        second keeps irregular real walking (which the model describes badly) from
+        being taken for a stop.
+        """
         c = self.cfg
-        if not (c.min_frequency * 0.9 <= f <= c.max_frequency * 1.1):
+        if not (c.min_frequency * 0.9 + 1e-6 < f < c.max_frequency * 1.1 - 1e-6):
             return 'frequency'
         if self._nis and len(self._nis) >= 3:
             mean = sum(v for _, v in self._nis) / len(self._nis)
@@ -300,16 +382,67 @@ class WalkDetector:
                 return 'movement'
         tau, z = self.window(c.stop_window)
         if tau.size >= 4:
-            g = prefilter.gain_phase(f)[0]
-            amp = amplitude_at(tau, z[:, 1], f) / g
+            axes = [0, 1]                                # roll, pitch: turns bend the yaw
+            m, a = oscillation(tau)
+            a_m = math.sqrt(float(np.mean(np.asarray(a, float)[axes] ** 2)))
+            amp = np.array(stop_amplitudes(tau, z[:, axes], m[:, axes], a_m))
             t = self._t[-1]
-            if self._ref_t is not None:
+            if self._ref_t is None:
+                self._reference = amp.copy()
+            else:
                 a = min(1.0, (t - self._ref_t) / 3.0)
-                self.reference_amplitude += a * (amp - self.reference_amplitude)
+                self._reference += a * (amp - self._reference)
             self._ref_t = t
-            limit = max(c.stop_amplitude_deg * _D2R, c.stop_fraction * self.reference_amplitude)
-            self._low_count = self._low_count + 1 if amp < limit else 0
+            self.reference_amplitude = float(self._reference[0])
+            fr = np.array([c.stop_fraction, STOP_MOTION_FRACTION])
+            limit = np.maximum(c.stop_amplitude_deg * _D2R, fr * self._reference)
+            young = self._started is not None and t - self._started < c.stop_window
+            low = bool(np.all(amp < limit)) and not young
+            self._low_count = self._low_count + 1 if low else 0
             if self._low_count >= 2:
                 self._low_count = 0
                 return 'stop'
         return None
+
+
+_BASIS: dict = {}
+
+
+def _trend_basis(tau: np.ndarray) -> np.ndarray:
+    """Orthonormal basis (N, 2) of offset and trend over the sample times tau (the
+    windows repeat at a steady rate: cached)."""
+    key = np.round(tau, 6).tobytes()
+    q = _BASIS.get(key)
+    if q is None:
+        q, _ = np.linalg.qr(np.column_stack([np.ones(tau.size), tau]))
+        if len(_BASIS) > 64:
+            _BASIS.clear()
+        _BASIS[key] = q
+    return q
+
+
+def stop_amplitudes(tau: np.ndarray, z: np.ndarray, m: np.ndarray, a_m: float
+                    ) -> tuple[float, float]:
+    """The two amplitudes of the stop test (rad, sinusoid-equivalent: sqrt(2) rms over
+    the axes) of a window z (N, k) given the model's oscillation m (N, k) there and its
+    amplitude a_m (rad: sqrt(mean over the axes of sum_k |c_k|^2), as sqrt(2) rms(m) over
+    whole strides).
+
+    Offset and trend of each axis are removed from both (subscript r). Over a window
+    shorter than a stride that removes more or less of a sinusoid depending on its
+    phase; both amplitudes are therefore referred to the model's full amplitude a_m:
+
+        gait amplitude    beta a_m, beta = <z_r, m_r> / <m_r, m_r> (the part of the window
+                          that moves like the model; least squares);
+        motion amplitude  rms(z_r) / rms(m_r) a_m (how much the body moves, whatever the
+                          shape, corrected for the detrending).
+
+    Both are 0 when the model does not oscillate.
+    """
+    q = _trend_basis(tau)
+    zr, mr = z - q @ (q.T @ z), m - q @ (q.T @ m)           # offset and trend removed
+    mm = float(np.sum(mr * mr))
+    if mm <= 1e-18:
+        return 0.0, 0.0
+    beta = float(np.sum(zr * mr)) / mm
+    return max(beta, 0.0) * a_m, math.sqrt(float(np.sum(zr * zr)) / mm) * a_m

@@ -2,36 +2,47 @@
 Kalman filter.
 
 Each attitude axis of ``inclinometer_link`` (REP 103 roll, pitch, yaw in ``world``,
-radians) is a sinusoid on an offset,
+radians) is a periodic function of one shared gait phase on an offset:
 
-    roll(t)  = o_r + A_r sin(phi_r(t))                      phi_r' = 2 pi f / 2
-    pitch(t) = o_p + A_p sin(phi_p(t)) [+ B sin(2 phi_p(t) + delta)]   phi_p' = 2 pi f
-    yaw(t)   = o_y(t) + A_y sin(phi_y(t))     o_y' = r     phi_y' = 2 pi f / 2
+    a(t) = o_a(t) + sum_k  alpha_ak sin(k theta(t)) + beta_ak cos(k theta(t)),
+    theta' = pi f,        o_yaw' = r,   r' = a,
 
-with one shared base (step) frequency ``f`` (Hz): pitch at the step frequency, roll and
-yaw at half of it (Lee's gait-lab data, as in the paper). The paper's "more flexible
-states" are random walks on every parameter (speed changes: f and the amplitudes;
-uphill walking: the pitch offset) plus a yaw-rate state ``r`` (corner turning), and an
-optional second harmonic of pitch.
+``theta`` the *stride* phase (one cycle per stride, two steps), ``f`` the step frequency
+(Hz), k = 1 .. K_a the harmonics of the stride. The paper's model is the special case of
+one harmonic per axis: pitch at the step frequency (k = 2), roll and yaw at half of it
+(k = 1; Lee's gait-lab data). Real lower-back data also move at the stride frequency in
+pitch (left/right asymmetry) and at the step in roll and yaw, so every axis carries
+``sway_harmonics`` / ``pitch_harmonics`` harmonics. One phase for all axes keeps their
+relative timing, so an axis with a clear signal times the others. The coefficients are
+linear in the model, which leaves f and theta as the only nonlinear states.
+
+The paper's "more flexible states" are random walks on every parameter (speed changes:
+f and the coefficients; uphill walking: the pitch offset) plus the yaw rate ``r`` and
+acceleration ``a`` (corner turning). A turn is a change of the dynamics, so two models run
+as an interacting multiple model (IMM, Blom & Bar-Shalom): *straight* (r a slow random
+walk, a = 0) and *turning* (r and a free, the yaw harmonics nearly frozen so that they do
+not absorb the turn); each is the same iterated EKF with its own x and P, mixed before
+every prediction, weighted by its measurement likelihood, and combined for the output.
 
 State vector x (textbook symbols throughout: x, P, F, Q, H, R, z):
 
-    index  0      1    2      3    4    5      6    7    8      9    10   [11  12]
-    state  f      A_r  phi_r  o_r  A_p  phi_p  o_p  A_y  phi_y  o_y  r    [B   delta]
-    unit   Hz     rad  rad    rad  rad  rad    rad  rad  rad    rad  rad/s [rad rad]
+    index  0    1      2    3    4    5      6       7 ..
+    state  f    theta  o_r  o_p  o_y  r      a       (alpha, beta) per harmonic: roll
+                                                     k = 1..K_r, pitch 1..K_p, yaw 1..K_y
+    unit   Hz   rad    rad  rad  rad  rad/s  rad/s2  rad
 
-The dynamics are linear (phases advance with f, the yaw offset with r), so the
-prediction is the ordinary Kalman one (filterpy's ``KalmanFilter.predict``); the
+The dynamics are linear (the phase advances with f, the yaw offset with r, r with a),
+so the prediction is the ordinary Kalman one (filterpy's ``KalmanFilter.predict``); the
 measurements are nonlinear and use an iterated (Gauss-Newton) EKF update written here.
 Because the model is a parametric function of time, a measurement made ``s`` seconds
-before (s < 0) or after the filter time is predicted exactly by advancing the phases by
-``2 pi k f s`` -- which is how the visual-motion increments (over an interval in the
-past) and the prediction horizon are handled.
+before (s < 0) or after the filter time is predicted exactly by advancing the phase by
+``pi f s`` -- which is how the visual-motion increments (over an interval in the past)
+and the prediction horizon are handled.
 
-Not walking (the change detector's verdict): the oscillation states (f, amplitudes,
-phases, harmonic) are frozen -- neither predicted nor updated -- and contribute nothing
-to the attitude; the offsets (and the yaw rate) follow the measured attitude, which is
-then the prediction.
+Not walking (the change detector's verdict): the oscillation states (f, theta, the
+coefficients) are frozen -- neither predicted nor updated -- and contribute nothing to
+the attitude; the offsets (and the yaw rate) follow the measured attitude, which is then
+the prediction.
 """
 from __future__ import annotations
 
@@ -44,20 +55,16 @@ from filterpy.kalman import KalmanFilter
 from asmonc_vision.core.config import check_fields, param
 from asmonc_vision.core.gait.rotations import wrap_angle
 
-#: frequency multiple of each axis (roll, pitch, yaw) relative to the step frequency
-K_AXIS = np.array([0.5, 1.0, 0.5])
 I_F = 0
-I_A = np.array([1, 4, 7])
-I_PH = np.array([2, 5, 8])
-I_O = np.array([3, 6, 9])
-I_R = 10
-I_B = 11
-I_D = 12
-STATE_NAMES = ('f', 'A_roll', 'phi_roll', 'o_roll', 'A_pitch', 'phi_pitch', 'o_pitch',
-               'A_yaw', 'phi_yaw', 'o_yaw', 'yaw_rate', 'B_pitch2', 'delta_pitch2')
-#: indices of the oscillation states (frozen when not walking), without the harmonic
-_OSC = np.array([0, 1, 2, 4, 5, 7, 8])
+I_TH = 1
+I_O = np.array([2, 3, 4])
+I_R = 5
+I_YA = 6
+#: the main harmonic of each axis (roll, pitch, yaw): the stride sway and the step
+K_MAIN = (1, 2, 1)
 _D2R = math.pi / 180.0
+#: while turning, the yaw harmonics' process noise (variance) is scaled by this
+TURN_SWAY_SCALE = 0.01
 
 
 @dataclass(frozen=True)
@@ -82,7 +89,7 @@ class GaitConfig:
     inclinometer_sigma_deg: float = param(0.0, 'inclinometer noise per angle, degrees; '
                                           '0 = use the Imu message covariance',
                                           range=(0.0, 30.0))
-    model_error_deg: float = param(0.5, 'added to the inclinometer noise (in quadrature) '
+    model_error_deg: float = param(1.0, 'added to the inclinometer noise (in quadrature) '
                                    'for what the walk model does not describe (higher '
                                    'harmonics, sway, posture), degrees', range=(0.0, 30.0))
     adaptive_model_error: bool = param(True, 'raise the model error of an axis to the '
@@ -91,7 +98,7 @@ class GaitConfig:
     egomotion_sigma_deg: float = param(0.5, 'noise of each visual-motion rotation '
                                        'increment per axis, degrees (TransformStamped '
                                        'carries no covariance)', range=(0.01, 30.0))
-    egomotion_model_error_deg: float = param(0.3, 'added to each visual-motion increment\'s '
+    egomotion_model_error_deg: float = param(1.0, 'added to each visual-motion increment\'s '
                                              'noise (in quadrature) for what the walk '
                                              'model does not describe, degrees',
                                              range=(0.0, 30.0))
@@ -100,13 +107,28 @@ class GaitConfig:
                                      'at zero)', range=(0.1, 90.0))
     min_frequency: float = param(1.0, 'lowest step frequency, Hz', range=(0.2, 5.0))
     max_frequency: float = param(2.8, 'highest step frequency, Hz', range=(0.3, 6.0))
-    pitch_harmonic: bool = param(True, 'model a second harmonic of pitch (two more '
-                                 'states)')
+    prior_frequency: float = param(1.8, 'walk start and lock checks prefer step '
+                                   'frequencies near this (a Gaussian weight on the grid '
+                                   'criterion), Hz', range=(0.2, 6.0))
+    prior_frequency_sd: float = param(0.4, 'spread of that preference, Hz (0 = none)',
+                                      range=(0.0, 10.0))
+    pitch_harmonics: int = param(4, 'harmonics of the stride frequency in pitch, k = 1 .. '
+                                 'this (k = 2 is the step; 1 the stride asymmetry, 4 the '
+                                 'second harmonic of the step)', range=(2, 6))
+    sway_harmonics: int = param(2, 'harmonics of the stride frequency in roll and yaw, '
+                                'k = 1 .. this (k = 1 is the sway, 2 the step)',
+                                range=(1, 6))
     freq_noise: float = param(0.08, 'step frequency random walk, Hz/sqrt(s)',
                               range=(0.0, 10.0))
-    phase_noise: float = param(0.05, 'phase random walk, rad/sqrt(s)', range=(0.0, 10.0))
-    amplitude_noise_deg: float = param(0.8, 'amplitude random walk, deg/sqrt(s)',
+    phase_noise: float = param(0.05, 'random walk of the shared stride phase (timing '
+                               'jitter of all axes together), rad/sqrt(s)',
+                               range=(0.0, 10.0))
+    amplitude_noise_deg: float = param(0.8, 'random walk of the sine and cosine '
+                                       'coefficients of each axis\'s main harmonic (roll, '
+                                       'yaw: the stride; pitch: the step), deg/sqrt(s)',
                                        range=(0.0, 30.0))
+    harmonic_noise_deg: float = param(0.1, 'random walk of the coefficients of the other '
+                                      'harmonics, deg/sqrt(s)', range=(0.0, 30.0))
     roll_offset_noise_deg: float = param(0.3, 'roll offset random walk while walking, '
                                          'deg/sqrt(s)', range=(0.0, 30.0))
     pitch_offset_noise_deg: float = param(0.6, 'pitch offset random walk while walking '
@@ -114,20 +136,26 @@ class GaitConfig:
                                           range=(0.0, 30.0))
     yaw_offset_noise_deg: float = param(0.3, 'yaw offset random walk, deg/sqrt(s)',
                                         range=(0.0, 30.0))
-    yaw_rate_noise_deg: float = param(0.5, 'yaw rate random walk when not turning, '
+    yaw_rate_noise_deg: float = param(0.5, 'walking straight: yaw rate random walk, '
                                       'deg/s/sqrt(s)', range=(0.0, 500.0))
-    turn_yaw_rate_noise_deg: float = param(30.0, 'yaw rate random walk while a turn is '
-                                           'detected, deg/s/sqrt(s)', range=(0.0, 500.0))
-    turn_rate_deg: float = param(8.0, 'turn detected while the yaw trend over the last '
-                                 'stride exceeds this, deg/s (ends below half of it)',
-                                 range=(0.1, 360.0))
+    turn_yaw_rate_noise_deg: float = param(10.0, 'turning: yaw rate random walk, '
+                                           'deg/s/sqrt(s)', range=(0.0, 500.0))
+    turn_yaw_accel_noise_deg: float = param(30.0, 'turning: yaw acceleration random walk '
+                                            '(walking straight it is zero), '
+                                            'deg/s^2/sqrt(s)', range=(0.0, 1000.0))
+    turn_start_rate: float = param(0.02, 'interacting multiple models: rate of switching '
+                                   'from walking straight to turning, 1/s',
+                                   range=(0.0, 100.0))
+    turn_end_rate: float = param(0.5, 'interacting multiple models: rate of switching from '
+                                 'turning to walking straight, 1/s', range=(0.0, 100.0))
     standing_offset_noise_deg: float = param(10.0, 'roll/pitch/yaw random walk while not '
                                              'walking, deg/sqrt(s)', range=(0.0, 100.0))
-    iterations: int = param(3, 'most Gauss-Newton iterations of the iterated EKF update',
+    iterations: int = param(2, 'most Gauss-Newton iterations of the iterated EKF update',
                             range=(1, 20))
     relock_window: float = param(2.5, 'while walking, the walk model is refitted over '
-                                 'this window every relock_period s; a frequency off by '
-                                 'more than relock_tolerance re-initialises the '
+                                 'this window (at least 1.5 s of it) every relock_period '
+                                 's; a frequency off by more than relock_tolerance that '
+                                 'explains the gait clearly better re-initialises the '
                                  'oscillation, s', range=(0.5, 20.0))
     relock_period: float = param(0.25, 'interval of the refit in the first 3 s of a '
                                  'walk (later four times as long), s', range=(0.05, 60.0))
@@ -145,19 +173,26 @@ class GaitConfig:
                                      range=(0.0, 1.0))
     start_sway_periodicity: float = param(0.5, 'walk start: least share of the detrended '
                                           'roll or yaw variance explained by the stride '
-                                          'sinusoid (a bend has none)', range=(0.0, 1.0))
-    stop_window: float = param(0.6, 'window of the walk-stop test (amplitude at the '
-                               'tracked frequency), s', range=(0.2, 5.0))
-    stop_amplitude_deg: float = param(0.3, 'walk stop: pitch amplitude below this, deg '
+                                          'sinusoid (a bend has none); relock: least '
+                                          'share of the gait explained', range=(0.0, 1.0))
+    stop_window: float = param(0.6, 'window of the walk-stop test (gait and motion '
+                               'amplitude), s', range=(0.2, 5.0))
+    stop_amplitude_deg: float = param(0.3, 'walk stop: both amplitudes below this, deg '
                                       '(absolute floor of the test below)',
                                       range=(0.0, 20.0))
-    stop_fraction: float = param(0.5, 'walk stop: pitch amplitude over the stop window '
-                                 'below this share of its running mean while walking '
-                                 '(3 s)', range=(0.0, 1.0))
+    stop_fraction: float = param(0.6, 'walk stop: the gait amplitude (the part moving like '
+                                 'the model) over the stop window below this share of '
+                                 'its running mean while walking (3 s), and the motion '
+                                 'amplitude below 0.8 of its own', range=(0.0, 1.0))
     nis_window: float = param(0.5, 'window of the mean normalised innovation, s',
                               range=(0.1, 5.0))
     nis_threshold: float = param(12.0, 'non-walking movement: mean normalised innovation '
                                  'squared per measurement above this', range=(1.0, 1000.0))
+    skill_weighting: bool = param(True, 'predict the inverse-MSE weighted mean of the walk '
+                                  'model and the attitude held, by their rms error over '
+                                  'the last skill_memory s (measured against the model\'s '
+                                  'attitude horizon s later), per axis')
+    skill_memory: float = param(0.5, 'memory of the skill weighting, s', range=(0.1, 60.0))
     max_gap: float = param(0.5, 'an inclinometer gap longer than this restarts the '
                            'prefilter and the detector, s', range=(0.05, 10.0))
 
@@ -171,32 +206,99 @@ class GaitConfig:
                              f'be below half the sample rate ({0.5 * self.sample_rate} Hz)')
 
     @property
+    def harmonics(self) -> tuple[int, int, int]:
+        """Number of stride harmonics of roll, pitch, yaw."""
+        return (self.sway_harmonics, self.pitch_harmonics, self.sway_harmonics)
+
+    @property
     def dim_x(self) -> int:
-        """Number of states (13 with the pitch harmonic, else 11)."""
-        return 13 if self.pitch_harmonic else 11
+        """Number of states: f, theta, three offsets, the yaw rate and acceleration, and
+        two coefficients per harmonic."""
+        return 7 + 2 * sum(self.harmonics)
 
 
-def continuous_system(n: int, walking: bool) -> np.ndarray:
-    """The continuous-time system matrix A (dx/dt = A x): phases advance with f, the
-    yaw offset with r. Not walking, the phases stand still (frozen)."""
-    a = np.zeros((n, n))
+class StateLayout:
+    """Where each coefficient sits in the state vector.
+
+    Args:
+        harmonics: number of stride harmonics of roll, pitch, yaw.
+    Attributes:
+        n: number of states.
+        k: (M,) harmonic number of every (alpha, beta) pair, axis by axis.
+        axis: (M,) its axis (0 roll, 1 pitch, 2 yaw).
+        alpha, beta: (M,) state indices of its coefficients.
+        main: (3,) position (in 0..M-1) of each axis's main harmonic (``K_MAIN``).
+        oscillation: indices of the states frozen when not walking.
+    """
+
+    def __init__(self, harmonics) -> None:
+        self.harmonics = tuple(int(k) for k in harmonics)
+        ks, axes = [], []
+        for a, n in enumerate(self.harmonics):
+            ks += list(range(1, n + 1))
+            axes += [a] * n
+        self.k = np.array(ks, float)
+        self.axis = np.array(axes, int)
+        m = self.k.size
+        self.alpha = 7 + 2 * np.arange(m)
+        self.beta = self.alpha + 1
+        self.n = 7 + 2 * m
+        self.main = np.array([int(np.flatnonzero((self.axis == a) & (self.k == min(
+            K_MAIN[a], self.harmonics[a])))[0]) for a in range(3)])
+        self.oscillation = np.r_[I_F, I_TH, self.alpha, self.beta]
+        #: (3, M) 0/1: row a sums axis a's harmonics
+        self.sum_matrix = (self.axis[None, :] == np.arange(3)[:, None]).astype(float)
+
+    def of_axis(self, a: int) -> np.ndarray:
+        """Positions (in 0..M-1) of axis a's harmonics, k ascending."""
+        return np.flatnonzero(self.axis == a)
+
+    def names(self) -> list[str]:
+        """State names, e.g. 'f', 'theta', 'o_roll', 'r', 'alpha_pitch_2'."""
+        ax = ('roll', 'pitch', 'yaw')
+        out = ['f', 'theta', 'o_roll', 'o_pitch', 'o_yaw', 'yaw_rate', 'yaw_accel']
+        for k, a in zip(self.k, self.axis):
+            out += [f'alpha_{ax[a]}_{int(k)}', f'beta_{ax[a]}_{int(k)}']
+        return out
+
+
+def wrap_phase(d: np.ndarray) -> np.ndarray:
+    """A state difference with its stride-phase entry wrapped to [-pi, pi)."""
+    d = np.array(d, float)
+    d[I_TH] = wrap_angle(float(d[I_TH]))
+    return d
+
+
+def continuous_system(layout: StateLayout, walking: bool) -> np.ndarray:
+    """The continuous-time system matrix A (dx/dt = A x): the stride phase advances with
+    pi f, the yaw offset with r, the yaw rate with the yaw acceleration. Not walking,
+    the phase stands still (frozen)."""
+    a = np.zeros((layout.n, layout.n))
     if walking:
-        a[I_PH, I_F] = 2.0 * np.pi * K_AXIS
+        a[I_TH, I_F] = np.pi
     a[I_O[2], I_R] = 1.0
+    a[I_R, I_YA] = 1.0
     return a
 
 
 def discretise(a: np.ndarray, qc: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """F and Q of dx = A x dt + dw, cov(dw) = diag(qc) dt, for nilpotent A (A^2 = 0).
+    """F and Q of dx = A x dt + dw, cov(dw) = diag(qc) dt, for nilpotent A (A^3 = 0).
 
-    F = exp(A dt) = I + A dt;  Q = int_0^dt F(s) Qc F(s)^T ds
-      = Qc dt + (A Qc + Qc A^T) dt^2 / 2 + A Qc A^T dt^3 / 3.
+    F(s) = exp(A s) = I + A s + A^2 s^2 / 2;  F = F(dt);
+    Q = int_0^dt F(s) Qc F(s)^T ds = sum_ij M_i Qc M_j^T dt^(i+j+1) / (i+j+1) with
+    M_0 = I, M_1 = A, M_2 = A^2 / 2.
     """
     n = a.shape[0]
-    f = np.eye(n) + a * dt
+    a2 = a @ a
+    f = np.eye(n) + a * dt + a2 * (dt * dt / 2.0)
     qcm = np.diag(qc)
-    aq = a @ qcm
-    q = qcm * dt + (aq + aq.T) * (dt * dt / 2.0) + (aq @ a.T) * (dt ** 3 / 3.0)
+    m = (np.eye(n), a, 0.5 * a2)
+    q = np.zeros((n, n))
+    for i in range(3):
+        mq = m[i] @ qcm
+        for j in range(3):
+            p = i + j + 1
+            q += (mq @ m[j].T) * (dt ** p / p)
     return f, q
 
 
@@ -210,7 +312,8 @@ class WalkModelEKF:
 
     def __init__(self, config: GaitConfig) -> None:
         self.cfg = config
-        n = config.dim_x
+        self.layout = lay = StateLayout(config.harmonics)
+        n = lay.n
         self.n = n
         self.kf = KalmanFilter(dim_x=n, dim_z=3)
         self.t: float | None = None
@@ -218,29 +321,32 @@ class WalkModelEKF:
         c = config
         q = np.zeros(n)
         q[I_F] = c.freq_noise ** 2
-        q[I_PH] = c.phase_noise ** 2
-        q[I_A] = (c.amplitude_noise_deg * _D2R) ** 2
+        q[I_TH] = c.phase_noise ** 2
+        main = np.zeros(lay.k.size, bool)
+        main[lay.main] = True
+        qa = np.where(main, c.amplitude_noise_deg, c.harmonic_noise_deg) * _D2R
+        q[lay.alpha] = q[lay.beta] = qa ** 2
         q[I_O] = (np.array([c.roll_offset_noise_deg, c.pitch_offset_noise_deg,
                             c.yaw_offset_noise_deg]) * _D2R) ** 2
         q[I_R] = (c.yaw_rate_noise_deg * _D2R) ** 2
-        if c.pitch_harmonic:
-            q[I_B] = (0.5 * c.amplitude_noise_deg * _D2R) ** 2
-            q[I_D] = c.phase_noise ** 2
+        q[I_YA] = 0.0                       # walking straight: no yaw acceleration
         qs = np.zeros(n)
         qs[I_O] = (c.standing_offset_noise_deg * _D2R) ** 2
         qs[I_R] = q[I_R]
+        qs[I_YA] = q[I_YA]
         q_turn, qs_turn = q.copy(), qs.copy()
         q_turn[I_R] = qs_turn[I_R] = (c.turn_yaw_rate_noise_deg * _D2R) ** 2
-        # while turning the yaw sinusoid must not absorb the turn: its amplitude and
-        # phase wander ten times less
-        q_turn[I_A[2]] *= 0.01
-        q_turn[I_PH[2]] *= 0.01
-        # continuous process noise by (walking, turning)
-        self._qc = {(True, False): q, (False, False): qs, (True, True): q_turn,
-                    (False, True): qs_turn}
-        #: a turn is under way: the yaw rate may change fast (set by the tracker)
-        self.turning = False
-        self._a = {w: continuous_system(n, w) for w in (True, False)}
+        q_turn[I_YA] = qs_turn[I_YA] = (c.turn_yaw_accel_noise_deg * _D2R) ** 2
+        # while turning the yaw harmonics must not absorb the turn: they wander less
+        yaw = np.r_[lay.alpha[lay.axis == 2], lay.beta[lay.axis == 2]]
+        q_turn[yaw] *= TURN_SWAY_SCALE
+        # continuous process noise by (walking, model): model 0 straight, 1 turning
+        self._qc = {(True, 0): q, (False, 0): qs, (True, 1): q_turn, (False, 1): qs_turn}
+        self._a = {w: continuous_system(lay, w) for w in (True, False)}
+        #: the models' own estimates (x (n,), P (n, n)) and probabilities mu
+        self._mx = [np.zeros(n), np.zeros(n)]
+        self._mP = [np.eye(n), np.eye(n)]
+        self.mu = np.array([1.0, 0.0])
         self._fq_cache: dict = {}
         self.last_nis: float = 0.0
         self.iterations_used = 0
@@ -259,6 +365,33 @@ class WalkModelEKF:
     def P(self) -> np.ndarray:  # noqa: N802 (textbook symbol)
         return self.kf.P
 
+    @property
+    def turning(self) -> bool:
+        """The turning model is the more probable one."""
+        return bool(self.mu[1] > 0.5)
+
+    def sync_models(self) -> None:
+        """Copy the combined estimate into both models (after the caller changed x or P:
+        a walk start, a stop, a reset). The straight model gets no yaw acceleration."""
+        for j in range(2):
+            self._mx[j] = self.x.copy()
+            self._mP[j] = self.P.copy()
+        self._no_accel(0)
+
+    def coefficients(self, x: np.ndarray | None = None) -> np.ndarray:
+        """(M,) complex coefficients alpha + i beta of every harmonic (a harmonic is
+        Im[c exp(i k theta)] = alpha sin(k theta) + beta cos(k theta))."""
+        x = self.x if x is None else x
+        return x[self.layout.alpha] + 1j * x[self.layout.beta]
+
+    def amplitude_phase(self, s: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """Amplitude (rad) and phase (rad) of each axis's main harmonic (roll, yaw: the
+        stride; pitch: the step) at filter time + s: axis = A sin(phase) + the rest."""
+        lay = self.layout
+        c = self.coefficients()[lay.main]
+        th = float(self.x[I_TH]) + (np.pi * float(self.x[I_F]) * s if self.walking else 0.0)
+        return np.abs(c), wrap_angle(lay.k[lay.main] * th + np.angle(c))
+
     def initialise(self, t: float, rpy, var) -> None:
         """Start (not walking) at time t from a (lag-free) attitude and its variances."""
         n = self.n
@@ -268,98 +401,177 @@ class WalkModelEKF:
         p = np.diag(np.full(n, 1e-6))
         p[I_O, I_O] = np.asarray(var, float)
         p[I_R, I_R] = (10.0 * _D2R) ** 2
+        p[I_YA, I_YA] = (10.0 * _D2R) ** 2
         self.kf.x = x[:, None]
         self.kf.P = p
         self.t = float(t)
         self.walking = False
+        self.mu = np.array([1.0, 0.0])
+        self.sync_models()
 
-    def start_walking(self, f: float, amplitude, phase, offset, yaw_rate: float,
-                      harmonic: tuple[float, float] = (0.0, 0.0),
+    def start_walking(self, f: float, coefficients, offset, yaw_rate: float,
                       sigma: dict | None = None) -> None:
         """Switch the oscillation on with initial values (true-attitude domain, at the
-        filter time) and a fresh covariance for the oscillation states."""
+        filter time, stride phase 0) and a fresh covariance for the oscillation states.
+
+        Args:
+            f: step frequency, Hz.
+            coefficients: (M,) complex alpha + i beta per harmonic (``layout`` order).
+            offset: (3,) rad.  yaw_rate: rad/s.
+            sigma: initial standard deviations {'f' Hz, 'theta' rad, 'c' (main
+                harmonics), 'c2' (the others), 'o' rad, 'r' rad/s}; c, c2 may be (M,)
+                arrays.
+        """
+        lay = self.layout
         x = self.x.copy()
         x[I_F] = f
-        x[I_A] = amplitude
-        x[I_PH] = wrap_angle(phase)
+        x[I_TH] = 0.0
+        c = np.asarray(coefficients, complex)
+        x[lay.alpha], x[lay.beta] = c.real, c.imag
         x[I_O] = offset
         x[I_R] = yaw_rate
-        s = {'f': 0.15, 'A': 0.5 * _D2R, 'phi': 0.6, 'o': 0.5 * _D2R, 'r': 5.0 * _D2R,
-             'B': 0.3 * _D2R, 'delta': 1.0}
+        x[I_YA] = 0.0
+        s = {'f': 0.15, 'theta': 0.05, 'c': 0.5 * _D2R, 'c2': 0.5 * _D2R, 'o': 0.5 * _D2R,
+             'r': 5.0 * _D2R, 'a': 10.0 * _D2R}
         if sigma:
             s.update(sigma)
-        p = np.zeros((self.n, self.n))
+        main = np.zeros(lay.k.size, bool)
+        main[lay.main] = True
+        sc = np.where(main, s['c'], s['c2'])
         d = np.zeros(self.n)
         d[I_F] = s['f'] ** 2
-        d[I_A] = s['A'] ** 2
-        d[I_PH] = s['phi'] ** 2
+        d[I_TH] = s['theta'] ** 2
+        d[lay.alpha] = d[lay.beta] = sc ** 2
         d[I_O] = s['o'] ** 2
         d[I_R] = s['r'] ** 2
-        if self.cfg.pitch_harmonic:
-            x[I_B], x[I_D] = harmonic[0], wrap_angle(harmonic[1])
-            d[I_B] = s['B'] ** 2
-            d[I_D] = s['delta'] ** 2
-        p[np.diag_indices(self.n)] = d
+        d[I_YA] = s['a'] ** 2
         self.kf.x = x[:, None]
-        self.kf.P = p
+        self.kf.P = np.diag(d)
         self.walking = True
         self._normalise()
+        self.sync_models()
 
-    def reset_yaw(self, amplitude: float, phase: float, offset: float, rate: float,
-                  sigma_amplitude: float, sigma_phase: float, sigma_offset: float,
-                  sigma_rate: float) -> None:
-        """Re-initialise the yaw block (A_y, phi_y, o_y, r) at the filter time, e.g. when a
-        turn starts (the sinusoid must not have absorbed the turn), dropping its
-        correlations with the other states."""
-        idx = np.array([I_A[2], I_PH[2], I_O[2], I_R])
+    def reset_yaw(self, coefficients, offset: float, rate: float, sigma_coefficient: float,
+                  sigma_offset: float, sigma_rate: float, accel: float = 0.0,
+                  sigma_accel: float = 20.0 * _D2R) -> None:
+        """Re-initialise the yaw block (its harmonics, o_y, r) at the filter time, e.g.
+        when a turn starts (the harmonics must not have absorbed the turn), dropping its
+        correlations with the other states.
+
+        Args:
+            coefficients: (K_y,) complex yaw coefficients (relative to the stride phase).
+        """
+        lay = self.layout
+        pos = lay.of_axis(2)
+        idx = np.r_[lay.alpha[pos], lay.beta[pos], I_O[2], I_R, I_YA]
         x = self.kf.x[:, 0]
-        x[idx] = (amplitude, phase, offset, rate)
+        c = np.asarray(coefficients, complex)
+        x[lay.alpha[pos]], x[lay.beta[pos]] = c.real, c.imag
+        x[I_O[2]], x[I_R], x[I_YA] = offset, rate, accel
         P = self.kf.P
         P[idx, :] = 0.0
         P[:, idx] = 0.0
-        P[idx, idx] = np.array([sigma_amplitude, sigma_phase, sigma_offset, sigma_rate]) ** 2
-        if not self.walking:
-            P[I_A[2], I_A[2]] = P[I_PH[2], I_PH[2]] = 1e-6
-        self._normalise()
+        sc = sigma_coefficient if self.walking else 1e-3
+        P[idx, idx] = np.r_[np.full(2 * pos.size, sc), sigma_offset, sigma_rate,
+                            sigma_accel] ** 2
+        self.sync_models()
 
     def oscillation_indices(self) -> np.ndarray:
         """Indices of the states frozen when not walking."""
-        if self.cfg.pitch_harmonic:
-            return np.r_[_OSC, I_B, I_D]
-        return _OSC
+        return self.layout.oscillation
 
     def stop_walking(self) -> None:
         """Freeze the oscillation: its states keep their last values, and their
-        correlations with the offsets are dropped so that no later update moves them."""
+        correlations with the offsets are dropped so that no later update moves them.
+        The offsets take over the oscillation's current value (the attitude estimate
+        does not jump)."""
+        osc_now = self.oscillation(0.0)[0]
+        for x in [self.kf.x[:, 0]] + self._mx:
+            x[I_O] += osc_now
         self.walking = False
         osc = self.oscillation_indices()
         rest = np.setdiff1d(np.arange(self.n), osc)
-        P = self.kf.P
-        P[np.ix_(osc, rest)] = 0.0
-        P[np.ix_(rest, osc)] = 0.0
+        for P in [self.kf.P] + self._mP:
+            P[np.ix_(osc, rest)] = 0.0
+            P[np.ix_(rest, osc)] = 0.0
 
     # ------------------------------------------------------------------ prediction
-    def transition(self, dt: float, walking: bool | None = None
+    def transition(self, dt: float, walking: bool | None = None, model: int | None = None
                    ) -> tuple[np.ndarray, np.ndarray]:
-        """F and Q over dt seconds (dt >= 0) in the given (default: current) mode."""
+        """F and Q over dt seconds (dt >= 0) in the given (default: current) walking mode,
+        of model 0 (straight), 1 (turning) or, by default, the more probable one."""
         w = self.walking if walking is None else walking
-        key = (round(dt, 9), w, self.turning)
+        m = int(self.turning) if model is None else int(model)
+        key = (round(dt, 9), w, m)
         fq = self._fq_cache.get(key)
         if fq is None:
-            fq = discretise(self._a[w], self._qc[(w, self.turning)], dt)
+            fq = discretise(self._a[w], self._qc[(w, m)], dt)
             if len(self._fq_cache) > 256:
                 self._fq_cache.clear()
             self._fq_cache[key] = fq
         return fq
 
     def predict_to(self, t: float) -> None:
-        """Advance the filter to time t (s); nothing happens if t is not later."""
+        """Advance the filter to time t (s); nothing happens if t is not later.
+
+        IMM interaction, then each model's Kalman prediction (filterpy), then the
+        combination:
+            Pi = [[1 - p01, p01], [p10, 1 - p10]], p01 = 1 - exp(-turn_start_rate dt), ...
+            c_j = sum_i Pi_ij mu_i;  mu_i|j = Pi_ij mu_i / c_j
+            x0_j = sum_i mu_i|j x_i;  P0_j = sum_i mu_i|j (P_i + (x_i - x0_j)(x_i - x0_j)^T)
+            x_j = F x0_j;  P_j = F P0_j F^T + Q_j;  mu_j = c_j
+        """
         if self.t is None or t <= self.t:
             return
-        F, Q = self.transition(t - self.t)
-        self.kf.F, self.kf.Q = F, Q
-        self.kf.predict()              # x = F x;  P = F P F^T + Q
+        dt = t - self.t
+        p01 = 1.0 - math.exp(-self.cfg.turn_start_rate * dt)
+        p10 = 1.0 - math.exp(-self.cfg.turn_end_rate * dt)
+        Pi = np.array([[1.0 - p01, p01], [p10, 1.0 - p10]])
+        c = Pi.T @ self.mu                                   # c_j = sum_i Pi_ij mu_i
+        c = np.maximum(c, 1e-12)
+        mix = Pi * self.mu[:, None] / c[None, :]             # mu_i|j
+        xs, Ps = self._mx, self._mP
+        new_x, new_P = [], []
+        for j in range(2):
+            x0, P0 = self._mix(xs, Ps, mix[:, j])
+            F, Q = self.transition(dt, model=j)
+            self.kf.x, self.kf.P = x0[:, None], P0
+            self.kf.F, self.kf.Q = F, Q
+            self.kf.predict()          # x = F x;  P = F P F^T + Q
+            new_x.append(self.kf.x[:, 0].copy())
+            new_P.append(self.kf.P.copy())
+        self._mx, self._mP = new_x, new_P
+        self.mu = c / c.sum()
+        self._no_accel(0)
         self.t = float(t)
+        self._combine()
+
+    def _mix(self, xs, Ps, w) -> tuple[np.ndarray, np.ndarray]:
+        """The mixture of the two models' estimates with weights w (summing to 1):
+        sum_i w_i x_i and sum_i w_i (P_i + e_i e_i^T), e_i = x_i - mean (the stride-phase
+        difference wrapped)."""
+        ref = xs[0]
+        d1 = xs[1] - ref
+        d1[I_TH] = wrap_angle(float(d1[I_TH]))
+        w0, w1 = float(w[0]), float(w[1])
+        xm = ref + w1 * d1
+        # sum_i w_i (P_i + e_i e_i^T) with e_0 = -w1 d1, e_1 = w0 d1
+        P = w0 * Ps[0] + w1 * Ps[1] + (w0 * w1) * np.outer(d1, d1)
+        return xm, P
+
+    def _no_accel(self, j: int) -> None:
+        """Model j has no yaw acceleration: a = 0, uncorrelated, variance (1 deg/s^2)^2."""
+        self._mx[j][I_YA] = 0.0
+        P = self._mP[j]
+        P[I_YA, :] = 0.0
+        P[:, I_YA] = 0.0
+        P[I_YA, I_YA] = (1.0 * _D2R) ** 2
+
+    def _combine(self) -> None:
+        """The output: the probability-weighted mixture of the models."""
+        x, P = self._mix(self._mx, self._mP, self.mu)
+        self.kf.x = x[:, None]
+        self.kf.P = P
         self._normalise()
 
     # ------------------------------------------------------------------ the model
@@ -367,14 +579,15 @@ class WalkModelEKF:
               ) -> tuple[np.ndarray, np.ndarray]:
         """Attitude (roll, pitch, yaw) at filter time + s and its Jacobian dh/dx (3, n).
 
-        True attitude (prefilter None), per axis a with k = (1/2, 1, 1/2):
+        True attitude (prefilter None), per axis a, with u = k (theta + pi f s):
 
-            h_a = o_a [+ r s for yaw] + A_a sin(phi_a + 2 pi k_a f s) [+ pitch harmonic]
+            h_a = o_a [+ r s for yaw] + sum_k alpha_ak sin(u) + beta_ak cos(u)
 
-        Measured (through ``prefilter``, whose response H(f) includes the sensor lag):
+        Measured (through ``prefilter``, whose response H(f) includes the sensor lag),
+        each harmonic (at k f / 2 Hz) scaled by |H| and advanced by arg H:
 
-            h_a = o_a [+ r (s - tau_dc) for yaw] + |H(k_a f)| A_a sin(phi_a + 2 pi k_a f s
-                  + arg H(k_a f))
+            h_a = o_a [+ r (s - tau_dc) for yaw]
+                  + sum_k |H| (alpha_ak sin(u + arg H) + beta_ak cos(u + arg H))
 
         Args:
             s: time offset from the filter time, s (negative: the past).
@@ -385,54 +598,100 @@ class WalkModelEKF:
             (h (3,), H (3, n)).
         """
         x = self.x if x is None else x
+        lay = self.layout
         H = np.zeros((3, self.n))
-        H[0, 3] = H[1, 6] = H[2, 9] = 1.0
-        r = float(x[I_R])
+        H[0, I_O[0]] = H[1, I_O[1]] = H[2, I_O[2]] = 1.0
+        r, ya = float(x[I_R]), float(x[I_YA])
         sy = s - prefilter.dc_delay if prefilter is not None else s
-        h0, h1, h2 = float(x[3]), float(x[6]), float(x[9]) + r * sy
+        h = np.array([x[I_O[0]], x[I_O[1]], x[I_O[2]] + r * sy + 0.5 * ya * sy * sy], float)
         H[2, I_R] = sy
+        H[2, I_YA] = 0.5 * sy * sy
         if not self.walking:
-            return np.array([h0, h1, h2]), H
+            return h, H
         f = float(x[I_F])
-        tw = 2.0 * math.pi
-        out = [h0, h1, h2]
-        dfsum = [0.0, 0.0, 0.0]
-        for a, (ia, k) in enumerate(((1, 0.5), (4, 1.0), (7, 0.5))):
-            if prefilter is not None:
-                g, psi, dg, dpsi = prefilter.gain_phase(k * f)
-            else:
-                g, psi, dg, dpsi = 1.0, 0.0, 0.0, 0.0
-            amp = float(x[ia])
-            arg = float(x[ia + 1]) + tw * k * f * s + psi
-            sn, cs = math.sin(arg), math.cos(arg)
-            out[a] += g * amp * sn
-            H[a, ia] = g * sn                                  # dh/dA
-            H[a, ia + 1] = g * amp * cs                        # dh/dphi
-            # d/df of g(kf) A sin(phi + 2 pi k f s + psi(kf))
-            dfsum[a] = amp * k * (dg * sn + g * cs * (tw * s + dpsi))
-        if self.cfg.pitch_harmonic:
-            if prefilter is not None:
-                g, psi, dg, dpsi = prefilter.gain_phase(2.0 * f)
-            else:
-                g, psi, dg, dpsi = 1.0, 0.0, 0.0, 0.0
-            b = float(x[I_B])
-            arg2 = 2.0 * float(x[5]) + float(x[I_D]) + tw * 2.0 * f * s + psi
-            s2, c2 = math.sin(arg2), math.cos(arg2)
-            out[1] += g * b * s2
-            H[1, I_B] = g * s2
-            H[1, I_D] = g * b * c2
-            H[1, 5] += 2.0 * g * b * c2
-            dfsum[1] += b * 2.0 * (dg * s2 + g * c2 * (tw * s + dpsi))
-        H[0, 0], H[1, 0], H[2, 0] = dfsum
-        return np.array(out), H
+        k = lay.k
+        if prefilter is not None:
+            g, psi, dg, dpsi = prefilter.gain_phase_array(0.5 * k * f)
+        else:
+            g, psi, dg, dpsi = 1.0, 0.0, 0.0, 0.0
+        u = k * (float(x[I_TH]) + math.pi * f * s) + psi
+        su, cu = np.sin(u), np.cos(u)
+        al, be = x[lay.alpha], x[lay.beta]
+        val = al * su + be * cu                      # the harmonic before the gain
+        der = al * cu - be * su                      # its derivative by u
+        ax = lay.axis
+        A = lay.sum_matrix                           # (3, M): sums each axis's harmonics
+        h += A @ (g * val)
+        H[ax, lay.alpha] = g * su                    # dh/dalpha
+        H[ax, lay.beta] = g * cu                     # dh/dbeta
+        H[:, I_TH] = A @ (g * k * der)               # dh/dtheta
+        # dh/df: the gain and phase of H at k f / 2, and the phase advance k pi s
+        H[:, I_F] = A @ (0.5 * k * dg * val + g * der * k * (math.pi * s + 0.5 * dpsi))
+        return h, H
+
+    def attitude(self, s: float, prefilter=None) -> np.ndarray:
+        """``model(s, prefilter)``'s attitude without the Jacobian (cheaper), (3,) rad."""
+        x = self.x
+        sy = s - prefilter.dc_delay if prefilter is not None else s
+        h = np.array([x[I_O[0]], x[I_O[1]],
+                      x[I_O[2]] + x[I_R] * sy + 0.5 * x[I_YA] * sy * sy], float)
+        if self.walking:
+            h += self.oscillation(s, prefilter)[0]
+        return h
+
+    def lag_correction(self, s: float, prefilter) -> np.ndarray:
+        """``attitude(s) - attitude(s, prefilter)``: what the prefilter and the sensor lag
+        do to the walk model's attitude at filter time + s, (3,) rad."""
+        x = self.x
+        ya = float(x[I_YA])
+        dc = prefilter.dc_delay
+        out = np.array([0.0, 0.0, float(x[I_R]) * dc + 0.5 * ya * (2.0 * s * dc - dc * dc)])
+        if self.walking:
+            lay = self.layout
+            f = float(x[I_F])
+            c = self.coefficients() * (1.0 - prefilter.response(0.5 * lay.k * f))
+            u = lay.k * (float(x[I_TH]) + math.pi * f * s)
+            out += lay.sum_matrix @ np.imag(c * np.exp(1j * u))
+        return out
+
+    def oscillation(self, s, prefilter=None) -> np.ndarray:
+        """The oscillation part of the model (no offsets, no yaw ramp) at filter time + s
+        for an array of offsets s (N,): (N, 3) rad, measured through ``prefilter`` if
+        given. Zero when not walking."""
+        s = np.atleast_1d(np.asarray(s, float))
+        if not self.walking:
+            return np.zeros((s.size, 3))
+        lay = self.layout
+        x = self.x
+        f = float(x[I_F])
+        c = self.coefficients()
+        if prefilter is not None:
+            c = c * prefilter.response(0.5 * lay.k * f)
+        u = lay.k[None, :] * (float(x[I_TH]) + math.pi * f * s[:, None])
+        val = np.imag(c[None, :] * np.exp(1j * u))                 # (N, M)
+        return val @ lay.sum_matrix.T
+
+    def oscillation_amplitude(self, prefilter=None) -> np.ndarray:
+        """(3,) amplitude of each axis's oscillation, rad: sqrt(sum_k |c_k|^2) (the
+        sinusoid-equivalent sqrt(2) rms over a stride), measured through ``prefilter``
+        if given; zero when not walking."""
+        if not self.walking:
+            return np.zeros(3)
+        lay = self.layout
+        c = self.coefficients()
+        if prefilter is not None:
+            c = c * prefilter.response(0.5 * lay.k * float(self.x[I_F]))
+        return np.sqrt(lay.sum_matrix @ np.abs(c) ** 2)
 
     def predict_attitude(self, s: float) -> tuple[np.ndarray, np.ndarray]:
         """True attitude at filter time + s (s >= 0) and its (3, 3) covariance.
 
         The covariance includes the process noise over s:
-        Cov = H (F(s) P F(s)^T + Q(s)) H^T with H at the filter time evaluated for x(s).
+        Cov = H (F(s) P F(s)^T + Q(s)) H^T with H at the filter time evaluated for x(s),
+        Q the models' probability-weighted process noise.
         """
-        F, Q = self.transition(max(s, 0.0))
+        F, Q0 = self.transition(max(s, 0.0), model=0)
+        Q = self.mu[0] * Q0 + self.mu[1] * self.transition(max(s, 0.0), model=1)[1]
         xs = F @ self.x
         Ps = F @ self.P @ F.T + Q
         h, H = self.model(0.0, x=xs)
@@ -440,28 +699,56 @@ class WalkModelEKF:
 
     # ------------------------------------------------------------------ updates
     def update(self, z, R, hfun, wrap_yaw: bool = True) -> float | None:
-        """Iterated EKF update with measurement z (m,), noise R (m, m).
+        """Iterated EKF update of each model with measurement z (m,), noise R (m, m), and
+        the models' probabilities from their likelihoods.
 
-        ``hfun(x) -> (h (m,), H (m, n))``. Iterates (Gauss-Newton)
+        ``hfun(x) -> (h (m,), H (m, n))``. Each model iterates (Gauss-Newton)
 
             x_{i+1} = x^- + K_i (z - h(x_i) - H_i (x^- - x_i)),
             K_i = P^- H_i^T (H_i P^- H_i^T + R)^-1,
 
         until the step is tiny or ``iterations`` are done, then (Joseph form)
-        P = (I - K H) P^- (I - K H)^T + K R K^T. ``z = None``: a missed measurement,
-        nothing changes. Angle residuals of the third row are wrapped (yaw) if asked.
+        P = (I - K H) P^- (I - K H)^T + K R K^T; its likelihood is N(y; 0, S) of the
+        first iterate, mu_j ∝ mu_j N(y_j; 0, S_j) (a model with mu_j < 0.1 is updated with
+        one step). ``z = None``: a missed measurement, nothing changes. Angle residuals of the third row are wrapped (yaw) if asked.
 
         Returns:
-            The normalised innovation squared y^T S^-1 y of the first iterate, or None.
+            The normalised innovation squared y^T S^-1 y (first iterate, more probable
+            model), or None.
         """
         if z is None:
             return None
         z = np.asarray(z, float)
-        x_prior = self.x.copy()
-        P = self.P
+        like = np.zeros(2)
+        best = int(np.argmax(self.mu))
+        nis_best = 0.0
+        for j in range(2):
+            # an improbable model gets one Gauss-Newton step (a plain EKF update)
+            its = self.cfg.iterations if self.mu[j] >= 0.1 else 1
+            x, P, y, S, S_inv = self._update_one(self._mx[j], self._mP[j], z, R, hfun,
+                                                 wrap_yaw, its)
+            self._mx[j], self._mP[j] = x, P
+            nis = float(y @ S_inv @ y)
+            # log N(y; 0, S) up to the common constant
+            like[j] = -0.5 * nis - 0.5 * math.log(max(np.linalg.det(S), 1e-300))
+            if j == best:
+                nis_best = nis
+                self.last_y, self.last_S = y, S
+        w = np.log(np.maximum(self.mu, 1e-300)) + like
+        w = np.exp(w - w.max())
+        self.mu = np.maximum(w / w.sum(), 1e-6)
+        self.mu /= self.mu.sum()
+        self._no_accel(0)
+        self._combine()
+        self.last_nis = nis_best
+        return nis_best
+
+    def _update_one(self, x_prior, P, z, R, hfun, wrap_yaw, iterations: int):
+        """The iterated update of one model: (x, P, y, S, S^-1) (first-iterate y, S)."""
         xi = x_prior
-        nis = None
-        for it in range(self.cfg.iterations):
+        y0 = S0 = S0_inv = None
+        K = H = None
+        for it in range(iterations):
             h, H = hfun(xi)
             y = z - h                                          # innovation
             if wrap_yaw and y.size >= 3:
@@ -472,8 +759,7 @@ class WalkModelEKF:
             S_inv = np.linalg.inv(S)
             K = PHt @ S_inv                                    # K = P H^T S^-1
             if it == 0:
-                nis = float(y @ S_inv @ y)
-                self.last_y, self.last_S = y, S
+                y0, S0, S0_inv = y, S, S_inv
             x_new = x_prior + K @ y                            # x = x^- + K y
             done = float(np.max(np.abs(x_new - xi))) < 1e-3
             xi = x_new
@@ -481,11 +767,12 @@ class WalkModelEKF:
             if done:
                 break
         IKH = self._eye - K @ H
-        self.kf.P = IKH @ P @ IKH.T + K @ R @ K.T              # Joseph form
-        self.kf.x = xi[:, None]
-        self._normalise()
-        self.last_nis = nis if nis is not None else 0.0
-        return nis
+        P_new = IKH @ P @ IKH.T + K @ R @ K.T                  # Joseph form
+        xi = xi.copy()
+        xi[I_TH] = wrap_angle(float(xi[I_TH]))
+        lo, hi = self.frequency_bounds
+        xi[I_F] = min(max(float(xi[I_F]), lo), hi)
+        return xi, P_new, y0, S0, S0_inv
 
     def update_attitude(self, z, R, s: float = 0.0, prefilter=None) -> float | None:
         """Update with an (optionally prefiltered) attitude measurement made at filter
@@ -504,19 +791,15 @@ class WalkModelEKF:
 
     # ------------------------------------------------------------------ helpers
     def _normalise(self) -> None:
-        """Keep amplitudes positive (A sin(phi) = -A sin(phi + pi)) and phases wrapped."""
-        x = self.kf.x[:, 0]
-        neg = I_A[x[I_A] < 0]
-        for ia in neg:
-            x[ia] = -x[ia]
-            x[ia + 1] += np.pi
-            self.kf.P[ia, :] *= -1.0
-            self.kf.P[:, ia] *= -1.0
-        if self.cfg.pitch_harmonic and x[I_B] < 0:
-            x[I_B] = -x[I_B]
-            x[I_D] += np.pi
-            self.kf.P[I_B, :] *= -1.0
-            self.kf.P[:, I_B] *= -1.0
-        x[I_PH] = wrap_angle(x[I_PH])
-        if self.cfg.pitch_harmonic:
-            x[I_D] = wrap_angle(x[I_D])
+        """Keep the stride phase wrapped (every harmonic is 2 pi periodic in it) and the
+        step frequency within [0.9 min_frequency, 1.1 max_frequency] (the change
+        detector treats a frequency at that bound as a lost lock)."""
+        x = self.kf.x
+        x[I_TH, 0] = wrap_angle(float(x[I_TH, 0]))
+        lo, hi = self.frequency_bounds
+        x[I_F, 0] = min(max(float(x[I_F, 0]), lo), hi)
+
+    @property
+    def frequency_bounds(self) -> tuple[float, float]:
+        """The step frequency is kept within these, Hz."""
+        return 0.9 * self.cfg.min_frequency, 1.1 * self.cfg.max_frequency

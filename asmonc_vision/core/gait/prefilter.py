@@ -53,6 +53,8 @@ class Prefilter:
         self._a = np.pad(self.a, (0, n - len(self.a)))
         self._zi_unit = signal.lfilter_zi(self.b, self.a) if n > 1 else np.zeros(0)
         self._z: np.ndarray | None = None           # (n - 1, 3) filter state
+        self._resp_key: bytes | None = None
+        self._resp_value = None
         h = signal.lfilter(self.b, self.a, np.r_[1.0, np.zeros(int(20 * rate) + 64)])
         #: white-noise variance gain sum(h^2): R of the filtered stream = gain * R
         self.noise_gain = float(np.sum(h * h))
@@ -71,6 +73,9 @@ class Prefilter:
         self._p = np.unwrap(np.angle(resp))
         self._dg = np.gradient(self._g, self._df)
         self._dp = np.gradient(self._p, self._df)
+        self._table = np.column_stack([self._g, self._p, self._dg, self._dp])
+        self._last_key: bytes | None = None
+        self._last_value = None
 
     def reset(self) -> None:
         """Forget the filter state (the next sample restarts it in steady state)."""
@@ -99,10 +104,15 @@ class Prefilter:
     def response(self, f) -> np.ndarray:
         """Complex response H(f) of prefilter times sensor lag at frequencies f (Hz)."""
         f = np.asarray(f, float)
+        key = f.tobytes()
+        if key == self._resp_key:                   # asked again for the same frequencies
+            return self._resp_value
         zinv = np.exp(-2j * np.pi * f / self.rate)
         num = np.polyval(self.b[::-1], zinv)
         den = np.polyval(self.a[::-1], zinv)
-        return num / den / (1.0 + 2j * np.pi * f * self.sensor_lag)
+        h = num / den / (1.0 + 2j * np.pi * f * self.sensor_lag)
+        self._resp_key, self._resp_value = key, h
+        return h
 
     def gain_phase(self, f: float) -> tuple[float, float, float, float]:
         """|H|, arg H (rad, unwrapped from 0 Hz) and their derivatives with respect to f
@@ -119,3 +129,18 @@ class Prefilter:
         g, p, dg, dp = self._g, self._p, self._dg, self._dp
         return (v * g[i] + w * g[i + 1], v * p[i] + w * p[i + 1],
                 v * dg[i] + w * dg[i + 1], v * dp[i] + w * dp[i + 1])
+
+    def gain_phase_array(self, f) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``gain_phase`` for an array of frequencies f (Hz): four arrays of f's shape
+        (frequencies beyond the Nyquist frequency are clamped to it)."""
+        f = np.asarray(f, float)
+        key = f.tobytes()
+        if key == self._last_key:                  # the EKF asks again for the same f
+            return self._last_value
+        u = np.clip(f / self._df, 0.0, 4096.0 - 1e-9)
+        i = u.astype(int)
+        w = (u - i)[..., None]
+        tab = self._table
+        v = tab[i] * (1.0 - w) + tab[i + 1] * w
+        self._last_key, self._last_value = key, (v[..., 0], v[..., 1], v[..., 2], v[..., 3])
+        return self._last_value

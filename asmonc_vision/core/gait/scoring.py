@@ -101,3 +101,22 @@ def match_bouts(reference: list[tuple[float, float]], detected: list[tuple[float
                 best, best_ov = d, ov
         out.append((r, best))
     return out
+
+
+def event_precision_recall(true_times, detected_times, tolerance: float
+                           ) -> tuple[int, int, int]:
+    """One-to-one matching of detected to true events within +-tolerance (s), closest
+    pairs first. Returns (matched, detected, true): precision = matched / detected,
+    recall = matched / true."""
+    tt = np.asarray(true_times, float)
+    dd = np.asarray(detected_times, float)
+    if tt.size == 0 or dd.size == 0:
+        return 0, int(dd.size), int(tt.size)
+    gap = np.abs(dd[:, None] - tt[None, :])
+    pairs = sorted((float(gap[i, j]), i, j) for i, j in zip(*np.nonzero(gap <= tolerance)))
+    used_d, used_t = set(), set()
+    for _, i, j in pairs:
+        if i not in used_d and j not in used_t:
+            used_d.add(i)
+            used_t.add(j)
+    return len(used_d), int(dd.size), int(tt.size)

@@ -12,9 +12,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from asmonc_vision.core.gait.detector import WalkDetector, WalkFit, lstsq
-from asmonc_vision.core.gait.model import I_A, I_F, I_O, I_PH, I_R, K_AXIS, GaitConfig, \
-    WalkModelEKF
+from asmonc_vision.core.gait.detector import WalkDetector, WalkFit
+from asmonc_vision.core.gait.model import I_F, I_O, I_R, I_YA, GaitConfig, WalkModelEKF
 from asmonc_vision.core.gait.prefilter import Prefilter
 from asmonc_vision.core.gait.rotations import (egomotion_to_body, euler_rate_matrix,
                                                relative_rotation, rpy_increment,
@@ -24,6 +23,20 @@ _D2R = np.pi / 180.0
 #: visual-motion increments whose normalised innovation exceeds this are outliers
 #: (chi-square, 3 degrees of freedom, p = 0.001)
 EGOMOTION_GATE = 16.27
+#: the skill weighting's prior at a walk start: the model's mean squared error is this
+#: share of holding's (expected from the fitted oscillation and the buffered samples)
+SKILL_PRIOR = 1.0
+#: ... and holding's rms error is at least this, rad
+SKILL_FLOOR = 0.2 * _D2R
+
+
+def wrap_diff(a, b) -> np.ndarray:
+    """a - b (3,) with the yaw difference wrapped."""
+    d = np.asarray(a, float) - np.asarray(b, float)
+    d[2] = wrap_angle(float(d[2]))
+    return d
+
+
 #: visual-motion intervals ending more than this before the filter time are too old, s
 EGOMOTION_MAX_AGE = 2.0
 
@@ -43,10 +56,14 @@ class GaitEstimate:
         predicted: (3,) attitude at stamp + horizon, rad (yaw continuous).
         predicted_covariance: (3, 3) rad^2.
         motion: (3, 3) rotation of inclinometer_link at stamp + horizon expressed in
-            inclinometer_link at the stamp (the predicted camera-rig rotation).
+            inclinometer_link at the stamp (the predicted camera-rig rotation): from the
+            attitude now to attitude + w (model prediction - attitude), w the skill
+            weights (holding predicts no motion).
         event: 'start', 'stop', 'movement', 'frequency', 'gap' when the walking verdict
             changed at this sample, 'relock' when the oscillation was re-initialised
             while walking, else None.
+        predicted_model, predicted_model_covariance: the walk model's own prediction
+            (``predicted`` weights it with the attitude held by their recent skill).
     """
 
     stamp: float
@@ -63,6 +80,8 @@ class GaitEstimate:
     predicted_covariance: np.ndarray
     motion: np.ndarray
     event: str | None = None
+    predicted_model: np.ndarray | None = None
+    predicted_model_covariance: np.ndarray | None = None
 
 
 @dataclass
@@ -77,6 +96,7 @@ class TrackerStats:
     starts: int = 0
     stops: int = 0
     relocks: int = 0
+    turns: int = 0
     last_event: str = ''
     events: list = field(default_factory=list)
 
@@ -106,7 +126,11 @@ class GaitTracker:
         self._resid2 = np.zeros(3)                # running mean squared post-fit residual
         self._next_lock_check = 0.0
         self._walk_start = 0.0
-        self._sway_history: deque = deque()       # (t, A_yaw, phi_yaw) while walking straight
+        self._was_turning = False
+        self._past: deque = deque()               # (t, model prediction, measurement)
+        self._zc_prev: tuple | None = None        # (t, lag-corrected measurement)
+        self._e2m = np.zeros(3)                   # running mean squared error: model
+        self._e2h = np.zeros(3)                   # ... and "hold the attitude"
         self._last_yaw_raw = 0.0
         self._yaw_cont = 0.0
         self._default_var = (0.5 * _D2R) ** 2
@@ -185,7 +209,7 @@ class GaitTracker:
         elif self.use_inclinometer_updates or not self.ekf.walking:
             nis = self.ekf.update_attitude(zf, R, s, self.prefilter)
             if self.ekf.walking and c.adaptive_model_error:
-                r = zf - self.ekf.model(s, self.prefilter)[0]
+                r = zf - self.ekf.attitude(s, self.prefilter)
                 r[2] = wrap_angle(float(r[2]))
                 a = 1.0 / (3.0 * c.sample_rate)
                 self._resid2 += a * (r * r - self._resid2)
@@ -193,7 +217,7 @@ class GaitTracker:
             nis = None
         if not settling:
             self.detector.push(t, zf)
-            self._turn_check(t)
+            self._turn_check()
             if self.ekf.walking and nis is not None:
                 # non-walking movement shows in roll and pitch (yaw jumps at turns)
                 y, S = self.ekf.last_y, self.ekf.last_S
@@ -204,66 +228,46 @@ class GaitTracker:
         if event is not None:
             self.stats.last_event = event
             self.stats.events.append((t, event))
-        return self.estimate(t, event)
+        # the measurement with the known lag of its walk-model part undone:
+        # z_c = z_f + (model(true) - model(through the prefilter and sensor lag))
+        s = t - self.ekf.t
+        zc = zf + self.ekf.lag_correction(s, self.prefilter)
+        self._score_past(t, zc)
+        self._zc_prev = (t, zc)
+        est = self.estimate(t, event)
+        if self.ekf.walking:
+            self._past.append((t, est.predicted_model, zc))
+        return est
 
-    def _turn_check(self, t: float) -> None:
-        """Turn detection (the flexible yaw rate; the paper's "corner turning").
+    def _score_past(self, t: float, zc: np.ndarray) -> None:
+        """Score the walk model's past predictions against "hold the measurement": every
+        prediction made ``horizon`` s ago, and the measurement then, are compared with
+        the measurement at the target time (interpolated between the latest two
+        samples); running mean squared errors per axis over ``skill_memory`` s. The
+        measurements are z_c: prefiltered, with the lag of their walk-model part undone
+        (the true attitude plus noise where the model holds)."""
+        h = self.cfg.horizon
+        past = self._past
+        a = 1.0 / max(self.cfg.skill_memory * self.cfg.sample_rate, 1.0)
+        t0, z0 = self._zc_prev if self._zc_prev is not None else (t, zc)
+        while past and past[0][0] + h <= t + 1e-9:
+            ti, pm, held = past.popleft()
+            if not self.ekf.walking:
+                continue
+            u = 1.0 if t <= t0 else min(max((ti + h - t0) / (t - t0), 0.0), 1.0)
+            truth = z0 + u * wrap_diff(zc, z0)
+            em = pm - truth
+            eh = held - truth
+            em[2], eh[2] = wrap_angle(em[2]), wrap_angle(eh[2])
+            self._e2m += a * (em * em - self._e2m)
+            self._e2h += a * (eh * eh - self._e2h)
 
-        The yaw over the last stride is fitted with offset + trend + the stride sinusoid
-        (so the sway cancels). A trend above ``turn_rate_deg`` starts a turn: the yaw
-        block is re-initialised from the fit (the sinusoid may have absorbed the turn's
-        beginning) and the yaw rate gets the larger turning process noise, the yaw
-        sinusoid a smaller one, until the trend falls below half the threshold.
-        """
-        ekf = self.ekf
-        f = float(ekf.x[I_F]) if ekf.walking else 0.0
-        span = 2.0 / f if f > 0 else 1.0
-        tau, z = self.detector.window(span)
-        if tau.size < 6:
-            return
-        one = np.ones(tau.size)
-        sway = []
-        if f > 0:
-            w = np.pi * f * tau
-            sway = [np.sin(w), np.cos(w)]
-        # detection: the mean trend over the stride (robust); the values to start from:
-        # a quadratic trend (its slope at the window's end follows the turn closely)
-        mean_slope = float(lstsq(np.column_stack([one, tau] + sway), z[:, 2])[1])
-        thr = self.cfg.turn_rate_deg * _D2R
-        hist = self._sway_history
-        if abs(mean_slope) > thr and not ekf.turning:
-            ekf.turning = True
-            pf = self.prefilter
-            d = ekf.t - t
-            # the sway as it was before the turn began (the filter has been absorbing
-            # the turn's start into the sinusoid since): some 3/4 stride ago
-            amp, phase = float(ekf.x[I_A[2]]), float(ekf.x[I_PH[2]])
-            if f > 0 and hist:
-                back = t - 0.75 * span
-                tb, ab, pb = hist[0]
-                for item in hist:
-                    if item[0] <= back:
-                        tb, ab, pb = item
-                amp, phase = ab, pb + np.pi * f * (ekf.t - tb)
-                w = np.pi * f * tau
-                sway_fit = amp * np.sin(phase - np.pi * f * (ekf.t - t) + w
-                                        + float(np.angle(pf.response(0.5 * f)))) \
-                    * float(np.abs(pf.response(0.5 * f)))
-            else:
-                sway_fit = 0.0
-            # offset and rate: a quadratic trend through the yaw without that sway
-            c = np.polyfit(tau, z[:, 2] - sway_fit, 2)
-            slope = float(c[1])
-            offset = float(c[2]) + slope * (pf.dc_delay + d)
-            ekf.reset_yaw(amp, phase, offset, slope, 0.1 * _D2R, 0.05, 0.5 * _D2R,
-                          0.3 * abs(slope) + 2.0 * _D2R)
-            hist.clear()
-        elif abs(mean_slope) < 0.5 * thr:
-            ekf.turning = False
-        if ekf.walking and not ekf.turning:
-            hist.append((ekf.t, float(ekf.x[I_A[2]]), float(ekf.x[I_PH[2]])))
-            while hist and hist[0][0] < ekf.t - 2.0:
-                hist.popleft()
+    def _turn_check(self) -> None:
+        """Count turns (the IMM's turning model becoming the more probable one)."""
+        turning = self.ekf.walking and self.ekf.turning
+        if turning and not self._was_turning:
+            self.stats.turns += 1
+        self._was_turning = turning
 
     def _detect(self, t: float) -> str | None:
         if not self.ekf.walking:
@@ -275,7 +279,11 @@ class GaitTracker:
                 self._next_lock_check = t + self.cfg.relock_period
                 return 'start'
             return None
-        reason = self.detector.check_stop(float(self.ekf.x[I_F]), self.prefilter)
+        d = self.ekf.t - t
+        reason = self.detector.check_stop(
+            float(self.ekf.x[I_F]),
+            lambda tau: (self.ekf.oscillation(tau - d, self.prefilter),
+                         self.ekf.oscillation_amplitude(self.prefilter)))
         if reason == 'frequency':
             # the tracked frequency ran off: a bad lock rather than a stop if the window
             # still holds a walk
@@ -307,33 +315,64 @@ class GaitTracker:
         A relock (walking already) keeps the tracked offsets and yaw rate, and during a
         turn the whole yaw block (the fit's straight trend cannot describe a turn)."""
         pf = self.prefilter
-        keep = self.ekf.walking and self.ekf.turning
-        old = self.ekf.x.copy()
-        old_P = self.ekf.P.copy()
+        ekf = self.ekf
+        lay = ekf.layout
+        keep = ekf.walking and ekf.turning
+        old = ekf.x.copy()
+        old_P = ekf.P.copy()
+        old_yaw = ekf.coefficients()[lay.of_axis(2)]
         f = fit.frequency
-        d = self.ekf.t - t                    # >= 0: the filter time may be ahead
-        H = pf.response(np.r_[K_AXIS * f, 2.0 * f])
-        g, psi = np.abs(H), np.angle(H)
-        amp = fit.amplitude / g[:3]
-        amp[amp > self.cfg.max_amplitude_deg * _D2R] = 0.0     # implausible: not gait sway
-        phase = fit.phase - psi[:3] + 2.0 * np.pi * K_AXIS * f * d
+        d = ekf.t - t                         # >= 0: the filter time may be ahead
+        resp = pf.response(0.5 * lay.k * f)
+        # measured -> true (divide by the response), then advance the phase to the
+        # filter time (stride phase 0 there)
+        c_meas = np.array([fit.harmonic(int(a), int(k)) for a, k in zip(lay.axis, lay.k)])
+        coef = c_meas / resp * np.exp(1j * lay.k * np.pi * f * d)
+        amp = np.abs(coef)
+        coef[amp > self.cfg.max_amplitude_deg * _D2R] = 0.0    # implausible: not gait sway
         offset = fit.offset + fit.trend * pf.dc_delay
         offset[2] += fit.trend[2] * d
-        harmonic = (fit.harmonic[0] / g[3],
-                    fit.harmonic[1] - psi[3] + 2.0 * np.pi * 2.0 * f * d - 2.0 * phase[1])
         rate = float(fit.trend[2])
         if relock:
             offset, rate = old[I_O].copy(), float(old[I_R])
         if keep:
-            amp[2], phase[2], offset[2], rate = old[I_A[2]], old[I_PH[2]], old[I_O[2]], old[I_R]
-        self.ekf.start_walking(f, amp, phase, offset, rate, harmonic)
+            offset[2], rate = old[I_O[2]], old[I_R]
+        ekf.start_walking(f, coef, offset, rate)
         if keep:
-            yb = np.array([I_A[2], I_PH[2], I_O[2], I_R])
-            P = self.ekf.P
+            ekf.x[I_YA] = old[I_YA]
+        pos = lay.of_axis(2)
+        if keep:
+            yb = np.r_[lay.alpha[pos], lay.beta[pos], I_O[2], I_R, I_YA]
+            x = ekf.kf.x[:, 0]
+            x[lay.alpha[pos]], x[lay.beta[pos]] = old_yaw.real, old_yaw.imag
+            P = ekf.P
             P[yb, :] = 0.0
             P[:, yb] = 0.0
             P[np.ix_(yb, yb)] = old_P[np.ix_(yb, yb)]
-        self.detector.start_reference(float(amp[1]))
+            mu = ekf.mu.copy()
+            ekf.sync_models()
+            ekf.mu = mu
+        self.detector.start_reference()
+        if not relock:
+            # the model error starts at what the start fit left unexplained
+            self._resid2 = np.asarray(fit.residual, float) ** 2
+            # the skill weighting starts from an expectation: holding errs by the change
+            # over the horizon, the larger of the fitted oscillation's (mean over a
+            # stride) and the one seen in the buffered samples; the model by
+            # SKILL_PRIOR of that
+            self._past.clear()
+            h = self.cfg.horizon
+            s = np.linspace(0.0, 2.0 / f, 16, endpoint=False)
+            d = ekf.oscillation(s + h) - ekf.oscillation(s)
+            e2 = np.mean(d * d, axis=0)
+            tau, z = self.detector.window(2.0 / f)
+            if tau.size and tau[-1] - tau[0] > h:
+                zh = np.column_stack([np.interp(tau + h, tau, z[:, a]) for a in range(3)])
+                m = tau + h <= tau[-1]
+                seen = np.mean((zh[m] - z[m]) ** 2, axis=0)
+                e2 = np.maximum(e2, seen)
+            self._e2h = e2 + SKILL_FLOOR ** 2
+            self._e2m = SKILL_PRIOR * self._e2h
 
     # ------------------------------------------------------------------ visual motion
     def add_egomotion(self, t_prev: float, t_cur: float, r_optical,
@@ -388,21 +427,33 @@ class GaitTracker:
         s = t - ekf.t
         x = ekf.x
         h = self.cfg.horizon
-        att, _ = ekf.model(s)
+        att = ekf.attitude(s)
         if s + h >= 0:
             pred, cov = ekf.predict_attitude(s + h)
         else:
             pred, H = ekf.model(s + h)
             cov = H @ ekf.P @ H.T
-        if ekf.walking:
-            phase = wrap_angle(x[I_PH] + 2.0 * np.pi * K_AXIS * x[I_F] * s)
-        else:
-            phase = x[I_PH].copy()
+        pred_model, cov_model = pred, cov
+        target = pred                         # where the rig is predicted to turn to
+        fresh = (self._zc_prev is not None
+                 and abs(t - self._zc_prev[0]) <= 0.5 / self.cfg.sample_rate)
+        if ekf.walking and self.cfg.skill_weighting and fresh:
+            # inverse-MSE weighting of the model's prediction and the latest measurement
+            # held, per axis: w = e_h^2 / (e_m^2 + e_h^2) (only at an inclinometer stamp:
+            # visual motion alone has no measurement to hold)
+            w = self._e2h / np.maximum(self._e2m + self._e2h, 1e-12)
+            held = self._zc_prev[1]
+            pred = held + w * wrap_diff(pred_model, held)
+            cov = (w[:, None] * cov * w[None, :]) + np.diag((1.0 - w) ** 2 * self._e2h)
+            # the motion likewise: holding predicts none
+            target = att + w * wrap_diff(pred_model, att)
+        amplitude, phase = ekf.amplitude_phase(s)
         offset = x[I_O].copy()
-        offset[2] += x[I_R] * s
+        offset[2] += x[I_R] * s + 0.5 * x[I_YA] * s * s
         return GaitEstimate(
             stamp=float(t), walking=bool(ekf.walking), step_frequency=float(x[I_F]),
-            step_frequency_variance=float(ekf.P[I_F, I_F]), amplitude=x[I_A].copy(),
+            step_frequency_variance=float(ekf.P[I_F, I_F]), amplitude=amplitude,
             phase=phase, offset=offset, yaw_rate=float(x[I_R]), attitude=att,
             horizon=h, predicted=pred, predicted_covariance=cov,
-            motion=relative_rotation(att, pred), event=event)
+            motion=relative_rotation(att, target), event=event, predicted_model=pred_model,
+            predicted_model_covariance=cov_model)
