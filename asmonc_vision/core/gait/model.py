@@ -188,10 +188,11 @@ class GaitConfig:
                               range=(0.1, 5.0))
     nis_threshold: float = param(12.0, 'non-walking movement: mean normalised innovation '
                                  'squared per measurement above this', range=(1.0, 1000.0))
-    skill_weighting: bool = param(True, 'predict the inverse-MSE weighted mean of the walk '
-                                  'model and the attitude held, by their rms error over '
-                                  'the last skill_memory s (measured against the model\'s '
-                                  'attitude horizon s later), per axis')
+    skill_weighting: bool = param(True, 'predict the minimum-MSE combination of the walk '
+                                  'model and the last measurement held, by their errors '
+                                  '(mean squares and mean product) over the last '
+                                  'skill_memory s (measured against the model\'s attitude '
+                                  'horizon s later), per axis')
     skill_memory: float = param(0.5, 'memory of the skill weighting, s', range=(0.1, 60.0))
     max_gap: float = param(0.5, 'an inclinometer gap longer than this restarts the '
                            'prefilter and the detector, s', range=(0.05, 10.0))
@@ -276,8 +277,8 @@ def continuous_system(layout: StateLayout, walking: bool) -> np.ndarray:
     a = np.zeros((layout.n, layout.n))
     if walking:
         a[I_TH, I_F] = np.pi
-    a[I_O[2], I_R] = 1.0
-    a[I_R, I_YA] = 1.0
+        a[I_O[2], I_R] = 1.0
+        a[I_R, I_YA] = 1.0
     return a
 
 

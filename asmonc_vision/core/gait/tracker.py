@@ -28,6 +28,11 @@ EGOMOTION_GATE = 16.27
 SKILL_PRIOR = 1.0
 #: ... and holding's rms error is at least this, rad
 SKILL_FLOOR = 0.2 * _D2R
+#: the skill shown on earlier walks (errors of model and holding while walking, a memory
+#: of this many seconds) replaces that prior at a walk start once it holds this many
+#: seconds of scored walking
+SKILL_LONG_MEMORY = 10.0
+SKILL_LONG_MIN = 1.0
 
 
 def wrap_diff(a, b) -> np.ndarray:
@@ -129,8 +134,12 @@ class GaitTracker:
         self._was_turning = False
         self._past: deque = deque()               # (t, model prediction, measurement)
         self._zc_prev: tuple | None = None        # (t, lag-corrected measurement)
+        self._z_raw = np.zeros(3)                 # latest raw measurement (yaw continuous)
         self._e2m = np.zeros(3)                   # running mean squared error: model
         self._e2h = np.zeros(3)                   # ... and "hold the attitude"
+        self._emh = np.zeros(3)                   # ... and their mean product
+        self._long = np.zeros((3, 3))             # the same over SKILL_LONG_MEMORY s walking
+        self._long_n = 0.0                        # ... its weight (scored walking samples)
         self._last_yaw_raw = 0.0
         self._yaw_cont = 0.0
         self._default_var = (0.5 * _D2R) ** 2
@@ -232,11 +241,11 @@ class GaitTracker:
         # z_c = z_f + (model(true) - model(through the prefilter and sensor lag))
         s = t - self.ekf.t
         zc = zf + self.ekf.lag_correction(s, self.prefilter)
+        self._z_raw = z
         self._score_past(t, zc)
         self._zc_prev = (t, zc)
         est = self.estimate(t, event)
-        if self.ekf.walking:
-            self._past.append((t, est.predicted_model, zc))
+        self._past.append((t, est.predicted_model, z))
         return est
 
     def _score_past(self, t: float, zc: np.ndarray) -> None:
@@ -252,8 +261,6 @@ class GaitTracker:
         t0, z0 = self._zc_prev if self._zc_prev is not None else (t, zc)
         while past and past[0][0] + h <= t + 1e-9:
             ti, pm, held = past.popleft()
-            if not self.ekf.walking:
-                continue
             u = 1.0 if t <= t0 else min(max((ti + h - t0) / (t - t0), 0.0), 1.0)
             truth = z0 + u * wrap_diff(zc, z0)
             em = pm - truth
@@ -261,6 +268,12 @@ class GaitTracker:
             em[2], eh[2] = wrap_angle(em[2]), wrap_angle(eh[2])
             self._e2m += a * (em * em - self._e2m)
             self._e2h += a * (eh * eh - self._e2h)
+            self._emh += a * (em * eh - self._emh)
+            if self.ekf.walking:
+                b = 1.0 / max(SKILL_LONG_MEMORY * self.cfg.sample_rate, 1.0)
+                self._long_n += 1.0
+                b = max(b, 1.0 / self._long_n)
+                self._long += b * (np.array([em * em, eh * eh, em * eh]) - self._long)
 
     def _turn_check(self) -> None:
         """Count turns (the IMM's turning model becoming the more probable one)."""
@@ -373,6 +386,12 @@ class GaitTracker:
                 e2 = np.maximum(e2, seen)
             self._e2h = e2 + SKILL_FLOOR ** 2
             self._e2m = SKILL_PRIOR * self._e2h
+            self._emh = np.zeros(3)
+            if self._long_n >= SKILL_LONG_MIN * self.cfg.sample_rate:
+                # the skill shown on earlier walks, scaled to this walk's holding error
+                sc = self._e2h / np.maximum(self._long[1], 1e-12)
+                self._e2m = self._long[0] * sc
+                self._emh = self._long[2] * sc
 
     # ------------------------------------------------------------------ visual motion
     def add_egomotion(self, t_prev: float, t_cur: float, r_optical,
@@ -418,6 +437,15 @@ class GaitTracker:
         return True
 
     # ------------------------------------------------------------------ output
+    def skill_weights(self) -> np.ndarray:
+        """(3,) weight of the walk model's prediction against holding the measurement,
+        per axis: the minimum-MSE combination w em + (1 - w) eh of two correlated
+        predictors, w = (E eh^2 - E em eh) / E (em - eh)^2, clipped to [0, 1] (only at an
+        inclinometer stamp: visual motion alone has no measurement to hold)."""
+        num = self._e2h - self._emh
+        den = self._e2m + self._e2h - 2.0 * self._emh
+        return np.clip(num / np.maximum(den, 1e-12), 0.0, 1.0)
+
     def estimate(self, t: float | None = None, event: str | None = None) -> GaitEstimate:
         """The estimate at stamp t (default the latest inclinometer stamp)."""
         ekf = self.ekf
@@ -437,12 +465,9 @@ class GaitTracker:
         target = pred                         # where the rig is predicted to turn to
         fresh = (self._zc_prev is not None
                  and abs(t - self._zc_prev[0]) <= 0.5 / self.cfg.sample_rate)
-        if ekf.walking and self.cfg.skill_weighting and fresh:
-            # inverse-MSE weighting of the model's prediction and the latest measurement
-            # held, per axis: w = e_h^2 / (e_m^2 + e_h^2) (only at an inclinometer stamp:
-            # visual motion alone has no measurement to hold)
-            w = self._e2h / np.maximum(self._e2m + self._e2h, 1e-12)
-            held = self._zc_prev[1]
+        if self.cfg.skill_weighting and fresh:
+            w = self.skill_weights()
+            held = self._z_raw
             pred = held + w * wrap_diff(pred_model, held)
             cov = (w[:, None] * cov * w[None, :]) + np.diag((1.0 - w) ** 2 * self._e2h)
             # the motion likewise: holding predicts none
