@@ -1065,14 +1065,9 @@ def draw_figures(out: Path, data: Path = DEFAULT_DATA) -> list[Path]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m asmonc_vision.cli.gait ...`` (the same as ``asmonc gait ...``)."""
-    import argparse
-
-    parser = argparse.ArgumentParser(prog='asmonc gait', description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    add_arguments(parser)
-    args = parser.parse_args(argv)
-    return int(args.func(args) or 0)
+    """``python -m asmonc_vision.cli.gait ...``: the same as ``asmonc gait ...``."""
+    from asmonc_vision.cli.main import main as asmonc_main
+    return asmonc_main(['gait', *(sys.argv[1:] if argv is None else argv)])
 
 
 if __name__ == '__main__':

@@ -429,14 +429,10 @@ def run_corners(args) -> int:
     return 0
 
 
-def main(argv=None) -> int:
-    """Stand-alone entry (``python -m asmonc_vision.cli.motion ...``)."""
-    import argparse
-    p = argparse.ArgumentParser(prog='asmonc motion', description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
-    add_arguments(p)
-    args = p.parse_args(argv)
-    return int(args.func(args) or 0)
+def main(argv: list[str] | None = None) -> int:
+    """``python -m asmonc_vision.cli.motion ...``: the same as ``asmonc motion ...``."""
+    from asmonc_vision.cli.main import main as asmonc_main
+    return asmonc_main(['motion', *(sys.argv[1:] if argv is None else argv)])
 
 
 if __name__ == '__main__':

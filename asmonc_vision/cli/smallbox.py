@@ -33,7 +33,6 @@ their truth) for repeated runs, `--workers 2` renders and runs two scenes at onc
 """
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import pickle
@@ -344,12 +343,9 @@ def run(args) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog='python -m asmonc_vision.cli.smallbox',
-                                description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
-    add_arguments(p)
-    args = p.parse_args(argv)
-    return int(args.func(args) or 0)
+    """``python -m asmonc_vision.cli.smallbox ...``: the same as ``asmonc smallbox ...``."""
+    from asmonc_vision.cli.main import main as asmonc_main
+    return asmonc_main(['smallbox', *(sys.argv[1:] if argv is None else argv)])
 
 
 if __name__ == '__main__':
