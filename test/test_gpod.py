@@ -329,6 +329,32 @@ def test_matched_run_length():
     np.testing.assert_array_equal(matched_run_length(e, m, 1.0), [5, 5, 5, 5, 5, 1, 4, 4, 4, 4])
 
 
+def test_occluded_matches_half_occlusion():
+    """A right silhouette edge (one right string) matched, at alternate rows, to the post's
+    own left edge (d = 90) and to a ground edge left of it (d = 60): the ground matches
+    are hidden behind the post in the right image. An untrusted near match hides
+    nothing, and a string matched at one consistent disparity is left alone."""
+    from asmonc_vision.core.edges import detect_vertical_edges
+    from asmonc_vision.core.gpod import occluded_matches
+    from asmonc_vision.core.matching import Matches
+    img = np.zeros((12, 40), np.uint8)
+    img[:, 20:] = 200
+    e = detect_vertical_edges(img)                # the right image: one string, 10 rows
+    k = len(e)
+    near = np.arange(k) % 2 == 0
+    d = np.where(near, 90.0, 60.0).astype(np.float32)
+    z = np.zeros(k, np.float32)
+    m = Matches(u_left=e.u + d, u_right=e.u, v=e.v, d=d, strength=z,
+                string_id=np.where(near, 0, 1).astype(np.int32),
+                left_index=np.arange(k, dtype=np.int32), right_index=np.arange(k, dtype=np.int32),
+                support=z)
+    np.testing.assert_array_equal(occluded_matches(e, m, 1.0), ~near)
+    np.testing.assert_array_equal(occluded_matches(e, m, 1.0, trusted=np.zeros(k, bool)),
+                                  np.zeros(k, bool))
+    flat = dataclasses.replace(m, d=np.full(k, 60.0, np.float32), u_left=e.u + 60.0)
+    assert not occluded_matches(e, flat, 1.0).any()
+
+
 def test_result_plane_view(scenes):
     det, results = _calibrated(scenes['free'])
     r = results[-1]

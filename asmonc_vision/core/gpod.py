@@ -646,6 +646,65 @@ def run_links(edges: EdgeMap, m: Matches, tolerance_px: float) -> np.ndarray:
     return np.where(link, prev, -1)
 
 
+def occluded_matches(right: EdgeMap, m: Matches, gradient_limit: float,
+                     trusted: np.ndarray | None = None, neighbours: int = 16) -> np.ndarray:
+    """Matches hidden in the right image behind a nearer surface (half-occlusion).
+
+    A right edge string is one continuous curve in the right image. When it is matched,
+    at nearby rows, to left edges whose disparities differ more than a continuous
+    surface allows (disparity gradient ``|dd| / cyclopean distance`` above
+    ``gradient_limit``, PMF's limit), the two cannot both be right: the nearer surface
+    (larger disparity) is what the right camera sees along that edge, and the farther
+    match is a left-image edge whose true partner is hidden behind it (typically the
+    ground just left of a post, matched to the post's silhouette in the right image).
+    The test is scale-free (a disparity gradient), so it holds at any focal length.
+    Only a trusted nearer match (e.g. one in a matched run: figural continuity) hides
+    another; an isolated mismatch of large disparity hides nothing.
+
+    Args:
+        right: the right EdgeMap the matches index (for ``string_id``).
+        m: the matches.
+        gradient_limit: largest disparity gradient along one surface.
+        trusted: (K,) bool, the matches that may hide others (default all).
+        neighbours: matches of the same right string compared on either side (in row
+            order).
+    Returns:
+        (K,) bool, True for a match of the farther surface of such a pair.
+    """
+    k = len(m)
+    occ = np.zeros(k, bool)
+    if k < 2:
+        return occ
+    rs = right.string_id[m.right_index].astype(np.int64)
+    tr = np.ones(k, bool) if trusted is None else np.asarray(trusted, bool)
+    if not tr.any():
+        return occ
+    # only the right strings with a trusted match can hide anything
+    has = np.zeros(int(rs.max()) + 1, bool)
+    has[rs[tr]] = True
+    sub = np.nonzero(has[rs])[0]
+    order = sub[np.lexsort((m.v[sub], rs[sub]))]
+    n = order.size
+    rs_o = rs[order]
+    tr_o = tr[order]
+    d_o = m.d[order].astype(np.float64)
+    u_o = 0.5 * (m.u_left[order].astype(np.float64) + m.u_right[order])
+    v_o = m.v[order].astype(np.float64)
+    for s in range(1, min(neighbours, n - 1) + 1):
+        same = rs_o[s:] == rs_o[:-s]
+        dd = d_o[s:] - d_o[:-s]
+        dist = np.hypot(u_o[s:] - u_o[:-s], v_o[s:] - v_o[:-s])
+        # the nearer of the pair (larger disparity) must be trusted
+        near_ok = np.where(dd > 0, tr_o[s:], tr_o[:-s])
+        bad = same & near_ok & (np.abs(dd) > gradient_limit * np.maximum(dist, 1.0))
+        if not bad.any():
+            continue
+        i = np.nonzero(bad)[0]
+        far = np.where(dd[i] > 0, i, i + s)       # the smaller disparity of the pair
+        occ[order[far]] = True
+    return occ
+
+
 def matched_run_length(edges: EdgeMap, m: Matches, tolerance_px: float,
                        prev: np.ndarray | None = None) -> np.ndarray:
     """Length of the disparity-consistent matched run (see :func:`run_links`) that each
@@ -1512,6 +1571,19 @@ class GpodDetector:
         if c.ambiguity_fraction > 0 and obst_string.any():
             obst_string &= ~self._ambiguous_strings(m, excess, obst, cand, el, er, thr_global,
                                                     n_s)
+        if obst_string.any():
+            # Half-occlusion: a left edge matched to the silhouette of an obstacle (a
+            # nearer surface) in the right image is hidden there. A string that is an
+            # obstacle or a drop only through such pixels is none (strings with enough
+            # other evidence are kept whole).
+            occluded = occluded_matches(er, m, c.pmf_disparity_gradient_limit,
+                                        trusted=obst_string[sid] & (run >= c.min_matched_run))
+            if occluded.any():
+                seen = obst & ~occluded
+                n_seen = np.bincount(sid[seen], weights=weight[seen], minlength=n_s)
+                obst_string &= n_seen + 1e-9 >= c.min_obstacle_pixels
+                seen = drop & ~occluded
+                n_drop = np.bincount(sid[seen], weights=weight[seen], minlength=n_s) + 1e-9
         drop_string = ~obst_string & (n_drop >= c.min_drop_pixels)
         obst &= obst_string[sid]
         drop &= drop_string[sid]
