@@ -153,3 +153,15 @@ def test_recorded_egomotion_scores_against_the_true_camera_pose(static_run):
     assert m is not None and m['motions'] >= 0.75 * (m['pairs'] - 1)
     assert m['errors']['pitch']['median'] < 0.3      # degrees (issue 4 target on walking bags)
     assert m['errors']['translation']['median'] < 10  # mm
+
+
+def test_side_by_side_runs_claim_different_domains(tmp_path):
+    from asmonc_vision.cli.run import MAX_DOMAIN_ID, claim_domain
+    d1, f1 = claim_domain(7, tmp_path)
+    d2, f2 = claim_domain(7, tmp_path)
+    assert (d1, d2) == (7, 8)
+    f1.close()                                       # the first run ends: its id is free
+    d3, f3 = claim_domain(7, tmp_path)
+    assert d3 == 7
+    assert claim_domain(MAX_DOMAIN_ID + 1, tmp_path) == (None, None)
+    f2.close(), f3.close()

@@ -251,6 +251,35 @@ def first_image_stamp(bag: Path) -> int | None:
 
 # --- run ----------------------------------------------------------------------------------------
 
+MAX_DOMAIN_ID = 101   # the highest domain id that is portable across DDS vendors
+
+
+def claim_domain(preferred: int, lock_dir: Path | None = None):
+    """Claim a ROS domain id for one `asmonc run`, so that runs started side by side on one
+    machine do not hear each other's topics (each would see the other's /obstacles).
+
+    Tries ``preferred``, then the ids above it up to `MAX_DOMAIN_ID`, taking an exclusive
+    ``flock`` on ``<lock_dir>/asmonc-run-domain-<id>.lock`` (the system temp dir by
+    default); the lock lasts as long as the returned file object is open, and the OS
+    releases it if the process dies. Other ROS programs in the domain are not seen: this
+    only keeps asmonc runs apart.
+
+    Returns:
+        (domain id, open lock file), or (None, None) when every id is taken.
+    """
+    import fcntl
+    lock_dir = Path(lock_dir or tempfile.gettempdir())
+    for domain in range(max(0, preferred), MAX_DOMAIN_ID + 1):
+        f = open(lock_dir / f'asmonc-run-domain-{domain}.lock', 'a')
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            f.close()
+            continue
+        return domain, f
+    return None, None
+
+
 def run(args) -> int:
     console_err = lambda s: print(s, file=sys.stderr, flush=True)  # noqa: E731
     bag = Path(args.bag) if args.bag is not None else default_bag()
@@ -282,10 +311,25 @@ def run(args) -> int:
         console_err(f"asmonc run: --out '{args.out}' exists and is not empty")
         return 2
 
+    try:
+        preferred = int(os.environ.get('ROS_DOMAIN_ID', '0') or 0)
+    except ValueError:
+        console_err(f"asmonc run: ROS_DOMAIN_ID must be an integer, got "
+                    f"'{os.environ['ROS_DOMAIN_ID']}'")
+        return 2
+    domain, domain_lock = claim_domain(preferred)   # held until this function returns
+    if domain is None:
+        console_err(f'asmonc run: every ROS domain {preferred}..{MAX_DOMAIN_ID} is in use by '
+                    'another asmonc run')
+        return 2
+    os.environ['ROS_DOMAIN_ID'] = str(domain)
     env = dict(os.environ)
     env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     console = _Console(n_pairs or n_imu, not args.no_progress, args.quiet)
+    if domain != preferred:
+        console.line(f'asmonc run: ROS domain {preferred} is in use by another asmonc run; '
+                     f'this one uses domain {domain} (ROS_DOMAIN_ID={domain} to watch it)')
     try:
         t0 = first_image_stamp(bag) or 0
         truth = read_truth(bag) if bagio.TOPICS['gt_obstacles'][0] in topics else {}
