@@ -329,14 +329,21 @@ def test_matched_run_length():
     np.testing.assert_array_equal(matched_run_length(e, m, 1.0), [5, 5, 5, 5, 5, 1, 4, 4, 4, 4])
 
 
-def test_occluded_matches_half_occlusion():
+@pytest.mark.parametrize('use_numba', [True, False])
+def test_occluded_matches_half_occlusion(monkeypatch, use_numba):
     """A right silhouette edge (one right string) matched, at alternate rows, to the post's
     own left edge (d = 90) and to a ground edge left of it (d = 60): the ground matches
     are hidden behind the post in the right image. An untrusted near match hides
     nothing, and a string matched at one consistent disparity is left alone."""
     from asmonc_vision.core.edges import detect_vertical_edges
+    from asmonc_vision.core import gpod
     from asmonc_vision.core.gpod import occluded_matches
     from asmonc_vision.core.matching import Matches
+    gpod._warm_up()
+    if use_numba and gpod._nb_occluded is None:
+        pytest.skip('numba not installed')
+    if not use_numba:
+        monkeypatch.setattr(gpod, '_nb_occluded', None)
     img = np.zeros((12, 40), np.uint8)
     img[:, 20:] = 200
     e = detect_vertical_edges(img)                # the right image: one string, 10 rows

@@ -223,3 +223,28 @@ def test_empty_inputs():
     with pytest.raises(ValueError):
         support_links(tex, tex, candidate_matches(tex, tex, 0.0, 5.0), 0.0, 5.0,
                       disparity_gradient_limit=2.5)
+
+
+@pytest.mark.parametrize('shuffle', [False, True])
+def test_numba_kernels_equal_the_numpy_path(plane_pair, monkeypatch, shuffle):
+    """The JIT-compiled loops (numba, optional) give bit-identical links, support and
+    selection to the numpy path."""
+    from asmonc_vision.core import matching as mt
+    if not mt.warm_up():
+        pytest.skip('numba not installed')
+    _, el, er = plane_pair
+    c = candidate_matches(el, er, 0.5, 80.0)
+    if shuffle:                                   # non-monotonic siblings: grouped links
+        o = np.lexsort((np.random.default_rng(1).random(len(c)), c.left))
+        c = Candidates(c.left[o], c.right[o], c.d[o])
+    fast_links = support_links(el, er, c, 0.5, 80.0, support_radius=3.0)
+    fast = select_matches(c, fast_links, el, er, iterations=3)
+    for name in ('_nb_pairs', '_nb_group', '_nb_select'):
+        monkeypatch.setattr(mt, name, None)
+    links = support_links(el, er, c, 0.5, 80.0, support_radius=3.0)
+    for f in ('cand', 'start', 'pair_link', 'pair_cand', 'pair_edge', 'pair_right', 'weight'):
+        np.testing.assert_array_equal(getattr(fast_links, f), getattr(links, f))
+    assert fast_links.num_single == links.num_single
+    slow = select_matches(c, links, el, er, iterations=3)
+    np.testing.assert_array_equal(fast[0], slow[0])
+    np.testing.assert_array_equal(fast[1], slow[1])

@@ -68,7 +68,8 @@ from .camera import MetricPlane, StereoCamera, plane_disparity
 from .config import check_fields, param
 from .edges import EdgeMap, detect_vertical_edges
 from .ground_plane import PlaneFit, fit_ground_plane, plane_is_plausible
-from .matching import Candidates, Matches, pmf_match
+from .matching import Candidates, Matches, _jit, pmf_match
+from .matching import warm_up as matching_warm_up
 
 #: Obstacle pixels this far above the plane (pixels) or more are checked for a ground
 #: alternative (``GpodConfig.ambiguity_fraction``): a repetitive pattern matched one
@@ -690,6 +691,10 @@ def occluded_matches(right: EdgeMap, m: Matches, gradient_limit: float,
     d_o = m.d[order].astype(np.float64)
     u_o = 0.5 * (m.u_left[order].astype(np.float64) + m.u_right[order])
     v_o = m.v[order].astype(np.float64)
+    if _nb_occluded is not None:
+        occ[order[_nb_occluded(rs_o, tr_o, d_o, u_o, v_o, float(gradient_limit),
+                               min(neighbours, n - 1))]] = True
+        return occ
     for s in range(1, min(neighbours, n - 1) + 1):
         same = rs_o[s:] == rs_o[:-s]
         dd = d_o[s:] - d_o[:-s]
@@ -703,6 +708,46 @@ def occluded_matches(right: EdgeMap, m: Matches, gradient_limit: float,
         far = np.where(dd[i] > 0, i, i + s)       # the smaller disparity of the pair
         occ[order[far]] = True
     return occ
+
+
+def _occluded_kernel(rs_o, tr_o, d_o, u_o, v_o, gradient_limit, neighbours):
+    """The pair loop of :func:`occluded_matches` (for numba), same tests: (n,) bool,
+    the farther match of each offending pair, in the sorted order."""
+    n = rs_o.shape[0]
+    far = np.zeros(n, np.bool_)
+    for s in range(1, neighbours + 1):
+        for i in range(n - s):
+            j = i + s
+            if rs_o[j] != rs_o[i]:
+                continue
+            dd = d_o[j] - d_o[i]
+            if not (tr_o[j] if dd > 0 else tr_o[i]):
+                continue
+            dist = math.hypot(u_o[j] - u_o[i], v_o[j] - v_o[i])
+            if abs(dd) > gradient_limit * max(dist, 1.0):
+                far[i if dd > 0 else j] = True
+    return far
+
+
+_nb_occluded = _jit(_occluded_kernel)
+_warm = False
+
+
+def _warm_up() -> None:
+    """Compile the numba kernels once per process (see `matching.warm_up`), before the
+    first frame; falls back to the numpy paths if numba is missing or fails."""
+    global _warm, _nb_occluded
+    if _warm:
+        return
+    _warm = True
+    if not matching_warm_up() or _nb_occluded is None:
+        _nb_occluded = None
+        return
+    try:
+        z = np.zeros(2)
+        _nb_occluded(np.zeros(2, np.int64), np.ones(2, bool), z, z, z, 1.0, 1)
+    except Exception:       # pragma: no cover - a broken numba/llvmlite install
+        _nb_occluded = None
 
 
 def matched_run_length(edges: EdgeMap, m: Matches, tolerance_px: float,
@@ -1170,6 +1215,7 @@ class GpodDetector:
 
     def __init__(self, config: GpodConfig | None = None) -> None:
         self.config = config if config is not None else GpodConfig()
+        _warm_up()
         self.reset()
 
     def reset(self) -> None:

@@ -24,6 +24,9 @@ After Pollard, Mayhew & Frisby (PMF, 1985), as used by GPOD (Molton et al. 1998,
    rounds.
 
 Disparities are sub-pixel, from the sub-pixel edge positions in both images.
+
+The pair, grouping and selection loops run compiled by numba when it is installed
+(:func:`warm_up`), with the numpy paths' tests and order of summation: identical results.
 """
 from __future__ import annotations
 
@@ -33,6 +36,11 @@ import cv2
 import numpy as np
 
 from .edges import EdgeMap
+
+try:                        # optional: JIT-compiled loops (same results as numpy's)
+    import numba as _numba
+except ImportError:         # pragma: no cover
+    _numba = None
 
 
 @dataclass(frozen=True)
@@ -351,6 +359,10 @@ def _neighbour_pairs(left: EdgeMap, right: EdgeMap, cand: Candidates, rad: float
     nd = r_int + 1
     dvs = np.arange(nd)
     half = (np.sqrt(np.maximum(rad * rad - dvs * dvs, 0.0)) + 1e-6)[:, None]
+    if _nb_pairs is not None:
+        i, j, s2 = _nb_pairs(table, half[:, 0], w, s_uc64, s_d64, s_v, rad * rad,
+                             lim * lim)
+        return order[i], order[j], s2
     base = (s_v * w)[None, :] + (dvs * w)[:, None]
     lo = table[base + np.maximum(np.floor(s_uc64[None, :] - half).astype(np.int64), 0)]
     hi = table[base + np.minimum(np.floor(s_uc64[None, :] + half).astype(np.int64), w - 1)
@@ -384,11 +396,78 @@ def _neighbour_pairs(left: EdgeMap, right: EdgeMap, cand: Candidates, rad: float
     return order[i[keep]], order[j[keep]], s2[keep]
 
 
+def _pairs_kernel(table, half, w, s_uc, s_d64, s_v, rad2, lim2):
+    """The loops of :func:`_neighbour_pairs` (for numba): the same windows and tests, in
+    the same order (row offset, then candidate, then window position) as numpy's (its
+    single-precision pre-test only skips pairs that the exact tests reject)."""
+    nd = half.shape[0]
+    m = s_uc.shape[0]
+    lo = np.empty((nd, m), np.int64)
+    hi = np.empty((nd, m), np.int64)
+    tot = 0
+    for k in range(nd):
+        hk = half[k]
+        for i in range(m):
+            ui = s_uc[i]
+            base = (s_v[i] + k) * w
+            a = np.int64(table[base + max(np.int64(np.floor(ui - hk)), 0)])
+            if k == 0:
+                a = max(a, i + 1)
+            b = np.int64(table[base + min(np.int64(np.floor(ui + hk)), w - 1) + 1])
+            lo[k, i] = a
+            hi[k, i] = b
+            tot += max(b - a, 0)
+    oi = np.empty(tot, np.int64)
+    oj = np.empty(tot, np.int64)
+    os2 = np.empty(tot, np.float64)
+    n = 0
+    for k in range(nd):
+        for i in range(m):
+            ui = s_uc[i]
+            di = s_d64[i]
+            vi = s_v[i]
+            # Branch-free: write every pair, advance past the kept ones.
+            for j in range(lo[k, i], hi[k, i]):
+                dcu = s_uc[j] - ui
+                dv = np.float64(s_v[j] - vi)
+                s2 = dcu * dcu + dv * dv
+                dd = s_d64[j] - di
+                oi[n] = i
+                oj[n] = j
+                os2[n] = s2
+                n += (s2 <= rad2) & (dd * dd <= lim2 * s2) & (s2 > 0.0)
+    return oi[:n], oj[:n], os2[:n]
+
+
+def _jit(fn):
+    """``numba.njit(fn)``, cached on disk when a cache directory is writable; None
+    without numba (the numpy path is used then)."""
+    if _numba is None:
+        return None
+    try:
+        return _numba.njit(cache=True, nogil=True)(fn)
+    except Exception:       # no writable cache location: compile at every start
+        return _numba.njit(cache=False, nogil=True)(fn)
+
+
+_nb_pairs = _jit(_pairs_kernel)
+_nb_select = None          # set after _select_kernel
+_nb_group = None
+
+
 def _group_links(cand: Candidates, n_left: int, a: np.ndarray, b: np.ndarray,
                  s2: np.ndarray, tol: float) -> SupportLinks:
     """The SupportLinks of the mutually supporting candidate pairs (a, b) at squared
     separations s2 (``tol``: lim * rad, with slack)."""
     m = len(cand)
+    if _nb_group is not None:
+        d_prev, d_next, monotonic = _sibling_disparities(cand)
+        c, start, c2, sep2, n1 = _nb_group(a, b, s2, cand.d, d_prev, d_next, monotonic,
+                                           float(tol), cand.left, n_left)
+        pair_link = np.repeat(np.arange(start.size), np.diff(np.append(start, c2.size)))
+        return SupportLinks(num_candidates=m, cand=c, start=start, pair_link=pair_link,
+                            pair_cand=c2, pair_edge=cand.left[c2],
+                            pair_right=cand.right[c2], weight=sep2, num_single=int(n1))
     # Each pair (a, b) is used both ways: a supported by b, and b by a. Links group the
     # supporters by (supported candidate, supporter's left edge). Two supporters of c
     # on one left edge both lie within lim * rad of c's disparity, so a supporter can
@@ -430,6 +509,83 @@ def _group_links(cand: Candidates, n_left: int, a: np.ndarray, b: np.ndarray,
     return SupportLinks(num_candidates=m, cand=c[start], start=start, pair_link=pair_link,
                         pair_cand=c2, pair_edge=cand.left[c2], pair_right=cand.right[c2],
                         weight=np.divide(1.0, sep2, out=sep2), num_single=n1)
+
+
+def _group_kernel(a, b, s2, d, d_prev, d_next, monotonic, tol, c_left, n_left):
+    """The loops of :func:`_group_links` (for numba), same order and arithmetic: returns
+    (link candidate, link start, supporter, weight, number of single links)."""
+    npair = a.shape[0]
+    n = 2 * npair
+    multi = np.empty(n, np.bool_)
+    for k in range(npair):
+        ak = a[k]
+        bk = b[k]
+        if monotonic:
+            da = d[ak]
+            db = d[bk]
+            multi[k] = abs(d_prev[bk] - da) <= tol or abs(d_next[bk] - da) <= tol
+            multi[npair + k] = abs(d_prev[ak] - db) <= tol or abs(d_next[ak] - db) <= tol
+        else:
+            multi[k] = not (np.isnan(d_prev[bk]) and np.isnan(d_next[bk]))
+            multi[npair + k] = not (np.isnan(d_prev[ak]) and np.isnan(d_next[ak]))
+    n_multi = 0
+    for k in range(n):
+        n_multi += multi[k]
+    n1 = n - n_multi
+    grp = np.empty(n_multi, np.int64)
+    key = np.empty(n_multi, np.int64)
+    c = np.empty(n, np.int64)
+    c2 = np.empty(n, np.int64)
+    w = np.empty(n, np.float64)
+    q1 = 0
+    q2 = 0
+    for k in range(n):
+        if k < npair:
+            ck = a[k]
+            sk = b[k]
+            s2k = s2[k]
+        else:
+            ck = b[k - npair]
+            sk = a[k - npair]
+            s2k = s2[k - npair]
+        if multi[k]:
+            grp[q2] = k
+            key[q2] = ck * n_left + c_left[sk]
+            q2 += 1
+        else:
+            c[q1] = ck
+            c2[q1] = sk
+            w[q1] = 1.0 / np.sqrt(s2k)
+            q1 += 1
+    order = np.argsort(key, kind='mergesort')
+    start = np.empty(n, np.int64)
+    l_cand = np.empty(n, np.int64)
+    for k in range(n1):
+        start[k] = k
+        l_cand[k] = c[k]
+    nl = n1
+    prev = -1
+    for t in range(n_multi):
+        k = grp[order[t]]
+        kk = key[order[t]]
+        if k < npair:
+            ck = a[k]
+            sk = b[k]
+            s2k = s2[k]
+        else:
+            ck = b[k - npair]
+            sk = a[k - npair]
+            s2k = s2[k - npair]
+        p = n1 + t
+        c[p] = ck
+        c2[p] = sk
+        w[p] = 1.0 / np.sqrt(s2k)
+        if t == 0 or kk != prev:
+            start[nl] = p
+            l_cand[nl] = ck
+            nl += 1
+        prev = kk
+    return l_cand[:nl], start[:nl], c2, w, n1
 
 
 def _lexsort_small(minor: np.ndarray, major: np.ndarray, n_minor: int,
@@ -538,6 +694,10 @@ def select_matches(cand: Candidates, links: SupportLinks, left: EdgeMap, right: 
     if m == 0:
         return accepted, support
     n_l, n_r = len(left), len(right)
+    if _nb_select is not None and len(links):
+        return _nb_select(cand.left, cand.right, n_l, n_r, links.cand, links.start,
+                          links.pair_cand, links.weight, max(int(iterations), 1),
+                          float(min_support))
     alive = np.ones(m, bool)
     by_left = _Groups(cand.left, n_l)
     by_right = _Groups(cand.right, n_r)
@@ -565,6 +725,81 @@ def select_matches(cand: Candidates, links: SupportLinks, left: EdgeMap, right: 
         taken_r[cand.right[k]] = True
         matched_l[cand.left[k]] = True
         alive &= accepted | ~(matched_l[cand.left] | taken_r[cand.right])
+    return accepted, support
+
+
+def _select_kernel(c_left, c_right, n_l, n_r, l_cand, l_start, pair_cand, weight, rounds,
+                   min_support):
+    """:func:`select_matches` as loops (for numba), with the same arithmetic: a link's
+    best alive weight (a maximum: exact), summed per candidate in link order (as
+    ``np.bincount``), strict maxima per left and right edge."""
+    m = c_left.shape[0]
+    nq = l_cand.shape[0]
+    npair = weight.shape[0]
+    accepted = np.zeros(m, np.bool_)
+    alive = np.ones(m, np.bool_)
+    support = np.zeros(m)
+    win = np.zeros(m, np.bool_)
+    taken_r = np.zeros(n_r, np.bool_)
+    matched_l = np.zeros(n_l, np.bool_)
+    gmax_l = np.empty(n_l)
+    cnt_l = np.empty(n_l, np.int64)
+    gmax_r = np.empty(n_r)
+    cnt_r = np.empty(n_r, np.int64)
+    val = np.empty(m)
+    for it in range(rounds):
+        support[:] = 0.0
+        for q in range(nq):
+            end = l_start[q + 1] if q + 1 < nq else npair
+            best = -np.inf
+            for p in range(l_start[q], end):
+                wp = weight[p] if (it == 0 or alive[pair_cand[p]]) else 0.0
+                if wp > best:
+                    best = wp
+            support[l_cand[q]] += best
+        for c in range(m):
+            val[c] = support[c] if (it == 0 or alive[c]) else -np.inf
+        gmax_l[:] = -np.inf
+        gmax_r[:] = -np.inf
+        cnt_l[:] = 0
+        cnt_r[:] = 0
+        for c in range(m):
+            x = val[c]
+            e = c_left[c]
+            if x > gmax_l[e]:
+                gmax_l[e] = x
+                cnt_l[e] = 1
+            elif x == gmax_l[e]:
+                cnt_l[e] += 1
+            r = c_right[c]
+            if x > gmax_r[r]:
+                gmax_r[r] = x
+                cnt_r[r] = 1
+            elif x == gmax_r[r]:
+                cnt_r[r] += 1
+        new = False
+        for c in range(m):
+            e = c_left[c]
+            r = c_right[c]
+            wc = (alive[c] and support[c] > min_support and val[c] == gmax_l[e]
+                  and cnt_l[e] == 1 and val[c] == gmax_r[r] and cnt_r[r] == 1)
+            win[c] = wc
+            if wc and not accepted[c]:
+                new = True
+        if not new:
+            break
+        for c in range(m):
+            if win[c]:
+                accepted[c] = True
+        if it == rounds - 1:
+            break
+        for c in range(m):
+            if win[c]:
+                taken_r[c_right[c]] = True
+                matched_l[c_left[c]] = True
+        for c in range(m):
+            alive[c] = alive[c] and (accepted[c] or not (matched_l[c_left[c]]
+                                                         or taken_r[c_right[c]]))
     return accepted, support
 
 
@@ -628,3 +863,28 @@ def match_edges(left: EdgeMap, right: EdgeMap, d_min: float, d_max: float, *,
                      support_radius=support_radius,
                      disparity_gradient_limit=disparity_gradient_limit,
                      iterations=iterations, min_support=min_support)[0]
+
+
+_nb_select = _jit(_select_kernel)
+_nb_group = _jit(_group_kernel)
+
+
+def warm_up() -> bool:
+    """Compile (or load from the disk cache) the numba kernels on tiny inputs of the
+    real argument types, so that the first frame does not pay for it; without numba, or
+    if compiling fails, the numpy paths are used. Returns whether numba is in use."""
+    global _nb_pairs, _nb_select, _nb_group
+    if _nb_pairs is None or _nb_select is None or _nb_group is None:
+        _nb_pairs = _nb_select = _nb_group = None
+        return False
+    i64, f64 = np.zeros(2, np.int64), np.zeros(2)
+    try:
+        for table in (np.zeros(9, np.int32), np.zeros(9, np.int64)):
+            _nb_pairs(table, np.ones(2), 2, f64, f64, i64, 9.0, 1.0)
+        _nb_select(i64, i64, 2, 2, i64, i64, i64, f64, 3, 0.5)
+        for mono in (True, False):
+            _nb_group(i64, i64, f64 + 1.0, f64, f64, f64, mono, 3.0, i64, 2)
+    except Exception:       # pragma: no cover - a broken numba/llvmlite install
+        _nb_pairs = _nb_select = _nb_group = None
+        return False
+    return True
