@@ -529,3 +529,31 @@ def test_hidden_corner_from_thales_and_the_contact_edges():
     feet = np.array([left, near, right])
     np.testing.assert_allclose(nearest_point(feet, np.full(3, 0.01), np.zeros((0, 2)),
                                              edges_at(near)), near)
+
+
+def test_silhouette_owners_place_only_next_to_a_matching_obstacle():
+    """A candidate silhouette edge (just under the thresholds) places a detected obstacle
+    only if its foot is beside the obstacle's feet, its top at the obstacle's height and
+    no visible ground separates them."""
+    from asmonc_vision.core.gpod import silhouette_owners
+    xy = np.array([[5.0, -0.2], [5.0, 0.2], [3.0, 1.0]])     # feet of obstacles 0, 0, 1
+    g_lab = np.array([0, 0, 1])
+    height = np.array([0.08, 0.3])
+    xw = np.array([[5.1, 0.5],    # beside obstacle 0, at its height
+                   [5.1, 0.5],    # the same foot, but too low a top
+                   [6.5, 0.0],    # too far from any foot
+                   [3.1, 1.2]])   # beside obstacle 1, at its height
+    top = np.array([0.07, 0.02, 0.08, 0.25])
+    no_ground = np.zeros((0, 2))
+    np.testing.assert_array_equal(silhouette_owners(xw, top, xy, g_lab, height, 0.7, no_ground),
+                                  [0, -1, -1, 1])
+    # Visible ground between the obstacle's feet and a candidate in front: not its edge.
+    front = np.array([[4.6, 0.3]])
+    assert silhouette_owners(front, [0.08], xy, g_lab, height, 0.7, no_ground)[0] == 0
+    ground = np.array([[4.85, 0.1]])
+    assert silhouette_owners(front, [0.08], xy, g_lab, height, 0.7, lambda: ground)[0] == -1
+    # Only the outermost candidate beyond the feet on either side is a silhouette.
+    xw2 = np.array([[5.0, 0.45], [5.05, 0.35], [4.8, 0.1], [5.1, -0.5]])
+    np.testing.assert_array_equal(
+        silhouette_owners(xw2, np.full(4, 0.08), xy, g_lab, height, 0.7, no_ground),
+        [0, -1, -1, 0])

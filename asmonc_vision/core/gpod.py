@@ -100,6 +100,18 @@ _BORDER_PX = 3.0
 #: located to a few centimetres).
 _FREE_SPACE_MARGIN_M = 0.05
 
+#: Placement-only silhouette feet (`silhouette_owners`): an edge string that is no
+#: obstacle may still be the other silhouette edge of a detected one. Its pixels above
+#: ``_WEAK_FRACTION`` of the threshold must number ``_WEAK_MIN_PIXELS`` or more and their
+#: mean smoothed excess exceed ``_WEAK_SIGMAS`` noise sigmas over sqrt(n / _WEAK_CORR)
+#: (neighbouring smoothed pixels are correlated); its top must be at the obstacle's
+#: height within the factor ``_WEAK_HEIGHT_RATIO``.
+_WEAK_FRACTION = 0.5
+_WEAK_MIN_PIXELS = 3
+_WEAK_SIGMAS = 4.0
+_WEAK_CORR = 2.0
+_WEAK_HEIGHT_RATIO = 2.0
+
 #: `cluster_points_2d` links up to this many (thinned) points by testing all pairs, more
 #: on a grid.
 _PAIRWISE_POINTS = 256
@@ -828,6 +840,10 @@ class _FrameContext:
         self.lft = np.cross(n, self.fwd)
         self.origin = -metric.height * n
         self._ground_points = ground_points
+        # Placement-only silhouette candidates (`silhouette_owners`): the lowest
+        # candidate pixel of each and the height of its top, metres.
+        self.weak_start = np.zeros(0, np.int64)
+        self.weak_top = np.zeros(0)
         self._ground_xy: np.ndarray | None = None
         self._left = left
 
@@ -1203,6 +1219,83 @@ def nearest_point(xy: np.ndarray, sr: np.ndarray, ground_xy: np.ndarray,
     """
     return nearest_points(xy, sr, np.zeros(xy.shape[0], np.int64), 1, ground_xy,
                           None if score is None else _single_score(score), at_border)[0]
+
+
+def silhouette_owners(xw: np.ndarray, top: np.ndarray, xy: np.ndarray, g_lab: np.ndarray,
+                      height: np.ndarray, radius: float, ground_xy) -> np.ndarray:
+    """The detected obstacle whose silhouette foot each candidate edge may be (-1: none).
+
+    A candidate (an edge string just under the obstacle thresholds, never an obstacle
+    itself) with foot ``xw`` and top ``top`` metres above the plane belongs to the
+    nearest obstacle that has a string foot within ``radius`` of it, whose height
+    (``height[g_lab]``) its top matches within the factor ``_WEAK_HEIGHT_RATIO``, and
+    whose footprint stays free of visible ground with it: the obstacle's footprint holds
+    the convex hull of its feet, so a ground feature more than ``_FREE_SPACE_MARGIN_M``
+    inside a triangle w-p-q (p, q feet of the obstacle) separates w from it. A
+    silhouette lies beyond the obstacle's feet in bearing (by more than that margin
+    across the line of sight): of the candidates of one obstacle only the outermost on
+    either side is kept.
+
+    Args:
+        xw: (W, 2) ground coordinates of the candidates' feet, ``top`` (W,) their tops.
+        xy: (S, 2) the obstacles' string feet, ``g_lab`` (S,) their obstacle.
+        height: (C,) the obstacles' heights, metres.
+        radius: metres (``GpodConfig.cluster_radius_m``).
+        ground_xy: (G, 2) visible ground, or a callable returning it.
+    Returns:
+        (W,) int obstacle of each candidate, -1 for none.
+    """
+    w_n = xw.shape[0]
+    if w_n == 0 or xy.shape[0] == 0:
+        return np.full(w_n, -1, np.int64)
+    dist = np.hypot(xw[:, None, 0] - xy[None, :, 0], xw[:, None, 1] - xy[None, :, 1])
+    tp = np.asarray(top, np.float64)[:, None]
+    hk = np.asarray(height, np.float64)[g_lab][None, :]
+    ok = (dist <= radius) & (tp * _WEAK_HEIGHT_RATIO >= hk) & (tp <= _WEAK_HEIGHT_RATIO * hk)
+    dist = np.where(ok, dist, np.inf)
+    j = np.argmin(dist, axis=1)
+    lab = np.where(np.isfinite(dist[np.arange(w_n), j]), g_lab[j], -1).astype(np.int64)
+    m_ = _FREE_SPACE_MARGIN_M
+    # A silhouette widens the obstacle: only the outermost candidate beyond its feet on
+    # either side (in bearing, by more than the margin across the line of sight: feet
+    # are located to a few centimetres) counts; one between them, or along the line of
+    # sight of an outermost foot (the same silhouette), is none.
+    bw = np.arctan2(xw[:, 1], xw[:, 0])
+    tol = m_ / np.maximum(np.hypot(xw[:, 0], xw[:, 1]), 1e-9)
+    bf = np.arctan2(xy[:, 1], xy[:, 0])
+    out = np.full(w_n, -1, np.int64)
+    g_all = None
+    for k in np.unique(lab[lab >= 0]):
+        mine = np.flatnonzero(lab == k)
+        f = xy[g_lab == k]
+        bk = bf[g_lab == k]
+        for sgn, side in ((1.0, mine[bw[mine] > bk.max() + tol[mine]]),
+                          (-1.0, mine[bw[mine] < bk.min() - tol[mine]])):
+            # The outermost candidate on this side that no visible ground separates.
+            for w in side[np.argsort(-sgn * bw[side], kind='stable')]:
+                if f.shape[0] >= 2:
+                    if g_all is None:
+                        g_all = ground_xy() if callable(ground_xy) else ground_xy
+                    if _separated(xw[w], f, g_all, m_):
+                        continue
+                out[w] = k
+                break
+    return out
+
+
+def _separated(w: np.ndarray, f: np.ndarray, g_all: np.ndarray, margin: float) -> bool:
+    """Whether a ground point of g_all (G, 2) lies more than ``margin`` inside one of
+    the triangles w-p-q of pairs p, q of the points f (F >= 2, 2)."""
+    if g_all.shape[0] == 0:
+        return False
+    pts = np.vstack([f, w[None, :]])
+    lo, hi = pts.min(axis=0) - margin, pts.max(axis=0) + margin
+    g = g_all[np.all((g_all >= lo) & (g_all <= hi), axis=1)]
+    if g.shape[0] == 0:
+        return False
+    ii, jj = np.triu_indices(f.shape[0], 1)
+    n = np.broadcast_to(w[None, None, :], (ii.size, 1, 2))
+    return bool(_ground_inside(g, f[ii], n, f[jj], margin).any())
 
 
 class GpodDetector:
@@ -1642,6 +1735,29 @@ class GpodDetector:
         self._ctx = _FrameContext(cam=cam, metric=metric, abc=self._abc.copy(), u=u, v=v,
                                   pd=pd, excess_mean=ex_mean, sigma=thr / c.threshold_k,
                                   prev=prev, ground_points=pts[ground], left=self._left)
+        if obst_string.any():
+            # Candidate silhouette edges for placing detected obstacles (never obstacles):
+            # strings neither obstacle, drop nor rejected as one (mismatch, repetitive
+            # pattern, half-occlusion), consistently above the plane near the threshold:
+            # reliably matched pixels above _WEAK_FRACTION of it, at least
+            # _WEAK_MIN_PIXELS, whose mean excess is _WEAK_SIGMAS standard errors above
+            # the plane (sum of z > K sqrt(n _WEAK_CORR)).
+            weak = (usable & (ex_mean > _WEAK_FRACTION * thr) & (h <= c.max_obstacle_height_m)
+                    & ~(obst_string | drop_string | (n_obst >= c.min_obstacle_pixels))[sid])
+            wi = np.flatnonzero(weak)
+            if wi.size:
+                z = ex_mean[wi] * (c.threshold_k / thr[wi])
+                n_w = np.bincount(sid[wi], minlength=n_s)
+                z_sum = np.bincount(sid[wi], weights=z, minlength=n_s)
+                ok_s = (n_w >= _WEAK_MIN_PIXELS) & (
+                    z_sum > _WEAK_SIGMAS * np.sqrt(np.maximum(n_w, 1) * _WEAK_CORR))
+                wi = wi[ok_s[sid[wi]]]
+            if wi.size:
+                o = np.lexsort((-m.v[wi], sid[wi]))
+                wi = wi[o]
+                head = np.r_[True, sid[wi][1:] != sid[wi][:-1]]
+                top = np.maximum.reduceat(h[wi], np.flatnonzero(head))
+                self._ctx.weak_start, self._ctx.weak_top = wi[head], top
         found: list[GpodObstacle] = []
         for sel, sign, radius, min_px in (
                 (obst, 1.0, c.cluster_radius_m, 1),
@@ -1689,8 +1805,11 @@ class GpodDetector:
                               fwd, lft)
 
     def _obstacle_feet(self, idx: np.ndarray, label: np.ndarray, sid: np.ndarray, n_c: int,
-                       m: Matches) -> tuple[np.ndarray, np.ndarray]:
-        """Range and bearing (n_c,) of the nearest point of each obstacle cluster.
+                       m: Matches, height: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Range and bearing (n_c,) of the nearest point of each obstacle cluster, and
+        (n_c, 2) its ground coordinates from the obstacle's own strings alone (the ROI's
+        foot: the placement-only candidates below change range and bearing only).
 
         Every edge string of a cluster gives one ground foot (`string_feet`): its matched
         run followed down to where it meets the ground. The cluster's nearest point is
@@ -1699,6 +1818,12 @@ class GpodDetector:
         silhouette of a body whose near corner has no vertical edge (two faces of one
         shade), the hidden corner on the Thales circle over LR that the image's edges
         and the visible ground support (`hidden_corner`); else the probably nearest foot.
+
+        Placement only: edge strings just under the thresholds (the frame's candidates,
+        see `_detect`) that `silhouette_owners` assigns to an obstacle add their feet to
+        its search; the result is kept only where it is nearer than without them (a
+        silhouette can reveal a hidden near corner, not move the obstacle away). They
+        never change which obstacles exist, their pixels, ROI, height or confidence.
         """
         ctx = self._ctx
         # The lowest obstacle pixel of each (cluster, string): where its foot search starts.
@@ -1707,15 +1832,43 @@ class GpodDetector:
         lab_o, sid_o = label[o], sid[o]
         head = np.r_[True, (lab_o[1:] != lab_o[:-1]) | (sid_o[1:] != sid_o[:-1])]
         start = idx[o][head]
-        xy, sr = string_feet(ctx, start)
+        n_w = ctx.weak_start.size
+        xy, sr = string_feet(ctx, np.concatenate([start, ctx.weak_start]) if n_w else start)
+        if n_w:     # one walk down for the obstacles' strings and the candidates
+            xy, xw, sr, sw = xy[:-n_w], xy[-n_w:], sr[:-n_w], sr[-n_w:]
         g_lab = lab_o[head]
         ul = m.u_left[start]
         at_border = (ul < _BORDER_PX) | (ul > ctx.cam.width - 1 - _BORDER_PX)
-        q = nearest_points(xy, sr, g_lab, n_c, lambda: ctx.ground_xy,
-                           ctx.contact_edge_scores, at_border)
+        xy_w = None
+        if n_w:
+            lw = silhouette_owners(xw, ctx.weak_top, xy, g_lab, height,
+                                   self.config.cluster_radius_m, lambda: ctx.ground_xy)
+            keep = lw >= 0
+            if keep.any():
+                uw = m.u_left[ctx.weak_start[keep]]
+                xy_w, sr_w, lab_w = xw[keep], sw[keep], lw[keep]
+                bd_w = (uw < _BORDER_PX) | (uw > ctx.cam.width - 1 - _BORDER_PX)
+        q = q0 = nearest_points(xy, sr, g_lab, n_c, lambda: ctx.ground_xy,
+                                ctx.contact_edge_scores, at_border)
+        if xy_w is not None:
+            # The candidate silhouettes can only reveal a nearer point (a hidden near
+            # corner), never move an obstacle away.
+            # (Only the obstacles with candidates are searched again.)
+            ks = np.unique(lab_w)
+            sub = np.full(n_c, -1, np.int64)
+            sub[ks] = np.arange(ks.size)
+            mine = sub[g_lab] >= 0
+            qw = nearest_points(np.concatenate([xy[mine], xy_w]),
+                                np.concatenate([sr[mine], sr_w]),
+                                np.concatenate([sub[g_lab[mine]], sub[lab_w]]), ks.size,
+                                lambda: ctx.ground_xy, ctx.contact_edge_scores,
+                                np.concatenate([at_border[mine], bd_w]))
+            nearer = np.hypot(qw[:, 0], qw[:, 1]) < np.hypot(q[ks, 0], q[ks, 1])
+            q = q.copy()
+            q[ks[nearer]] = qw[nearer]
         rng = np.array([math.hypot(x, y) for x, y in q.tolist()])
         brg = np.array([math.atan2(y, x) for x, y in q.tolist()])
-        return rng, brg
+        return rng, brg, q0
 
     def _describe(self, idx, label, sign, min_pixels, hh, g2, m: Matches, excess, cam,
                   metric, fwd, lft) -> list[GpodObstacle]:
@@ -1735,7 +1888,8 @@ class GpodDetector:
         height = _group_quantile(label, hh, 0.9 if sign > 0 else 0.1, n_c)
         sid_all = m.string_id[idx]
         if sign > 0:
-            r_near, bearing = self._obstacle_feet(idx, label, sid_all, n_c, m)
+            r_near, bearing, q_roi = self._obstacle_feet(idx, label, sid_all, n_c, m,
+                                                              height)
         else:
             # A drop starts at its near edge: its 2nd-percentile range, in the median
             # direction of the nearest feet of its strings (one vote per string) within
@@ -1755,6 +1909,13 @@ class GpodDetector:
                 + r_near[:, None] * (np.cos(bearing)[:, None] * fwd[None, :]
                                      + np.sin(bearing)[:, None] * lft[None, :]))
         position = foot + height[:, None] * metric.normal_up[None, :]
+        foot_roi = foot
+        if sign > 0:
+            r0 = np.array([math.hypot(x, y) for x, y in q_roi.tolist()])
+            b0 = np.array([math.atan2(y, x) for x, y in q_roi.tolist()])
+            foot_roi = (-metric.height * metric.normal_up[None, :]
+                        + r0[:, None] * (np.cos(b0)[:, None] * fwd[None, :]
+                                         + np.sin(b0)[:, None] * lft[None, :]))
         # Lateral extent of the feet across the line of sight to their median.
         mx = _group_quantile(label, g2[:, 0], 0.5, n_c)
         my = _group_quantile(label, g2[:, 1], 0.5, n_c)
@@ -1789,7 +1950,7 @@ class GpodDetector:
             if count[k] < min_pixels:
                 continue
             yk1 = int(y1[k])
-            fk = foot[k]
+            fk = foot_roi[k]
             if sign > 0 and fk[2] > 1e-6:    # extend down to where the obstacle meets the ground
                 v_foot = cam.f * fk[1] / fk[2] + cam.cy
                 if np.isfinite(v_foot):
