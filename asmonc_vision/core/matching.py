@@ -537,17 +537,16 @@ def _group_kernel(a, b, s2, d, d_prev, d_next, monotonic, tol, c_left, n_left):
     c = np.empty(n, np.int64)
     c2 = np.empty(n, np.int64)
     w = np.empty(n, np.float64)
+    # link k < npair: candidate a[k] supported by b[k]; k >= npair: the reverse
+    cand_of = np.concatenate((a, b))
+    sup_of = np.concatenate((b, a))
+    s2_of = np.concatenate((s2, s2))
     q1 = 0
     q2 = 0
     for k in range(n):
-        if k < npair:
-            ck = a[k]
-            sk = b[k]
-            s2k = s2[k]
-        else:
-            ck = b[k - npair]
-            sk = a[k - npair]
-            s2k = s2[k - npair]
+        ck = cand_of[k]
+        sk = sup_of[k]
+        s2k = s2_of[k]
         if multi[k]:
             grp[q2] = k
             key[q2] = ck * n_left + c_left[sk]
@@ -568,14 +567,9 @@ def _group_kernel(a, b, s2, d, d_prev, d_next, monotonic, tol, c_left, n_left):
     for t in range(n_multi):
         k = grp[order[t]]
         kk = key[order[t]]
-        if k < npair:
-            ck = a[k]
-            sk = b[k]
-            s2k = s2[k]
-        else:
-            ck = b[k - npair]
-            sk = a[k - npair]
-            s2k = s2[k - npair]
+        ck = cand_of[k]
+        sk = sup_of[k]
+        s2k = s2_of[k]
         p = n1 + t
         c[p] = ck
         c2[p] = sk
