@@ -26,44 +26,28 @@ from visualization_msgs.msg import Marker, MarkerArray
 from asmonc_vision_msgs.msg import GroundPlane, Obstacle, ObstacleArray
 
 from asmonc_vision.core.camera import StereoCamera, metric_from_plane
-from asmonc_vision.core.config import check_fields, param
+from asmonc_vision.core.config import param
 from asmonc_vision.core.draw import draw_debug
 from asmonc_vision.core.gpod import GpodConfig, GpodDetector, GpodResult
 from asmonc_vision.nodes.common import (IMAGE_QOS, RESULT_QOS, Diagnostics, declare_config,
                                         run_node)
 from asmonc_vision.nodes.conversions import array_to_image_msg
-from asmonc_vision.nodes.stereo_input import StereoInputNode, StereoPair
+from asmonc_vision.nodes.stereo_input import StereoInputConfig, StereoInputNode, StereoPair
 
 _STATUS = {'initialising': GroundPlane.INITIALISING, 'tracking': GroundPlane.TRACKING,
            'lost': GroundPlane.LOST}
 
 
 @dataclass(frozen=True)
-class DetectorNodeConfig:
-    """Settings of the node around the core detector (the detector's own: GpodConfig)."""
+class DetectorNodeConfig(StereoInputConfig):
+    """Settings of the node around the core detector (the detector's own: GpodConfig);
+    the stereo input's are `StereoInputConfig`'s."""
 
-    max_stamp_skew: float = param(
-        0.0, 'largest left/right stamp difference still paired, s (0: stamps must be equal)',
-        range=(0.0, 0.1))
     max_pending_pairs: int = param(
         30, 'pairs waiting for the detector before the oldest is dropped (with a warning)',
         range=(1, 1000))
-    unpaired_timeout: float = param(
-        1.0, 'an image with no partner this long (s of stamp time) is dropped with a warning',
-        range=(0.05, 10.0))
     publish_debug_image: bool = param(True, 'publish /detector/debug_image')
     publish_markers: bool = param(True, 'publish /obstacles/markers')
-    time_jump_reset: float = param(
-        1.0, 'stamps going back by more than this (s) restart the detector (bag loop)',
-        range=(0.0, 1e6))
-    info_wait: float = param(
-        1.0, 'how long a pair waits for its first camera_info before it is skipped, s',
-        range=(0.0, 10.0))
-    input_timeout: float = param(
-        2.0, 'no image pair for this long (s) is reported in /diagnostics', range=(0.1, 60.0))
-
-    def __post_init__(self) -> None:
-        check_fields(self)
 
 
 class DetectorNode(StereoInputNode):

@@ -41,7 +41,7 @@ from geometry_msgs.msg import TransformStamped
 from nav_msgs.msg import Odometry
 
 from asmonc_vision.core.camera import StereoCamera
-from asmonc_vision.core.config import check_fields, param
+from asmonc_vision.core.config import param
 from asmonc_vision.core.motion import (FIRST, TOO_FEW_FEATURES, EgomotionConfig,
                                        EgomotionEstimator, EgomotionResult)
 from asmonc_vision.core.motion.geometry import (adjoint, compose, invert, matrix_to_quaternion,
@@ -49,33 +49,17 @@ from asmonc_vision.core.motion.geometry import (adjoint, compose, invert, matrix
 from asmonc_vision.core.motion.pipeline import use_one_core
 from asmonc_vision.nodes.common import (RESULT_QOS, Diagnostics, declare_config,
                                         run_node)
-from asmonc_vision.nodes.stereo_input import StereoInputNode, StereoPair
+from asmonc_vision.nodes.stereo_input import StereoInputConfig, StereoInputNode, StereoPair
 
 DEFAULT_LEFT_FRAME = 'stereo_left_optical_frame'
 
 
 @dataclass(frozen=True)
-class EgomotionNodeConfig:
+class EgomotionNodeConfig(StereoInputConfig):
     """Settings of the node around the core estimator (the estimator's own:
-    core.motion.EgomotionConfig, under ``motion.``)."""
+    core.motion.EgomotionConfig, under ``motion.``); the stereo input's are
+    `StereoInputConfig`'s."""
 
-    max_stamp_skew: float = param(
-        0.0, 'largest left/right stamp difference still paired, s (0: stamps must be equal)',
-        range=(0.0, 0.1))
-    max_pending_pairs: int = param(
-        10, 'pairs waiting for the estimator before the oldest is dropped (with a warning)',
-        range=(1, 1000))
-    unpaired_timeout: float = param(
-        1.0, 'an image with no partner this long (s of stamp time) is dropped with a warning',
-        range=(0.05, 10.0))
-    info_wait: float = param(
-        1.0, 'how long a pair waits for its first camera_info before it is skipped, s',
-        range=(0.0, 10.0))
-    input_timeout: float = param(
-        2.0, 'no image pair for this long (s) is reported in /diagnostics', range=(0.1, 60.0))
-    time_jump_reset: float = param(
-        1.0, 'stamps going back by more than this (s) restart the estimator and the odometry '
-        '(bag loop)', range=(0.0, 1e6))
     odom_frame: str = param(
         'egomotion_origin', 'frame id of /egomotion/odometry: the left optical frame of the '
         'first pair (x right, y down, z forward)')
@@ -86,9 +70,6 @@ class EgomotionNodeConfig:
     lost_rotation_variance: float = param(
         0.1, 'added to each rotation variance of the odometry when the motion chain breaks, '
         'rad^2', range=(0.0, 1e6))
-
-    def __post_init__(self) -> None:
-        check_fields(self)
 
 
 class EgomotionNode(StereoInputNode):

@@ -22,9 +22,39 @@ from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 
 from asmonc_vision.core.camera import StereoCamera
+from asmonc_vision.core.config import check_fields, param
 from asmonc_vision.nodes.common import IMAGE_QOS, Diagnostics
 from asmonc_vision.nodes.conversions import (ImageFormatError, image_msg_to_gray, stamp_to_ns,
                                              stereo_camera_from_infos)
+
+
+@dataclass(frozen=True)
+class StereoInputConfig:
+    """Settings of the stereo input every `StereoInputNode` shares (pairing, queue,
+    time-outs); a node's own settings class derives from it and may override a default by
+    declaring the field again."""
+
+    max_stamp_skew: float = param(
+        0.0, 'largest left/right stamp difference still paired, s (0: stamps must be equal)',
+        range=(0.0, 0.1))
+    max_pending_pairs: int = param(
+        10, 'pairs waiting for processing before the oldest is dropped (with a warning)',
+        range=(1, 1000))
+    unpaired_timeout: float = param(
+        1.0, 'an image with no partner this long (s of stamp time) is dropped with a warning',
+        range=(0.05, 10.0))
+    info_wait: float = param(
+        1.0, 'how long a pair waits for its first camera_info before it is skipped, s',
+        range=(0.0, 10.0))
+    input_timeout: float = param(
+        2.0, 'no image pair for this long (s) is reported in /diagnostics', range=(0.1, 60.0))
+    time_jump_reset: float = param(
+        1.0, 'stamps going back by more than this (s) restart the node\'s processing and its '
+        'state: the detector\'s plane, the estimator\'s odometry (bag loop)',
+        range=(0.0, 1e6))
+
+    def __post_init__(self) -> None:
+        check_fields(self)
 
 
 @dataclass
@@ -131,7 +161,7 @@ class StereoInputNode(Node):
         self.diag.update(level, why, frames_in=self.frames_in, frames_done=self.frames_done,
                          frames_bad=self.frames_bad)
 
-    def start_stereo_input(self, settings) -> None:
+    def start_stereo_input(self, settings: StereoInputConfig) -> None:
         """Subscribe and start the worker; call at the end of the subclass's __init__."""
         self._settings = settings
         self._pairer = StereoPairer(int(settings.max_stamp_skew * 1e9),
