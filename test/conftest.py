@@ -39,6 +39,40 @@ def spin_until(executor, predicate, timeout=10.0, step=0.05):
     return bool(predicate())
 
 
+
+def stereo_types():
+    """The stereo input topics of the detector and egomotion nodes and their rclpy types,
+    in (left image, right image, left info, right info) order."""
+    from sensor_msgs.msg import CameraInfo, Image
+    return {'/stereo/left/image_rect': Image, '/stereo/right/image_rect': Image,
+            '/stereo/left/camera_info': CameraInfo, '/stereo/right/camera_info': CameraInfo}
+
+
+def read_messages(bag, types):
+    """{topic: [rclpy message, ...]} of a bag, for the topics in ``types`` (topic -> type)."""
+    from rclpy.serialization import deserialize_message
+    from rosbags.rosbag2 import Reader
+    per_topic = {t: [] for t in types}
+    with Reader(bag) as r:
+        conns = [c for c in r.connections if c.topic in types]
+        for c, _, raw in r.messages(connections=conns):
+            per_topic[c.topic].append(deserialize_message(bytes(raw), types[c.topic]))
+    return per_topic
+
+
+def stereo_sender(probe):
+    """Publishers of the stereo input topics on the ``probe`` node, and
+    ``send(left, right, left_info, right_info)`` publishing one pair (infos first)."""
+    from asmonc_vision.nodes.common import IMAGE_QOS
+    pubs = {t: probe.create_publisher(typ, t, IMAGE_QOS) for t, typ in stereo_types().items()}
+
+    def send(left, right, linfo, rinfo):
+        pubs['/stereo/left/camera_info'].publish(linfo)
+        pubs['/stereo/right/camera_info'].publish(rinfo)
+        pubs['/stereo/left/image_rect'].publish(left)
+        pubs['/stereo/right/image_rect'].publish(right)
+    return pubs, send
+
 class RosGraph:
     """An rclpy Context on a domain of its own, a single-threaded executor, and the
     nodes added to it (destroyed at `close`). For node tests over real topics."""

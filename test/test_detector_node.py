@@ -1,31 +1,22 @@
 """detector_node over real topics, in-process: frames from the committed static bag."""
 import pytest
-import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.serialization import deserialize_message
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import Image
 
-from asmonc_vision import bagio
 from asmonc_vision.nodes.common import IMAGE_QOS, RESULT_QOS
 from asmonc_vision.nodes.detector_node import DetectorNode
 from asmonc_vision.nodes.stereo_input import StereoPairer
 from asmonc_vision_msgs.msg import GroundPlane, ObstacleArray
-from conftest import BAGS, spin_until
+from conftest import BAGS, read_messages, spin_until, stereo_sender, stereo_types
 
-TYPES = {'/stereo/left/image_rect': Image, '/stereo/right/image_rect': Image,
-         '/stereo/left/camera_info': CameraInfo, '/stereo/right/camera_info': CameraInfo}
+TYPES = stereo_types()
 
 
 def load_frames(bag, indices):
     """[(left, right, left_info, right_info)] rclpy messages of the given frame indices."""
-    from rosbags.rosbag2 import Reader
-    per_topic = {t: [] for t in TYPES}
-    with Reader(bag) as r:
-        conns = [c for c in r.connections if c.topic in TYPES]
-        for c, _, raw in r.messages(connections=conns):
-            per_topic[c.topic].append(deserialize_message(bytes(raw), TYPES[c.topic]))
+    per_topic = read_messages(bag, TYPES)
     return [tuple(per_topic[t][i] for t in TYPES) for i in indices]
 
 
@@ -38,18 +29,12 @@ def graph(ros_context):
     probe.create_subscription(ObstacleArray, '/obstacles', got['obstacles'].append, RESULT_QOS)
     probe.create_subscription(GroundPlane, '/ground_plane', got['plane'].append, RESULT_QOS)
     probe.create_subscription(Image, '/detector/debug_image', got['debug'].append, IMAGE_QOS)
-    pubs = {t: probe.create_publisher(typ, t, IMAGE_QOS) for t, typ in TYPES.items()}
+    pubs, send = stereo_sender(probe)
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(det)
     ex.add_node(probe)
     assert spin_until(ex, lambda: all(p.get_subscription_count() >= 1 for p in pubs.values())
                       and probe.count_publishers('/obstacles') >= 1)
-
-    def send(left, right, linfo, rinfo):
-        pubs['/stereo/left/camera_info'].publish(linfo)
-        pubs['/stereo/right/camera_info'].publish(rinfo)
-        pubs['/stereo/left/image_rect'].publish(left)
-        pubs['/stereo/right/image_rect'].publish(right)
     yield det, ex, send, got
     ex.shutdown()
     det.destroy_node()

@@ -6,17 +6,14 @@ from geometry_msgs.msg import TransformStamped
 from nav_msgs.msg import Odometry
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.serialization import deserialize_message
-from sensor_msgs.msg import CameraInfo, Image
 
 from asmonc_vision.core.motion.geometry import (compose, invert, quaternion_to_matrix,
                                                 rotation_error_components)
-from asmonc_vision.nodes.common import IMAGE_QOS, RESULT_QOS
+from asmonc_vision.nodes.common import RESULT_QOS
 from asmonc_vision.nodes.egomotion_node import EgomotionNode
-from conftest import BAGS, spin_until
+from conftest import BAGS, read_messages, spin_until, stereo_sender, stereo_types
 
-TYPES = {'/stereo/left/image_rect': Image, '/stereo/right/image_rect': Image,
-         '/stereo/left/camera_info': CameraInfo, '/stereo/right/camera_info': CameraInfo}
+TYPES = stereo_types()
 POSE = '/ground_truth/camera_pose'
 BAG = BAGS / 'walk_obstacles'
 
@@ -25,16 +22,8 @@ def load_frames(indices):
     """[(left, right, left_info, right_info)] rclpy messages and {stamp_ns: (R, t)} of the
     left optical frame in the world, for the given frame indices of the walking bag."""
     from geometry_msgs.msg import PoseStamped
-    from rosbags.rosbag2 import Reader
-    per_topic = {t: [] for t in TYPES}
-    poses = []
-    with Reader(BAG) as r:
-        conns = [c for c in r.connections if c.topic in TYPES or c.topic == POSE]
-        for c, _, raw in r.messages(connections=conns):
-            if c.topic == POSE:
-                poses.append(deserialize_message(bytes(raw), PoseStamped))
-            else:
-                per_topic[c.topic].append(deserialize_message(bytes(raw), TYPES[c.topic]))
+    per_topic = read_messages(BAG, {**TYPES, POSE: PoseStamped})
+    poses = per_topic[POSE]
     frames = [tuple(per_topic[t][i] for t in TYPES) for i in indices]
     truth = {}
     for i in indices:
@@ -65,18 +54,12 @@ def graph(ros_context):
     probe.create_subscription(TransformStamped, '/egomotion', got['motion'].append, RESULT_QOS)
     probe.create_subscription(Odometry, '/egomotion/odometry', got['odom'].append, RESULT_QOS)
     probe.create_subscription(DiagnosticArray, '/diagnostics', got['diag'].append, 10)
-    pubs = {t: probe.create_publisher(typ, t, IMAGE_QOS) for t, typ in TYPES.items()}
+    pubs, send = stereo_sender(probe)
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(node)
     ex.add_node(probe)
     assert spin_until(ex, lambda: all(p.get_subscription_count() >= 1 for p in pubs.values())
                       and probe.count_publishers('/egomotion') >= 1)
-
-    def send(left, right, linfo, rinfo):
-        pubs['/stereo/left/camera_info'].publish(linfo)
-        pubs['/stereo/right/camera_info'].publish(rinfo)
-        pubs['/stereo/left/image_rect'].publish(left)
-        pubs['/stereo/right/image_rect'].publish(right)
     yield node, ex, send, got
     ex.shutdown()
     node.destroy_node()
