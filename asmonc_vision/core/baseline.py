@@ -58,15 +58,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from .camera import MetricPlane, StereoCamera, ground_range_bearing
-from .config import check_fields, param
-from .ground_plane import plane_is_plausible
+from .config import param
+from .ground_plane import PlausiblePlaneConfig, plane_is_plausible
 
 #: StereoSGBM modes by name.
 SGBM_MODES = ('sgbm', 'hh', '3way', 'hh4')
 
 
 @dataclass(frozen=True)
-class SgbmConfig:
+class SgbmConfig(PlausiblePlaneConfig):
     """Settings of the SGBM baseline (validated on construction)."""
 
     # --- StereoSGBM ----------------------------------------------------------------
@@ -111,15 +111,6 @@ class SgbmConfig:
         1.0, 'RANSAC inlier bound, pixels of disparity', range=(0.05, 20.0))
     min_plane_inliers: int = param(
         100, 'Least number of inlier pixels for a valid plane', range=(3, 10000000))
-    min_camera_height_m: float = param(
-        0.2, 'A plane is plausible only if the left camera is at least this high above it, '
-        'metres', range=(0.0, 100.0))
-    max_camera_height_m: float = param(
-        5.0, 'A plane is plausible only if the left camera is at most this high above it, '
-        'metres', range=(0.01, 1000.0))
-    max_plane_tilt_deg: float = param(
-        75.0, "A plane is plausible only if its up normal is within this angle of the "
-        "camera's up axis (-y), degrees", range=(1.0, 90.0))
     # --- obstacles -------------------------------------------------------------------
     threshold_px: float = param(
         1.7, 'Disparity excess over the plane above which a pixel is an obstacle pixel, '
@@ -141,15 +132,12 @@ class SgbmConfig:
                       range=(0, 2 ** 31 - 1))
 
     def __post_init__(self) -> None:
-        check_fields(self)
+        super().__post_init__()
         if self.block_size % 2 == 0:
             raise ValueError(f'SgbmConfig.block_size = {self.block_size} must be odd')
         if self.p2_factor <= self.p1_factor:
             raise ValueError(f'SgbmConfig.p2_factor = {self.p2_factor} must exceed '
                              f'p1_factor = {self.p1_factor}')
-        if self.min_camera_height_m >= self.max_camera_height_m:
-            raise ValueError('SgbmConfig.min_camera_height_m must be less than '
-                             'max_camera_height_m')
 
     def num_disparities(self, cam: StereoCamera) -> int:
         """numDisparities for a camera: f*B/min_range_m rounded up to a multiple of 16."""
@@ -351,9 +339,7 @@ class SgbmBaseline:
                                   max_points=c.fit_max_points)
         plane = None
         if fit is not None and int(fit[1].sum()) >= c.min_plane_inliers:
-            metric = plane_is_plausible(cam, fit[0], min_height_m=c.min_camera_height_m,
-                                        max_height_m=c.max_camera_height_m,
-                                        max_tilt_deg=c.max_plane_tilt_deg)
+            metric = plane_is_plausible(cam, fit[0], **c.plausibility())
             if metric is not None:
                 plane = SgbmPlane(abc=np.asarray(fit[0], float), metric=metric,
                                   num_inliers=int(fit[1].sum()), residual_rms=fit[2])

@@ -65,9 +65,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .camera import MetricPlane, StereoCamera, plane_disparity
-from .config import check_fields, param
+from .config import param
 from .edges import EdgeMap, detect_vertical_edges
-from .ground_plane import PlaneFit, fit_ground_plane, plane_is_plausible
+from .ground_plane import PlaneFit, PlausiblePlaneConfig, fit_ground_plane, plane_is_plausible
 from .matching import Candidates, Matches, _jit, pmf_match
 from .matching import warm_up as matching_warm_up
 
@@ -125,7 +125,7 @@ STATUSES = ('initialising', 'tracking', 'lost')
 
 
 @dataclass(frozen=True)
-class GpodConfig:
+class GpodConfig(PlausiblePlaneConfig):
     """Settings of the GPOD detector (validated on construction)."""
 
     # --- detection ---------------------------------------------------------------
@@ -234,15 +234,6 @@ class GpodConfig:
     recover_max_angle_deg: float = param(
         25.0, "'refit': ... and its normal within this angle of the calibrated normal, "
         'degrees', range=(0.0, 90.0))
-    min_camera_height_m: float = param(
-        0.2, 'A plane is plausible only if the left camera is at least this high above it, '
-        'metres', range=(0.0, 100.0))
-    max_camera_height_m: float = param(
-        5.0, 'A plane is plausible only if the left camera is at most this high above it, '
-        'metres', range=(0.01, 1000.0))
-    max_plane_tilt_deg: float = param(
-        75.0, "A plane is plausible only if its up normal is within this angle of the "
-        "camera's up axis (-y), degrees", range=(1.0, 90.0))
     # --- edges ---------------------------------------------------------------------
     edge_threshold: float = param(
         4.0, 'Least horizontal intensity gradient of a vertical edge, grey levels per pixel',
@@ -338,7 +329,7 @@ class GpodConfig:
                       range=(0, 2 ** 31 - 1))
 
     def __post_init__(self) -> None:
-        check_fields(self)
+        super().__post_init__()
         if self.min_range_m >= self.search_max_range_m:
             raise ValueError(f'GpodConfig.min_range_m = {self.min_range_m} must be less than '
                              f'search_max_range_m = {self.search_max_range_m}')
@@ -349,10 +340,6 @@ class GpodConfig:
             raise ValueError(
                 f'GpodConfig.threshold_floor_px = {self.threshold_floor_px} must not exceed '
                 f'threshold_ceiling_px = {self.threshold_ceiling_px}')
-        if self.min_camera_height_m >= self.max_camera_height_m:
-            raise ValueError(
-                f'GpodConfig.min_camera_height_m = {self.min_camera_height_m} must be less '
-                f'than max_camera_height_m = {self.max_camera_height_m}')
 
 
 @dataclass(frozen=True)
@@ -1363,8 +1350,7 @@ class GpodDetector:
             u, v, d, cam=cam, method=c.plane_method, inlier_threshold_px=c.plane_inlier_px,
             iterations=c.ransac_iterations, weights=np.maximum(d, 0.0) ** 3,
             min_features=c.min_plane_features,
-            min_height_m=c.min_camera_height_m, max_height_m=c.max_camera_height_m,
-            max_tilt_deg=c.max_plane_tilt_deg, rng=self._rng)
+            rng=self._rng, **c.plausibility())
 
     def _near_calibration(self, fit: PlaneFit) -> bool:
         """Whether an ungated refit is close enough to the calibrated plane to trust."""

@@ -14,9 +14,40 @@ from dataclasses import dataclass
 import numpy as np
 
 from .camera import MetricPlane, StereoCamera, metric_from_plane
+from .config import check_fields, param
 
 #: Fitting methods accepted by :func:`fit_ground_plane`.
 METHODS = ('ransac', 'trimmed')
+
+
+@dataclass(frozen=True)
+class PlausiblePlaneConfig:
+    """The bounds a fitted plane must meet to be taken for the ground (see
+    :func:`plane_is_plausible`); the settings of GPOD and of the SGBM baseline derive from
+    it."""
+
+    min_camera_height_m: float = param(
+        0.2, 'A plane is plausible only if the left camera is at least this high above it, '
+        'metres', range=(0.0, 100.0))
+    max_camera_height_m: float = param(
+        5.0, 'A plane is plausible only if the left camera is at most this high above it, '
+        'metres', range=(0.01, 1000.0))
+    max_plane_tilt_deg: float = param(
+        75.0, "A plane is plausible only if its up normal is within this angle of the "
+        "camera's up axis (-y), degrees", range=(1.0, 90.0))
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+        if self.min_camera_height_m >= self.max_camera_height_m:
+            raise ValueError(
+                f'{type(self).__name__}.min_camera_height_m = {self.min_camera_height_m} must '
+                f'be less than max_camera_height_m = {self.max_camera_height_m}')
+
+    def plausibility(self) -> dict[str, float]:
+        """The keyword arguments of :func:`plane_is_plausible` for these bounds."""
+        return dict(min_height_m=self.min_camera_height_m,
+                    max_height_m=self.max_camera_height_m,
+                    max_tilt_deg=self.max_plane_tilt_deg)
 
 
 @dataclass(frozen=True)
