@@ -557,3 +557,48 @@ def test_silhouette_owners_place_only_next_to_a_matching_obstacle():
     np.testing.assert_array_equal(
         silhouette_owners(xw2, np.full(4, 0.08), xy, g_lab, height, 0.7, no_ground),
         [0, -1, -1, 0])
+
+
+# ---------------------------------------------------------------- obstacle tracks
+def test_tracks_bridge_a_missed_detection_and_end_when_the_obstacle_goes(scenes,
+                                                                         monkeypatch):
+    """While the rig stands still a detected obstacle keeps its track id; in a frame where
+    its evidence dips (here: the frame's detections withheld) it is still reported at its
+    tracked place, since its image region shows something above the ground; when the box
+    is taken away the region shows ground and the track ends at once, although its coast
+    time (1 s) has not run out."""
+    det, res = _calibrated(scenes['free'])
+    assert all(not r.obstacles for r in res)
+    ids = set()
+    for k in range(3):
+        r = det.process(*scenes['box'], CAM, stamp_ns=(3 + k) * 100_000_000)
+        assert r.still and len(r.obstacles) == 1 and r.obstacles[0].age_s == 0.0
+        ids.add(r.obstacles[0].track_id)
+    assert len(ids) == 1 and ids.pop() > 0
+    tracked = r.obstacles[0]
+    real_detect = det._detect
+
+    def withheld(*a, **kw):
+        features, _ = real_detect(*a, **kw)
+        return features, ()
+
+    monkeypatch.setattr(det, '_detect', withheld)
+    r = det.process(*scenes['box'], CAM, stamp_ns=600_000_000)
+    assert r.detections == () and len(r.obstacles) == 1
+    ob = r.obstacles[0]
+    assert ob.track_id == tracked.track_id and ob.age_s == pytest.approx(0.1)
+    assert ob.range == pytest.approx(tracked.range, abs=0.02)
+    assert ob.num_edge_pixels == 0 and ob.string_ids.size == 0
+    monkeypatch.setattr(det, '_detect', real_detect)
+    r = det.process(*scenes['free'], CAM, stamp_ns=700_000_000)
+    assert r.still and r.detections == () and r.obstacles == ()
+
+
+def test_tracks_off_reports_the_detections_only(scenes, monkeypatch):
+    det, _ = _calibrated(scenes['free'], GpodConfig(track_coast_s=0.0))
+    for _ in range(3):
+        r = det.process(*scenes['box'], CAM)
+        assert len(r.obstacles) == 1 and r.obstacles[0].track_id > 0
+    real_detect = det._detect
+    monkeypatch.setattr(det, '_detect', lambda *a, **kw: (real_detect(*a, **kw)[0], ()))
+    assert det.process(*scenes['box'], CAM).obstacles == ()

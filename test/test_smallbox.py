@@ -61,11 +61,11 @@ def test_command_runs_both_methods_on_the_same_frames(tmp_path, capsys):
                         '--cache', str(tmp_path / 'cache'), '--quiet'])
     assert rc == 0
     text = capsys.readouterr().out
-    assert 'gpod' in text and 'sgbm' in text
+    assert 'gpod' in text and 'gpod/frame' in text and 'sgbm' in text
     res = json.loads(out.read_text())
     cell = res['cells'][0]
     assert cell['height'] == 0.08 and cell['range'] == 2.5
-    for m in ('gpod', 'sgbm'):
+    for m in ('gpod', 'gpod/frame', 'sgbm'):
         assert cell[m]['frames'] == 6 and cell[m]['box_frames'] == 3
         assert 0.0 <= cell[m]['found'] <= 1.0 and np.isfinite(cell[m]['cpu_ms_per_frame'])
     assert cell['gpod']['found'] == 1.0                  # 8 cm at 2.5 m: easy

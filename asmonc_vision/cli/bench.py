@@ -250,7 +250,10 @@ def run_method(frames: list[Frame], method: str = 'gpod', threshold_px: float | 
     for i, f in enumerate(frames):
         c = time.thread_time()
         t = time.perf_counter()
-        res = det.process(f.left, f.right, f.cam)
+        if method == 'gpod':
+            res = det.process(f.left, f.right, f.cam, stamp_ns=f.stamp_ns)
+        else:
+            res = det.process(f.left, f.right, f.cam)
         ms = (time.perf_counter() - t) * 1e3
         cpu_ms = (time.thread_time() - c) * 1e3
         plane = res.plane.metric if res.plane is not None else None

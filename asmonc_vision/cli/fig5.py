@@ -363,7 +363,8 @@ def _seed_job(seed: int, heights_m: list, ranges_m: list, frames: int, rig_kw: d
             frames_run += 1
             if res.status != 'tracking':
                 not_tracking += 1
-            found = [o for o in res.obstacles if not o.is_drop]
+            # per-frame detection, as the model: each frame's own detections (no tracks)
+            found = [o for o in res.detections if not o.is_drop]
             score_frame(_frame_obstacles(found), truth_fo, score,
                         match_radius=MATCH_RADIUS_M, min_height=0.0, max_range=math.inf)
             # world (x, y) of each report: the rig stands at the origin looking along x,

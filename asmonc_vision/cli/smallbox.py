@@ -28,6 +28,10 @@ foot of the box's nearest visible point):
 * the range error |r - r_true| / r_true and the bearing error |b - b_true| (degrees) of
   the nearest found report: medians (and 90th percentiles in the JSON).
 
+GPOD is scored on what it reports (its obstacle tracks: detections, and obstacles
+carried through a frame or two where their evidence dips, `core.obstacle_tracks`) and,
+as the row `gpod/frame`, on each frame's detections alone.
+
 Rendering (~0.1 s per frame) dominates; `--cache DIR` keeps the rendered frames (with
 their truth) for repeated runs, `--workers 2` renders and runs two scenes at once.
 """
@@ -43,6 +47,8 @@ from pathlib import Path
 import numpy as np
 
 METHODS = ('gpod', 'sgbm')
+#: The row of GPOD's own per-frame detections, before its obstacle tracks.
+PER_FRAME = 'gpod/frame'
 #: A report's image region centre within this many pixels of the box's region is "on" it.
 ON_BOX_MARGIN_PX = 4
 
@@ -189,28 +195,52 @@ def make_detector(method: str, gpod_config=None):
     raise ValueError(f"unknown method '{method}'; expected one of {', '.join(METHODS)}")
 
 
+def rows(methods) -> tuple[str, ...]:
+    """The result rows of ``methods``: each method, and after 'gpod' its per-frame
+    detections ('gpod/frame')."""
+    out: list[str] = []
+    for m in methods:
+        out.append(m)
+        if m == 'gpod':
+            out.append(PER_FRAME)
+    return tuple(out)
+
+
 def run_scene(height: float, range_m: float, seed: int, box_frames: int = 20,
               clear_frames: int = 5, methods=METHODS, match_radius: float = 0.3,
               gpod_config=None, cache: Path | None = None) -> dict:
     """Render one scene and run each method, fresh, on its frames in order.
 
     Returns:
-        {method: tally} (see `new_tally`, `score_frame`).
+        {row: tally} (see `rows`, `new_tally`, `score_frame`).
     """
     import cv2
 
     cv2.setNumThreads(1)
+    from asmonc_vision.sim import RigSettings
+
     cam, frames = scene_frames(height, range_m, seed, box_frames, clear_frames, cache)
+    rig_fps = RigSettings().fps        # the rig of small_box_scene
     out = {}
     for method in methods:
         det = make_detector(method, gpod_config)
-        tally = new_tally()
-        for left, right, truths in frames:
+        tally, per_frame = new_tally(), new_tally()
+        period_ns = int(round(1e9 / rig_fps))
+        for k, (left, right, truths) in enumerate(frames):
             t0 = time.process_time()
-            res = det.process(left, right, cam)
-            tally['cpu_ms'] += (time.process_time() - t0) * 1e3
+            if method == 'gpod':
+                res = det.process(left, right, cam, stamp_ns=k * period_ns)
+            else:
+                res = det.process(left, right, cam)
+            dt = (time.process_time() - t0) * 1e3
+            tally['cpu_ms'] += dt
             score_frame(tally, res.obstacles, truths, match_radius)
+            if method == 'gpod':
+                per_frame['cpu_ms'] += dt
+                score_frame(per_frame, res.detections, truths, match_radius)
         out[method] = tally
+        if method == 'gpod':
+            out[PER_FRAME] = per_frame
     return out
 
 
@@ -224,7 +254,7 @@ def measure(heights, ranges, seeds, box_frames: int = 20, clear_frames: int = 5,
     """Run every (height, range) cell over the seeds.
 
     Returns:
-        {(height, range): {method: tally}}.
+        {(height, range): {row: tally}} (rows: see `rows`).
     """
     kw = dict(box_frames=box_frames, clear_frames=clear_frames, methods=tuple(methods),
               match_radius=match_radius, gpod_config=gpod_config, cache=cache)
@@ -233,8 +263,8 @@ def measure(heights, ranges, seeds, box_frames: int = 20, clear_frames: int = 5,
     total = len(jobs)
 
     def add(key, res):
-        cell = cells.setdefault(key[:2], {m: new_tally() for m in methods})
-        for m in methods:
+        cell = cells.setdefault(key[:2], {m: new_tally() for m in rows(methods)})
+        for m in rows(methods):
             cell[m] = merge(cell[m], res[m])
 
     if workers > 1 and total > 1:
@@ -293,12 +323,12 @@ def _cells(args) -> list[tuple[float, float]]:
 
 def format_table(cells: dict, methods) -> list[str]:
     """Printable lines: one per cell and method."""
-    lines = [f"{'cell':<14}{'method':<7}{'found':>8}{'on box':>8}{'false/fr':>10}"
+    lines = [f"{'cell':<14}{'method':<11}{'found':>8}{'on box':>8}{'false/fr':>10}"
              f"{'|dr| med':>10}{'|db| med':>10}{'cpu ms':>8}"]
     for (h, r), per in cells.items():
-        for m in methods:
+        for m in rows(methods):
             s = summarise(per[m])
-            lines.append(f"{h * 100:4.0f} cm @{r:4.1f} m {m:<7}{s['found']:>8.1%}"
+            lines.append(f"{h * 100:4.0f} cm @{r:4.1f} m {m:<11}{s['found']:>8.1%}"
                          f"{s['found_on_box']:>8.1%}{s['false_per_frame']:>10.3f}"
                          f"{s['range_err_median']:>10.1%}{s['bearing_err_median_deg']:>9.2f}°"
                          f"{s['cpu_ms_per_frame']:>8.1f}")
@@ -336,7 +366,7 @@ def run(args) -> int:
         out = {'seeds': seeds, 'frames': args.frames, 'clear_frames': args.clear_frames,
                'match_radius': args.match_radius,
                'cells': [{'height': h, 'range': r,
-                          **{m: summarise(per[m]) for m in args.method}}
+                          **{m: summarise(per[m]) for m in rows(args.method)}}
                          for (h, r), per in cells.items()]}
         args.json.write_text(json.dumps(out, indent=1))
     return 0

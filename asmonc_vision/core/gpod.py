@@ -57,6 +57,7 @@ without a plane is a return value, never an exception.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections import deque
@@ -64,9 +65,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .camera import MetricPlane, StereoCamera, plane_disparity
+from .camera import MetricPlane, StereoCamera, ground_range_bearing, plane_disparity
 from .config import param
 from .edges import EdgeMap, detect_vertical_edges
+from .obstacle_tracks import ObstacleTracker
 from .ground_plane import PlaneFit, PlausiblePlaneConfig, fit_ground_plane, plane_is_plausible
 from .matching import Candidates, Matches, _jit, pmf_match
 from .matching import warm_up as matching_warm_up
@@ -325,6 +327,40 @@ class GpodConfig(PlausiblePlaneConfig):
         20, 'Obstacle pixels at which the confidence is no longer reduced for small '
         'evidence (confidence = P(any pixel truly beyond the threshold) * '
         'min(1, pixels / this))', range=(1, 100000))
+    track_coast_s: float = param(
+        1.0, 'Obstacle tracks (DGPR): while the rig stands still, an obstacle detected before '
+        'is still reported for up to this long after its last detection (at its tracked '
+        'place), unless the frame shows ground where it stood; 0 = report detections only, s',
+        range=(0.0, 60.0))
+    track_gate_chi2: float = param(
+        11.34, 'Obstacle tracks: a detection updates a track when their squared Mahalanobis '
+        'distance (3 dof) is below this (11.34: chi-square 99 %)', range=(0.1, 1000.0))
+    track_process_noise_m: float = param(
+        0.05, 'Obstacle tracks: random-walk noise of a tracked foot, m per sqrt(s)',
+        range=(0.0, 10.0))
+    track_confirm_hits: int = param(
+        1, 'Obstacle tracks: frames in which a track must have been detected before it is '
+        'reported in frames where it is not', 
+        range=(1, 1000))
+    track_min_hit_fraction: float = param(
+        0.5, 'Obstacle tracks: a track is carried through frames without a detection only '
+        'while it was detected in at least this fraction of the frames since it began (M of '
+        'N: an obstacle is seen in most frames, ground texture that sometimes passes the '
+        'threshold is not)', range=(0.0, 1.0))
+    track_position_sigma_m: float = param(
+        0.05, 'Obstacle tracks: placement uncertainty of a detected foot added to its '
+        'triangulation noise (which corner of the obstacle is nearest), metres',
+        range=(0.001, 10.0))
+    track_pixel_sigma_px: float = param(
+        1.0, 'Obstacle tracks: image position uncertainty of a detected foot, pixels',
+        range=(0.01, 100.0))
+    track_free_min_features: int = param(
+        5, 'Obstacle tracks: a track not detected in a frame ends when its image region '
+        'holds at least this many reliably matched edge pixels on the ground plane and '
+        'three times as many as above it (the obstacle went away)', range=(1, 100000))
+    track_frame_period_s: float = param(
+        0.1, 'Time between frames assumed when process() is given no stamp, s',
+        range=(1e-4, 10.0))
     seed: int = param(0, 'Seed of the random generator of the robust plane fit',
                       range=(0, 2 ** 31 - 1))
 
@@ -359,7 +395,11 @@ class GpodObstacle:
         roi: (x, y, w, h) ints, region in the left image (from the top of the obstacle
             down to its foot on the ground).
         num_edge_pixels: matched edge pixels beyond the threshold in the obstacle.
-        string_ids: (k,) int32 ids of its edge strings (left EdgeMap).
+        string_ids: (k,) int32 ids of its edge strings (left EdgeMap); empty when coasted.
+        track_id: id of its obstacle track (> 0), 0 if untracked.
+        age_s: seconds since it was last detected: 0 when detected in this frame, > 0
+            when the track is coasted (reported at its tracked place, see
+            ``GpodConfig.track_coast_s``).
     """
 
     position: np.ndarray
@@ -372,6 +412,8 @@ class GpodObstacle:
     roi: tuple[int, int, int, int]
     num_edge_pixels: int
     string_ids: np.ndarray
+    track_id: int = 0
+    age_s: float = 0.0
 
     @property
     def is_drop(self) -> bool:
@@ -453,7 +495,9 @@ class GpodResult:
         plane_residual_rms: RMS residual of the last plane fit, pixels (NaN if none).
         plane_updated: True when the plane was (re)fitted on this frame.
         metric_plane: the plane in the left optical frame, or None.
-        obstacles: obstacles and drop-offs, nearest first.
+        obstacles: obstacles and drop-offs, nearest first: this frame's detections (their
+            feet filtered by their tracks) and the tracks coasted through this frame
+            (``age_s`` > 0).
         features: the matched edge features.
         threshold_px: the obstacle threshold used, pixels ('sigma' mode: threshold_k
             times sigma_px within the floor and ceiling; with ``sigma_per_edge`` each
@@ -465,6 +509,8 @@ class GpodResult:
             plane fit, pixels (NaN before it).
         still: True when the rig stood still since the previous frame (the excess is
             being averaged over frames).
+        detections: this frame's own obstacles and drop-offs, before tracking, nearest
+            first (per-frame detection rates are measured on these).
     """
 
     status: str
@@ -482,6 +528,7 @@ class GpodResult:
     timings_ms: dict[str, float]
     sigma_px: float = float('nan')
     still: bool = False
+    detections: tuple[GpodObstacle, ...] = ()
 
     @property
     def plane(self) -> GpodPlane | None:
@@ -1321,6 +1368,11 @@ class GpodDetector:
         #: the current left image and the current frame's context for describing obstacles
         self._left: np.ndarray | None = None
         self._ctx: _FrameContext | None = None
+        c = self.config
+        self._tracker = ObstacleTracker(coast_s=c.track_coast_s, gate_chi2=c.track_gate_chi2,
+                                        process_noise_m=c.track_process_noise_m,
+                                        confirm_hits=c.track_confirm_hits,
+                                        min_hit_fraction=c.track_min_hit_fraction)
 
     @property
     def calibrated_plane(self) -> PlaneFit | None:
@@ -1509,13 +1561,16 @@ class GpodDetector:
         return 'tracking', True
 
     # ------------------------------------------------------------------ main
-    def process(self, left: np.ndarray, right: np.ndarray, cam: StereoCamera) -> GpodResult:
+    def process(self, left: np.ndarray, right: np.ndarray, cam: StereoCamera,
+                stamp_ns: int | None = None) -> GpodResult:
         """Detect obstacles in one rectified stereo pair.
 
         Args:
             left, right: (H, W) uint8 rectified grey images, H = cam.height, W = cam.width.
             cam: the rectified stereo camera. A camera different from the previous
                 call's resets the detector.
+            stamp_ns: the pair's time, ns (for the obstacle tracks' coasting time); None:
+                frames ``track_frame_period_s`` apart.
         Returns:
             The GpodResult (status 'initialising', 'tracking' or 'lost').
         Raises:
@@ -1560,14 +1615,19 @@ class GpodDetector:
 
         metric = None
         obstacles: tuple[GpodObstacle, ...] = ()
+        detections: tuple[GpodObstacle, ...] = ()
         if status == 'tracking':
             metric = plane_is_plausible(cam, self._abc, min_height_m=0.0,
                                         max_height_m=float('inf'), max_tilt_deg=90.0)
         threshold = self.pixel_thresholds(np.zeros(0))[1]
         if status == 'tracking' and metric is not None:
-            features, obstacles = self._detect(m, u, v, d, cam, metric, d_min, d_max, el,
-                                               er, cand, still)
+            features, detections = self._detect(m, u, v, d, cam, metric, d_min, d_max, el,
+                                                er, cand, still)
+            stamp_s = (self._frame * c.track_frame_period_s if stamp_ns is None
+                       else stamp_ns * 1e-9)
+            obstacles = self._track(detections, stamp_s, still, cam, metric)
         else:
+            self._tracker.reset()
             if status == 'tracking':          # smoothing made an implausible plane
                 status = 'lost'
             self._acc = None
@@ -1588,7 +1648,7 @@ class GpodDetector:
             plane_updated=bool(updated and have_plane), metric_plane=metric if have_plane else None,
             obstacles=obstacles, features=features, threshold_px=threshold,
             num_edges=(len(el), len(er)), timings_ms=timings, sigma_px=self._sigma,
-            still=still)
+            still=still, detections=detections)
 
     def _stillness(self, el: EdgeMap) -> bool:
         """Whether the rig stood still since the previous frame: most left edge pixels
@@ -1718,6 +1778,7 @@ class GpodDetector:
         self._frame_thr = thr
         # Ground features: reliably matched edge pixels on the plane (free space).
         ground = (np.abs(ex_mean) <= thr) & usable & ~obst_string[sid]
+        self._usable, self._ex_mean, self._u_left = usable, ex_mean, m.u_left
         self._ctx = _FrameContext(cam=cam, metric=metric, abc=self._abc.copy(), u=u, v=v,
                                   pd=pd, excess_mean=ex_mean, sigma=thr / c.threshold_k,
                                   prev=prev, ground_points=pts[ground], left=self._left)
@@ -1754,6 +1815,74 @@ class GpodDetector:
                                             cam, metric))
         found.sort(key=lambda o: o.range)
         return features, tuple(found)
+
+    def _track(self, detections: tuple[GpodObstacle, ...], stamp_s: float, still: bool,
+               cam: StereoCamera, metric: MetricPlane) -> tuple[GpodObstacle, ...]:
+        """The frame's reports: its detections with their feet filtered by their obstacle
+        tracks, and the tracks coasted through this frame (`core.obstacle_tracks`). The
+        tracks' motion input is the identity while the rig stands still; after any
+        motion (unknown here) all tracks end. Drop-offs are not tracked."""
+        c = self.config
+        n = metric.normal_up
+        self._tracker.predict(stamp_s, (np.eye(3), np.zeros(3)) if still else None)
+        obst = [o for o in detections if not o.is_drop]
+        drops = [o for o in detections if o.is_drop]
+        feet = np.array([o.position - o.height * n for o in obst]).reshape(-1, 3)
+        cov = self._foot_covariance(feet, cam)
+        tracks = self._tracker.update(feet, cov, obst, self._track_is_free)
+        out = list(drops)
+        for tr in tracks:
+            ob = tr.payload
+            rng_, brg = ground_range_bearing(metric, tr.foot[None, :])
+            seen = tr.index >= 0
+            out.append(dataclasses.replace(
+                ob, position=tr.foot + ob.height * n, range=float(rng_[0]),
+                bearing=float(brg[0]), track_id=tr.track_id, age_s=tr.age_s,
+                string_ids=ob.string_ids if seen else np.zeros(0, np.int32),
+                num_edge_pixels=ob.num_edge_pixels if seen else 0))
+        out.sort(key=lambda o: o.range)
+        return tuple(out)
+
+    def _foot_covariance(self, feet: np.ndarray, cam: StereoCamera) -> np.ndarray:
+        """(N, 3, 3) covariance of detected feet (N, 3), m²: triangulation of the foot's
+        pixel (``track_pixel_sigma_px`` in u and v, the ground's disparity noise) plus
+        ``track_position_sigma_m``² (which point of the obstacle is nearest)."""
+        c = self.config
+        k = feet.shape[0]
+        z = np.maximum(feet[:, 2], 1e-3)
+        d = cam.fb / z
+        sig_d = self._sigma if np.isfinite(self._sigma) else c.disparity_sigma_px
+        # X = (u - cx) B / d, Y = (v - cy) B / d, Z = f B / d: J = d(X, Y, Z)/d(u, v, d)
+        J = np.zeros((k, 3, 3))
+        J[:, 0, 0] = z / cam.f
+        J[:, 1, 1] = z / cam.f
+        J[:, 0, 2] = -feet[:, 0] / d
+        J[:, 1, 2] = -feet[:, 1] / d
+        J[:, 2, 2] = -z / d
+        S = np.diag([c.track_pixel_sigma_px ** 2, c.track_pixel_sigma_px ** 2, sig_d ** 2])
+        return (np.einsum('nij,jk,nlk->nil', J, S, J)
+                + (c.track_position_sigma_m ** 2) * np.eye(3)[None])
+
+    def _track_is_free(self, ob: GpodObstacle, foot: np.ndarray) -> bool:
+        """Whether this frame shows an undetected track's place free: its foot out of
+        view, or its image region (``ob.roi``) holding at least
+        ``track_free_min_features`` reliably matched edge pixels on the ground plane
+        (within half their threshold) and three times as many as above it."""
+        cam = self._cam
+        if foot[2] <= 1e-3:
+            return True
+        uf = cam.f * foot[0] / foot[2] + cam.cx
+        vf = cam.f * foot[1] / foot[2] + cam.cy
+        if not (0 <= uf <= cam.width - 1 and 0 <= vf <= cam.height - 1):
+            return True
+        x, y, w, h = ob.roi
+        inside = (self._usable & (self._u_left >= x) & (self._u_left <= x + w - 1)
+                  & (self._ctx.v >= y) & (self._ctx.v <= y + h - 1))
+        ex = self._ex_mean[inside]
+        thr = self._frame_thr[inside]
+        on_ground = int(np.count_nonzero(np.abs(ex) <= 0.5 * thr))
+        above = int(np.count_nonzero(ex > 0.5 * thr))
+        return on_ground >= self.config.track_free_min_features and on_ground >= 3 * above
 
     def _ambiguous_strings(self, m: Matches, excess: np.ndarray, obst: np.ndarray,
                            cand: Candidates, el: EdgeMap, er: EdgeMap, threshold: float,

@@ -5,7 +5,10 @@ stamp, and runs the core detector (`core.gpod.GpodDetector`) on a worker thread 
 callbacks that receive images stay fast. Publishes, per processed pair:
 
 * `/obstacles` (asmonc_vision_msgs/ObstacleArray): stamp of the pair, left optical frame.
-  Published for every good pair, empty when nothing stands above the ground.
+  Published for every good pair, empty when nothing stands above the ground. ``id`` is
+  the obstacle's track id (stable while it is tracked, 0 for drop-offs, which are not
+  tracked); while the rig stands still an obstacle whose evidence dips for a frame or
+  two is still reported at its tracked place (`core.obstacle_tracks`).
 * `/ground_plane` (asmonc_vision_msgs/GroundPlane)
 * `/obstacles/markers` (visualization_msgs/MarkerArray), `/detector/debug_image` (bgr8)
 * `/diagnostics`
@@ -70,7 +73,7 @@ class DetectorNode(StereoInputNode):
 
     def process_pair(self, pair: StereoPair, left: np.ndarray, right: np.ndarray,
                      cam: StereoCamera) -> None:
-        result = self.detector.process(left, right, cam)
+        result = self.detector.process(left, right, cam, stamp_ns=pair.stamp_ns)
         header = pair.left.header
         self.pub_obstacles.publish(obstacles_to_msg(result, header))
         self.pub_plane.publish(plane_to_msg(result, cam, header))
@@ -90,7 +93,7 @@ def obstacles_to_msg(result: GpodResult, header) -> ObstacleArray:
     out = ObstacleArray(header=header)
     for ob in result.obstacles:
         m = Obstacle()
-        m.id = int(getattr(ob, 'id', 0))
+        m.id = int(ob.track_id)
         m.position = Point(x=float(ob.position[0]), y=float(ob.position[1]),
                            z=float(ob.position[2]))
         m.height = float(ob.height)

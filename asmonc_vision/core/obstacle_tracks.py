@@ -1,0 +1,253 @@
+"""Kalman tracks of obstacles over frames (the obstacle half of the paper's DGPR).
+
+Molton et al. (1998), Section 4: obstacles found by GPOD are tracked from frame to frame
+as 3-D points (X, Y, Z) with a Kalman filter, associated to new detections by nearest
+neighbour within a Mahalanobis gate, born from unassociated detections and deleted when
+they are no longer seen; the camera's motion between frames is the filter's input.
+
+Here each track is the *foot* of an obstacle's nearest point: where its nearest part
+meets the ground, metres, in the current left optical frame (x right, y down, z forward).
+All tracks are one batch of 3-state filters (arrays of x and P), with
+
+    predict:  x = F x + u,  F = R_cᵀ, u = -R_cᵀ t_c      (camera motion as input)
+              P = F P Fᵀ + Q,  Q = q² dt I + F Σ_t Fᵀ    (random walk; motion uncertainty)
+    update:   y = z - H x,  H = I
+              S = H P Hᵀ + R
+              K = P Hᵀ S⁻¹
+              x = x + K y
+              P = (I - K H) P (I - K H)ᵀ + K R Kᵀ         (Joseph form)
+
+where (R_c, t_c) is the motion ``T_prev_curr`` of the left camera (``X_prev = R_c X_curr +
+t_c``, as `/egomotion` gives it). With no motion known (``motion=None``) tracks cannot be
+carried into the new frame and are all ended; the detector passes the identity while the
+rig stands still.
+
+Association: the squared Mahalanobis distance d² = yᵀ S⁻¹ y of every (track, detection)
+pair; pairs within the gate (χ² with 3 degrees of freedom, ``gate_chi2``) are taken
+greedily by increasing d² (global nearest neighbour, each track and detection at most
+once). A detection left over starts a track. A track left over is *coasted*: reported at
+its predicted place, flagged with the time since its last detection, for up to
+``coast_s`` seconds -- unless the caller's free-space test says its region now shows
+ground (the obstacle went away) or its foot is out of view. Coasting bridges the frames
+in which a small obstacle's evidence dips under the threshold: an obstacle does not
+vanish because one frame's disparities were noisy.
+
+A missed measurement of a track is ``z = None`` in textbook terms: the track is
+predicted and not updated.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+
+#: χ²(3) 0.99 quantile: the default association gate.
+CHI2_3_99 = 11.344866730144373
+
+
+@dataclass
+class TrackOutput:
+    """One track's report for the current frame.
+
+    Attributes:
+        track_id: positive id, stable over the track's life.
+        index: index into the frame's detections of the detection it was updated with,
+            or -1 when coasted (no detection this frame).
+        foot: (3,) float64 the filtered foot, metres, current left optical frame.
+        foot_cov: (3, 3) float64 its covariance, m².
+        age_s: seconds since the track was last detected (0 when detected this frame).
+        hits: number of frames in which it was detected.
+        payload: the object of its latest detection (passed in by the caller).
+    """
+
+    track_id: int
+    index: int
+    foot: np.ndarray
+    foot_cov: np.ndarray
+    age_s: float
+    hits: int
+    payload: object = None
+
+
+class ObstacleTracker:
+    """A batch of constant-position Kalman tracks of obstacle feet; see the module
+    docstring.
+
+    Args:
+        coast_s: longest time a track is reported without a detection, s (0: tracks are
+            reported only in frames where they are detected).
+        gate_chi2: association gate on the squared Mahalanobis distance (3 dof).
+        process_noise_m: random-walk noise of a foot, m/√s (a static obstacle's estimate
+            may drift this much: ground-plane refits, sway).
+        confirm_hits: detections a track needs before it is coasted.
+        min_hit_fraction: a track is coasted only while it was detected in at least this
+            fraction of the frames since its birth (M of N: an obstacle is seen in most
+            frames, a texture that sometimes passes the threshold is not).
+    Raises:
+        ValueError: a setting out of its range (the message names it).
+    """
+
+    def __init__(self, coast_s: float = 1.0, gate_chi2: float = CHI2_3_99,
+                 process_noise_m: float = 0.05, confirm_hits: int = 1,
+                 min_hit_fraction: float = 0.5) -> None:
+        self.coast_s, self.gate_chi2 = float(coast_s), float(gate_chi2)
+        self.process_noise_m, self.confirm_hits = float(process_noise_m), int(confirm_hits)
+        self.min_hit_fraction = float(min_hit_fraction)
+        for name, lo, hi in (('coast_s', 0.0, 3600.0), ('gate_chi2', 0.01, 1e6),
+                             ('process_noise_m', 0.0, 100.0), ('confirm_hits', 1, 1000),
+                             ('min_hit_fraction', 0.0, 1.0)):
+            val = getattr(self, name)
+            if not lo <= val <= hi:
+                raise ValueError(f'ObstacleTracker.{name} = {val} is out of range '
+                                 f'[{lo}, {hi}]')
+        #: x (T, 3) feet, P (T, 3, 3) covariances, ids, hits, stamps last detected
+        self._x = np.zeros((0, 3))
+        self._P = np.zeros((0, 3, 3))
+        self._id = np.zeros(0, np.int64)
+        self._hits = np.zeros(0, np.int64)
+        self._frames = np.zeros(0, np.int64)
+        self._last_seen = np.zeros(0)
+        self._payload: list = []
+        self._stamp: float | None = None
+        self._next_id = 1
+
+    def __len__(self) -> int:
+        return int(self._x.shape[0])
+
+    def reset(self) -> None:
+        """End every track (ids keep counting up)."""
+        self._keep(np.zeros(len(self), bool))
+        self._stamp = None
+
+    def _keep(self, keep: np.ndarray) -> None:
+        self._x, self._P = self._x[keep], self._P[keep]
+        self._id, self._hits = self._id[keep], self._hits[keep]
+        self._frames = self._frames[keep]
+        self._last_seen = self._last_seen[keep]
+        self._payload = [p for p, k in zip(self._payload, keep) if k]
+
+    def predict(self, stamp_s: float,
+                motion: tuple[np.ndarray, np.ndarray] | None,
+                motion_cov: np.ndarray | None = None) -> None:
+        """Carry the tracks to the frame at ``stamp_s`` (seconds).
+
+        Args:
+            stamp_s: the new frame's time, s. A time going backwards ends all tracks.
+            motion: (R (3, 3), t (3,)) the left camera's motion from the previous frame
+                to this one, ``X_prev = R X_curr + t`` (metres, left optical frames), or
+                None when unknown (all tracks end).
+            motion_cov: (3, 3) covariance of t, m² (default 0).
+        """
+        dt = 0.0 if self._stamp is None else stamp_s - self._stamp
+        self._stamp = stamp_s
+        if len(self) == 0:
+            return
+        if motion is None or dt < 0:
+            self.reset()
+            self._stamp = stamp_s
+            return
+        Rc = np.asarray(motion[0], float).reshape(3, 3)
+        tc = np.asarray(motion[1], float).reshape(3)
+        F = Rc.T
+        u = -F @ tc
+        # x = F x + u
+        self._x = self._x @ F.T + u[None, :]
+        # P = F P Fᵀ + Q
+        Q = (self.process_noise_m ** 2) * dt * np.eye(3)
+        if motion_cov is not None:
+            Q = Q + F @ np.asarray(motion_cov, float).reshape(3, 3) @ F.T
+        self._P = np.einsum('ij,njk,lk->nil', F, self._P, F) + Q[None]
+
+    def update(self, feet: np.ndarray, feet_cov: np.ndarray, payloads: Sequence[object],
+               is_free: Callable[[object, np.ndarray], bool] | None = None
+               ) -> list[TrackOutput]:
+        """Associate this frame's detections with the (predicted) tracks and update.
+
+        Call :meth:`predict` first, once per frame.
+
+        Args:
+            feet: (N, 3) float64 detected feet, metres, current left optical frame.
+            feet_cov: (N, 3, 3) their covariances R, m².
+            payloads: N objects kept with the track (e.g. the detection).
+            is_free: ``is_free(payload, foot) -> bool`` for an undetected track: True when
+                the frame shows its place free (or out of view), which ends it.
+        Returns:
+            The tracks reported this frame: every detection's (in detection order), then
+            the coasted ones.
+        """
+        z = np.asarray(feet, float).reshape(-1, 3)
+        Rz = np.asarray(feet_cov, float).reshape(-1, 3, 3)
+        n, t = z.shape[0], len(self)
+        if len(payloads) != n or Rz.shape[0] != n:
+            raise ValueError(f'feet ({n}), feet_cov ({Rz.shape[0]}) and payloads '
+                             f'({len(payloads)}) must be as many')
+        stamp = 0.0 if self._stamp is None else self._stamp
+        det_track = np.full(n, -1, np.int64)
+        if n and t:
+            # y = z - H x ; S = H P Hᵀ + R ; d² = yᵀ S⁻¹ y, all (track, detection) pairs
+            y = z[None, :, :] - self._x[:, None, :]
+            S = self._P[:, None] + Rz[None, :]
+            d2 = np.einsum('tni,tni->tn', y, np.linalg.solve(S, y[..., None])[..., 0])
+            order = np.argsort(d2, axis=None)
+            used_t = np.zeros(t, bool)
+            for flat in order:
+                i, j = divmod(int(flat), n)
+                if d2[i, j] > self.gate_chi2:
+                    break
+                if used_t[i] or det_track[j] >= 0:
+                    continue
+                used_t[i] = True
+                det_track[j] = i
+            ti = det_track[det_track >= 0]
+            dj = np.flatnonzero(det_track >= 0)
+            if ti.size:
+                P = self._P[ti]
+                S = P + Rz[dj]
+                # K = P Hᵀ S⁻¹ (P, S symmetric: K = (S⁻¹ P)ᵀ)
+                K = np.swapaxes(np.linalg.solve(S, P), 1, 2)
+                # x = x + K y
+                self._x[ti] = self._x[ti] + np.einsum('nij,nj->ni', K, z[dj] - self._x[ti])
+                # P = (I - K) P (I - K)ᵀ + K R Kᵀ
+                IK = np.eye(3)[None] - K
+                self._P[ti] = (np.einsum('nij,njk,nlk->nil', IK, P, IK)
+                               + np.einsum('nij,njk,nlk->nil', K, Rz[dj], K))
+                self._hits[ti] += 1
+                self._last_seen[ti] = stamp
+                for i, j in zip(ti.tolist(), dj.tolist()):
+                    self._payload[i] = payloads[j]
+        # Tracks not detected: coast or end.
+        seen = np.zeros(t, bool)
+        seen[det_track[det_track >= 0]] = True
+        keep = np.ones(t, bool)
+        self._frames += 1
+        for i in np.flatnonzero(~seen).tolist():
+            alive = (self._hits[i] >= self.confirm_hits
+                     and self._hits[i] >= self.min_hit_fraction * self._frames[i]
+                     and stamp - self._last_seen[i] <= self.coast_s + 1e-9)
+            if alive and is_free is not None:
+                alive = not is_free(self._payload[i], self._x[i].copy())
+            keep[i] = alive
+        # Births: detections left over.
+        new = np.flatnonzero(det_track < 0)
+        ids = np.arange(self._next_id, self._next_id + new.size, dtype=np.int64)
+        self._next_id += int(new.size)
+        index_of = np.full(t + new.size, -1, np.int64)
+        index_of[det_track[det_track >= 0]] = np.flatnonzero(det_track >= 0)
+        index_of[t:] = new
+        self._x = np.concatenate([self._x, z[new]])
+        self._P = np.concatenate([self._P, Rz[new]])
+        self._id = np.concatenate([self._id, ids])
+        self._hits = np.concatenate([self._hits, np.ones(new.size, np.int64)])
+        self._frames = np.concatenate([self._frames, np.ones(new.size, np.int64)])
+        self._last_seen = np.concatenate([self._last_seen, np.full(new.size, stamp)])
+        self._payload.extend(payloads[j] for j in new.tolist())
+        keep = np.concatenate([keep, np.ones(new.size, bool)])
+        index_of = index_of[keep]
+        self._keep(keep)
+        out = [TrackOutput(track_id=int(self._id[i]), index=int(index_of[i]),
+                           foot=self._x[i].copy(), foot_cov=self._P[i].copy(),
+                           age_s=float(stamp - self._last_seen[i]), hits=int(self._hits[i]),
+                           payload=self._payload[i]) for i in range(len(self))]
+        out.sort(key=lambda o: (o.index < 0, o.index))
+        return out

@@ -1,0 +1,133 @@
+"""Obstacle tracks (core.obstacle_tracks): Kalman filtering, gating, coasting, births and
+deaths, and camera motion as the input. No ROS."""
+import numpy as np
+import pytest
+
+from asmonc_vision.core.obstacle_tracks import ObstacleTracker
+
+STILL = (np.eye(3), np.zeros(3))
+R1 = np.eye(3) * 0.05 ** 2
+
+
+def step(tr, stamp, feet, free=None):
+    """One frame: predict with the identity, update with ``feet`` (K, 3)."""
+    feet = np.asarray(feet, float).reshape(-1, 3)
+    tr.predict(stamp, STILL)
+    return tr.update(feet, np.repeat(R1[None], len(feet), 0), list(range(len(feet))), free)
+
+
+def test_static_obstacle_keeps_its_id_and_the_filter_beats_one_measurement():
+    rng = np.random.default_rng(3)
+    truth = np.array([0.3, 1.2, 2.5])
+    tr = ObstacleTracker(process_noise_m=0.0)
+    ids, err_meas, err_track = set(), [], []
+    for k in range(30):
+        z = truth + rng.normal(0, 0.03, 3)      # within the modelled R = (0.05 m)² I
+        out = step(tr, 0.1 * k, [z])
+        assert len(out) == 1 and out[0].index == 0 and out[0].age_s == 0.0
+        ids.add(out[0].track_id)
+        err_meas.append(np.linalg.norm(z - truth))
+        err_track.append(np.linalg.norm(out[0].foot - truth))
+    assert ids == {1}
+    assert np.mean(err_track[10:]) < 0.5 * np.mean(err_meas[10:])
+    # P shrinks like R / n for a static point (no process noise)
+    assert np.allclose(np.diag(out[0].foot_cov), 0.05 ** 2 / 30, rtol=1e-6)
+
+
+def test_coasting_bridges_missed_frames_then_the_track_ends():
+    tr = ObstacleTracker(coast_s=0.25, min_hit_fraction=0.0)
+    p = [0.0, 1.2, 3.0]
+    step(tr, 0.0, [p])
+    step(tr, 0.1, [p])
+    out = step(tr, 0.2, [])                 # missed: z = None
+    assert len(out) == 1 and out[0].index == -1 and out[0].age_s == pytest.approx(0.1)
+    assert np.allclose(out[0].foot, p)
+    assert step(tr, 0.3, [])[0].age_s == pytest.approx(0.2)
+    assert step(tr, 0.4, []) == []          # 0.3 s > coast_s
+    assert len(tr) == 0
+
+
+def test_a_track_seen_in_too_few_frames_is_not_coasted():
+    tr = ObstacleTracker(coast_s=10.0, min_hit_fraction=0.5)
+    step(tr, 0.0, [[0.0, 1.2, 3.0]])
+    assert len(step(tr, 0.1, [])) == 1      # 1 of 2 frames
+    assert step(tr, 0.2, []) == []          # 1 of 3 frames: ended
+
+
+def test_confirm_hits():
+    tr = ObstacleTracker(confirm_hits=2, min_hit_fraction=0.0)
+    step(tr, 0.0, [[0.0, 1.2, 3.0]])
+    assert step(tr, 0.1, []) == []          # one detection is not carried on
+
+
+def test_free_space_ends_an_undetected_track_at_once():
+    tr = ObstacleTracker(coast_s=5.0)
+    step(tr, 0.0, [[0.0, 1.2, 3.0]])
+    seen = []
+
+    def free(payload, foot):
+        seen.append((payload, foot))
+        return True
+
+    assert step(tr, 0.1, [], free) == []
+    assert seen and seen[0][0] == 0 and np.allclose(seen[0][1], [0.0, 1.2, 3.0])
+
+
+def test_gating_a_far_detection_starts_a_new_track():
+    tr = ObstacleTracker(min_hit_fraction=0.0)
+    step(tr, 0.0, [[0.0, 1.2, 3.0]])
+    out = step(tr, 0.1, [[0.6, 1.2, 3.0]])   # 0.6 m away: d² = 0.36 / (2 · 0.0025) = 72
+    assert [o.index for o in out] == [0, -1]
+    assert out[0].track_id == 2 and out[1].track_id == 1
+    # nearest neighbour: of two detections the nearer one updates the track
+    tr = ObstacleTracker()
+    step(tr, 0.0, [[0.0, 1.2, 3.0]])
+    out = step(tr, 0.1, [[0.09, 1.2, 3.0], [0.02, 1.2, 3.0]])
+    by_index = {o.index: o.track_id for o in out}
+    assert by_index[1] == 1 and by_index[0] == 2
+
+
+def test_camera_motion_is_the_input():
+    """The camera walks 0.5 m forward and turns 5 degrees left between frames: the track
+    follows the obstacle into the new frame and keeps its id."""
+    tr = ObstacleTracker(process_noise_m=0.0, min_hit_fraction=0.0)
+    world = np.array([0.4, 1.2, 4.0])        # the obstacle in the first camera frame
+    tr.predict(0.0, None)
+    tr.update(world[None], R1[None], ['a'])
+    a = np.radians(5.0)
+    # the current frame's orientation in the previous one: a yaw left is a rotation
+    # about the optical -y axis (y down)
+    Rc = np.array([[np.cos(a), 0, -np.sin(a)], [0, 1, 0], [np.sin(a), 0, np.cos(a)]])
+    tc = np.array([0.0, 0.0, 0.5])
+    cur = Rc.T @ (world - tc)                # X_prev = R X_curr + t
+    tr.predict(0.1, (Rc, tc))
+    out = tr.update(np.zeros((0, 3)), np.zeros((0, 3, 3)), [])
+    assert np.allclose(out[0].foot, cur)     # coasted through the motion
+    tr.predict(0.2, STILL)
+    out = tr.update(cur[None] + 0.01, R1[None], ['b'])
+    assert len(out) == 1 and out[0].track_id == 1 and out[0].payload == 'b'
+    # unknown motion: the tracks cannot be carried and end
+    tr.predict(0.3, None)
+    assert len(tr) == 0
+
+
+def test_time_going_back_ends_the_tracks():
+    tr = ObstacleTracker()
+    step(tr, 1.0, [[0.0, 1.2, 3.0]])
+    tr.predict(0.5, STILL)
+    assert len(tr) == 0
+
+
+@pytest.mark.parametrize('kw', [dict(coast_s=-1.0), dict(gate_chi2=0.0),
+                                dict(process_noise_m=-0.1), dict(confirm_hits=0),
+                                dict(min_hit_fraction=1.5)])
+def test_bad_settings_name_the_field(kw):
+    with pytest.raises(ValueError, match=next(iter(kw))):
+        ObstacleTracker(**kw)
+
+
+def test_mismatched_inputs_raise():
+    tr = ObstacleTracker()
+    tr.predict(0.0, STILL)
+    with pytest.raises(ValueError):
+        tr.update(np.zeros((2, 3)), np.zeros((1, 3, 3)), [0, 1])
