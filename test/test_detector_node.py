@@ -61,6 +61,57 @@ def test_one_result_per_pair_and_obstacles_found(graph):
     assert got['debug'][-1].encoding == 'bgr8'
 
 
+def test_walking_tracks_take_egomotion_as_their_motion_input(graph):
+    """Walking: with the pair's /egomotion (here from the core estimator on the same
+    frames) the node's obstacle tracks are carried from frame to frame and keep their
+    ids; the detector uses one motion per pair after the first."""
+    import numpy as np
+    from geometry_msgs.msg import TransformStamped
+
+    from asmonc_vision.core.motion import EgomotionEstimator
+    from asmonc_vision.core.rotations import matrix_to_quaternion
+    from asmonc_vision.nodes.conversions import image_msg_to_gray, stereo_camera_from_infos
+
+    det, ex, send, got = graph
+    probe = Node('ego_probe', context=det.context)
+    pub = probe.create_publisher(TransformStamped, '/egomotion', RESULT_QOS)
+    ex.add_node(probe)
+    assert spin_until(ex, lambda: pub.get_subscription_count() >= 1)
+    frames = load_frames(BAGS / 'walk_obstacles', range(16, 32))   # walking
+    est = EgomotionEstimator()
+    motions = []
+    for left, right, li, ri in frames:
+        cam = stereo_camera_from_infos(li, ri)
+        stamp = left.header.stamp.sec * 10 ** 9 + left.header.stamp.nanosec
+        r = est.process(image_msg_to_gray(left), image_msg_to_gray(right), cam, stamp)
+        motions.append(r.motion if r.ok else None)
+    assert sum(m is not None for m in motions) >= 11
+    for i, f in enumerate(frames):
+        send(*f)
+        if motions[i] is not None:
+            msg = TransformStamped()
+            msg.header = f[0].header
+            msg.child_frame_id = f[0].header.frame_id
+            q = matrix_to_quaternion(motions[i].R)
+            msg.transform.rotation.x, msg.transform.rotation.y = float(q[0]), float(q[1])
+            msg.transform.rotation.z, msg.transform.rotation.w = float(q[2]), float(q[3])
+            t = motions[i].t
+            msg.transform.translation.x, msg.transform.translation.y = float(t[0]), float(t[1])
+            msg.transform.translation.z = float(t[2])
+            pub.publish(msg)
+        assert spin_until(ex, lambda: len(got['obstacles']) == i + 1, timeout=15)
+    # a motion is taken for every pair with a ground plane (none while initialising)
+    assert spin_until(ex, lambda: len(got['plane']) == len(frames))
+    tracking = [p.status == GroundPlane.TRACKING for p in got['plane']]
+    assert det.motions_used == sum(m is not None and tr for m, tr in zip(motions[1:],
+                                                                         tracking[1:]))
+    # the same obstacle keeps its track id from frame to frame while walking
+    ids = [{o.id for o in m.obstacles} for m in got['obstacles'][3:]]
+    carried = sum(len(a & b) for a, b in zip(ids, ids[1:]))
+    assert carried >= 10 and all(i > 0 for s_ in ids for i in s_)
+    probe.destroy_node()
+
+
 def test_bad_inputs_are_logged_skipped_and_the_node_keeps_going(graph, capfd):
     det, ex, send, got = graph
     good = load_frames(BAGS / 'static_obstacles', [0, 1, 2, 15])  # 15: 1.5 s later

@@ -61,6 +61,7 @@ import dataclasses
 import math
 import time
 from collections import deque
+from typing import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -1562,7 +1563,8 @@ class GpodDetector:
 
     # ------------------------------------------------------------------ main
     def process(self, left: np.ndarray, right: np.ndarray, cam: StereoCamera,
-                stamp_ns: int | None = None) -> GpodResult:
+                stamp_ns: int | None = None,
+                motion: tuple | Callable[[], tuple | None] | None = None) -> GpodResult:
         """Detect obstacles in one rectified stereo pair.
 
         Args:
@@ -1571,6 +1573,13 @@ class GpodDetector:
                 call's resets the detector.
             stamp_ns: the pair's time, ns (for the obstacle tracks' coasting time); None:
                 frames ``track_frame_period_s`` apart.
+            motion: the left camera's motion from the previous pair to this one, the
+                obstacle tracks' input: (R (3, 3), t (3,)) or (R, t, cov (3, 3) of t, m²),
+                ``X_prev = R X_curr + t`` (metres, left optical frames; `/egomotion`'s
+                convention). None: the identity while the rig stands still (its edges
+                stay in place), unknown otherwise (the tracks end). A callable returning
+                one of these is called after the detection, before the tracks are updated
+                (so a node can wait for the motion while the detector works).
         Returns:
             The GpodResult (status 'initialising', 'tracking' or 'lost').
         Raises:
@@ -1625,7 +1634,9 @@ class GpodDetector:
                                                 er, cand, still)
             stamp_s = (self._frame * c.track_frame_period_s if stamp_ns is None
                        else stamp_ns * 1e-9)
-            obstacles = self._track(detections, stamp_s, still, cam, metric)
+            if callable(motion):
+                motion = motion()
+            obstacles = self._track(detections, stamp_s, still, cam, metric, motion)
         else:
             self._tracker.reset()
             if status == 'tracking':          # smoothing made an implausible plane
@@ -1817,26 +1828,38 @@ class GpodDetector:
         return features, tuple(found)
 
     def _track(self, detections: tuple[GpodObstacle, ...], stamp_s: float, still: bool,
-               cam: StereoCamera, metric: MetricPlane) -> tuple[GpodObstacle, ...]:
+               cam: StereoCamera, metric: MetricPlane, motion=None
+               ) -> tuple[GpodObstacle, ...]:
         """The frame's reports: its detections with their feet filtered by their obstacle
         tracks, and the tracks coasted through this frame (`core.obstacle_tracks`). The
-        tracks' motion input is the identity while the rig stands still; after any
-        motion (unknown here) all tracks end. Drop-offs are not tracked."""
+        tracks' motion input is ``motion`` if given, else the identity while the rig
+        stands still; after a motion not given all tracks end. Drop-offs are not
+        tracked. A coasted obstacle moved by a given motion has its image region
+        re-projected from its new foot and top."""
         c = self.config
         n = metric.normal_up
-        self._tracker.predict(stamp_s, (np.eye(3), np.zeros(3)) if still else None)
+        if motion is not None:
+            mcov = motion[2] if len(motion) > 2 else None
+            self._tracker.predict(stamp_s, (motion[0], motion[1]), mcov)
+        else:
+            self._tracker.predict(stamp_s, (np.eye(3), np.zeros(3)) if still else None)
         obst = [o for o in detections if not o.is_drop]
         drops = [o for o in detections if o.is_drop]
         feet = np.array([o.position - o.height * n for o in obst]).reshape(-1, 3)
         cov = self._foot_covariance(feet, cam)
-        tracks = self._tracker.update(feet, cov, obst, self._track_is_free)
+        moved = motion is not None
+        is_free = ((lambda ob, foot: self._track_is_free(
+            dataclasses.replace(ob, roi=_moved_roi(ob, foot, n, cam)), foot))
+            if moved else self._track_is_free)
+        tracks = self._tracker.update(feet, cov, obst, is_free)
         out = list(drops)
         for tr in tracks:
             ob = tr.payload
             rng_, brg = ground_range_bearing(metric, tr.foot[None, :])
             seen = tr.index >= 0
+            roi = ob.roi if (seen or not moved) else _moved_roi(ob, tr.foot, n, cam)
             out.append(dataclasses.replace(
-                ob, position=tr.foot + ob.height * n, range=float(rng_[0]),
+                ob, position=tr.foot + ob.height * n, range=float(rng_[0]), roi=roi,
                 bearing=float(brg[0]), track_id=tr.track_id, age_s=tr.age_s,
                 string_ids=ob.string_ids if seen else np.zeros(0, np.int32),
                 num_edge_pixels=ob.num_edge_pixels if seen else 0))
@@ -2080,6 +2103,26 @@ class GpodDetector:
                 confidence=float(conf[k]), roi=roi, num_edge_pixels=int(count[k]),
                 string_ids=sid_u[lab_u == k].astype(np.int32)))
         return out
+
+
+def _moved_roi(ob: GpodObstacle, foot: np.ndarray, normal_up: np.ndarray,
+               cam: StereoCamera) -> tuple[int, int, int, int]:
+    """The left-image region (x, y, w, h) of obstacle ``ob`` moved to stand on ``foot``
+    ((3,) metres, left optical frame; ``normal_up`` the plane's unit normal): from its top
+    down to its foot, as wide as before scaled by the change of depth; clipped to the
+    image (at least 1 x 1)."""
+    old_foot = ob.position - ob.height * normal_up
+    top = foot + ob.height * normal_up
+    z_f, z_t = max(float(foot[2]), 1e-3), max(float(top[2]), 1e-3)
+    u = cam.f * foot[0] / z_f + cam.cx
+    v_foot = cam.f * foot[1] / z_f + cam.cy
+    v_top = cam.f * top[1] / z_t + cam.cy
+    w = ob.roi[2] * max(float(old_foot[2]), 1e-3) / z_f
+    x0 = int(np.clip(np.floor(u - w / 2), 0, cam.width - 1))
+    x1 = int(np.clip(np.ceil(u + w / 2), 0, cam.width - 1))
+    y0 = int(np.clip(np.floor(min(v_top, v_foot)), 0, cam.height - 1))
+    y1 = int(np.clip(np.ceil(max(v_top, v_foot)), 0, cam.height - 1))
+    return (x0, y0, max(x1 - x0 + 1, 1), max(y1 - y0 + 1, 1))
 
 
 def _group_quantile(group: np.ndarray, x: np.ndarray, q: float, n_groups: int) -> np.ndarray:

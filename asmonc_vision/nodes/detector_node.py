@@ -13,15 +13,26 @@ callbacks that receive images stay fast. Publishes, per processed pair:
 * `/obstacles/markers` (visualization_msgs/MarkerArray), `/detector/debug_image` (bgr8)
 * `/diagnostics`
 
+Subscribes to `/egomotion` (geometry_msgs/TransformStamped, the visual egomotion node's
+motion of the left camera from the previous pair to this one) as the motion input of the
+obstacle tracks: after detecting a pair the worker waits up to ``egomotion_wait`` for that
+pair's motion, and tracks are carried through the motion (an obstacle whose evidence dips
+for a frame is still reported, moved to where it now is). With no motion (no egomotion
+node, a pair it could not estimate, a pair dropped here) tracks are carried only while
+the rig stands still; detection itself never waits on anything.
+
 Focal length, principal point and baseline come from the CameraInfo on the wire, the
 ground plane from the images: the node works on any rectified rig and image size.
 """
 from __future__ import annotations
 
+import collections
+import threading
+import time
 from dataclasses import dataclass
 
 import numpy as np
-from geometry_msgs.msg import Point
+from geometry_msgs.msg import Point, TransformStamped
 from sensor_msgs.msg import Image
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
@@ -32,9 +43,10 @@ from asmonc_vision.core.camera import StereoCamera, metric_from_plane
 from asmonc_vision.core.config import param
 from asmonc_vision.core.draw import draw_debug
 from asmonc_vision.core.gpod import GpodConfig, GpodDetector, GpodResult
+from asmonc_vision.core.rotations import quaternion_to_matrix
 from asmonc_vision.nodes.common import (IMAGE_QOS, RESULT_QOS, Diagnostics, declare_config,
                                         run_node)
-from asmonc_vision.nodes.conversions import array_to_image_msg
+from asmonc_vision.nodes.conversions import array_to_image_msg, stamp_to_ns
 from asmonc_vision.nodes.stereo_input import StereoInputConfig, StereoInputNode, StereoPair
 
 _STATUS = {'initialising': GroundPlane.INITIALISING, 'tracking': GroundPlane.TRACKING,
@@ -51,6 +63,13 @@ class DetectorNodeConfig(StereoInputConfig):
         range=(1, 1000))
     publish_debug_image: bool = param(True, 'publish /detector/debug_image')
     publish_markers: bool = param(True, 'publish /obstacles/markers')
+    use_egomotion: bool = param(
+        True, 'use /egomotion (the visual egomotion node) as the motion input of the '
+        'obstacle tracks')
+    egomotion_wait: float = param(
+        0.1, 'longest wait, after detecting a pair, for its /egomotion message (wall time, '
+        's); without it the tracks are carried only while the rig stands still',
+        range=(0.0, 2.0))
 
 
 class DetectorNode(StereoInputNode):
@@ -65,15 +84,70 @@ class DetectorNode(StereoInputNode):
         self.pub_plane = self.create_publisher(GroundPlane, '/ground_plane', RESULT_QOS)
         self.pub_markers = self.create_publisher(MarkerArray, '/obstacles/markers', RESULT_QOS)
         self.pub_debug = self.create_publisher(Image, '/detector/debug_image', IMAGE_QOS)
+        #: /egomotion by stamp (ns) -> (R, t), the newest stamp received, the previous
+        #: processed pair's sequence number, and how many pairs had a motion
+        self._motions: collections.OrderedDict = collections.OrderedDict()
+        self._motion_cv = threading.Condition()
+        self._newest_motion_ns = -1
+        self._prev_seq: int | None = None
+        self.motions_used = 0
+        if self.node_config.use_egomotion:
+            self.create_subscription(TransformStamped, '/egomotion', self._on_egomotion,
+                                     RESULT_QOS)
         self.start_stereo_input(self.node_config)
         self.get_logger().info('detector ready: waiting for /stereo/{left,right}/image_rect')
 
     def restart(self) -> None:
         self.detector.reset()
+        self._prev_seq = None
+
+    def _on_egomotion(self, msg: TransformStamped) -> None:
+        q = msg.transform.rotation
+        tr = msg.transform.translation
+        t = np.array([tr.x, tr.y, tr.z], float)
+        try:
+            R = quaternion_to_matrix(np.array([q.x, q.y, q.z, q.w], float))
+        except ValueError:
+            R = None
+        if R is None or not np.all(np.isfinite(t)):
+            self.get_logger().warn('/egomotion with non-finite values ignored',
+                                   throttle_duration_sec=5.0)
+            return
+        stamp = stamp_to_ns(msg.header.stamp)
+        with self._motion_cv:
+            self._motions[stamp] = (R, t)
+            while len(self._motions) > 64:
+                self._motions.popitem(last=False)
+            self._newest_motion_ns = max(self._newest_motion_ns, stamp)
+            self._motion_cv.notify_all()
+
+    def _motion_for(self, stamp_ns: int, follows_previous: bool):
+        """The pair's /egomotion (R, t), waiting up to ``egomotion_wait``; None when the
+        previous pair was not the one processed before it, nobody publishes /egomotion,
+        a later motion arrived instead (none will come for this pair) or time ran out."""
+        if not (self.node_config.use_egomotion and follows_previous):
+            return None
+        if self.count_publishers('/egomotion') == 0:
+            return None
+        deadline = time.monotonic() + self.node_config.egomotion_wait
+        with self._motion_cv:
+            while True:
+                motion = self._motions.pop(stamp_ns, None)
+                if motion is not None:
+                    self.motions_used += 1
+                    return motion
+                left = deadline - time.monotonic()
+                if self._newest_motion_ns > stamp_ns or left <= 0:
+                    return None
+                self._motion_cv.wait(left)
 
     def process_pair(self, pair: StereoPair, left: np.ndarray, right: np.ndarray,
                      cam: StereoCamera) -> None:
-        result = self.detector.process(left, right, cam, stamp_ns=pair.stamp_ns)
+        follows = self._prev_seq is not None and pair.seq == self._prev_seq + 1
+        self._prev_seq = pair.seq
+        result = self.detector.process(
+            left, right, cam, stamp_ns=pair.stamp_ns,
+            motion=lambda: self._motion_for(pair.stamp_ns, follows))
         header = pair.left.header
         self.pub_obstacles.publish(obstacles_to_msg(result, header))
         self.pub_plane.publish(plane_to_msg(result, cam, header))
@@ -85,6 +159,7 @@ class DetectorNode(StereoInputNode):
         self.diag.update(level, f'{result.status}: {len(result.obstacles)} obstacles',
                          frames_in=self.frames_in, frames_done=self.frames_done + 1,
                          frames_dropped=self.frames_dropped, frames_bad=self.frames_bad,
+                         motions_used=self.motions_used,
                          total_ms=f"{result.timings.get('total', float('nan')):.1f}")
 
 
