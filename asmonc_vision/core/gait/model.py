@@ -698,6 +698,23 @@ class WalkModelEKF:
         h, H = self.model(0.0, x=xs)
         return h, H @ Ps @ H.T
 
+    def predict_models(self, s: float) -> np.ndarray:
+        """Each IMM model's own prediction of the true attitude at filter time + s
+        (s >= 0), (2, 3) rad, rows straight and turning: h(F_j(s) x_j) (the output of
+        ``predict_attitude`` is that of their mixture).
+
+        x_j(s) = F_j(s) x_j;  h_a = o_a + sum_k Im[(alpha_ak + i beta_ak) exp(i k theta)]
+        (the yaw ramp is in F: o_y(s) = o_y + r s + a s^2 / 2)."""
+        xs = np.array([self.transition(max(s, 0.0), model=j)[0] @ self._mx[j]
+                       for j in range(2)])                          # (2, n)
+        out = xs[:, I_O].copy()
+        if self.walking:
+            lay = self.layout
+            c = xs[:, lay.alpha] + 1j * xs[:, lay.beta]                # (2, M)
+            u = lay.k[None, :] * xs[:, I_TH][:, None]
+            out += np.imag(c * np.exp(1j * u)) @ lay.sum_matrix.T
+        return out
+
     # ------------------------------------------------------------------ updates
     def update(self, z, R, hfun, wrap_yaw: bool = True) -> float | None:
         """Iterated EKF update of each model with measurement z (m,), noise R (m, m), and

@@ -132,12 +132,15 @@ class GaitTracker:
         self._next_lock_check = 0.0
         self._walk_start = 0.0
         self._was_turning = False
-        self._past: deque = deque()               # (t, model prediction, measurement)
+        # (t, model prediction, measurement, each IMM model's own yaw prediction (2,))
+        self._past: deque = deque()
         self._zc_prev: tuple | None = None        # (t, lag-corrected measurement)
         self._z_raw = np.zeros(3)                 # latest raw measurement (yaw continuous)
-        self._e2m = np.zeros(3)                   # running mean squared error: model
-        self._e2h = np.zeros(3)                   # ... and "hold the attitude"
-        self._emh = np.zeros(3)                   # ... and their mean product
+        # running mean squared error of the model per IMM model (rows straight,
+        # turning: they differ in yaw only, the roll and pitch columns are the same)
+        self._e2m = np.zeros((2, 3))
+        self._e2h = np.zeros(3)                   # ... of "hold the attitude"
+        self._emh = np.zeros((2, 3))              # ... and their mean product
         self._long = np.zeros((3, 3))             # the same over SKILL_LONG_MEMORY s walking
         self._long_n = 0.0                        # ... its weight (scored walking samples)
         self._last_yaw_raw = 0.0
@@ -245,7 +248,8 @@ class GaitTracker:
         self._score_past(t, zc)
         self._zc_prev = (t, zc)
         est = self.estimate(t, event)
-        self._past.append((t, est.predicted_model, z))
+        yaw_j = self.ekf.predict_models(t - self.ekf.t + c.horizon)[:, 2]
+        self._past.append((t, est.predicted_model, z, yaw_j))
         return est
 
     def _score_past(self, t: float, zc: np.ndarray) -> None:
@@ -254,21 +258,29 @@ class GaitTracker:
         the measurement at the target time (interpolated between the latest two
         samples); running mean squared errors per axis over ``skill_memory`` s. The
         measurements are z_c: prefiltered, with the lag of their walk-model part undone
-        (the true attitude plus noise where the model holds)."""
+        (the true attitude plus noise where the model holds).
+
+        Yaw is scored per IMM model: the straight and the turning model's own
+        predictions (both, whichever was the more probable), so that each model's weight
+        reflects its own skill — the straight model's errors at a turn's onset do not
+        lower the turning model's weight once it has taken over, and errors both models
+        share (a poor start fit) lower both."""
         h = self.cfg.horizon
         past = self._past
         a = 1.0 / max(self.cfg.skill_memory * self.cfg.sample_rate, 1.0)
         t0, z0 = self._zc_prev if self._zc_prev is not None else (t, zc)
         while past and past[0][0] + h <= t + 1e-9:
-            ti, pm, held = past.popleft()
+            ti, pm, held, yaw_j = past.popleft()
             u = 1.0 if t <= t0 else min(max((ti + h - t0) / (t - t0), 0.0), 1.0)
             truth = z0 + u * wrap_diff(zc, z0)
             em = pm - truth
             eh = held - truth
             em[2], eh[2] = wrap_angle(em[2]), wrap_angle(eh[2])
-            self._e2m += a * (em * em - self._e2m)
+            emj = np.tile(em, (2, 1))                # per model: own yaw error
+            emj[:, 2] = [wrap_angle(float(y - truth[2])) for y in yaw_j]
+            self._e2m += a * (emj * emj - self._e2m)
             self._e2h += a * (eh * eh - self._e2h)
-            self._emh += a * (em * eh - self._emh)
+            self._emh += a * (emj * eh - self._emh)
             if self.ekf.walking:
                 b = 1.0 / max(SKILL_LONG_MEMORY * self.cfg.sample_rate, 1.0)
                 self._long_n += 1.0
@@ -385,13 +397,13 @@ class GaitTracker:
                 seen = np.mean((zh[m] - z[m]) ** 2, axis=0)
                 e2 = np.maximum(e2, seen)
             self._e2h = e2 + SKILL_FLOOR ** 2
-            self._e2m = SKILL_PRIOR * self._e2h
-            self._emh = np.zeros(3)
+            self._e2m = np.tile(SKILL_PRIOR * self._e2h, (2, 1))     # both IMM models
+            self._emh = np.zeros((2, 3))
             if self._long_n >= SKILL_LONG_MIN * self.cfg.sample_rate:
                 # the skill shown on earlier walks, scaled to this walk's holding error
                 sc = self._e2h / np.maximum(self._long[1], 1e-12)
-                self._e2m = self._long[0] * sc
-                self._emh = self._long[2] * sc
+                self._e2m = np.tile(self._long[0] * sc, (2, 1))
+                self._emh = np.tile(self._long[2] * sc, (2, 1))
 
     # ------------------------------------------------------------------ visual motion
     def add_egomotion(self, t_prev: float, t_cur: float, r_optical,
@@ -440,8 +452,15 @@ class GaitTracker:
     def skill_weights(self) -> np.ndarray:
         """(3,) weight of the walk model's prediction against holding the measurement,
         per axis: the minimum-MSE combination w em + (1 - w) eh of two correlated
-        predictors, w = (E eh^2 - E em eh) / E (em - eh)^2, clipped to [0, 1] (only at an
-        inclinometer stamp: visual motion alone has no measurement to hold)."""
+        predictors, w_j = (E eh^2 - E em_j eh) / E (em_j - eh)^2 clipped to [0, 1] for
+        each IMM model j (straight, turning; em_j its own error), w = sum_j mu_j w_j with
+        the models' current probabilities (only at an inclinometer stamp: visual motion
+        alone has no measurement to hold)."""
+        return self.ekf.mu @ self.model_skill_weights()
+
+    def model_skill_weights(self) -> np.ndarray:
+        """(2, 3) the minimum-MSE weight w_j of each IMM model (rows straight, turning)
+        and axis (roll and pitch the same for both)."""
         num = self._e2h - self._emh
         den = self._e2m + self._e2h - 2.0 * self._emh
         return np.clip(num / np.maximum(den, 1e-12), 0.0, 1.0)
