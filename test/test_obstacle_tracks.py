@@ -131,3 +131,27 @@ def test_mismatched_inputs_raise():
     tr.predict(0.0, STILL)
     with pytest.raises(ValueError):
         tr.update(np.zeros((2, 3)), np.zeros((1, 3, 3)), [0, 1])
+
+
+def test_a_detection_of_the_same_obstacle_elsewhere_keeps_the_track_seen():
+    """A far-corner report of the obstacle (outside the gate, but the same obstacle by
+    the caller's test) keeps the near track seen without moving it; a detection of
+    another obstacle does not."""
+    near, far = [0.0, 1.2, 3.0], [0.5, 1.2, 3.4]
+    same = lambda a, b: {a, b} == {'box-near', 'box-far'}    # noqa: E731
+    tr = ObstacleTracker(coast_s=0.15, min_hit_fraction=0.5)
+    tr.predict(0.0, STILL)
+    tr.update(np.array([near]), R1[None], ['box-near'])
+    for k in range(1, 6):                   # 0.5 s, beyond coast_s
+        tr.predict(0.1 * k, STILL)
+        out = tr.update(np.array([far]), R1[None], ['box-far'], same_object=same)
+        ids = {o.payload: o for o in out}
+        assert set(ids) == {'box-near', 'box-far'}
+        assert ids['box-near'].age_s == 0.0 and np.allclose(ids['box-near'].foot, near)
+    tr = ObstacleTracker(coast_s=0.15, min_hit_fraction=0.5)
+    tr.predict(0.0, STILL)
+    tr.update(np.array([near]), R1[None], ['box-near'])
+    for k in range(1, 4):
+        tr.predict(0.1 * k, STILL)
+        out = tr.update(np.array([far]), R1[None], ['post'], same_object=same)
+    assert [o.payload for o in out] == ['post']

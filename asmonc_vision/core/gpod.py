@@ -1835,7 +1835,9 @@ class GpodDetector:
         tracks' motion input is ``motion`` if given, else the identity while the rig
         stands still; after a motion not given all tracks end. Drop-offs are not
         tracked. A coasted obstacle moved by a given motion has its image region
-        re-projected from its new foot and top."""
+        re-projected from its new foot and top. While the rig stands still, a track not
+        detected is still seen when a detection's image region overlaps its own by half
+        (the same obstacle placed at another point)."""
         c = self.config
         n = metric.normal_up
         if motion is not None:
@@ -1851,7 +1853,12 @@ class GpodDetector:
         is_free = ((lambda ob, foot: self._track_is_free(
             dataclasses.replace(ob, roi=_moved_roi(ob, foot, n, cam)), foot))
             if moved else self._track_is_free)
-        tracks = self._tracker.update(feet, cov, obst, is_free)
+        # While the view stands still an obstacle's nearest visible point is one fixed
+        # point, so a detection of the same obstacle placed elsewhere (its far corner when
+        # one silhouette edge dips) keeps its track seen; in motion the nearest visible
+        # part of a large obstacle moves with the view, and it does not.
+        tracks = self._tracker.update(feet, cov, obst, is_free,
+                                      _same_object if still else None)
         out = list(drops)
         for tr in tracks:
             ob = tr.payload
@@ -2103,6 +2110,18 @@ class GpodDetector:
                 confidence=float(conf[k]), roi=roi, num_edge_pixels=int(count[k]),
                 string_ids=sid_u[lab_u == k].astype(np.int32)))
         return out
+
+
+def _same_object(a: GpodObstacle, b: GpodObstacle) -> bool:
+    """Whether two obstacles' image regions overlap by at least half the smaller one
+    (one obstacle, reported at different points)."""
+    ax, ay, aw, ah = a.roi
+    bx, by, bw, bh = b.roi
+    ix = min(ax + aw, bx + bw) - max(ax, bx)
+    iy = min(ay + ah, by + bh) - max(ay, by)
+    if ix <= 0 or iy <= 0:
+        return False
+    return ix * iy >= 0.5 * min(aw * ah, bw * bh)
 
 
 def _moved_roi(ob: GpodObstacle, foot: np.ndarray, normal_up: np.ndarray,

@@ -160,7 +160,8 @@ class ObstacleTracker:
         self._P = np.einsum('ij,njk,lk->nil', F, self._P, F) + Q[None]
 
     def update(self, feet: np.ndarray, feet_cov: np.ndarray, payloads: Sequence[object],
-               is_free: Callable[[object, np.ndarray], bool] | None = None
+               is_free: Callable[[object, np.ndarray], bool] | None = None,
+               same_object: Callable[[object, object], bool] | None = None
                ) -> list[TrackOutput]:
         """Associate this frame's detections with the (predicted) tracks and update.
 
@@ -172,6 +173,11 @@ class ObstacleTracker:
             payloads: N objects kept with the track (e.g. the detection).
             is_free: ``is_free(payload, foot) -> bool`` for an undetected track: True when
                 the frame shows its place free (or out of view), which ends it.
+            same_object: ``same_object(track_payload, detection_payload) -> bool``: a
+                detection that is not the track's (outside its gate: another point of
+                the obstacle measured as its nearest, e.g. a far corner) but shows the
+                same obstacle. It keeps the track seen (its coasting time and hit count
+                go on as if detected) without moving it.
         Returns:
             The tracks reported this frame: every detection's (in detection order), then
             the coasted ones.
@@ -222,6 +228,11 @@ class ObstacleTracker:
         keep = np.ones(t, bool)
         self._frames += 1
         for i in np.flatnonzero(~seen).tolist():
+            if same_object is not None and any(same_object(self._payload[i], payloads[j])
+                                               for j in range(n)):
+                self._hits[i] += 1
+                self._last_seen[i] = stamp
+                continue
             alive = (self._hits[i] >= self.confirm_hits
                      and self._hits[i] >= self.min_hit_fraction * self._frames[i]
                      and stamp - self._last_seen[i] <= self.coast_s + 1e-9)
