@@ -1860,14 +1860,15 @@ class GpodDetector:
         tracks = self._tracker.update(feet, cov, obst, is_free,
                                       _same_object if still else None)
         out = list(drops)
-        for tr in tracks:
+        feet_t = np.array([tr.foot for tr in tracks]).reshape(-1, 3)
+        rngs, brgs = ground_range_bearing(metric, feet_t)
+        for tr, rng_k, brg_k in zip(tracks, rngs.tolist(), brgs.tolist()):
             ob = tr.payload
-            rng_, brg = ground_range_bearing(metric, tr.foot[None, :])
             seen = tr.index >= 0
             roi = ob.roi if (seen or not moved) else _moved_roi(ob, tr.foot, n, cam)
             out.append(dataclasses.replace(
-                ob, position=tr.foot + ob.height * n, range=float(rng_[0]), roi=roi,
-                bearing=float(brg[0]), track_id=tr.track_id, age_s=tr.age_s,
+                ob, position=tr.foot + ob.height * n, range=rng_k, roi=roi,
+                bearing=brg_k, track_id=tr.track_id, age_s=tr.age_s,
                 string_ids=ob.string_ids if seen else np.zeros(0, np.int32),
                 num_edge_pixels=ob.num_edge_pixels if seen else 0))
         out.sort(key=lambda o: o.range)
