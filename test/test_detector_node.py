@@ -112,6 +112,25 @@ def test_walking_tracks_take_egomotion_as_their_motion_input(graph):
     probe.destroy_node()
 
 
+def test_a_silent_egomotion_publisher_never_stalls_detection(graph):
+    """Someone publishes /egomotion but no motion comes: every pair is still detected and
+    published (each waits at most egomotion_wait, none while others are queued)."""
+    from geometry_msgs.msg import TransformStamped
+
+    det, ex, send, got = graph
+    probe = Node('silent_ego', context=det.context)
+    pub = probe.create_publisher(TransformStamped, '/egomotion', RESULT_QOS)
+    ex.add_node(probe)
+    assert spin_until(ex, lambda: pub.get_subscription_count() >= 1)
+    frames = load_frames(BAGS / 'static_obstacles', [0, 1, 2, 3, 45, 46, 47, 48])
+    for f in frames:
+        send(*f)
+    assert spin_until(ex, lambda: len(got['obstacles']) == len(frames), timeout=20)
+    assert det.frames_dropped == 0 and det.motions_used == 0
+    assert len(got['obstacles'][-1].obstacles) >= 3    # still-rig tracks and detections
+    probe.destroy_node()
+
+
 def test_bad_inputs_are_logged_skipped_and_the_node_keeps_going(graph, capfd):
     det, ex, send, got = graph
     good = load_frames(BAGS / 'static_obstacles', [0, 1, 2, 15])  # 15: 1.5 s later

@@ -122,14 +122,17 @@ class DetectorNode(StereoInputNode):
             self._motion_cv.notify_all()
 
     def _motion_for(self, stamp_ns: int, follows_previous: bool):
-        """The pair's /egomotion (R, t), waiting up to ``egomotion_wait``; None when the
-        previous pair was not the one processed before it, nobody publishes /egomotion,
-        a later motion arrived instead (none will come for this pair) or time ran out."""
+        """The pair's /egomotion (R, t), waiting up to ``egomotion_wait`` -- not at all
+        when further pairs are already waiting (detection must not fall behind a slow
+        egomotion node); None when the previous pair was not the one processed before
+        it, nobody publishes /egomotion, a later motion arrived instead (none will come
+        for this pair) or time ran out."""
         if not (self.node_config.use_egomotion and follows_previous):
             return None
         if self.count_publishers('/egomotion') == 0:
             return None
-        deadline = time.monotonic() + self.node_config.egomotion_wait
+        wait = 0.0 if self.pending_pairs() else self.node_config.egomotion_wait
+        deadline = time.monotonic() + wait
         with self._motion_cv:
             while True:
                 motion = self._motions.pop(stamp_ns, None)

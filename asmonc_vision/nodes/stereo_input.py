@@ -155,6 +155,11 @@ class StereoInputNode(Node):
     def restart(self) -> None:
         """Forget the past: time went back (a looping replay) or the camera changed."""
 
+    def pending_pairs(self) -> int:
+        """Pairs received and waiting for the worker."""
+        with self._cv:
+            return len(self._pending)
+
     def skip_pair(self, pair: StereoPair, level: int, why: str) -> None:
         """A pair could not be used: count it and report why in /diagnostics."""
         self.frames_bad += 1
