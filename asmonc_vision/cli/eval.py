@@ -5,7 +5,9 @@
                 [--match-radius 0.3] [--min-height 0.10] [--max-range 5]
 
 By default runs our detector (GPOD, default settings) in this process, without ROS, over
-each bag's stereo pairs in order; `--method sgbm` runs the OpenCV StereoSGBM baseline
+each bag's stereo pairs in order (with no motion input: its obstacle tracks are carried
+only while the rig stands still; the node graph feeds them the egomotion node's motion,
+so score a graph run with `asmonc run BAG --out DIR` and `--outputs DIR`); `--method sgbm` runs the OpenCV StereoSGBM baseline
 (core.baseline) instead, and several methods or `--threshold-px` values give one run
 each. With `--outputs DIR` (one per BAG) nothing is run: the /obstacles and
 /ground_plane recorded by `asmonc run BAG --out DIR` are scored against BAG's truth.
