@@ -32,6 +32,10 @@ ground (the obstacle went away) or its foot is out of view. Coasting bridges the
 in which a small obstacle's evidence dips under the threshold: an obstacle does not
 vanish because one frame's disparities were noisy.
 
+A detection outside a track's gate that the caller's ``same_object`` test says shows
+the same obstacle (another point of it reported as its nearest, e.g. a box's far corner
+when one silhouette edge dips) keeps the track seen without moving it.
+
 A missed measurement of a track is ``z = None`` in textbook terms: the track is
 predicted and not updated.
 """
