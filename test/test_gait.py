@@ -294,6 +294,60 @@ def test_pitch_at_the_stride_locks_onto_the_step_frequency():
     assert _rms(err)[1] < 0.5 * _rms(hold)[1], (_rms(err), _rms(hold))
 
 
+def _initiation_walk(seed: int, lean_deg: float = 4.0, shift_deg: float = 2.0,
+                     f_step: float = 1.8, duration: float = 8.0):
+    """A synthetic 16 Hz walk whose start shifts the trunk, as a real gait initiation
+    does: from t = 2 s the gait builds up over 0.8 s while the pitch leans forward by
+    ``lean_deg`` (a half-cosine over 1.5 s) and the roll shifts sideways by up to
+    ``shift_deg`` and back. Returns (t, rpy, truth(t) -> rpy)."""
+    rng = np.random.default_rng(seed)
+    d = np.radians
+
+    def truth(t):
+        t = np.asarray(t, float)
+        env = np.clip((t - 2.0) / 0.8, 0.0, 1.0)
+        u = np.clip((t - 2.0) / 1.5, 0.0, 1.0)
+        th = np.pi * f_step * t
+        roll = env * (d(1.5) * np.sin(th + 0.5) + d(0.4) * np.sin(2 * th + 2.0)) \
+            + d(shift_deg) * np.sin(np.pi * u)
+        pitch = d(12.0) + env * (d(0.8) * np.sin(th + 1.0) + d(1.5) * np.sin(2 * th - 0.4)) \
+            + d(lean_deg) * (0.5 - 0.5 * np.cos(np.pi * u))
+        yaw = d(30.0) + env * (d(3.0) * np.sin(th + 2.5) + d(0.5) * np.sin(2 * th))
+        return np.column_stack([roll, pitch, yaw])
+
+    t = np.arange(int(duration * 16)) / 16.0
+    return t, truth(t) + rng.normal(0.0, d(0.1), (t.size, 3)), truth
+
+
+def test_a_trunk_shift_at_the_walk_start_goes_into_the_offsets():
+    """At a walk start the roll and pitch offsets start with the start fit's own
+    uncertainty (a 1 s window holds less than a stride), not a fixed 0.5 deg: the trunk's
+    lean and sideways shift of a gait initiation then move the offsets instead of pulling
+    the step frequency away (with the fixed spread it ran 0.3 Hz off and needed a
+    relock) and the 0.5 s roll/pitch prediction follows."""
+    cfg = GaitConfig(sensor_lag=0.0)
+    for seed in (0, 1):
+        t, rpy, truth = _initiation_walk(seed)
+        tr = GaitTracker(cfg)
+        rows = []
+        for ti, zi in zip(t, rpy):
+            est = tr.add_inclinometer(ti, zi, np.full(3, math.radians(0.1) ** 2))
+            if est.event == 'start':
+                sd = np.degrees(np.sqrt(np.diag(tr.ekf.P)[I_O]))
+                assert sd[2] == pytest.approx(0.5)                # yaw: as before
+                assert np.all(sd[:2] > 0.8), sd                   # roll, pitch: the fit's
+            rows.append((ti, est.walking, est.step_frequency, est.predicted))
+        assert [e for _, e in tr.stats.events] == ['start']    # no relock, no stop
+        tt = np.array([r[0] for r in rows])
+        walking = np.array([r[1] for r in rows])
+        sel = walking & (tt >= 2.5) & (tt <= 5.0)
+        freq = np.array([r[2] for r in rows])[sel]
+        assert np.max(np.abs(freq - 1.8)) < 0.2, freq
+        pred = np.array([r[3] for r in rows])[sel]
+        err = _rms(scoring.angle_errors_deg(pred, truth(tt[sel] + 0.5)))
+        assert err[0] < 1.45 and err[1] < 1.45, err
+
+
 def test_turning_model_takes_over_in_a_turn_only():
     case = ev.make_case('turn', 1)
     tr = GaitTracker()

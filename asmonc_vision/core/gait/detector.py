@@ -64,6 +64,9 @@ class WalkFit:
         score: the grid criterion (weighted periodicity) of the best frequency.
         residual: (3,) rms residual of the refit per axis, rad (what the model does not
             describe, for the EKF's initial model error).
+        offset_trend_cov: (3, 2, 2) per axis the posterior covariance of (offset, trend)
+            (rad^2, rad^2/s, rad^2/s^2): over a window shorter than a stride the level is
+            hardly separable from the stride sway and the trend.
     """
 
     frequency: float
@@ -74,6 +77,7 @@ class WalkFit:
     periodicity: np.ndarray
     score: float
     residual: np.ndarray
+    offset_trend_cov: np.ndarray | None = None
 
     def harmonic(self, axis: int, k: int) -> complex:
         """Coefficient of harmonic k of an axis (0 if not fitted)."""
@@ -192,6 +196,7 @@ def fit_walk(tau: np.ndarray, z: np.ndarray, freqs: np.ndarray,
     f = float(freqs[i])
     coef, csd = [], []
     off, tr, res = np.empty(3), np.empty(3), np.empty(3)
+    otc = np.zeros((3, 2, 2))
     main = (1, 2, 1)
     for a in range(3):
         ks = np.arange(1, harmonics[a] + 1)
@@ -210,13 +215,14 @@ def fit_walk(tau: np.ndarray, z: np.ndarray, freqs: np.ndarray,
         c = np.linalg.solve(G, X.T @ zw[:, a])
         cov = np.linalg.inv(G) * noise_sd ** 2
         off[a], tr[a] = c[0], c[1]
+        otc[a] = cov[:2, :2]
         e = X @ c - zw[:, a]
         res[a] = math.sqrt(float(e @ e) / float(sw @ sw))
         coef.append(c[2::2] + 1j * c[3::2])
         csd.append(np.sqrt(0.5 * (np.diag(cov)[2::2] + np.diag(cov)[3::2])))
     return WalkFit(frequency=f, coefficients=tuple(coef), coefficient_sd=tuple(csd),
                    offset=off, trend=tr, periodicity=per[i].copy(), score=float(score[i]),
-                   residual=res)
+                   residual=res, offset_trend_cov=otc)
 
 
 class WalkDetector:

@@ -33,6 +33,8 @@ SKILL_FLOOR = 0.2 * _D2R
 #: seconds of scored walking
 SKILL_LONG_MEMORY = 10.0
 SKILL_LONG_MIN = 1.0
+#: least initial standard deviation of the offsets at a walk start, rad
+START_OFFSET_SD = 0.5 * _D2R
 
 
 def wrap_diff(a, b) -> np.ndarray:
@@ -362,7 +364,19 @@ class GaitTracker:
             offset, rate = old[I_O].copy(), float(old[I_R])
         if keep:
             offset[2], rate = old[I_O[2]], old[I_R]
-        ekf.start_walking(f, coef, offset, rate)
+        # the initial spread of the roll and pitch offsets: the start fit's posterior of
+        # offset + trend * delay, at least START_OFFSET_SD. A walk start shifts the trunk
+        # (sideways onto the stance leg, forwards into the walk) and a 1 s window holds
+        # less than a stride, so the level is uncertain by about the stride sway; an
+        # offset held too tightly pushes that shift into the frequency and phase. (The
+        # yaw level is a ramp whose rate has its own spread.)
+        sigma = None
+        if fit.offset_trend_cov is not None and not relock:
+            g = np.array([1.0, pf.dc_delay])
+            var = np.einsum('i,aij,j->a', g, fit.offset_trend_cov, g)     # g^T C_a g
+            var[2] = 0.0
+            sigma = {'o': np.sqrt(np.maximum(var, START_OFFSET_SD ** 2))}
+        ekf.start_walking(f, coef, offset, rate, sigma)
         if keep:
             ekf.x[I_YA] = old[I_YA]
         pos = lay.of_axis(2)
