@@ -112,9 +112,10 @@ def test_walking_tracks_take_egomotion_as_their_motion_input(graph):
     probe.destroy_node()
 
 
-def test_a_silent_egomotion_publisher_never_stalls_detection(graph):
-    """Someone publishes /egomotion but no motion comes: every pair is still detected and
-    published (each waits at most egomotion_wait, none while others are queued)."""
+def test_a_silent_egomotion_publisher_never_stalls_detection(graph, capfd):
+    """Someone publishes /egomotion but no usable motion comes (one malformed message):
+    every pair is still detected and published (each waits at most egomotion_wait, none
+    while others are queued)."""
     from geometry_msgs.msg import TransformStamped
 
     det, ex, send, got = graph
@@ -123,10 +124,15 @@ def test_a_silent_egomotion_publisher_never_stalls_detection(graph):
     ex.add_node(probe)
     assert spin_until(ex, lambda: pub.get_subscription_count() >= 1)
     frames = load_frames(BAGS / 'static_obstacles', [0, 1, 2, 3, 45, 46, 47, 48])
+    bad = TransformStamped()                 # a zero quaternion: warned about, ignored
+    bad.header = frames[4][0].header
+    bad.transform.rotation.w = 0.0
+    pub.publish(bad)
     for f in frames:
         send(*f)
     assert spin_until(ex, lambda: len(got['obstacles']) == len(frames), timeout=20)
     assert det.frames_dropped == 0 and det.motions_used == 0
+    assert '/egomotion with an invalid rotation or translation ignored' in capfd.readouterr().err
     assert len(got['obstacles'][-1].obstacles) >= 3    # still-rig tracks and detections
     probe.destroy_node()
 

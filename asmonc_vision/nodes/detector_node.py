@@ -110,7 +110,7 @@ class DetectorNode(StereoInputNode):
         except ValueError:
             R = None
         if R is None or not np.all(np.isfinite(t)):
-            self.get_logger().warn('/egomotion with non-finite values ignored',
+            self.get_logger().warn('/egomotion with an invalid rotation or translation ignored',
                                    throttle_duration_sec=5.0)
             return
         stamp = stamp_to_ns(msg.header.stamp)
