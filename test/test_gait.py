@@ -418,6 +418,34 @@ def test_skill_weighting_falls_back_on_the_measurement():
     assert np.all(res[True] < 1.2 * hold), (res, hold)
 
 
+def test_a_relock_restarts_the_skill_record():
+    """The skill record (E em^2, E em eh) scores the predictions of the oscillation that
+    made them. A relock replaces the oscillation by a new fit, so the record restarts
+    from the walk-start prior (here the skill of the walk so far, the long memory), as at
+    a start. Before, the old oscillation's record went on: on HA/001 Test5 Trial2 a
+    pitch weight of 1 learnt during a forward lean (raw minimum-MSE weight 2-2.5, both
+    predictors lagging it) was applied to the oscillation refitted over that lean,
+    10 deg off (pitch -22 % against holding; now 0 %)."""
+    t, rpy, _ = _stride_walk(1, duration=9.0)
+    tr = GaitTracker(GaitConfig(sensor_lag=0.0))
+    for ti, zi in zip(t, rpy):
+        tr.add_inclinometer(ti, zi, np.full(3, math.radians(0.1) ** 2))
+    assert tr.walking and tr.stats.relocks == 0
+    w_walk = tr.model_skill_weights()
+    assert np.all(w_walk[:, 1] > 0.5), w_walk           # the model predicts pitch well
+    # a record that says the current oscillation mispredicts (w ~ 0.01) ...
+    tr._e2m[:] = 100.0 * tr._e2h
+    tr._emh[:] = 0.0
+    assert np.all(tr.model_skill_weights() < 0.02)
+    # ... belongs to it, not to the oscillation a relock fits
+    tau, z = tr.detector.window(2.0)
+    fit = fit_walk(tau, z, np.arange(1.0, 2.81, 0.02), tr.cfg.harmonics)
+    tr._start(float(t[-1]), fit, relock=True)
+    w = tr.model_skill_weights()
+    assert np.all(w[:, 1] > 0.5), w
+    assert not tr._past                                  # no scoring of the old predictions
+
+
 def test_stop_amplitudes_do_not_depend_on_the_phase():
     tau = np.arange(-9, 1) / 16.0                              # a 0.6 s window
     for phase in np.linspace(0.0, 2 * np.pi, 7):

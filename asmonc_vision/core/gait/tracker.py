@@ -340,7 +340,9 @@ class GaitTracker:
         """Initialise the oscillation from the detector's fit (measured domain at t).
 
         A relock (walking already) keeps the tracked offsets and yaw rate, and during a
-        turn the whole yaw block (the fit's straight trend cannot describe a turn)."""
+        turn the whole yaw block (the fit's straight trend cannot describe a turn). A
+        start and a relock both restart the skill record (``_restart_skill``): it scored
+        the oscillation that the new fit replaces."""
         pf = self.prefilter
         ekf = self.ekf
         lay = ekf.layout
@@ -395,29 +397,44 @@ class GaitTracker:
         if not relock:
             # the model error starts at what the start fit left unexplained
             self._resid2 = np.asarray(fit.residual, float) ** 2
-            # the skill weighting starts from an expectation: holding errs by the change
-            # over the horizon, the larger of the fitted oscillation's (mean over a
-            # stride) and the one seen in the buffered samples; the model by
-            # SKILL_PRIOR of that
-            self._past.clear()
-            h = self.cfg.horizon
-            s = np.linspace(0.0, 2.0 / f, 16, endpoint=False)
-            d = ekf.oscillation(s + h) - ekf.oscillation(s)
-            e2 = np.mean(d * d, axis=0)
-            tau, z = self.detector.window(2.0 / f)
-            if tau.size and tau[-1] - tau[0] > h:
-                zh = np.column_stack([np.interp(tau + h, tau, z[:, a]) for a in range(3)])
-                m = tau + h <= tau[-1]
-                seen = np.mean((zh[m] - z[m]) ** 2, axis=0)
-                e2 = np.maximum(e2, seen)
-            self._e2h = e2 + SKILL_FLOOR ** 2
-            self._e2m = np.tile(SKILL_PRIOR * self._e2h, (2, 1))     # both IMM models
-            self._emh = np.zeros((2, 3))
-            if self._long_n >= SKILL_LONG_MIN * self.cfg.sample_rate:
-                # the skill shown on earlier walks, scaled to this walk's holding error
-                sc = self._e2h / np.maximum(self._long[1], 1e-12)
-                self._e2m = np.tile(self._long[0] * sc, (2, 1))
-                self._emh = np.tile(self._long[2] * sc, (2, 1))
+        # the skill record belongs to the oscillation that made the predictions: a relock
+        # replaces it by a new fit, so the record restarts from the prior as at a start
+        self._restart_skill(f)
+
+    def _restart_skill(self, f: float) -> None:
+        """Restart the skill statistics from a prior (at a walk start or a relock: a new
+        oscillation, whose predictions the record of the old one does not describe).
+
+        Holding errs by the change over the horizon, E e_h^2 = the larger of the fitted
+        oscillation's (mean over a stride) and the one seen in the buffered samples, plus
+        SKILL_FLOOR^2; the model by E e_m^2 = SKILL_PRIOR E e_h^2 with E e_m e_h = 0
+        (w = 0.5), or, once SKILL_LONG_MIN s of walking were scored, as on the earlier
+        walks (the long memory, scaled to this E e_h^2). The pending predictions are
+        dropped (they were made by the old oscillation).
+
+        Args:
+            f: the new step frequency, Hz (the stride over which the prior is taken).
+        """
+        ekf = self.ekf
+        self._past.clear()
+        h = self.cfg.horizon
+        s = np.linspace(0.0, 2.0 / f, 16, endpoint=False)
+        d = ekf.oscillation(s + h) - ekf.oscillation(s)
+        e2 = np.mean(d * d, axis=0)
+        tau, z = self.detector.window(2.0 / f)
+        if tau.size and tau[-1] - tau[0] > h:
+            zh = np.column_stack([np.interp(tau + h, tau, z[:, a]) for a in range(3)])
+            m = tau + h <= tau[-1]
+            seen = np.mean((zh[m] - z[m]) ** 2, axis=0)
+            e2 = np.maximum(e2, seen)
+        self._e2h = e2 + SKILL_FLOOR ** 2
+        self._e2m = np.tile(SKILL_PRIOR * self._e2h, (2, 1))     # both IMM models
+        self._emh = np.zeros((2, 3))
+        if self._long_n >= SKILL_LONG_MIN * self.cfg.sample_rate:
+            # the skill shown on earlier walks, scaled to this walk's holding error
+            sc = self._e2h / np.maximum(self._long[1], 1e-12)
+            self._e2m = np.tile(self._long[0] * sc, (2, 1))
+            self._emh = np.tile(self._long[2] * sc, (2, 1))
 
     # ------------------------------------------------------------------ visual motion
     def add_egomotion(self, t_prev: float, t_cur: float, r_optical,
