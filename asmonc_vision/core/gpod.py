@@ -865,9 +865,11 @@ class _FrameContext:
     """
 
     def __init__(self, cam: StereoCamera, metric: MetricPlane, abc: np.ndarray, u, v, pd,
-                 excess_mean, sigma, prev, ground_points, left) -> None:
+                 excess_mean, sigma, prev, ground_points, left, u_left, usable) -> None:
         self.cam, self.metric, self.abc = cam, metric, abc
         self.u, self.v, self.pd = u, v, pd
+        # the matches' left-image columns and whether each is reliably matched in range
+        self.u_left, self.usable = u_left, usable
         self.excess_mean, self.sigma, self.prev = excess_mean, sigma, prev
         n = metric.normal_up
         fwd = np.array([0.0, 0.0, 1.0]) - n[2] * n
@@ -1789,10 +1791,10 @@ class GpodDetector:
         self._frame_thr = thr
         # Ground features: reliably matched edge pixels on the plane (free space).
         ground = (np.abs(ex_mean) <= thr) & usable & ~obst_string[sid]
-        self._usable, self._ex_mean, self._u_left = usable, ex_mean, m.u_left
         self._ctx = _FrameContext(cam=cam, metric=metric, abc=self._abc.copy(), u=u, v=v,
                                   pd=pd, excess_mean=ex_mean, sigma=thr / c.threshold_k,
-                                  prev=prev, ground_points=pts[ground], left=self._left)
+                                  prev=prev, ground_points=pts[ground], left=self._left,
+                                  u_left=m.u_left, usable=usable)
         if obst_string.any():
             # Candidate silhouette edges for placing detected obstacles (never obstacles):
             # strings neither obstacle, drop nor rejected as one (mismatch, repetitive
@@ -1899,17 +1901,17 @@ class GpodDetector:
         view, or its image region (``ob.roi``) holding at least
         ``track_free_min_features`` reliably matched edge pixels on the ground plane
         (within half their threshold) and three times as many as above it."""
-        cam = self._cam
+        cam, ctx = self._cam, self._ctx
         if foot[2] <= 1e-3:
             return True
-        uf = cam.f * foot[0] / foot[2] + cam.cx
-        vf = cam.f * foot[1] / foot[2] + cam.cy
-        if not (0 <= uf <= cam.width - 1 and 0 <= vf <= cam.height - 1):
+        uc, vf, df = cam.project(foot)
+        uf = float(uc[0] + df[0] / 2.0)           # cyclopean -> left image column
+        if not (0 <= uf <= cam.width - 1 and 0 <= float(vf[0]) <= cam.height - 1):
             return True
         x, y, w, h = ob.roi
-        inside = (self._usable & (self._u_left >= x) & (self._u_left <= x + w - 1)
-                  & (self._ctx.v >= y) & (self._ctx.v <= y + h - 1))
-        ex = self._ex_mean[inside]
+        inside = (ctx.usable & (ctx.u_left >= x) & (ctx.u_left <= x + w - 1)
+                  & (ctx.v >= y) & (ctx.v <= y + h - 1))
+        ex = ctx.excess_mean[inside]
         thr = self._frame_thr[inside]
         on_ground = int(np.count_nonzero(np.abs(ex) <= 0.5 * thr))
         above = int(np.count_nonzero(ex > 0.5 * thr))
