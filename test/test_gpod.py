@@ -6,6 +6,7 @@ high, pitched down 20 degrees), optionally with textured boxes standing on it or
 down in the ground.
 """
 import dataclasses
+import math
 
 import cv2
 import numpy as np
@@ -602,3 +603,62 @@ def test_tracks_off_reports_the_detections_only(scenes, monkeypatch):
     real_detect = det._detect
     monkeypatch.setattr(det, '_detect', lambda *a, **kw: (real_detect(*a, **kw)[0], ()))
     assert det.process(*scenes['box'], CAM).obstacles == ()
+
+
+# ---------------------------------------------------------------- a face leaving the view
+def _view_edge_camera(f=300.0, h=1.25, cx=159.5, cy=119.5):
+    """A level pinhole looking along the ground's x axis, 1.25 m high: ground (N, 2)
+    (x ahead, y left) -> image (u, v)."""
+    def to_image(xy):
+        x = np.maximum(xy[:, 0], 1e-6)
+        return cx - f * xy[:, 1] / x, cy + f * h / x
+    return to_image
+
+
+def test_view_edge_points_extend_a_wall_to_the_view_edge():
+    from asmonc_vision.core.gpod import view_edge_points
+    to_image = _view_edge_camera()
+    # A wall 1.9 m to the right: it leaves the view (u = 319) at x = 300 * 1.9 / 159.5.
+    x_edge = 300.0 * 1.9 / 159.5
+    feet = np.array([[x, -1.9] for x in (4.0, 4.3, 4.7, 5.2)])
+    feet[:, 1] += [0.01, -0.01, 0.01, -0.01]
+    group = np.zeros(4, np.int64)
+    q = view_edge_points(feet, group, 1, to_image, 320, 240, np.zeros((0, 2)))[0]
+    assert abs(q[0] - x_edge) < 0.02 and abs(q[1] + 1.9) < 0.02
+    # Visible ground behind the extension: the wall ends inside the view.
+    b = np.radians(np.linspace(-25.6, -27.8, 12))     # within the extension's bearings
+    behind = np.stack([2.3 / np.tan(-b), np.full(12, -2.3)], axis=1)
+    assert np.isnan(view_edge_points(feet, group, 1, to_image, 320, 240, behind)[0, 0])
+    # A few features behind it (wall texture matched at the ground's disparity) do not.
+    q2 = view_edge_points(feet, group, 1, to_image, 320, 240,
+                          np.vstack([behind[:2], [[x, -1.5] for x in (3.7, 3.8, 3.9)]]))[0]
+    np.testing.assert_allclose(q2, q, atol=1e-9)
+    # No extension: a corner (feet off one line); a face whose nearest point is inside
+    # it (frontal); a face that would need more than its own span; too few feet.
+    corner = np.array([[4.0, -1.9], [4.3, -1.9], [4.3, -1.5], [4.3, -1.2]])
+    frontal = np.array([[4.0, y] for y in (-0.6, -0.2, 0.2, 0.6)])
+    short = np.array([[x, -1.9] for x in (5.0, 5.1, 5.2)])
+    for p in (corner, frontal, short, feet[:2]):
+        g = np.zeros(len(p), np.int64)
+        assert np.isnan(view_edge_points(p, g, 1, to_image, 320, 240, np.zeros((0, 2)))).all()
+
+
+def test_wall_beside_the_path_is_reported_where_it_leaves_the_view():
+    """A wall along the path on the right: its nearest visible point is where its foot
+    leaves the image, not its nearest vertical edge inside the view."""
+    wall = (1.9, 2.0, 1.5, 9.0, 2.0)
+    det, _ = _calibrated(render_pair(seed=5))
+    r = det.process(*render_pair(boxes=[wall], seed=5), CAM)
+    assert r.status == 'tracking' and r.obstacles
+    # The truth: the nearest point of the wall's inner foot (x = 1.9) inside the image.
+    z = np.linspace(1.5, 9.0, 3001)
+    p = np.array([to_left_optical([1.9, HEIGHT, zz]) for zz in z])
+    u = CAM.f * p[:, 0] / p[:, 2] + CAM.cx
+    v = CAM.f * p[:, 1] / p[:, 2] + CAM.cy
+    seen = (u <= CAM.width - 1) & (v <= CAM.height - 1)
+    z_near = z[seen][0]
+    truth = np.array([z_near, -1.9])
+    ob = min(r.obstacles, key=lambda o: abs(o.bearing - math.atan2(truth[1], truth[0])))
+    got = ob.range * np.array([math.cos(ob.bearing), math.sin(ob.bearing)])
+    # (its nearest vertical edge in the view is 0.17 m farther along the wall)
+    assert np.hypot(*(got - truth)) < 0.08, (got, truth)

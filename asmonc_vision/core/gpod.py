@@ -103,6 +103,23 @@ _BORDER_PX = 3.0
 #: located to a few centimetres).
 _FREE_SPACE_MARGIN_M = 0.05
 
+#: A straight face of an obstacle (a wall beside the path) whose feet come nearer towards
+#: the left or right edge of the view continues out of it: its nearest visible point is
+#: where its contact line leaves the image (`view_edge_points`). The face needs this many
+#: feet at least, along a line (orthogonal RMS residual at most _FACE_MAX_RMS_M metres)
+#: over _FACE_MIN_SPAN_M metres or more; it is extended by at most its own span, and not
+#: where ground is seen behind the extension (the face ends before the view's edge).
+_FACE_MIN_FEET = 3
+_FACE_MAX_RMS_M = 0.06
+_FACE_MIN_SPAN_M = 0.3
+#: Ground features this far (metres) behind the extended line end the face: at least
+#: _FACE_BEHIND_MIN of them and _FACE_BEHIND_FRACTION of the ground features within the
+#: extension's bearings (ground seen past a face's end is a region; a few are wall texture
+#: matched at the ground's disparity).
+_FACE_BEHIND_M = 0.1
+_FACE_BEHIND_MIN = 5
+_FACE_BEHIND_FRACTION = 0.25
+
 #: Placement-only silhouette feet (`silhouette_owners`): an edge string that is no
 #: obstacle may still be the other silhouette edge of a detected one. Its pixels above
 #: ``_WEAK_FRACTION`` of the threshold must number ``_WEAK_MIN_PIXELS`` or more and their
@@ -1258,6 +1275,94 @@ def nearest_point(xy: np.ndarray, sr: np.ndarray, ground_xy: np.ndarray,
                           None if score is None else _single_score(score), at_border)[0]
 
 
+def view_edge_points(xy: np.ndarray, group: np.ndarray, n_groups: int, to_image,
+                     width: int, height: int, ground_xy) -> np.ndarray:
+    """Where the straight face of an obstacle leaves the view, for faces that come nearer
+    towards the view's left or right edge (a wall beside the path): there is its nearest
+    visible point, which its edge strings' feet (inside the view) cannot reach.
+
+    For each obstacle with at least ``_FACE_MIN_FEET`` feet lying along one line (total
+    least squares, orthogonal RMS <= ``_FACE_MAX_RMS_M``, spanning >= ``_FACE_MIN_SPAN_M``)
+    whose range falls towards its outermost foot, the line is followed beyond that foot
+    (by at most the feet's span) to where it leaves the image (left or right border, or
+    the bottom row). The point is given unless visible ground lies behind the extended
+    line within that wedge of bearings (``_FACE_BEHIND_MIN`` and ``_FACE_BEHIND_FRACTION``
+    of its ground features beyond the line by ``_FACE_BEHIND_M``: then the face ends
+    inside the view).
+
+    Args:
+        xy: (S, 2) ground coordinates of the feet, metres (`_FrameContext.to_xy`).
+        group: (S,) obstacle of each foot, 0..n_groups-1.
+        to_image: ground (N, 2) -> left-image (u, v) pixels (`_FrameContext.to_image`).
+        width, height: image size, pixels.
+        ground_xy: (G, 2) visible ground, or a callable returning it.
+    Returns:
+        (n_groups, 2) ground coordinates of the point where each obstacle's face leaves
+        the view, NaN where there is none.
+    """
+    out = np.full((n_groups, 2), np.nan)
+    if xy.shape[0] < _FACE_MIN_FEET:
+        return out
+    counts = np.bincount(group, minlength=n_groups)
+    ground = None
+    for k in np.flatnonzero(counts >= _FACE_MIN_FEET):
+        p = xy[group == k]
+        c = p.mean(axis=0)
+        _, sv, vt = np.linalg.svd(p - c, full_matrices=False)
+        d = vt[0]
+        along = (p - c) @ d
+        span = float(along.max() - along.min())
+        if span < _FACE_MIN_SPAN_M or sv[1] / math.sqrt(p.shape[0]) > _FACE_MAX_RMS_M:
+            continue
+        # The end of the face nearer the camera (range falls along the line towards it).
+        ends = (c + along.min() * d, c + along.max() * d)
+        e, sgn = (ends[0], -1.0) if np.hypot(*ends[0]) < np.hypot(*ends[1]) else (ends[1], 1.0)
+        step = sgn * d
+        if float(e @ step) >= 0.0:          # the nearest point of the line is in the face
+            continue
+        u0, v0 = (w[0] for w in to_image(e[None]))
+        if not (0.0 <= u0 <= width - 1 and 0.0 <= v0 <= height - 1):
+            continue
+        t = np.linspace(0.0, span, 65)[1:]
+        pts = e[None] + t[:, None] * step[None]
+        # Stay in front of the camera (ground points behind it have no image).
+        pts = pts[pts[:, 0] > 0.05]
+        if pts.shape[0] == 0:
+            continue
+        uu, vv = to_image(pts)
+        outside = (uu < 0.0) | (uu > width - 1) | (vv > height - 1)
+        if not outside.any():
+            continue                        # the face would end inside the view
+        j = int(np.argmax(outside))
+        q = e
+        if j > 0:
+            # Refine between the last sample inside and the first outside.
+            fine = pts[j - 1][None] + np.linspace(0.0, 1.0, 33)[:, None] * (pts[j] - pts[j - 1])
+            uf, vf = to_image(fine)
+            inside = (uf >= 0.0) & (uf <= width - 1) & (vf <= height - 1)
+            q = fine[max(int(np.argmin(inside)) - 1, 0)]
+        if np.hypot(*q) >= np.hypot(*e) - 1e-6:
+            continue
+        if ground is None:
+            ground = ground_xy() if callable(ground_xy) else ground_xy
+        if ground.size:
+            # Visible ground behind the extension (within its wedge of bearings, beyond
+            # the line by the margin) shows the face ends before the view's edge.
+            b_e, b_q = math.atan2(e[1], e[0]), math.atan2(q[1], q[0])
+            lo_b, hi_b = min(b_e, b_q), max(b_e, b_q)
+            bg = np.arctan2(ground[:, 1], ground[:, 0])
+            w = ground[(bg >= lo_b) & (bg <= hi_b)]
+            if w.size:
+                nrm = np.array([-d[1], d[0]])
+                cam_side = math.copysign(1.0, float(nrm @ -c))
+                behind = cam_side * ((w - c) @ nrm) < -_FACE_BEHIND_M
+                if np.count_nonzero(behind) >= max(_FACE_BEHIND_MIN,
+                                                   _FACE_BEHIND_FRACTION * w.shape[0]):
+                    continue
+        out[k] = q
+    return out
+
+
 def silhouette_owners(xw: np.ndarray, top: np.ndarray, xy: np.ndarray, g_lab: np.ndarray,
                       height: np.ndarray, radius: float, ground_xy) -> np.ndarray:
     """The detected obstacle whose silhouette foot each candidate edge may be (-1: none).
@@ -2014,6 +2119,15 @@ class GpodDetector:
             nearer = np.hypot(qw[:, 0], qw[:, 1]) < np.hypot(q[ks, 0], q[ks, 1])
             q = q.copy()
             q[ks[nearer]] = qw[nearer]
+        # A face going out of the view (a wall beside the path): its nearest visible
+        # point is where it leaves the image.
+        qe = view_edge_points(xy, g_lab, n_c, ctx.to_image, ctx.cam.width, ctx.cam.height,
+                              lambda: ctx.ground_xy)
+        ext = ~np.isnan(qe[:, 0])
+        if ext.any():
+            ext &= np.hypot(qe[:, 0], qe[:, 1]) < np.hypot(q[:, 0], q[:, 1])
+            q = q.copy()
+            q[ext] = qe[ext]
         rng = np.array([math.hypot(x, y) for x, y in q.tolist()])
         brg = np.array([math.atan2(y, x) for x, y in q.tolist()])
         return rng, brg, q0
