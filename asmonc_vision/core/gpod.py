@@ -84,6 +84,10 @@ _AMBIGUOUS_EXCESS_PX = 3.0
 #: (metres) or this fraction of the nearest range, whichever is larger, of it.
 _NEAR_ZONE_M = 0.5
 _NEAR_ZONE_FRACTION = 0.1
+#: A drop's range is that of its pixel of this rank by range (0 = the nearest): a minimum
+#: that one stray pixel cannot pull. (Its edge pixels are sparse: a percentile of them
+#: lies measurably beyond the nearest visible lower ground.)
+_DROP_RANK = 1
 
 #: An obstacle string's foot is where its matched run, followed down the image from its
 #: lowest obstacle pixel, comes within this many noise sigmas of the ground plane.
@@ -2140,8 +2144,9 @@ class GpodDetector:
         Height: the 90th percentile of the pixels' heights (10th for a drop). Foot of an
         obstacle: its nearest point on the ground estimated from the ground feet of its
         edge strings (:meth:`_obstacle_feet`); range and bearing are those of that one
-        point. Foot of a drop: at its 2nd-percentile range, in the median direction of
-        the nearest feet of its edge strings (one vote per string) within
+        point. Foot of a drop: the nearest visible lower ground (each pixel's viewing
+        ray continued down to the drop's depth; the second nearest), in the median
+        direction of the nearest feet of its edge strings (one vote per string) within
         ``max(_NEAR_ZONE_M, _NEAR_ZONE_FRACTION * range)`` of that range.
         """
         c = self.config
@@ -2153,11 +2158,21 @@ class GpodDetector:
             r_near, bearing, q_roi = self._obstacle_feet(idx, label, sid_all, n_c, m,
                                                               height)
         else:
-            # A drop starts at its near edge: its 2nd-percentile range, in the median
-            # direction of the nearest feet of its strings (one vote per string) within
-            # the near zone of that range.
+            # A drop is placed at the nearest visible part of the lower ground (just
+            # beyond the brink, which hides the lower ground for a shadow's length):
+            # each pixel's viewing ray, continued from where it meets the plane down to
+            # the cluster's depth D (the median height), lands at r_ray (H + D) / H,
+            # H the camera's height -- its row places it, not its noisy disparity. The
+            # nearest: the pixel of rank _DROP_RANK.
+            ctx = self._ctx
+            g_ray = ctx.to_xy(cam.triangulate(ctx.u[idx], ctx.v[idx], ctx.pd[idx]))
+            depth = np.maximum(-_group_quantile(label, hh, 0.5, n_c), 0.0)
+            scale = ((metric.height + depth) / metric.height)[label]
+            g2 = g_ray * scale[:, None]
             rng_px = np.hypot(g2[:, 0], g2[:, 1])
-            r_near = _group_quantile(label, rng_px, 0.02, n_c)
+            o1 = np.lexsort((rng_px, label))
+            first = np.searchsorted(label[o1], np.arange(n_c))
+            r_near = rng_px[o1][first + np.minimum(_DROP_RANK, count - 1)]
             o3 = np.lexsort((rng_px, sid_all, label))
             lab3, sid3 = label[o3], sid_all[o3]
             head = np.r_[True, (lab3[1:] != lab3[:-1]) | (sid3[1:] != sid3[:-1])]
