@@ -164,9 +164,39 @@ def open_reader(path):
     return reader
 
 
+def _damaged_source(path, problem: BagError):
+    """A damaged or truncated MCAP bag that rosbags cannot open, scanned as a stream
+    (`asmonc_vision.bagplay.BagSource`: the messages before the damage). Raises
+    ``problem`` when not even that can be read."""
+    from asmonc_vision import bagplay
+
+    try:
+        return bagplay.BagSource(path)
+    except bagplay.BagError as exc:
+        raise problem from exc
+
+
+def bag_damage(path) -> str | None:
+    """Why a bag cannot be read to its end (a truncated or damaged MCAP file whose
+    messages before the damage can still be read), or None for an intact bag.
+    Raises BagError when nothing can be read."""
+    try:
+        open_reader(path).close()
+        return None
+    except BagError as exc:
+        src = _damaged_source(path, exc)
+        return src.info.truncated or str(exc)
+
+
 def bag_topics(path) -> dict[str, tuple[str, int]]:
-    """topic -> (message type, message count) of a bag. Raises BagError."""
-    reader = open_reader(path)
+    """topic -> (message type, message count) of a bag; of a truncated or damaged MCAP
+    bag, those of the messages before the damage (`bag_damage` says why). Raises
+    BagError."""
+    try:
+        reader = open_reader(path)
+    except BagError as exc:
+        src = _damaged_source(path, exc)
+        return {t.name: (t.msgtype, t.count) for t in src.info.topics.values()}
     try:
         out: dict[str, tuple[str, int]] = {}
         for c in reader.connections:
@@ -186,7 +216,22 @@ def read_messages(path, topics):
     from rosbags.rosbag2.errors import ReaderError
 
     store = typestore()
-    reader = open_reader(path)
+    try:
+        reader = open_reader(path)
+    except BagError as exc:
+        # A truncated or damaged MCAP file: the messages before the damage, then the error.
+        from asmonc_vision import bagplay
+
+        src = _damaged_source(path, exc)
+        wanted = {t.name: t.msgtype for t in src.info.topics.values() if t.name in set(topics)}
+        try:
+            for m in src.messages(wanted):
+                yield m.topic, m.timestamp, store.deserialize_cdr(m.data, m.msgtype)
+        except bagplay.BagError as cut:
+            raise BagError(str(cut)) from cut
+        if src.info.truncated:
+            raise BagError(src.info.truncated) from exc
+        return
     try:
         conns = [c for c in reader.connections if c.topic in set(topics)]
         try:

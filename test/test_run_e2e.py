@@ -92,14 +92,29 @@ def test_missing_bag_is_a_clear_error(tmp_path):
     assert 'does not exist' in res.stderr
 
 
-def test_truncated_bag_is_a_clear_error(tmp_path):
-    src = next((BAGS / 'clear_static').glob('*.mcap'))
+def test_truncated_bag_replays_what_can_be_read(tmp_path):
+    """A bag cut short (a recording that crashed): the messages before the cut are
+    replayed and scored, the cut is reported, and the exit status says the bag ended in
+    error. Cut to nothing readable, it is a clear error."""
+    src = next((BAGS / 'static_obstacles').glob('*.mcap'))
     cut = tmp_path / 'cut.mcap'
     data = src.read_bytes()
-    cut.write_bytes(data[:len(data) // 3])
-    res = asmonc_run(cut)
+    cut.write_bytes(data[:len(data) // 2])
+    out = tmp_path / 'out'
+    res = asmonc_run(cut, '--out', out, '--no-progress')
+    assert res.returncode == 1, res.stderr[-2000:]
+    assert 'cut.mcap' in res.stderr and 'truncated' in res.stderr
+    assert 'replaying the messages before it' in res.stderr
+    summary = json.loads((out / 'summary.json').read_text())
+    assert 10 <= summary['input_pairs'] < 55
+    assert summary['processed_frames'] == summary['input_pairs']
+    assert summary['player_exit_code'] == 2 and summary['errors']
+    assert len(frames(out, '/obstacles')) == summary['processed_frames']
+    assert summary['ground_truth']                   # the truth before the cut is scored
+    (tmp_path / 'none.mcap').write_bytes(data[:200])
+    res = asmonc_run(tmp_path / 'none.mcap')
     assert res.returncode == 2
-    assert 'cut.mcap' in res.stderr and 'cannot be read' in res.stderr
+    assert 'none.mcap' in res.stderr and 'cannot be read' in res.stderr
 
 
 def test_bag_with_neither_cameras_nor_inclinometer_is_a_clear_error(tmp_path):

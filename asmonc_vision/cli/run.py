@@ -236,10 +236,17 @@ class _Console:
 # --- ground truth ---------------------------------------------------------------------------
 
 def read_truth(bag: Path) -> dict[int, FrameObstacles]:
-    """stamp_ns -> true obstacles, from /ground_truth/obstacles (empty if the bag has none)."""
+    """stamp_ns -> true obstacles, from /ground_truth/obstacles (empty if the bag has none).
+    Of a truncated bag, the BagError carries those before the cut as ``partial``."""
     topic = bagio.TOPICS['gt_obstacles'][0]
-    return {bagio.header_stamp_ns(m): frame_from_obstacle_array(m)
-            for _, _, m in bagio.read_messages(bag, [topic])}
+    out: dict[int, FrameObstacles] = {}
+    try:
+        for _, _, m in bagio.read_messages(bag, [topic]):
+            out[bagio.header_stamp_ns(m)] = frame_from_obstacle_array(m)
+    except bagio.BagError as exc:
+        exc.partial = out
+        raise
+    return out
 
 
 def first_image_stamp(bag: Path) -> int | None:
@@ -288,9 +295,12 @@ def run(args) -> int:
         return 2
     try:
         topics = bagio.bag_topics(bag)
+        damage = bagio.bag_damage(bag)
     except bagio.BagError as exc:
         console_err(f'asmonc run: {exc}')
         return 2
+    if damage:
+        console_err(f'asmonc run: {damage}; replaying the messages before it')
     left_topic = bagio.TOPICS['left_image'][0]
     imu_topic = bagio.TOPICS['imu'][0]
     n_pairs = topics.get(left_topic, ('', 0))[1]
@@ -330,12 +340,14 @@ def run(args) -> int:
     if domain != preferred:
         console.line(f'asmonc run: ROS domain {preferred} is in use by another asmonc run; '
                      f'this one uses domain {domain} (ROS_DOMAIN_ID={domain} to watch it)')
+    t0, truth = 0, {}
     try:
         t0 = first_image_stamp(bag) or 0
         truth = read_truth(bag) if bagio.TOPICS['gt_obstacles'][0] in topics else {}
     except bagio.BagError as exc:
-        console.line(f'asmonc run: {exc} (continuing with what could be read)', err=True)
-        t0, truth = 0, {}
+        truth = getattr(exc, 'partial', truth)
+        if not damage:
+            console.line(f'asmonc run: {exc} (continuing with what could be read)', err=True)
     console.line(f'asmonc run: {bag} — {n_pairs} stereo pairs, {n_imu} inclinometer readings, '
                  f'at rate {args.rate:g}' + (', with ground truth' if truth else ', no ground truth')
                  + f"; nodes: {', '.join(nodes)}")
@@ -371,6 +383,8 @@ def run(args) -> int:
         ros_params += ['--params-file', str(pf)]
     children: dict[str, _Child] = {}
     failed: list[str] = []
+    if damage:
+        failed.append(f'bag not read to its end: {damage}')
     player_rc = None
     try:
         for name, spec in nodes.items():
