@@ -664,3 +664,52 @@ def test_wall_beside_the_path_is_reported_where_it_leaves_the_view():
     got = ob.range * np.array([math.cos(ob.bearing), math.sin(ob.bearing)])
     # (its nearest vertical edge in the view is 0.17 m farther along the wall)
     assert np.hypot(*(got - truth)) < 0.08, (got, truth)
+
+
+# ---------------------------------------------------------------- a face seen as two obstacles
+def test_face_gap_points_bridge_a_blank_middle_only_where_no_ground_shows_through():
+    from asmonc_vision.core.gpod import face_gap_points
+    # A wall across the path 3 m ahead, its textured parts either side of a blank middle.
+    feet = np.array([[3.0, y] for y in (1.2, 0.9, 0.6, -0.5, -0.8, -1.1)])
+    feet[:, 0] += [0.01, -0.01, 0.0, 0.01, -0.01, 0.0]
+    group = np.array([0, 0, 0, 1, 1, 1])
+    q = np.array([[3.0, 0.6], [3.0, -0.5]])            # each part's own nearest foot
+    front = np.array([[x, y] for x in (2.2, 2.5, 2.8) for y in (-0.3, 0.0, 0.3)])
+    got = face_gap_points(feet, group, 2, q, front)
+    assert np.isnan(got[0, 0])                          # the farther part stays
+    np.testing.assert_allclose(got[1], [3.0, 0.0], atol=0.02)
+    # Ground seen through the gap: two obstacles with a way between them.
+    behind = np.array([[x, y] for x in (3.4, 3.8) for y in (-0.3, 0.0, 0.3)])
+    assert np.isnan(face_gap_points(feet, group, 2, q, np.vstack([front, behind]))).all()
+    # Nothing seen in the gap (no ground features at all): no bridge.
+    assert np.isnan(face_gap_points(feet, group, 2, q, np.zeros((0, 2)))).all()
+    # The face's nearest point inside one part: nothing to bridge.
+    side = feet + [0.0, 1.5]
+    qs = q + [0.0, 1.5]
+    assert np.isnan(face_gap_points(side, group, 2, qs, front + [0.0, 1.5])).all()
+    # Not one line (a box in front of a wall part).
+    bent = feet.copy()
+    bent[3:, 0] -= 0.5
+    assert np.isnan(face_gap_points(bent, group, 2, q, front)).all()
+
+
+def test_wall_with_a_blank_middle_is_reported_at_its_nearest_point():
+    """A wall across the path whose middle is plain: its textured sides are the only
+    obstacle edges; the report is the wall's nearest point, in the blank middle."""
+    z_wall, half, blank = 3.0, 1.5, 0.55
+    wall = (-half, half, z_wall, z_wall + 0.1, 2.0)
+    det, _ = _calibrated(render_pair(seed=6))
+    left, right = (im.copy() for im in render_pair(boxes=[wall], seed=6))
+    # Paint the middle of the wall's face plain in both images (right: shifted by its
+    # disparity), from the top of the image down to the wall's foot.
+    base = to_left_optical([0.0, HEIGHT, z_wall])
+    v_base = int(CAM.f * base[1] / base[2] + CAM.cy)
+    for img, shift in ((left, 0.0), (right, CAM.f * CAM.baseline / base[2])):
+        cols = [CAM.f * to_left_optical([x, HEIGHT, z_wall])[0] / base[2] + CAM.cx - shift
+                for x in (-blank, blank)]
+        img[:v_base + 1, int(round(cols[0])):int(round(cols[1]))] = 150
+    r = det.process(left, right, CAM)
+    assert r.status == 'tracking' and r.detections
+    nearest = min(r.detections, key=lambda o: o.range)
+    assert abs(nearest.range - z_wall) < 0.1
+    assert abs(math.degrees(nearest.bearing)) < 2.0, math.degrees(nearest.bearing)

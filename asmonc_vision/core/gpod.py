@@ -123,6 +123,8 @@ _FACE_MIN_SPAN_M = 0.3
 _FACE_BEHIND_M = 0.1
 _FACE_BEHIND_MIN = 5
 _FACE_BEHIND_FRACTION = 0.25
+#: Least span (metres) of the feet of two obstacles taken for one face (`face_gap_points`).
+_GAP_MIN_SPAN_M = 1.0
 
 #: Placement-only silhouette feet (`silhouette_owners`): an edge string that is no
 #: obstacle may still be the other silhouette edge of a detected one. Its pixels above
@@ -1367,6 +1369,145 @@ def view_edge_points(xy: np.ndarray, group: np.ndarray, n_groups: int, to_image,
     return out
 
 
+def face_gap_points(xy: np.ndarray, group: np.ndarray, n_groups: int, q: np.ndarray,
+                    ground_xy) -> np.ndarray:
+    """The nearest point of a straight face seen as two obstacles: a wall across the
+    path whose middle has no edges to match (plain paint, a blank door) is found at its
+    textured parts on either side, each placed at its own nearest foot, while the face's
+    nearest point lies in the gap between them.
+
+    For each pair of obstacles whose feet together (at least ``_FACE_MIN_FEET`` + 1) lie
+    along one line (orthogonal RMS <= ``_FACE_MAX_RMS_M``, span >= ``_GAP_MIN_SPAN_M``)
+    with the foot of the perpendicular from the camera in the gap between their feet:
+    the gap is that face when visible ground lies in front of the line within the gap's
+    bearings (``_FACE_BEHIND_MIN`` features at least: the gap is seen) and not behind it
+    (fewer than ``_FACE_BEHIND_MIN`` and ``_FACE_BEHIND_FRACTION`` beyond the line by
+    ``_FACE_BEHIND_M``: a gap one could walk through shows the ground beyond). The
+    nearer obstacle of the pair is then placed at that foot.
+
+    Args:
+        xy: (S, 2) ground coordinates of the feet, metres.
+        group: (S,) obstacle of each foot, 0..n_groups-1.
+        q: (n_groups, 2) each obstacle's nearest point so far.
+        ground_xy: (G, 2) visible ground, or a callable returning it.
+    Returns:
+        (n_groups, 2) the face's nearest point for the obstacles to move there, NaN for
+        the others.
+    """
+    out = np.full((n_groups, 2), np.nan)
+    if n_groups < 2 or xy.shape[0] < _FACE_MIN_FEET + 1:
+        return out
+    counts = np.bincount(group, minlength=n_groups).astype(np.float64)
+    r_q = np.hypot(q[:, 0], q[:, 1])
+    # Per obstacle: mean and scatter of its feet; per pair, the line through all their
+    # feet from those (its normal's variance, the smaller eigenvalue of the 2x2 scatter).
+    n1 = np.maximum(counts, 1.0)
+    mean = np.stack([np.bincount(group, xy[:, i], n_groups) for i in (0, 1)], 1) / n1[:, None]
+    dev = xy - mean[group]
+    sxx = np.bincount(group, dev[:, 0] ** 2, n_groups)
+    syy = np.bincount(group, dev[:, 1] ** 2, n_groups)
+    sxy = np.bincount(group, dev[:, 0] * dev[:, 1], n_groups)
+    ia, ib = np.triu_indices(n_groups, 1)
+    na, nb = counts[ia], counts[ib]
+    ok = (na > 0) & (nb > 0) & (na + nb >= _FACE_MIN_FEET + 1) & np.isfinite(r_q[ia]) \
+        & np.isfinite(r_q[ib])
+    n = np.maximum(na + nb, 1.0)
+    c = (na[:, None] * mean[ia] + nb[:, None] * mean[ib]) / n[:, None]
+    da, db = mean[ia] - c, mean[ib] - c
+    mxx = sxx[ia] + sxx[ib] + na * da[:, 0] ** 2 + nb * db[:, 0] ** 2
+    myy = syy[ia] + syy[ib] + na * da[:, 1] ** 2 + nb * db[:, 1] ** 2
+    mxy = sxy[ia] + sxy[ib] + na * da[:, 0] * da[:, 1] + nb * db[:, 0] * db[:, 1]
+    half_tr = 0.5 * (mxx + myy)
+    disc = np.sqrt(np.maximum(half_tr ** 2 - (mxx * myy - mxy ** 2), 0.0))
+    ok &= (half_tr - disc) / n <= _FACE_MAX_RMS_M ** 2
+    ground = None
+    for t in np.flatnonzero(ok):
+        a, b = int(ia[t]), int(ib[t])
+        lam = half_tr[t] + disc[t]              # the line's direction: the larger eigenvalue
+        d = np.array([mxy[t], lam - mxx[t]]) if abs(mxy[t]) > 1e-12 else (
+            np.array([1.0, 0.0]) if mxx[t] >= myy[t] else np.array([0.0, 1.0]))
+        d = d / np.linalg.norm(d)
+        ct = c[t]
+        ta, tb = (xy[group == a] - ct) @ d, (xy[group == b] - ct) @ d
+        span = float(max(ta.max(), tb.max()) - min(ta.min(), tb.min()))
+        if span < _GAP_MIN_SPAN_M:
+            continue
+        t_p = -float(ct @ d)
+        if ta.max() < t_p < tb.min():
+            lo_t, hi_t = float(ta.max()), float(tb.min())
+        elif tb.max() < t_p < ta.min():
+            lo_t, hi_t = float(tb.max()), float(ta.min())
+        else:
+            continue                            # the nearest point is within one of them
+        if ground is None:
+            ground = ground_xy() if callable(ground_xy) else ground_xy
+        if ground.shape[0] == 0:
+            continue
+        e0, e1 = ct + lo_t * d, ct + hi_t * d
+        b0, b1 = math.atan2(e0[1], e0[0]), math.atan2(e1[1], e1[0])
+        bg = np.arctan2(ground[:, 1], ground[:, 0])
+        w = ground[(bg >= min(b0, b1)) & (bg <= max(b0, b1))]
+        nrm = np.array([-d[1], d[0]])
+        off = math.copysign(1.0, float(nrm @ -ct)) * ((w - ct) @ nrm)
+        n_front = int(np.count_nonzero(off > _FACE_BEHIND_M))
+        n_behind = int(np.count_nonzero(off < -_FACE_BEHIND_M))
+        if n_front < _FACE_BEHIND_MIN or n_behind >= max(_FACE_BEHIND_MIN,
+                                                          _FACE_BEHIND_FRACTION * w.shape[0]):
+            continue
+        k = a if r_q[a] <= r_q[b] else b
+        foot = ct + t_p * d
+        if np.hypot(*foot) < r_q[k] and (np.isnan(out[k, 0])
+                                         or np.hypot(*foot) < np.hypot(*out[k])):
+            out[k] = foot
+    return out
+    counts = np.bincount(group, minlength=n_groups)
+    r_q = np.hypot(q[:, 0], q[:, 1])
+    ground = None
+    for a in range(n_groups):
+        for b in range(a + 1, n_groups):
+            if counts[a] == 0 or counts[b] == 0 or counts[a] + counts[b] < _FACE_MIN_FEET + 1:
+                continue
+            if not (np.isfinite(r_q[a]) and np.isfinite(r_q[b])):
+                continue
+            pa, pb = xy[group == a], xy[group == b]
+            p = np.vstack([pa, pb])
+            c = p.mean(axis=0)
+            _, sv, vt = np.linalg.svd(p - c, full_matrices=False)
+            d = vt[0]
+            ta, tb = (pa - c) @ d, (pb - c) @ d
+            span = float(max(ta.max(), tb.max()) - min(ta.min(), tb.min()))
+            if span < _GAP_MIN_SPAN_M or sv[1] / math.sqrt(p.shape[0]) > _FACE_MAX_RMS_M:
+                continue
+            t_p = -float(c @ d)
+            if ta.max() < t_p < tb.min():
+                lo_t, hi_t = float(ta.max()), float(tb.min())
+            elif tb.max() < t_p < ta.min():
+                lo_t, hi_t = float(tb.max()), float(ta.min())
+            else:
+                continue                    # the nearest point is within one of them
+            if ground is None:
+                ground = ground_xy() if callable(ground_xy) else ground_xy
+            if ground.shape[0] == 0:
+                continue
+            e0, e1 = c + lo_t * d, c + hi_t * d
+            b0, b1 = math.atan2(e0[1], e0[0]), math.atan2(e1[1], e1[0])
+            bg = np.arctan2(ground[:, 1], ground[:, 0])
+            w = ground[(bg >= min(b0, b1)) & (bg <= max(b0, b1))]
+            nrm = np.array([-d[1], d[0]])
+            off = math.copysign(1.0, float(nrm @ -c)) * ((w - c) @ nrm)
+            n_front = int(np.count_nonzero(off > _FACE_BEHIND_M))
+            n_behind = int(np.count_nonzero(off < -_FACE_BEHIND_M))
+            if n_front < _FACE_BEHIND_MIN or n_behind >= max(_FACE_BEHIND_MIN,
+                                                              _FACE_BEHIND_FRACTION * w.shape[0]):
+                continue
+            k = a if r_q[a] <= r_q[b] else b
+            foot = c + t_p * d
+            if np.hypot(*foot) < r_q[k] and (np.isnan(out[k, 0])
+                                             or np.hypot(*foot) < np.hypot(*out[k])):
+                out[k] = foot
+    return out
+
+
 def silhouette_owners(xw: np.ndarray, top: np.ndarray, xy: np.ndarray, g_lab: np.ndarray,
                       height: np.ndarray, radius: float, ground_xy) -> np.ndarray:
     """The detected obstacle whose silhouette foot each candidate edge may be (-1: none).
@@ -2132,6 +2273,12 @@ class GpodDetector:
             ext &= np.hypot(qe[:, 0], qe[:, 1]) < np.hypot(q[:, 0], q[:, 1])
             q = q.copy()
             q[ext] = qe[ext]
+        # A face seen as two obstacles (its middle has no edges): its nearest point.
+        qg = face_gap_points(xy, g_lab, n_c, q, lambda: ctx.ground_xy)
+        gap = ~np.isnan(qg[:, 0])
+        if gap.any():
+            q = q.copy()
+            q[gap] = qg[gap]
         rng = np.array([math.hypot(x, y) for x, y in q.tolist()])
         brg = np.array([math.atan2(y, x) for x, y in q.tolist()])
         return rng, brg, q0
