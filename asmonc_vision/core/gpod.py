@@ -1460,52 +1460,6 @@ def face_gap_points(xy: np.ndarray, group: np.ndarray, n_groups: int, q: np.ndar
                                          or np.hypot(*foot) < np.hypot(*out[k])):
             out[k] = foot
     return out
-    counts = np.bincount(group, minlength=n_groups)
-    r_q = np.hypot(q[:, 0], q[:, 1])
-    ground = None
-    for a in range(n_groups):
-        for b in range(a + 1, n_groups):
-            if counts[a] == 0 or counts[b] == 0 or counts[a] + counts[b] < _FACE_MIN_FEET + 1:
-                continue
-            if not (np.isfinite(r_q[a]) and np.isfinite(r_q[b])):
-                continue
-            pa, pb = xy[group == a], xy[group == b]
-            p = np.vstack([pa, pb])
-            c = p.mean(axis=0)
-            _, sv, vt = np.linalg.svd(p - c, full_matrices=False)
-            d = vt[0]
-            ta, tb = (pa - c) @ d, (pb - c) @ d
-            span = float(max(ta.max(), tb.max()) - min(ta.min(), tb.min()))
-            if span < _GAP_MIN_SPAN_M or sv[1] / math.sqrt(p.shape[0]) > _FACE_MAX_RMS_M:
-                continue
-            t_p = -float(c @ d)
-            if ta.max() < t_p < tb.min():
-                lo_t, hi_t = float(ta.max()), float(tb.min())
-            elif tb.max() < t_p < ta.min():
-                lo_t, hi_t = float(tb.max()), float(ta.min())
-            else:
-                continue                    # the nearest point is within one of them
-            if ground is None:
-                ground = ground_xy() if callable(ground_xy) else ground_xy
-            if ground.shape[0] == 0:
-                continue
-            e0, e1 = c + lo_t * d, c + hi_t * d
-            b0, b1 = math.atan2(e0[1], e0[0]), math.atan2(e1[1], e1[0])
-            bg = np.arctan2(ground[:, 1], ground[:, 0])
-            w = ground[(bg >= min(b0, b1)) & (bg <= max(b0, b1))]
-            nrm = np.array([-d[1], d[0]])
-            off = math.copysign(1.0, float(nrm @ -c)) * ((w - c) @ nrm)
-            n_front = int(np.count_nonzero(off > _FACE_BEHIND_M))
-            n_behind = int(np.count_nonzero(off < -_FACE_BEHIND_M))
-            if n_front < _FACE_BEHIND_MIN or n_behind >= max(_FACE_BEHIND_MIN,
-                                                              _FACE_BEHIND_FRACTION * w.shape[0]):
-                continue
-            k = a if r_q[a] <= r_q[b] else b
-            foot = c + t_p * d
-            if np.hypot(*foot) < r_q[k] and (np.isnan(out[k, 0])
-                                             or np.hypot(*foot) < np.hypot(*out[k])):
-                out[k] = foot
-    return out
 
 
 def silhouette_owners(xw: np.ndarray, top: np.ndarray, xy: np.ndarray, g_lab: np.ndarray,
@@ -2090,7 +2044,6 @@ class GpodDetector:
         re-projected from its new foot and top. While the rig stands still, a track not
         detected is still seen when a detection's image region overlaps its own by half
         (the same obstacle placed at another point)."""
-        c = self.config
         n = metric.normal_up
         if motion is not None:
             mcov = motion[2] if len(motion) > 2 else None
