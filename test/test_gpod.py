@@ -713,3 +713,18 @@ def test_wall_with_a_blank_middle_is_reported_at_its_nearest_point():
     nearest = min(r.detections, key=lambda o: o.range)
     assert abs(nearest.range - z_wall) < 0.1
     assert abs(math.degrees(nearest.bearing)) < 2.0, math.degrees(nearest.bearing)
+
+
+@pytest.mark.parametrize('boxes', [
+    [(-0.8, -0.6, 3.0, 3.2, 1.0), (0.6, 0.8, 3.0, 3.2, 1.0)],      # two posts, 1.2 m apart
+    [(-2.0, -0.6, 3.0, 3.1, 2.0), (0.6, 2.0, 3.0, 3.1, 2.0)],      # a wall with a 1.2 m gap
+], ids=['posts', 'wall-gap'])
+def test_a_way_between_two_obstacles_is_left_open(boxes):
+    """Two obstacles in line with a way between them (the ground beyond is seen through
+    it): nothing is reported in the way, whose middle lies straight ahead."""
+    det, _ = _calibrated(render_pair(seed=7))
+    r = det.process(*render_pair(boxes=boxes, seed=7), CAM)
+    near = [o for o in r.detections if o.range < 4.0]
+    assert len(near) >= 2
+    assert all(abs(math.degrees(o.bearing)) > 5.0 for o in near), [
+        (o.range, math.degrees(o.bearing)) for o in near]
