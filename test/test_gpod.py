@@ -728,3 +728,25 @@ def test_a_way_between_two_obstacles_is_left_open(boxes):
     assert len(near) >= 2
     assert all(abs(math.degrees(o.bearing)) > 5.0 for o in near), [
         (o.range, math.degrees(o.bearing)) for o in near]
+
+
+def test_same_object_only_for_a_nearer_or_close_placement():
+    """While standing, a detection keeps an overlapping track seen as the same obstacle
+    placed elsewhere (its far corner; boxes reported together at the nearest) -- but not
+    a detection metres beyond the track: then the track's placement was wrong (a pole's
+    foot once followed down a paving joint to 1.1 m, the pole then seen at 7 m), and it
+    must end instead of being reported, and alarmed, for as long as the wearer stands."""
+    from asmonc_vision.core.gpod import GpodObstacle, _same_object
+
+    def ob(rng, roi, bearing=0.0):
+        return GpodObstacle(position=np.zeros(3), height=1.0, range=rng, bearing=bearing,
+                            width=0.1, disparity_excess=5.0, confidence=1.0, roi=roi,
+                            num_edge_pixels=20, string_ids=np.zeros(0, np.int32))
+
+    track = ob(1.13, (200, 11, 5, 229))                 # the wrong placement
+    pole = ob(6.95, (200, 1, 5, 67))                    # the same column, far away
+    assert _same_object(track, pole)                    # by the image alone it would be
+    assert not _same_object(track, pole, radius=0.7)
+    assert _same_object(ob(3.6, (150, 60, 20, 30)), ob(2.3, (140, 60, 40, 60)), radius=0.7)
+    assert _same_object(ob(2.5, (150, 60, 20, 30)), ob(2.9, (152, 58, 20, 30)), radius=0.7)
+    assert not _same_object(ob(2.5, (150, 60, 20, 30)), ob(2.6, (10, 60, 20, 30)), radius=0.7)

@@ -2061,9 +2061,15 @@ class GpodDetector:
         # While the view stands still an obstacle's nearest visible point is one fixed
         # point, so a detection of the same obstacle placed elsewhere (its far corner when
         # one silhouette edge dips) keeps its track seen; in motion the nearest visible
-        # part of a large obstacle moves with the view, and it does not.
-        tracks = self._tracker.update(feet, cov, obst, is_free,
-                                      _same_object if still else None)
+        # part of a large obstacle moves with the view, and it does not. The detection
+        # must not lie more than cluster_radius_m farther than the track: a nearer one
+        # (boxes reported as one obstacle at the nearest) or a far corner may be the
+        # same obstacle, but an obstacle seen metres beyond a track shows the track's
+        # placement was wrong (a pole's foot once followed down a paving joint).
+        radius = self.config.cluster_radius_m
+        tracks = self._tracker.update(
+            feet, cov, obst, is_free,
+            (lambda a, b: _same_object(a, b, radius)) if still else None)
         out = list(drops)
         feet_t = np.array([tr.foot for tr in tracks]).reshape(-1, 3)
         rngs, brgs = ground_range_bearing(metric, feet_t)
@@ -2344,9 +2350,12 @@ class GpodDetector:
         return out
 
 
-def _same_object(a: GpodObstacle, b: GpodObstacle) -> bool:
-    """Whether two obstacles' image regions overlap by at least half the smaller one
-    (one obstacle, reported at different points)."""
+def _same_object(a: GpodObstacle, b: GpodObstacle, radius: float = math.inf) -> bool:
+    """Whether detection ``b`` may be track ``a``'s obstacle reported at another point:
+    their image regions overlap by at least half the smaller one, and ``b`` lies no more
+    than ``radius`` metres farther than ``a``."""
+    if b.range - a.range > radius:
+        return False
     ax, ay, aw, ah = a.roi
     bx, by, bw, bh = b.roi
     ix = min(ax + aw, bx + bw) - max(ax, bx)
