@@ -95,6 +95,12 @@ class StereoCamera:
         y = (v - self.cy) * z / self.f
         return np.stack([x, y, z], axis=-1)
 
+    def project_left(self, points_left: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Left optical-frame points (N, 3), metres (z > 0), to their left-image (u, v),
+        pixels, (N,) each."""
+        p = np.asarray(points_left, float).reshape(-1, 3)
+        return self.f * p[:, 0] / p[:, 2] + self.cx, self.f * p[:, 1] / p[:, 2] + self.cy
+
     def project(self, points_left: np.ndarray):
         """Left optical-frame points (N, 3) to cyclopean (u, v, d) pixel arrays."""
         p = np.asarray(points_left, float).reshape(-1, 3)

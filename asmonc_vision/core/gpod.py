@@ -352,9 +352,10 @@ class GpodConfig(PlausiblePlaneConfig):
         'evidence (confidence = P(any pixel truly beyond the threshold) * '
         'min(1, pixels / this))', range=(1, 100000))
     track_coast_s: float = param(
-        1.0, 'Obstacle tracks (DGPR): while the rig stands still, an obstacle detected before '
-        'is still reported for up to this long after its last detection (at its tracked '
-        'place), unless the frame shows ground where it stood; 0 = report detections only, s',
+        1.0, 'Obstacle tracks (DGPR): an obstacle detected before is still reported for up to '
+        'this long after its last detection, at its tracked place (moved by the camera '
+        'motion, or still while the rig stands still), unless the frame shows ground where '
+        'it stood; 0 = report detections only, s',
         range=(0.0, 60.0))
     track_gate_chi2: float = param(
         11.34, 'Obstacle tracks: a detection updates a track when their squared Mahalanobis '
@@ -364,8 +365,7 @@ class GpodConfig(PlausiblePlaneConfig):
         range=(0.0, 10.0))
     track_confirm_hits: int = param(
         1, 'Obstacle tracks: frames in which a track must have been detected before it is '
-        'reported in frames where it is not', 
-        range=(1, 1000))
+        'reported in frames where it is not', range=(1, 1000))
     track_min_hit_fraction: float = param(
         0.5, 'Obstacle tracks: a track is carried through frames without a detection only '
         'while it was detected in at least this fraction of the frames since it began (M of '
@@ -918,8 +918,8 @@ class _FrameContext:
         """Left-image (u, v) of ground points (N, 2)."""
         p = (self.origin[None, :] + xy[:, :1] * self.fwd[None, :]
              + xy[:, 1:2] * self.lft[None, :])
-        z = np.maximum(p[:, 2], 1e-6)
-        return self.cam.f * p[:, 0] / z + self.cam.cx, self.cam.f * p[:, 1] / z + self.cam.cy
+        p[:, 2] = np.maximum(p[:, 2], 1e-6)
+        return self.cam.project_left(p)
 
     @property
     def ground_xy(self) -> np.ndarray:
@@ -1281,6 +1281,28 @@ def nearest_point(xy: np.ndarray, sr: np.ndarray, ground_xy: np.ndarray,
                           None if score is None else _single_score(score), at_border)[0]
 
 
+def _ground_across_line(ground: np.ndarray, c: np.ndarray, d: np.ndarray, a: np.ndarray,
+                        b: np.ndarray) -> tuple[int, int, int]:
+    """Visible ground on either side of the ground line through ``c`` along unit ``d``,
+    within the bearings of its points ``a`` and ``b`` ((2,) each, metres): the numbers of
+    ground features (G, 2) more than ``_FACE_BEHIND_M`` in front of it (the camera's
+    side) and behind it, and of all features within those bearings."""
+    b0, b1 = math.atan2(a[1], a[0]), math.atan2(b[1], b[0])
+    bg = np.arctan2(ground[:, 1], ground[:, 0])
+    w = ground[(bg >= min(b0, b1)) & (bg <= max(b0, b1))]
+    nrm = np.array([-d[1], d[0]])
+    off = math.copysign(1.0, float(nrm @ -c)) * ((w - c) @ nrm)
+    return (int(np.count_nonzero(off > _FACE_BEHIND_M)),
+            int(np.count_nonzero(off < -_FACE_BEHIND_M)), int(w.shape[0]))
+
+
+def _ground_behind(n_behind: int, n_wedge: int) -> bool:
+    """Whether enough ground is seen behind a face line to show the way through: at least
+    ``_FACE_BEHIND_MIN`` features and ``_FACE_BEHIND_FRACTION`` of those in its bearings
+    (a few are texture on the face matched at the ground's disparity)."""
+    return n_behind >= max(_FACE_BEHIND_MIN, _FACE_BEHIND_FRACTION * n_wedge)
+
+
 def view_edge_points(xy: np.ndarray, group: np.ndarray, n_groups: int, to_image,
                      width: int, height: int, ground_xy) -> np.ndarray:
     """Where the straight face of an obstacle leaves the view, for faces that come nearer
@@ -1351,20 +1373,10 @@ def view_edge_points(xy: np.ndarray, group: np.ndarray, n_groups: int, to_image,
             continue
         if ground is None:
             ground = ground_xy() if callable(ground_xy) else ground_xy
-        if ground.size:
-            # Visible ground behind the extension (within its wedge of bearings, beyond
-            # the line by the margin) shows the face ends before the view's edge.
-            b_e, b_q = math.atan2(e[1], e[0]), math.atan2(q[1], q[0])
-            lo_b, hi_b = min(b_e, b_q), max(b_e, b_q)
-            bg = np.arctan2(ground[:, 1], ground[:, 0])
-            w = ground[(bg >= lo_b) & (bg <= hi_b)]
-            if w.size:
-                nrm = np.array([-d[1], d[0]])
-                cam_side = math.copysign(1.0, float(nrm @ -c))
-                behind = cam_side * ((w - c) @ nrm) < -_FACE_BEHIND_M
-                if np.count_nonzero(behind) >= max(_FACE_BEHIND_MIN,
-                                                   _FACE_BEHIND_FRACTION * w.shape[0]):
-                    continue
+        # Visible ground behind the extension shows the face ends before the view's edge.
+        _, n_behind, n_wedge = _ground_across_line(ground, c, d, e, q)
+        if _ground_behind(n_behind, n_wedge):
+            continue
         out[k] = q
     return out
 
@@ -1443,16 +1455,9 @@ def face_gap_points(xy: np.ndarray, group: np.ndarray, n_groups: int, q: np.ndar
             ground = ground_xy() if callable(ground_xy) else ground_xy
         if ground.shape[0] == 0:
             continue
-        e0, e1 = ct + lo_t * d, ct + hi_t * d
-        b0, b1 = math.atan2(e0[1], e0[0]), math.atan2(e1[1], e1[0])
-        bg = np.arctan2(ground[:, 1], ground[:, 0])
-        w = ground[(bg >= min(b0, b1)) & (bg <= max(b0, b1))]
-        nrm = np.array([-d[1], d[0]])
-        off = math.copysign(1.0, float(nrm @ -ct)) * ((w - ct) @ nrm)
-        n_front = int(np.count_nonzero(off > _FACE_BEHIND_M))
-        n_behind = int(np.count_nonzero(off < -_FACE_BEHIND_M))
-        if n_front < _FACE_BEHIND_MIN or n_behind >= max(_FACE_BEHIND_MIN,
-                                                          _FACE_BEHIND_FRACTION * w.shape[0]):
+        n_front, n_behind, n_wedge = _ground_across_line(ground, ct, d, ct + lo_t * d,
+                                                         ct + hi_t * d)
+        if n_front < _FACE_BEHIND_MIN or _ground_behind(n_behind, n_wedge):
             continue
         k = a if r_q[a] <= r_q[b] else b
         foot = ct + t_p * d
@@ -2113,9 +2118,8 @@ class GpodDetector:
         cam, ctx = self._cam, self._ctx
         if foot[2] <= 1e-3:
             return True
-        uc, vf, df = cam.project(foot)
-        uf = float(uc[0] + df[0] / 2.0)           # cyclopean -> left image column
-        if not (0 <= uf <= cam.width - 1 and 0 <= float(vf[0]) <= cam.height - 1):
+        uf, vf = (float(w[0]) for w in cam.project_left(foot))
+        if not (0 <= uf <= cam.width - 1 and 0 <= vf <= cam.height - 1):
             return True
         x, y, w, h = ob.roi
         inside = (ctx.usable & (ctx.u_left >= x) & (ctx.u_left <= x + w - 1)
@@ -2373,11 +2377,10 @@ def _moved_roi(ob: GpodObstacle, foot: np.ndarray, normal_up: np.ndarray,
     image (at least 1 x 1)."""
     old_foot = ob.position - ob.height * normal_up
     top = foot + ob.height * normal_up
-    z_f, z_t = max(float(foot[2]), 1e-3), max(float(top[2]), 1e-3)
-    u = cam.f * foot[0] / z_f + cam.cx
-    v_foot = cam.f * foot[1] / z_f + cam.cy
-    v_top = cam.f * top[1] / z_t + cam.cy
-    w = ob.roi[2] * max(float(old_foot[2]), 1e-3) / z_f
+    ends = np.stack([foot, top]).astype(float)
+    ends[:, 2] = np.maximum(ends[:, 2], 1e-3)
+    (u, _), (v_foot, v_top) = cam.project_left(ends)
+    w = ob.roi[2] * max(float(old_foot[2]), 1e-3) / ends[0, 2]
     x0 = int(np.clip(np.floor(u - w / 2), 0, cam.width - 1))
     x1 = int(np.clip(np.ceil(u + w / 2), 0, cam.width - 1))
     y0 = int(np.clip(np.floor(min(v_top, v_foot)), 0, cam.height - 1))

@@ -7,8 +7,8 @@ callbacks that receive images stay fast. Publishes, per processed pair:
 * `/obstacles` (asmonc_vision_msgs/ObstacleArray): stamp of the pair, left optical frame.
   Published for every good pair, empty when nothing stands above the ground. ``id`` is
   the obstacle's track id (stable while it is tracked, 0 for drop-offs, which are not
-  tracked); while the rig stands still an obstacle whose evidence dips for a frame or
-  two is still reported at its tracked place (`core.obstacle_tracks`).
+  tracked); an obstacle whose evidence dips for a frame or two is still reported at
+  its tracked place (`core.obstacle_tracks`; moved by `/egomotion`, below).
 * `/ground_plane` (asmonc_vision_msgs/GroundPlane)
 * `/obstacles/markers` (visualization_msgs/MarkerArray), `/detector/debug_image` (bgr8)
 * `/diagnostics`
