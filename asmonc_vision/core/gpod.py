@@ -2099,11 +2099,12 @@ class GpodDetector:
         z = np.maximum(feet[:, 2], 1e-3)
         d = cam.fb / z
         sig_d = self._sigma if np.isfinite(self._sigma) else c.disparity_sigma_px
-        # X = (u - cx) B / d, Y = (v - cy) B / d, Z = f B / d: J = d(X, Y, Z)/d(u, v, d)
+        # X = (u - cx) B / d + B / 2, Y = (v - cy) B / d, Z = f B / d (cyclopean u):
+        # J = d(X, Y, Z)/d(u, v, d)
         J = np.zeros((k, 3, 3))
         J[:, 0, 0] = z / cam.f
         J[:, 1, 1] = z / cam.f
-        J[:, 0, 2] = -feet[:, 0] / d
+        J[:, 0, 2] = -(feet[:, 0] - cam.baseline / 2.0) / d
         J[:, 1, 2] = -feet[:, 1] / d
         J[:, 2, 2] = -z / d
         S = np.diag([c.track_pixel_sigma_px ** 2, c.track_pixel_sigma_px ** 2, sig_d ** 2])
