@@ -147,3 +147,33 @@ def test_uint8_integer_path_equals_the_float_path(kw):
         x, y = getattr(a, name), getattr(b, name)
         assert x.dtype == y.dtype, name
         np.testing.assert_array_equal(x, y, err_msg=name)
+
+
+@pytest.mark.parametrize('kw', [dict(), dict(abs_threshold=4.0, max_angle_deg=70.0,
+                                             min_string_length=3),
+                                dict(abs_threshold=1.0, max_angle_deg=90.0),
+                                dict(abs_threshold=3.3, rel_threshold=0.7, min_string_length=5)])
+def test_compiled_edges_equal_the_numpy_path(monkeypatch, kw):
+    """The uint8 path's compiled kernel (numba, optional) gives bit-identical edges,
+    strings and parents to the numpy path: on a noisy scene of straight and slanted
+    steps, on a non-contiguous view, and on a blank image."""
+    from asmonc_vision.core import edges as E
+    if not E.warm_up():
+        pytest.skip('numba not installed')
+    rng = np.random.default_rng(11)
+    img = (_step_image(80, 120, 30.3) + _step_image(80, 120, 70.0, 0.0, 90.0, slope=0.6)
+           + _step_image(80, 120, 95.5, 0.0, -60.0, slope=-1.3))
+    img = np.clip(img + rng.normal(0.0, 8.0, img.shape), 0, 255).astype(np.uint8)
+    images = [img, rng.integers(0, 256, (60, 90), dtype=np.uint8),
+              np.asarray(img[::2, 1::2]), np.zeros((20, 30), np.uint8)]
+    fast = [E.detect_vertical_edges(i, **kw) for i in images]
+    monkeypatch.setattr(E, '_nb_edges', None)
+    slow = [E.detect_vertical_edges(i, **kw) for i in images]
+    assert len(slow[0]) > 100 and slow[0].num_strings > 5 and len(slow[3]) == 0
+    for a, b in zip(fast, slow):
+        assert a.threshold == b.threshold and a.shape == b.shape
+        for name in ('v', 'u_int', 'u', 'strength', 'polarity', 'orientation', 'string_id',
+                     'string_prev', 'string_length', 'curvature'):
+            x, y = getattr(a, name), getattr(b, name)
+            assert x.dtype == y.dtype, name
+            np.testing.assert_array_equal(x, y, err_msg=name)

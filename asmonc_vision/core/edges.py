@@ -22,6 +22,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from .jit import jit
+
 #: Sobel 3x3 normalisation: the kernel sums |weights| to 8 on each side, so that
 #: ``sobel / 8`` is the intensity derivative in grey levels per pixel.
 _SOBEL_NORM = 1.0 / 8.0
@@ -158,6 +160,18 @@ def detect_vertical_edges(image: np.ndarray, *, abs_threshold: float = 4.0,
         thr_c = 1021 if np.isnan(t8) else int(np.clip(np.ceil(t8), -1, 1021))
     else:
         thr_c = thr
+    # Angle of the edge from the vertical = angle of the gradient from the horizontal.
+    cos_max = np.cos(np.deg2rad(min(max(max_angle_deg, 0.0), 90.0)))
+    if scale is not None and _nb_edges is not None:
+        # The same edges, sub-pixel positions and strings in one compiled pass (integer
+        # Sobel sums s: (s / 8)^2 >= cos^2 (...) / 64 scales exactly by 64).
+        vv, uu, u_sub, peak, pol, gxe, gye, sid, prev, slen, curv = _nb_edges(
+            amag, gy_src, sx, int(thr_c), float(cos_max * cos_max),
+            int(max(min_string_length, 1)))
+        ori = np.arctan2(gye, gxe).astype(np.float32)
+        return EdgeMap(v=vv, u_int=uu, u=u_sub, strength=peak, polarity=pol,
+                       orientation=ori, string_id=sid, string_prev=prev,
+                       string_length=slen, shape=(h, w), threshold=thr, curvature=curv)
     k = np.flatnonzero((c > left) & (c >= right) & (c >= thr_c))
     vv = (k // (w - 4) + 1).astype(np.int32)
     uu = (k % (w - 4) + 2).astype(np.int32)
@@ -172,8 +186,6 @@ def detect_vertical_edges(image: np.ndarray, *, abs_threshold: float = 4.0,
         gye = gy_src.ravel()[flat]
         ml = mag_flat[flat - 1]
         mr = mag_flat[flat + 1]
-    # Angle of the edge from the vertical = angle of the gradient from the horizontal.
-    cos_max = np.cos(np.deg2rad(min(max(max_angle_deg, 0.0), 90.0)))
     keep = gxe * gxe >= (cos_max * cos_max) * (gxe * gxe + gye * gye)
     if not keep.all():
         sel = np.flatnonzero(keep)
@@ -287,3 +299,211 @@ def _link_strings(v: np.ndarray, u: np.ndarray, u_sub: np.ndarray, pol: np.ndarr
     sid = new_id[root]
     slen = np.bincount(sid, minlength=int(new_id[-1]) + 1).astype(np.int32)
     return sid, slen, parent.astype(np.int32)
+
+
+def _maxima_kernel(amag, img, sx, thr_c, cos2):
+    """The uint8 path's row maxima and angle test as loops (for numba), with integer
+    Sobel sums: returns (v, u, s_u, s_v, s_left, s_right) int32 of the kept edges in
+    (v, u) order, s_u the sum along u at the edge, s_v the sum along v, s_left and
+    s_right the |sum along u| of its row neighbours (all 8 times the derivatives)."""
+    h, w = amag.shape
+    cap = (h - 2) * (w - 4) + 1
+    ov = np.empty(cap, np.int32)
+    ou = np.empty(cap, np.int32)
+    osx = np.empty(cap, np.int32)
+    osy = np.empty(cap, np.int32)
+    oml = np.empty(cap, np.int32)
+    omr = np.empty(cap, np.int32)
+    # Branch-free first pass: write every pixel's position, advance past the maxima.
+    k = 0
+    for r in range(1, h - 1):
+        for c in range(2, w - 2):
+            m = amag[r, c]
+            ov[k] = r
+            ou[k] = c
+            k += (m > amag[r, c - 1]) & (m >= amag[r, c + 1]) & (m >= thr_c)
+    n = 0
+    for i in range(k):
+        r = ov[i]
+        c = ou[i]
+        gx = np.int32(sx[r, c])
+        gy = (np.int32(img[r + 1, c - 1]) + 2 * np.int32(img[r + 1, c])
+              + np.int32(img[r + 1, c + 1])
+              - np.int32(img[r - 1, c - 1]) - 2 * np.int32(img[r - 1, c])
+              - np.int32(img[r - 1, c + 1]))
+        gx2 = np.float64(gx * gx)
+        if gx2 >= cos2 * (gx2 + np.float64(gy * gy)):
+            ov[n] = r
+            ou[n] = c
+            osx[n] = gx
+            osy[n] = gy
+            oml[n] = amag[r, c - 1]
+            omr[n] = amag[r, c + 1]
+            n += 1
+    return ov[:n], ou[:n], osx[:n], osy[:n], oml[:n], omr[:n]
+
+
+def _link_kernel(v, u, u_sub, pol, w):
+    """:func:`_link_strings` as loops over the rows (for numba), with the same rules and
+    float32 comparisons: returns (string_id, string_length, parent) int32."""
+    n = v.shape[0]
+    wp = w + 2
+    above = np.full((2, wp), -1, np.int64)     # edge index per (polarity, column + 1)
+    parent = np.full(n, -1, np.int32)
+    via = np.zeros(n, np.int8)                 # 1: diagonal parent up-left, 2: up-right
+    straight = np.zeros(n, np.bool_)
+    cost_l = np.full(n, np.inf, np.float32)
+    cost_r = np.full(n, np.inf, np.float32)
+    sid = np.empty(n, np.int32)
+    slen = np.zeros(n, np.int32)
+    ns = 0
+    a0 = 0
+    a1 = 0                                     # the edges in `above`: a0..a1-1
+    i = 0
+    while i < n:
+        row = v[i]
+        j = i
+        while j < n and v[j] == row:
+            j += 1
+        if a1 > a0 and v[a0] != row - 1:       # the row above has no edges
+            for k in range(a0, a1):
+                above[0 if pol[k] > 0 else 1, u[k] + 1] = -1
+            a0 = a1 = i
+        for k in range(i, j):
+            p = 0 if pol[k] > 0 else 1
+            c = u[k] + 1
+            p0 = above[p, c]
+            pl = above[p, c - 1]
+            pr = above[p, c + 1]
+            dl = np.float32(0.0)
+            dr = np.float32(0.0)
+            if pl >= 0:
+                dl = abs(u_sub[pl] - u_sub[k])
+            if pr >= 0:
+                dr = abs(u_sub[pr] - u_sub[k])
+            if p0 >= 0:
+                parent[k] = p0
+                straight[p0] = True
+            elif pl >= 0 and (pr < 0 or dl <= dr):
+                parent[k] = pl
+                via[k] = 1
+                cost_l[pl] = dl
+            elif pr >= 0:
+                parent[k] = pr
+                via[k] = 2
+                cost_r[pr] = dr
+        for k in range(i, j):
+            q = parent[k]
+            if via[k] == 1 and (straight[q] or cost_r[q] < cost_l[q]):
+                parent[k] = -1
+            elif via[k] == 2 and (straight[q] or cost_l[q] <= cost_r[q]):
+                parent[k] = -1
+            if parent[k] >= 0:
+                sid[k] = sid[parent[k]]
+            else:
+                sid[k] = ns
+                ns += 1
+            slen[sid[k]] += 1
+        for k in range(a0, a1):
+            above[0 if pol[k] > 0 else 1, u[k] + 1] = -1
+        for k in range(i, j):
+            above[0 if pol[k] > 0 else 1, u[k] + 1] = k
+        a0 = i
+        a1 = j
+        i = j
+    return sid, slen[:ns].copy(), parent
+
+
+_nb_maxima = jit(_maxima_kernel)
+_nb_link = jit(_link_kernel)
+
+
+def _edges_kernel(amag, img, sx, thr_c, cos2, min_len):
+    """The uint8 path of :func:`detect_vertical_edges` after the Sobel sums, as loops
+    (for numba), with the numpy path's float32 arithmetic: returns (v, u_int, u,
+    strength, polarity, gx, gy, string_id, string_prev, string_length, curvature), gx and
+    gy the float32 derivatives (for the orientation)."""
+    w = amag.shape[1]
+    vv, uu, sxe, sye, sml, smr = _nb_maxima(amag, img, sx, thr_c, cos2)
+    n = vv.shape[0]
+    eighth = np.float32(0.125)
+    gxe = np.empty(n, np.float32)
+    gye = np.empty(n, np.float32)
+    u_sub = np.empty(n, np.float32)
+    peak = np.empty(n, np.float32)
+    curv = np.empty(n, np.float32)
+    pol = np.empty(n, np.int8)
+    for i in range(n):
+        gx = np.float32(sxe[i]) * eighth
+        ml = np.float32(sml[i]) * eighth
+        mr = np.float32(smr[i]) * eighth
+        mc = abs(gx)
+        denom = ml - np.float32(2.0) * mc + mr          # < 0 at a strict maximum
+        off = np.float32(0.0)
+        if denom < 0:
+            off = np.float32(0.5) * (ml - mr) / denom
+            off = min(max(off, np.float32(-0.5)), np.float32(0.5))
+        gxe[i] = gx
+        gye[i] = np.float32(sye[i]) * eighth
+        u_sub[i] = np.float32(uu[i]) + off
+        peak[i] = mc - np.float32(0.25) * (ml - mr) * off
+        curv[i] = max(-denom, np.float32(0.0))
+        pol[i] = 1 if gx >= 0 else -1
+    sid, slen, prev = _nb_link(vv, uu, u_sub, pol, w)
+    if n == 0 or min_len <= 1:
+        return vv, uu, u_sub, peak, pol, gxe, gye, sid, prev, slen, curv
+    # Drop the short strings; renumber strings and parents in order.
+    new_id = np.full(slen.shape[0], -1, np.int32)
+    ns = 0
+    for s in range(slen.shape[0]):
+        if slen[s] >= min_len:
+            new_id[s] = ns
+            ns += 1
+    new_index = np.full(n, -1, np.int32)
+    m = 0
+    for i in range(n):
+        if new_id[sid[i]] >= 0:
+            new_index[i] = m
+            m += 1
+    if m == n:
+        return vv, uu, u_sub, peak, pol, gxe, gye, sid, prev, slen, curv
+    o_slen = np.empty(ns, np.int32)
+    for s in range(slen.shape[0]):
+        if new_id[s] >= 0:
+            o_slen[new_id[s]] = slen[s]
+    j = 0
+    for i in range(n):
+        if new_index[i] >= 0:
+            vv[j] = vv[i]
+            uu[j] = uu[i]
+            u_sub[j] = u_sub[i]
+            peak[j] = peak[i]
+            pol[j] = pol[i]
+            gxe[j] = gxe[i]
+            gye[j] = gye[i]
+            curv[j] = curv[i]
+            prev[j] = new_index[prev[i]] if prev[i] >= 0 else -1
+            sid[j] = new_id[sid[i]]
+            j += 1
+    return (vv[:m], uu[:m], u_sub[:m], peak[:m], pol[:m], gxe[:m], gye[:m], sid[:m],
+            prev[:m], o_slen, curv[:m])
+
+
+_nb_edges = jit(_edges_kernel) if _nb_maxima is not None else None
+
+
+def warm_up() -> bool:
+    """Compile (or load from numba's disk cache) the edge kernel on a tiny image, so
+    that the first frame does not pay for it; without numba, or if compiling fails, the
+    numpy path is used. Returns whether numba is in use."""
+    global _nb_edges
+    if _nb_edges is None:
+        return False
+    try:
+        img = np.zeros((3, 5), np.uint8)
+        s = np.zeros((3, 5), np.int16)
+        _nb_edges(s, img, s, 1, 0.5, 3)
+    except Exception:       # pragma: no cover - a broken numba/llvmlite install
+        _nb_edges = None
+        return False
+    return True

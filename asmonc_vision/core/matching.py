@@ -36,11 +36,7 @@ import cv2
 import numpy as np
 
 from .edges import EdgeMap
-
-try:                        # optional: JIT-compiled loops (same results as numpy's)
-    import numba as _numba
-except ImportError:         # pragma: no cover
-    _numba = None
+from .jit import jit as _jit
 
 
 @dataclass(frozen=True)
@@ -437,17 +433,6 @@ def _pairs_kernel(table, half, w, s_uc, s_d64, s_v, rad2, lim2):
                 os2[n] = s2
                 n += (s2 <= rad2) & (dd * dd <= lim2 * s2) & (s2 > 0.0)
     return oi[:n], oj[:n], os2[:n]
-
-
-def _jit(fn):
-    """``numba.njit(fn)``, cached on disk when a cache directory is writable; None
-    without numba (the numpy path is used then)."""
-    if _numba is None:
-        return None
-    try:
-        return _numba.njit(cache=True, nogil=True)(fn)
-    except Exception:       # no writable cache location: compile at every start
-        return _numba.njit(cache=False, nogil=True)(fn)
 
 
 _nb_pairs = _jit(_pairs_kernel)
