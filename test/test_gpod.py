@@ -236,6 +236,21 @@ def test_finds_a_step_down():
     assert not [o for o in r.obstacles if not o.is_drop and o.range < 8.0]
 
 
+def test_plane_stays_on_the_ground_stood_on_before_a_step_down():
+    """Standing 2 m before a 15 cm step down, the lower ground fills most of the view
+    (more features, even in the nearer half by disparity) and once took the plane: the
+    near ground then stood 15 cm 'high' and was reported as obstacles."""
+    free = render_pair(seed=4)
+    drop = render_pair(step=(2.0, 0.15), seed=4)
+    det, _ = _calibrated(free)
+    for k in range(8):
+        r = det.process(*drop, CAM)
+        assert r.status == 'tracking'
+        assert abs(r.metric_plane.height - HEIGHT) < 0.03, (k, r.metric_plane.height)
+        assert not [o for o in r.obstacles if not o.is_drop], k
+    assert [o for o in r.obstacles if o.is_drop]
+
+
 def test_no_texture_is_a_status_not_an_exception(scenes):
     blank = np.full((CAM.height, CAM.width), 128, np.uint8)
     det = GpodDetector()
@@ -635,6 +650,15 @@ def test_view_edge_points_extend_a_wall_to_the_view_edge():
     q2 = view_edge_points(feet, group, 1, to_image, 320, 240,
                           np.vstack([behind[:2], [[x, -1.5] for x in (3.7, 3.8, 3.9)]]))[0]
     np.testing.assert_allclose(q2, q, atol=1e-9)
+    # Two objects in a row (a post and a bollard 0.8 m apart): the ground seen through
+    # their line between them, as densely as in front of it, shows they are no face.
+    pair = np.array([[4.3, -0.6], [4.25, -0.7], [3.9, -1.35], [3.85, -1.45]])
+    gx, gy = np.meshgrid(np.linspace(3.0, 5.5, 26), np.linspace(-0.7, -1.35, 8))
+    ground = np.stack([gx.ravel(), gy.ravel()], axis=1)
+    g2 = np.zeros(4, np.int64)
+    assert np.isfinite(view_edge_points(pair, g2, 1, to_image, 320, 240,
+                                        ground[ground[:, 0] < 3.8])).all()
+    assert np.isnan(view_edge_points(pair, g2, 1, to_image, 320, 240, ground)).all()
     # No extension: a corner (feet off one line); a face whose nearest point is inside
     # it (frontal); a face that would need more than its own span; too few feet.
     corner = np.array([[4.0, -1.9], [4.3, -1.9], [4.3, -1.5], [4.3, -1.2]])

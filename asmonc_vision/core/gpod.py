@@ -69,6 +69,7 @@ import numpy as np
 from .camera import MetricPlane, StereoCamera, ground_range_bearing, plane_disparity
 from .config import param
 from .edges import EdgeMap, detect_vertical_edges
+from .edges import warm_up as edges_warm_up
 from .obstacle_tracks import ObstacleTracker
 from .ground_plane import PlaneFit, PlausiblePlaneConfig, fit_ground_plane, plane_is_plausible
 from .matching import Candidates, Matches, _jit, pmf_match
@@ -123,6 +124,14 @@ _FACE_MIN_SPAN_M = 0.3
 _FACE_BEHIND_M = 0.1
 _FACE_BEHIND_MIN = 5
 _FACE_BEHIND_FRACTION = 0.25
+#: Feet on one line are not a face when the ground within _FACE_BAND_M metres behind the
+#: line, within the feet's own bearings, is seen at least _FACE_SEEN_THROUGH times as
+#: densely as within as far in front (and by _FACE_BEHIND_MIN features): separate objects
+#: in a row (a post and a bollard), with the ground between them in view. Behind a wall
+#: only texture matched at the ground's disparity is (0.01-0.2 times, on the simulator's
+#: walls; 0.7-1.2 for a post and bollard 0.8 m apart).
+_FACE_BAND_M = 1.0
+_FACE_SEEN_THROUGH = 0.5
 #: Least span (metres) of the feet of two obstacles taken for one face (`face_gap_points`).
 _GAP_MIN_SPAN_M = 1.0
 
@@ -810,6 +819,7 @@ def _warm_up() -> None:
     if _warm:
         return
     _warm = True
+    edges_warm_up()
     if not matching_warm_up() or _nb_occluded is None:
         _nb_occluded = None
         return
@@ -1282,18 +1292,19 @@ def nearest_point(xy: np.ndarray, sr: np.ndarray, ground_xy: np.ndarray,
 
 
 def _ground_across_line(ground: np.ndarray, c: np.ndarray, d: np.ndarray, a: np.ndarray,
-                        b: np.ndarray) -> tuple[int, int, int]:
+                        b: np.ndarray, band: float = math.inf) -> tuple[int, int, int]:
     """Visible ground on either side of the ground line through ``c`` along unit ``d``,
     within the bearings of its points ``a`` and ``b`` ((2,) each, metres): the numbers of
-    ground features (G, 2) more than ``_FACE_BEHIND_M`` in front of it (the camera's
-    side) and behind it, and of all features within those bearings."""
+    ground features (G, 2) more than ``_FACE_BEHIND_M`` (and at most ``band`` metres) in
+    front of it (the camera's side) and behind it, and of all features within those
+    bearings."""
     b0, b1 = math.atan2(a[1], a[0]), math.atan2(b[1], b[0])
     bg = np.arctan2(ground[:, 1], ground[:, 0])
     w = ground[(bg >= min(b0, b1)) & (bg <= max(b0, b1))]
     nrm = np.array([-d[1], d[0]])
     off = math.copysign(1.0, float(nrm @ -c)) * ((w - c) @ nrm)
-    return (int(np.count_nonzero(off > _FACE_BEHIND_M)),
-            int(np.count_nonzero(off < -_FACE_BEHIND_M)), int(w.shape[0]))
+    return (int(np.count_nonzero((off > _FACE_BEHIND_M) & (off <= band))),
+            int(np.count_nonzero((off < -_FACE_BEHIND_M) & (off >= -band))), int(w.shape[0]))
 
 
 def _ground_behind(n_behind: int, n_wedge: int) -> bool:
@@ -1313,8 +1324,10 @@ def view_edge_points(xy: np.ndarray, group: np.ndarray, n_groups: int, to_image,
     least squares, orthogonal RMS <= ``_FACE_MAX_RMS_M``, spanning >= ``_FACE_MIN_SPAN_M``)
     whose range falls towards its outermost foot, the line is followed beyond that foot
     (by at most the feet's span) to where it leaves the image (left or right border, or
-    the bottom row). The point is given unless visible ground lies behind the extended
-    line within that wedge of bearings (``_FACE_BEHIND_MIN`` and ``_FACE_BEHIND_FRACTION``
+    the bottom row). Feet with the ground seen through their line (between them, within
+    ``_FACE_BAND_M``, ``_FACE_SEEN_THROUGH`` times as densely as in front) are separate
+    objects in a row, not a face. The point is given unless visible ground lies behind
+    the extended line within that wedge of bearings (``_FACE_BEHIND_MIN`` and ``_FACE_BEHIND_FRACTION``
     of its ground features beyond the line by ``_FACE_BEHIND_M``: then the face ends
     inside the view).
 
@@ -1373,6 +1386,11 @@ def view_edge_points(xy: np.ndarray, group: np.ndarray, n_groups: int, to_image,
             continue
         if ground is None:
             ground = ground_xy() if callable(ground_xy) else ground_xy
+        # Ground seen through the line between the feet: separate objects, not a face.
+        far = ends[1] if e is ends[0] else ends[0]
+        n_front, n_through, _ = _ground_across_line(ground, c, d, far, e, _FACE_BAND_M)
+        if n_through >= max(_FACE_BEHIND_MIN, _FACE_SEEN_THROUGH * n_front):
+            continue
         # Visible ground behind the extension shows the face ends before the view's edge.
         _, n_behind, n_wedge = _ground_across_line(ground, c, d, e, q)
         if _ground_behind(n_behind, n_wedge):
@@ -1704,9 +1722,11 @@ class GpodDetector:
         thr = np.clip(c.threshold_k * sig, c.threshold_floor_px, c.threshold_ceiling_px)
         return thr, glob
 
-    def _update_plane(self, u, v, d, s, cam: StereoCamera) -> tuple[str, bool]:
+    def _update_plane(self, u, v, d, s, cam: StereoCamera, still: bool = False
+                      ) -> tuple[str, bool]:
         """Advance the plane state with this frame's features (s: their
-        :func:`_noise_key`, for the residual spread). Returns (status, updated)."""
+        :func:`_noise_key`, for the residual spread; ``still``: the rig stood still since
+        the previous frame). Returns (status, updated)."""
         c = self.config
         if self._calib is None:
             self._init_window.append((u, v, d, s))
@@ -1729,7 +1749,7 @@ class GpodDetector:
         fit = None
         current = plane_is_plausible(cam, self._abc, min_height_m=0.0,
                                      max_height_m=float('inf'), max_tilt_deg=90.0)
-        if enough and current is not None:
+        if enough and current is not None and not still:
             # Coarse refit from the nearer half of the features near the predicted plane
             # in disparity (a gate wide enough for walking motion), then a fine refit
             # from all features near the coarse plane in disparity *and* metric height,
@@ -1744,6 +1764,17 @@ class GpodDetector:
                 gate = ((np.abs(d - plane_disparity(coarse.abc, u, v)) <= c.refit_gate_px)
                         & (np.abs(height) <= c.refit_gate_m))
                 fit = self._fit(u[gate], v[gate], d[gate], cam)
+            if fit is not None and not self._close_to_current(fit, cam):
+                fit = None
+        if enough and current is not None and fit is None:
+            # Standing still the current plane is where the ground is: refit from the
+            # features within refit_gate_m of it. So too when the coarse fit took another
+            # surface while walking: the ground beyond a step down can fill more of the
+            # view than the ground the wearer stands on, even in the nearer half (and a
+            # mixture of the two tilts the plane).
+            height = current.signed_height(cam.triangulate(u, v, d))
+            gate = np.abs(height) <= c.refit_gate_m
+            fit = self._fit(u[gate], v[gate], d[gate], cam)
             if fit is not None and not self._close_to_current(fit, cam):
                 fit = None
         if fit is None and enough and self._coast >= c.max_coast_frames:
@@ -1828,8 +1859,8 @@ class GpodDetector:
         u = m.u
         v = m.v.astype(np.float64)
         d = m.d.astype(np.float64)
-        status, updated = self._update_plane(u, v, d, _noise_key(m), cam)
         still = self._stillness(el)
+        status, updated = self._update_plane(u, v, d, _noise_key(m), cam, still)
         t3 = time.perf_counter()
         timings['plane'] = (t3 - t2) * 1e3
 
