@@ -232,8 +232,36 @@ def test_finds_a_step_down():
     # Placed at the nearest visible lower ground: the ray grazing the brink (3.5 m) meets
     # the lower ground 0.3 m down at 3.5 (1.25 + 0.3) / 1.25 = 4.34 m.
     assert 4.25 < nearest.range < 4.6
+    # The brink runs across the view: its nearest point is straight ahead (the median
+    # direction of the drop's strings, used before, gave -2.9 degrees).
+    assert abs(math.degrees(nearest.bearing)) < 1.5, math.degrees(nearest.bearing)
     assert nearest.disparity_excess < -r.threshold_px
     assert not [o for o in r.obstacles if not o.is_drop and o.range < 8.0]
+
+
+def test_brink_bearings_at_the_foot_of_the_perpendicular():
+    from asmonc_vision.core.gpod import _brink_bearings
+    rng = np.random.default_rng(3)
+    # A kerb 3 m ahead, turned 10 degrees: its nearest point lies at -10 degrees.
+    a = math.radians(-10.0)
+    n, t = np.array([math.cos(a), math.sin(a)]), np.array([-math.sin(a), math.cos(a)])
+    along = np.linspace(-1.2, 1.4, 12)
+    brink = 3.0 * n + along[:, None] * t + rng.normal(0.0, 0.02, (12, 1)) * n
+    beyond = 3.0 * n + np.array([[0.3], [-0.8]]) * t + np.array([[0.4], [0.6]]) * n
+    pts = np.vstack([brink, beyond])            # two strings start on the lower ground
+    group = np.zeros(len(pts), np.int64)
+    got = _brink_bearings(pts, group, np.array([0.3]))
+    assert abs(math.degrees(got[0]) + 10.0) < 1.0, math.degrees(got[0])
+    # Only the kerb's left part in view: its nearest seen end.
+    part = brink[along > 0.5]
+    end = part[np.argmin(part @ t)]
+    got = _brink_bearings(part, np.zeros(len(part), np.int64), np.array([0.3]))
+    assert abs(got[0] - math.atan2(end[1], end[0])) < math.radians(1.5)
+    # Kept: too few points, or no line (a scatter).
+    scatter = 3.0 * n + rng.normal(0.0, 0.5, (12, 2))
+    for p in (brink[:3], scatter):
+        np.testing.assert_array_equal(
+            _brink_bearings(p, np.zeros(len(p), np.int64), np.array([0.3])), [0.3])
 
 
 def test_plane_stays_on_the_ground_stood_on_before_a_step_down():

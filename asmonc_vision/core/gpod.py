@@ -89,6 +89,14 @@ _NEAR_ZONE_FRACTION = 0.1
 #: that one stray pixel cannot pull. (Its edge pixels are sparse: a percentile of them
 #: lies measurably beyond the nearest visible lower ground.)
 _DROP_RANK = 1
+#: A drop's brink taken for a straight line (`_brink_bearings`): at least this many edge
+#: strings' nearest lower ground, spanning this many metres, within this orthogonal RMS.
+_BRINK_MIN_POINTS = 4
+_BRINK_MIN_SPAN_M = 0.5
+_BRINK_MAX_RMS_M = 0.1
+#: ... with at least this fraction of the points left after dropping those more than
+#: _BRINK_MAX_RMS_M behind the line (strings that start on the lower ground).
+_BRINK_MIN_KEPT = 0.5
 
 #: An obstacle string's foot is where its matched run, followed down the image from its
 #: lowest obstacle pixel, comes within this many noise sigmas of the ground plane.
@@ -2324,6 +2332,7 @@ class GpodDetector:
             zx = _group_quantile(s_lab[zone], s_g[zone, 0], 0.5, n_c)
             zy = _group_quantile(s_lab[zone], s_g[zone, 1], 0.5, n_c)
             bearing = np.arctan2(zy, zx)
+            bearing = _brink_bearings(s_g[zone], s_lab[zone], bearing)
         foot = (-metric.height * metric.normal_up[None, :]
                 + r_near[:, None] * (np.cos(bearing)[:, None] * fwd[None, :]
                                      + np.sin(bearing)[:, None] * lft[None, :]))
@@ -2384,6 +2393,51 @@ class GpodDetector:
                 confidence=float(conf[k]), roi=roi, num_edge_pixels=int(count[k]),
                 string_ids=sid_u[lab_u == k].astype(np.int32)))
         return out
+
+
+def _brink_bearings(xy: np.ndarray, group: np.ndarray, bearing: np.ndarray) -> np.ndarray:
+    """The bearing of the nearest point of each drop's brink, where it is a straight
+    line: a kerb down is seen along its whole width at nearly one range, and the
+    nearest visible lower ground lies at the foot of the perpendicular from the camera's
+    foot to the line (or at the line's seen end nearer to it).
+
+    Args:
+        xy: (S, 2) ground points, metres: the nearest lower ground of each of the
+            drops' edge strings near their nearest range.
+        group: (S,) drop of each point, 0..len(bearing)-1.
+        bearing: (G,) radians, the drops' bearings so far (kept where the points are
+            fewer than ``_BRINK_MIN_POINTS``, span less than ``_BRINK_MIN_SPAN_M`` or
+            lie off one line by more than ``_BRINK_MAX_RMS_M``).
+    Returns:
+        (G,) radians.
+    """
+    out = bearing.copy()
+    counts = np.bincount(group, minlength=bearing.shape[0])
+    for k in np.flatnonzero(counts >= _BRINK_MIN_POINTS):
+        p = xy[group == k]
+        n_all = p.shape[0]
+        # The brink is the near boundary of the lower ground: a string that starts
+        # beyond it (texture on the lower ground) is dropped and the line refitted
+        # (most of the strings must stay: a scatter has no brink).
+        for _ in range(3):
+            c = p.mean(axis=0)
+            _, sv, vt = np.linalg.svd(p - c, full_matrices=False)
+            d = vt[0]
+            nrm = np.array([-d[1], d[0]])
+            behind = math.copysign(1.0, float(nrm @ c)) * ((p - c) @ nrm)
+            keep = behind <= _BRINK_MAX_RMS_M
+            if keep.all() or np.count_nonzero(keep) < _BRINK_MIN_POINTS:
+                break
+            p = p[keep]
+        along = (p - c) @ d
+        if (keep.sum() < max(_BRINK_MIN_POINTS, _BRINK_MIN_KEPT * n_all)
+                or float(along.max() - along.min()) < _BRINK_MIN_SPAN_M
+                or sv[1] / math.sqrt(p.shape[0]) > _BRINK_MAX_RMS_M):
+            continue
+        t = float(np.clip(-(c @ d), along.min(), along.max()))
+        q = c + t * d
+        out[k] = math.atan2(q[1], q[0])
+    return out
 
 
 def _same_object(a: GpodObstacle, b: GpodObstacle, radius: float = math.inf) -> bool:
