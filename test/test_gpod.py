@@ -577,6 +577,29 @@ def test_hidden_corner_from_thales_and_the_contact_edges():
                                              edges_at(near)), near)
 
 
+def test_a_hidden_corner_beyond_the_nearest_foot_is_not_the_nearest_point():
+    """Two boxes 0.6 m apart join one cluster (cluster_radius_m): the contact edges may
+    favour the far box's hidden corner, but the near box's foot is nearer (an unseen
+    640x480 scene reported a 30 cm and a 10 cm box 0.4 m beyond the 10 cm one)."""
+    from asmonc_vision.core.gpod import nearest_points
+    feet = np.array([[3.07, -0.27], [3.16, -0.54], [3.44, -1.04], [3.27, -1.46]])
+    sr = np.full(4, 0.02)
+    group = np.zeros(4, np.int64)
+
+    def prefer_far(a, n, b, ok):            # contact edges seen only at the far box
+        s = -np.hypot(n[..., 0] - 3.15, n[..., 1] + 1.46)
+        return np.where(ok, s, -np.inf)
+
+    q = nearest_points(feet, sr, group, 1, np.zeros((0, 2)), prefer_far)[0]
+    assert np.hypot(*q) <= np.hypot(*feet[0]) + 0.02, q
+    # A real hidden near corner (nearer than both silhouette feet) is still taken.
+    box = np.array([[3.3, -0.1], [3.3, -0.9]])
+    q = nearest_points(box, np.full(2, 0.02), np.zeros(2, np.int64), 1, np.zeros((0, 2)),
+                       lambda a, n, b, ok: np.where(ok, -np.abs(np.arctan2(
+                           n[..., 1], n[..., 0]) + 0.08), -np.inf))[0]
+    assert np.hypot(*q) < 3.25, q
+
+
 def test_silhouette_owners_place_only_next_to_a_matching_obstacle():
     """A candidate silhouette edge (just under the thresholds) places a detected obstacle
     only if its foot is beside the obstacle's feet, its top at the obstacle's height and

@@ -1268,8 +1268,12 @@ def nearest_points(xy: np.ndarray, sr: np.ndarray, group: np.ndarray, n_groups: 
         for k, qk in zip(search, q):
             if np.isnan(qk[0]):
                 soft.append(k)
-            else:
-                out[k] = qk
+                continue
+            # A corner beyond the nearest foot is not the nearest point (two bodies
+            # in one cluster: the corner of the far one, the near one's foot nearer).
+            sel = order[first[k]:last[k]]
+            qs = soft_nearest(xy[sel], sr[sel])
+            out[k] = qk if np.hypot(*qk) <= np.hypot(*qs) else qs
     for k in soft:
         sel = order[first[k]:last[k]]
         out[k] = soft_nearest(xy[sel], sr[sel])
