@@ -32,6 +32,7 @@ __all__ = ['PlayerConfig', 'BagError', 'BagTopic', 'BagInfo', 'BagMessage', 'Bag
            'compressed_to_image_cdr', 'IMAGE_TYPE', 'COMPRESSED_TYPE']
 
 IMAGE_TYPE = 'sensor_msgs/msg/Image'
+CAMERA_INFO_TYPE = 'sensor_msgs/msg/CameraInfo'
 COMPRESSED_TYPE = 'sensor_msgs/msg/CompressedImage'
 COMPRESSED_SUFFIX = '/compressed'
 #: topics published latched (TRANSIENT_LOCAL) even when the bag does not record QoS
@@ -52,8 +53,8 @@ class PlayerConfig:
                               '<topic>/compressed stream); empty: all')
     exclude_topics: tuple = param((), 'topics not to play')
     wait_for_subscribers: int = param(
-        0, 'before the first message, wait until every image topic has at least this '
-           'many subscribers (0: do not wait)', range=(0, 1000))
+        0, 'before the first message, wait until every image and camera_info topic has '
+           'at least this many subscribers (0: do not wait)', range=(0, 1000))
     wait_timeout: float = param(10.0, 'longest wait for subscribers in seconds, then play '
                                       'anyway with a warning (0: wait without limit)',
                                 range=(0.0, 3600.0))
@@ -433,8 +434,14 @@ class PlayTopic:
 
     @property
     def is_image(self) -> bool:
-        """Published as sensor_msgs/Image (the topics `wait_for_subscribers` is about)."""
+        """Published as sensor_msgs/Image."""
         return self.out_type == IMAGE_TYPE
+
+    @property
+    def is_camera(self) -> bool:
+        """Published as sensor_msgs/Image or CameraInfo (the topics
+        `wait_for_subscribers` is about: a stereo node needs both)."""
+        return self.out_type in (IMAGE_TYPE, CAMERA_INFO_TYPE)
 
 
 def plan_topics(topics: dict[str, BagTopic], include: Collection[str] = (),

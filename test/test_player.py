@@ -184,24 +184,35 @@ def test_clock_and_exit_when_done(tmp_path, ros_context):
     assert h.T0 <= ns[0] and ns[-1] <= h.T0 + 3 * h.STEP + 3000
 
 
-def test_waits_for_image_subscribers(tmp_path, ros_context):
-    """With wait_for_subscribers, a subscriber that comes late still gets every frame."""
+def test_waits_for_image_and_camera_info_subscribers(tmp_path, ros_context):
+    """With wait_for_subscribers, a subscriber that comes late still gets every frame and
+    every camera_info: the player waits for both (a stereo node needs both; on a loaded
+    machine the camera_info subscription once matched 2 s after the images', and the
+    frames before it were lost)."""
     from asmonc_vision.nodes.player_node import BagPlayerNode
 
     bag = h.write_bag(tmp_path / 'bag', h.sample_messages(3))
     player = BagPlayerNode(PlayerConfig(bag=str(bag), rate=5.0, wait_for_subscribers=1,
                                         exit_when_done=False), context=ros_context)
+    assert sorted(player.camera_topics) == sorted([h.LEFT, h.LEFT_INFO])
     time.sleep(0.4)
     assert not player.play_done.is_set() and sum(player.published_counts.values()) == 0
-    collector = h.RawCollector(ros_context, {h.LEFT: 'sensor_msgs/msg/Image'})
-    spinner = h.Spinner(ros_context, player, collector.node)
+    images = h.RawCollector(ros_context, {h.LEFT: 'sensor_msgs/msg/Image'})
+    spinner = h.Spinner(ros_context, player, images.node)
     try:
+        time.sleep(0.6)     # the image subscriber alone does not start the replay
+        assert sum(player.published_counts.values()) == 0
+        infos = h.RawCollector(ros_context, {h.LEFT_INFO: 'sensor_msgs/msg/CameraInfo'},
+                               name='infos')
+        spinner.add(infos.node)
         assert player.play_done.wait(10.0)
-        assert h.wait_for(lambda: collector.count() >= 3, 5.0)
+        assert h.wait_for(lambda: images.count() >= 3 and infos.count() >= 3, 5.0)
     finally:
         spinner.stop()
         player.destroy_node()
-    assert collector.data(h.LEFT) == h.by_topic(h.sample_messages(3))[h.LEFT]
+    sent = h.by_topic(h.sample_messages(3))
+    assert images.data(h.LEFT) == sent[h.LEFT]
+    assert infos.data(h.LEFT_INFO) == sent[h.LEFT_INFO]
 
 
 # --- the process ----------------------------------------------------------------------

@@ -201,9 +201,16 @@ class BagPlayerNode(Node):
         """Published topics of type sensor_msgs/Image."""
         return [p.out_topic for p in self.plan if p.is_image]
 
+    @property
+    def camera_topics(self) -> list[str]:
+        """Published topics of type sensor_msgs/Image and CameraInfo."""
+        return [p.out_topic for p in self.plan if p.is_camera]
+
     def wait_for_subscribers(self, count: int, timeout: float,
                              topics: Iterable[str] | None = None) -> bool:
-        """Wait until each of `topics` (default: the image topics) has `count` subscribers.
+        """Wait until each of `topics` (default: the image and camera_info topics: a
+        stereo node needs both, and a message published before its subscriber is
+        matched is lost) has `count` subscribers.
 
         Args:
             count: subscribers needed per topic.
@@ -211,7 +218,7 @@ class BagPlayerNode(Node):
         Returns:
             True when they are there, False on timeout or stop.
         """
-        topics = list(self.image_topics if topics is None else topics)
+        topics = list(self.camera_topics if topics is None else topics)
         deadline = None if timeout <= 0 else time.monotonic() + timeout
         while not self._stop.is_set():
             missing = {t: n for t in topics
@@ -234,7 +241,7 @@ class BagPlayerNode(Node):
         try:
             if cfg.wait_for_subscribers > 0 and self.image_topics:
                 log.info(f'waiting for {cfg.wait_for_subscribers} subscriber(s) on '
-                         + ', '.join(self.image_topics))
+                         + ', '.join(self.camera_topics))
                 self.wait_for_subscribers(cfg.wait_for_subscribers, cfg.wait_timeout)
             while not self._stop.is_set():
                 self._play_pass()
