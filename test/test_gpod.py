@@ -279,6 +279,27 @@ def test_plane_stays_on_the_ground_stood_on_before_a_step_down():
     assert [o for o in r.obstacles if o.is_drop]
 
 
+def test_calibrates_from_one_frame_when_the_walk_starts_at_once():
+    """A plane fitted to the features of several frames taken from different poses is
+    tilted between them (3 degrees on walk_stop_turn, whose wearer walks from the first
+    frame: obstacles everywhere in the first tracked frame): a rig that moved during the
+    calibration window calibrates from its latest frame alone."""
+    from asmonc_vision.cli.bench import load_frames
+    from asmonc_vision.core.evaluation import plane_error
+    from conftest import BAGS
+    det = GpodDetector(GpodConfig())
+    first = None
+    for f in load_frames(BAGS / 'walk_stop_turn', 4):
+        r = det.process(f.left, f.right, f.cam, stamp_ns=f.stamp_ns)
+        if r.metric_plane is not None and first is None:
+            first = (r, f)
+    assert first is not None
+    angle, dh = plane_error(first[0].metric_plane, first[1].truth_plane)
+    assert angle < 0.3 and abs(dh) < 0.01, (angle, dh)
+    # (the second frame: the first cannot tell whether the rig moves)
+    assert first[0].frame_index == 2 and not first[0].still
+
+
 def test_no_texture_is_a_status_not_an_exception(scenes):
     blank = np.full((CAM.height, CAM.width), 128, np.uint8)
     det = GpodDetector()
@@ -788,6 +809,28 @@ def test_wall_with_a_blank_middle_is_reported_at_its_nearest_point():
     nearest = min(r.detections, key=lambda o: o.range)
     assert abs(nearest.range - z_wall) < 0.1
     assert abs(math.degrees(nearest.bearing)) < 2.0, math.degrees(nearest.bearing)
+
+
+def test_two_bodies_closer_than_the_cluster_radius_are_reported_each():
+    """A 30 cm box and a 0.9 m block 0.45 m apart: one obstacle for the walking gap
+    (cluster_radius_m 0.7 m), and each body also at its own nearest point."""
+    near = (-0.9, -0.5, 2.8, 3.2, 0.3)
+    far = (-0.05, 0.35, 3.5, 3.9, 0.9)
+    det, _ = _calibrated(render_pair(seed=6))
+    pair = render_pair(boxes=[near, far], seed=6)
+    for _ in range(2):
+        r = det.process(*pair, CAM)
+    xy = np.array([[o.range * math.cos(o.bearing), o.range * math.sin(o.bearing)]
+                   for o in r.obstacles if not o.is_drop])
+    # Nearest points on the ground (x ahead, y left; the level frame's x is to the right).
+    for x0, x1, z0, _z1, _h in (near, far):
+        xs = np.clip(0.0, x0, x1)
+        truth = np.array([z0, -xs])
+        assert np.min(np.hypot(*(xy - truth).T)) < 0.3, (truth, xy)
+    det0, _ = _calibrated(render_pair(seed=6), GpodConfig(part_radius_m=0.0))
+    for _ in range(2):
+        r0 = det0.process(*pair, CAM)
+    assert len([o for o in r0.obstacles if not o.is_drop]) < len(xy)
 
 
 @pytest.mark.parametrize('boxes', [

@@ -361,6 +361,11 @@ class GpodConfig(PlausiblePlaneConfig):
         0.7, 'Obstacle strings whose feet on the ground are closer than this join one '
         'obstacle (a gap narrower than this cannot be walked through), metres',
         range=(0.01, 10.0))
+    part_radius_m: float = param(
+        0.35, 'An obstacle joined by cluster_radius_m from parts whose feet are farther '
+        'apart than this (a bollard beside a box) is also reported part by part, each part '
+        'at its own nearest point when that is farther than this from the whole\'s; metres, '
+        'at most cluster_radius_m (0 = off)', range=(0.0, 10.0))
     disparity_sigma_px: float = param(
         1.0, 'Standard deviation of the disparity excess of ground features, pixels (the '
         "paper's sigma = 1), for the confidence", range=(0.01, 20.0))
@@ -410,6 +415,9 @@ class GpodConfig(PlausiblePlaneConfig):
         if self.min_range_m >= self.search_max_range_m:
             raise ValueError(f'GpodConfig.min_range_m = {self.min_range_m} must be less than '
                              f'search_max_range_m = {self.search_max_range_m}')
+        if self.part_radius_m > self.cluster_radius_m:
+            raise ValueError(f'GpodConfig.part_radius_m = {self.part_radius_m} must not exceed '
+                             f'cluster_radius_m = {self.cluster_radius_m}')
         if self.max_range_m > self.search_max_range_m:
             raise ValueError(f'GpodConfig.max_range_m = {self.max_range_m} must not exceed '
                              f'search_max_range_m = {self.search_max_range_m}')
@@ -1741,8 +1749,15 @@ class GpodDetector:
         the previous frame). Returns (status, updated)."""
         c = self.config
         if self._calib is None:
+            moved = bool(self._init_window) and not still
+            if moved:
+                # The rig moved: the ground of earlier frames is not this frame's, and a
+                # plane fitted to several poses at once is tilted between them (on a
+                # walk that starts at once, 2 degrees: obstacles everywhere). Calibrate
+                # from this frame alone.
+                self._init_window.clear()
             self._init_window.append((u, v, d, s))
-            if len(self._init_window) < c.init_frames:
+            if len(self._init_window) < c.init_frames and not moved:
                 return 'initialising', False
             uu, vv, dd, ss = (np.concatenate(x) for x in zip(*self._init_window))
             fit = self._fit(uu, vv, dd, cam)
@@ -2206,8 +2221,34 @@ class GpodDetector:
         g = feet - origin[None, :]
         g2 = np.stack([g @ fwd, g @ lft], axis=1)
         label = cluster_points_2d(g2, m.string_id[idx], radius)
-        return self._describe(idx, label, sign, min_pixels, hh, g2, m, excess, cam, metric,
-                              fwd, lft)
+        out = self._describe(idx, label, sign, min_pixels, hh, g2, m, excess, cam, metric,
+                             fwd, lft)
+        pr = self.config.part_radius_m
+        if sign > 0 and 0.0 < pr < radius and out:
+            out.extend(self._parts(out, idx, label, pr, sign, min_pixels, hh, g2, m, excess,
+                                   cam, metric, fwd, lft))
+        return out
+
+    def _parts(self, whole: list[GpodObstacle], idx, label, radius: float, sign: float,
+               min_pixels: int, hh, g2, m: Matches, excess, cam, metric, fwd, lft
+               ) -> list[GpodObstacle]:
+        """The parts (clustered at ``radius``) of the obstacles made of several, as
+        obstacles of their own, those whose nearest point lies more than ``radius`` from
+        every whole obstacle's (the nearest part is the whole's report already)."""
+        fine = cluster_points_2d(g2, m.string_id[idx], radius)
+        pairs = np.unique(label * (int(fine.max()) + 1) + fine)
+        n_parts = np.bincount(pairs // (int(fine.max()) + 1), minlength=int(label.max()) + 1)
+        sel = n_parts[label] > 1
+        if not sel.any():
+            return []
+        _, part = np.unique(fine[sel], return_inverse=True)
+        parts = self._describe(idx[sel], part.astype(np.int64), sign, min_pixels, hh[sel],
+                               g2[sel], m, excess, cam, metric, fwd, lft)
+        at = np.array([[o.range * math.cos(o.bearing), o.range * math.sin(o.bearing)]
+                       for o in whole])
+        return [p for p in parts
+                if np.hypot(*(at - [p.range * math.cos(p.bearing),
+                                    p.range * math.sin(p.bearing)]).T).min() > radius]
 
     def _obstacle_feet(self, idx: np.ndarray, label: np.ndarray, sid: np.ndarray, n_c: int,
                        m: Matches, height: np.ndarray
