@@ -55,6 +55,10 @@ class PlayerConfig:
     wait_for_subscribers: int = param(
         0, 'before the first message, wait until every image and camera_info topic has '
            'at least this many subscribers (0: do not wait)', range=(0, 1000))
+    wait_topics: tuple = param(
+        (), "topics that need subscribers before the first message, each 'topic' "
+            "(wait_for_subscribers of them) or 'topic=N'; empty: every image and "
+            'camera_info topic')
     wait_timeout: float = param(10.0, 'longest wait for subscribers in seconds, then play '
                                       'anyway with a warning (0: wait without limit)',
                                 range=(0.0, 3600.0))
@@ -64,6 +68,30 @@ class PlayerConfig:
 
     def __post_init__(self) -> None:
         check_fields(self)
+        self.wait_targets(())
+
+    def wait_targets(self, camera_topics) -> dict[str, int]:
+        """{topic: subscribers needed} before the first message: ``wait_topics``, or
+        ``wait_for_subscribers`` on each of ``camera_topics`` (empty when not waiting).
+
+        Raises:
+            ValueError: a ``wait_topics`` entry that is not 'topic' or 'topic=N', N >= 0.
+        """
+        out: dict[str, int] = {}
+        for item in self.wait_topics:
+            topic, sep, n = str(item).partition('=')
+            try:
+                count = int(n) if sep else self.wait_for_subscribers
+            except ValueError:
+                count = -1
+            if not topic.strip() or count < 0:
+                raise ValueError(f"PlayerConfig.wait_topics: '{item}' is not 'topic' or "
+                                 "'topic=N' with N >= 0")
+            if count > 0:
+                out[normalize_topic(topic.strip())] = count
+        if not self.wait_topics and self.wait_for_subscribers > 0:
+            out = {t: self.wait_for_subscribers for t in camera_topics}
+        return out
 
 
 class BagError(RuntimeError):

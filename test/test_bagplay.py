@@ -33,6 +33,18 @@ def test_player_config_checks_ranges():
     with pytest.raises(ValueError, match='start_offset'):
         PlayerConfig(start_offset=-1.0)
     assert dataclasses.replace(PlayerConfig(), rate=5.0).rate == 5.0
+    with pytest.raises(ValueError, match="wait_topics: '/imu=two'"):
+        PlayerConfig(wait_topics=('/imu=two',))
+    with pytest.raises(ValueError, match='wait_topics'):
+        PlayerConfig(wait_topics=('=2',))
+
+
+def test_wait_targets():
+    cams = ['/stereo/left/image_rect', '/stereo/left/camera_info']
+    assert PlayerConfig().wait_targets(cams) == {}
+    assert PlayerConfig(wait_for_subscribers=2).wait_targets(cams) == {t: 2 for t in cams}
+    cfg = PlayerConfig(wait_for_subscribers=3, wait_topics=('/imu=1', 'stereo/x', '/y=0'))
+    assert cfg.wait_targets(cams) == {'/imu': 1, '/stereo/x': 3}
 
 
 def test_reads_directory_and_single_file(tmp_path):

@@ -407,11 +407,12 @@ def run(args) -> int:
         else:
             raise RuntimeError('the nodes did not connect within 60 s')
 
-        # The player itself must also see every image subscriber before the first frame.
-        image_readers = sum(left_topic in spec.inputs for spec in nodes.values())
+        # The player itself must also see every reader of the bag's inputs (images and
+        # their camera_info, the inclinometer) before the first message: a message sent
+        # before its subscriber is matched is lost.
         player_cmd = [sys.executable, '-m', 'asmonc_vision.nodes.player_node', '--ros-args',
                       '-p', f'bag:={bag.resolve()}', '-p', f'rate:={float(args.rate)}',
-                      '-p', f'wait_for_subscribers:={max(image_readers, 1)}',
+                      '-p', f'wait_topics:={json.dumps(_wait_topics(nodes, topics))}',
                       '-p', 'exit_when_done:=true']
         children['player'] = _Child('player', player_cmd, log_dir,
                                     lambda s: console.line(s, err=True), env)
@@ -479,6 +480,18 @@ def run(args) -> int:
     if failed or summary['dropped_frames'] or player_rc not in (0, None):
         return 1
     return 0
+
+
+def _wait_topics(nodes: dict[str, NodeSpec], topics: dict) -> list[str]:
+    """The player's ``wait_topics``: each bag input topic with its number of readers
+    among ``nodes`` ('topic=N'); every stereo node reads both images and both
+    camera_infos."""
+    stereo = sum(bagio.TOPICS['left_image'][0] in spec.inputs for spec in nodes.values())
+    want = {bagio.TOPICS[k][0]: stereo
+            for k in ('left_image', 'right_image', 'left_info', 'right_info')}
+    imu = bagio.TOPICS['imu'][0]
+    want[imu] = sum(imu in spec.inputs for spec in nodes.values())
+    return [f'{t}={n}' for t, n in want.items() if n > 0 and t in topics]
 
 
 def _connected(node, spec: NodeSpec, recording: bool) -> bool:

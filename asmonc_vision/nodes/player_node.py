@@ -206,6 +206,19 @@ class BagPlayerNode(Node):
         """Published topics of type sensor_msgs/Image and CameraInfo."""
         return [p.out_topic for p in self.plan if p.is_camera]
 
+    def wait_for_targets(self, targets: dict[str, int], timeout: float) -> bool:
+        """Wait until each published topic of ``targets`` has that many subscribers
+        (topics not played are left out, with a warning)."""
+        known = {t: n for t, n in targets.items() if t in self._pubs}
+        if len(known) < len(targets):
+            self.get_logger().warning(
+                'not waiting for subscribers of ' + ', '.join(sorted(set(targets) - set(known)))
+                + ': not played from this bag')
+        ok = True
+        for n in sorted(set(known.values())):
+            ok &= self.wait_for_subscribers(n, timeout, [t for t, c in known.items() if c == n])
+        return ok
+
     def wait_for_subscribers(self, count: int, timeout: float,
                              topics: Iterable[str] | None = None) -> bool:
         """Wait until each of `topics` (default: the image and camera_info topics: a
@@ -239,10 +252,11 @@ class BagPlayerNode(Node):
         log = self.get_logger()
         stopped_early = False
         try:
-            if cfg.wait_for_subscribers > 0 and self.image_topics:
-                log.info(f'waiting for {cfg.wait_for_subscribers} subscriber(s) on '
-                         + ', '.join(self.camera_topics))
-                self.wait_for_subscribers(cfg.wait_for_subscribers, cfg.wait_timeout)
+            targets = cfg.wait_targets(self.camera_topics)
+            if targets:
+                log.info('waiting for subscribers: ' + ', '.join(
+                    f'{t} ({n})' for t, n in sorted(targets.items())))
+                self.wait_for_targets(targets, cfg.wait_timeout)
             while not self._stop.is_set():
                 self._play_pass()
                 if self._stop.is_set():
