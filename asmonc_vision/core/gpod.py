@@ -1749,20 +1749,22 @@ class GpodDetector:
         the previous frame). Returns (status, updated)."""
         c = self.config
         if self._calib is None:
-            moved = bool(self._init_window) and not still
-            if moved:
-                # The rig moved: the ground of earlier frames is not this frame's, and a
-                # plane fitted to several poses at once is tilted between them (on a
-                # walk that starts at once, 2 degrees: obstacles everywhere). Calibrate
-                # from this frame alone.
-                self._init_window.clear()
             self._init_window.append((u, v, d, s))
-            if len(self._init_window) < c.init_frames and not moved:
+            if len(self._init_window) < c.init_frames:
                 return 'initialising', False
             uu, vv, dd, ss = (np.concatenate(x) for x in zip(*self._init_window))
             fit = self._fit(uu, vv, dd, cam)
             if fit is None:
                 return 'initialising', False
+            if len(self._init_window) > 1:
+                # Frames of different ground planes (a wearer who walks from the first
+                # frame sways): their joint plane is tilted between them (3 degrees:
+                # obstacles everywhere). Then this frame alone calibrates. (A car on a
+                # flat road moves, but its ground plane does not.)
+                last = self._fit(u, v, d, cam)
+                if last is not None and not _planes_agree(fit.abc, last.abc, cam,
+                                                          c.plane_inlier_px):
+                    fit, uu, vv, dd, ss = last, u, v, d, s
             self._calib = self._last_fit = fit
             self._abc, self._cov = fit.abc.copy(), fit.cov.copy()
             self._calibrate_sigma(uu, vv, dd, ss.astype(np.float64))
@@ -2438,6 +2440,17 @@ class GpodDetector:
                 confidence=float(conf[k]), roi=roi, num_edge_pixels=int(count[k]),
                 string_ids=sid_u[lab_u == k].astype(np.int32)))
         return out
+
+
+def _planes_agree(abc0: np.ndarray, abc1: np.ndarray, cam: StereoCamera,
+                  tol_px: float) -> bool:
+    """Whether two planes ``d = a*u + b*v + c`` ((3,) each) differ by at most ``tol_px``
+    pixels of disparity over the image's lower half (where the ground is seen): at its
+    four corners, the largest difference of a linear function."""
+    uu = np.array([0.0, cam.width - 1.0, 0.0, cam.width - 1.0])
+    vv = np.array([cam.cy, cam.cy, cam.height - 1.0, cam.height - 1.0])
+    dd = np.asarray(abc0, float) - np.asarray(abc1, float)
+    return bool(np.max(np.abs(dd[0] * uu + dd[1] * vv + dd[2])) <= tol_px)
 
 
 def _brink_bearings(xy: np.ndarray, group: np.ndarray, bearing: np.ndarray) -> np.ndarray:
