@@ -776,6 +776,14 @@ def test_face_gap_points_bridge_a_blank_middle_only_where_no_ground_shows_throug
     # Ground seen through the gap: two obstacles with a way between them.
     behind = np.array([[x, y] for x in (3.4, 3.8) for y in (-0.3, 0.0, 0.3)])
     assert np.isnan(face_gap_points(feet, group, 2, q, np.vstack([front, behind]))).all()
+    # Ground just behind the gap as dense as just in front of it, though few against all
+    # the near ground in its bearings: a way through (the share of the whole wedge once
+    # bridged a bollard and a wall 3.6 m apart).
+    near = np.array([[x, y] for x in np.linspace(1.2, 1.9, 8) for y in (-0.2, 0.0, 0.2)])
+    beyond = np.array([[x, y] for x in (3.3, 3.6, 3.9) for y in (-0.25, 0.0, 0.25)])
+    assert np.isfinite(face_gap_points(feet, group, 2, q, np.vstack([front, near]))[1]).all()
+    assert np.isnan(face_gap_points(feet, group, 2, q,
+                                    np.vstack([front, near, beyond]))).all()
     # Nothing seen in the gap (no ground features at all): no bridge.
     assert np.isnan(face_gap_points(feet, group, 2, q, np.zeros((0, 2)))).all()
     # The face's nearest point inside one part: nothing to bridge.
@@ -847,6 +855,61 @@ def test_a_way_between_two_obstacles_is_left_open(boxes):
         (o.range, math.degrees(o.bearing)) for o in near]
 
 
+def test_moved_roi_keeps_its_place_beside_the_foot():
+    """A coasted obstacle's region follows its foot but keeps its offset from it: a
+    foot placed beside the obstacle's edges (a wall's nearest point) once dragged the
+    region onto empty pavement, a false report for half a second while turning."""
+    from asmonc_vision.core.gpod import GpodObstacle, _moved_roi
+    up = np.array([0.0, -1.0, 0.0])
+    foot = np.array([-1.0, 1.25, 5.0])                  # projects to u = 99.5
+    ob = GpodObstacle(position=foot + 0.5 * up, height=0.5, range=5.1, bearing=0.2,
+                      width=0.1, disparity_excess=2.0, confidence=1.0,
+                      roi=(140, 60, 8, 40), num_edge_pixels=20,
+                      string_ids=np.zeros(0, np.int32))
+    x, y, w, h = _moved_roi(ob, foot, up, CAM)          # not moved: the same columns
+    assert abs(x - 140) <= 1 and abs(w - 8) <= 2, (x, w)
+    shifted = foot + np.array([0.5, 0.0, 0.0])          # moved 0.5 m right: +30 px
+    x2, _, w2, _ = _moved_roi(ob, shifted, up, CAM)
+    assert abs((x2 + w2 / 2) - (x + w / 2) - 30.0) <= 1.5, (x2, w2)
+
+
+def test_hanging_runs():
+    """A run of an edge string matched a period off (hanging in the air over the depth
+    at which the string goes on below it) is found; a real edge broken by a gap, the
+    same depth below, is not."""
+    from asmonc_vision.core.edges import EdgeMap
+    from asmonc_vision.core.gpod import hanging_runs, run_links
+    from asmonc_vision.core.matching import Matches
+    n = 12
+    v = np.arange(n, dtype=np.int32)
+    prev = np.r_[-1, np.arange(n - 1)].astype(np.int32)
+    z = np.zeros(n, np.float32)
+    edges = EdgeMap(v=v, u_int=np.full(n, 50, np.int32), u=z + 50, strength=z + 20,
+                    polarity=np.ones(n, np.int8), orientation=z, string_id=np.zeros(n, np.int32),
+                    string_prev=prev, string_length=np.array([n], np.int32), shape=(40, 100),
+                    threshold=4.0)
+    keep = np.r_[0:6, 7:n]                               # row 6 unmatched (a gap)
+
+    def matches(d):
+        d = np.asarray(d, np.float32)[keep]
+        i = keep.astype(np.int32)
+        return Matches(u_left=z[keep] + 50, u_right=z[keep] + 50 - d, v=v[keep], d=d,
+                       strength=z[keep] + 20, string_id=np.zeros(len(keep), np.int32),
+                       left_index=i, right_index=i, support=z[keep] + 1)
+
+    h = np.linspace(1.5, 0.0, n)[keep]                   # from 1.5 m down to the ground
+    bad = matches([13.0] * 3 + [56.0] * 3 + [13.0] * 6)  # rows 3-5 a period off
+    got = hanging_runs(edges, bad, run_links(edges, bad, 1.0), h, 0.5, 1.0, 0.1)
+    np.testing.assert_array_equal(np.flatnonzero(got), [3, 4, 5])
+    # Two stretches a period off, the upper held up only by the lower: both hang.
+    two = matches([13.0] * 3 + [56.0] * 3 + [0.0] + [56.0] * 2 + [13.0] * 3)
+    h2 = np.array([1.5, 1.4, 1.3, 1.0, 0.98, 0.96, 0.0, 0.92, 0.9, 0.2, 0.1, 0.0])[keep]
+    got = hanging_runs(edges, two, run_links(edges, two, 1.0), h2, 0.5, 1.0, 0.1)
+    np.testing.assert_array_equal(np.flatnonzero(got), [3, 4, 5, 6, 7])
+    good = matches([13.0] * n)                           # the gap: the same depth below
+    assert not hanging_runs(edges, good, run_links(edges, good, 1.0), h, 0.5, 1.0, 0.1).any()
+
+
 def test_same_object_only_for_a_nearer_or_close_placement():
     """While standing, a detection keeps an overlapping track seen as the same obstacle
     placed elsewhere (its far corner; boxes reported together at the nearest) -- but not
@@ -867,3 +930,27 @@ def test_same_object_only_for_a_nearer_or_close_placement():
     assert _same_object(ob(3.6, (150, 60, 20, 30)), ob(2.3, (140, 60, 40, 60)), radius=0.7)
     assert _same_object(ob(2.5, (150, 60, 20, 30)), ob(2.9, (152, 58, 20, 30)), radius=0.7)
     assert not _same_object(ob(2.5, (150, 60, 20, 30)), ob(2.6, (10, 60, 20, 30)), radius=0.7)
+
+
+def test_hanging_runs_compiled_equals_numpy(monkeypatch):
+    """The compiled walk of `hanging_runs` (numba, optional) marks the same matches as
+    the numpy one, on a real walking frame."""
+    from asmonc_vision.core import gpod
+    from asmonc_vision.core.gpod import hanging_runs, run_links
+    det = GpodDetector(GpodConfig())
+    det.process(*render_pair(seed=3), CAM)
+    if gpod._nb_hanging is None:
+        pytest.skip('numba not installed')
+    from asmonc_vision.core.edges import detect_vertical_edges
+    from asmonc_vision.core.matching import pmf_match
+    left, right = render_pair(boxes=[(-0.5, 0.0, 3.0, 3.3, 1.2)], seed=3)
+    el, er = detect_vertical_edges(left), detect_vertical_edges(right)
+    m = pmf_match(el, er, 0.5, 60.0)[0]
+    prev = run_links(el, m, 1.0)
+    rng = np.random.default_rng(2)
+    h = rng.uniform(0.0, 1.5, len(m))
+    fast = hanging_runs(el, m, prev, h, 0.5, 1.0, 0.1)
+    monkeypatch.setattr(gpod, '_nb_hanging', None)
+    slow = hanging_runs(el, m, prev, h, 0.5, 1.0, 0.1)
+    assert slow.any() and not slow.all()
+    np.testing.assert_array_equal(fast, slow)

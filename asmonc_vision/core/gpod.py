@@ -831,19 +831,25 @@ _warm = False
 def _warm_up() -> None:
     """Compile the numba kernels once per process (see `matching.warm_up`), before the
     first frame; falls back to the numpy paths if numba is missing or fails."""
-    global _warm, _nb_occluded
+    global _warm, _nb_occluded, _nb_hanging
     if _warm:
         return
     _warm = True
     edges_warm_up()
     if not matching_warm_up() or _nb_occluded is None:
-        _nb_occluded = None
+        _nb_occluded = _nb_hanging = None
         return
     try:
         z = np.zeros(2)
         _nb_occluded(np.zeros(2, np.int64), np.ones(2, bool), z, z, z, 1.0, 1)
     except Exception:       # pragma: no cover - a broken numba/llvmlite install
         _nb_occluded = None
+    if _nb_hanging is not None:
+        try:
+            i = np.zeros(1, np.int64)
+            _nb_hanging(i, i, np.zeros(1), i - 1, i, i - 1, 1, 2, 1.0, 0.1)
+        except Exception:   # pragma: no cover - a broken numba/llvmlite install
+            _nb_hanging = None
 
 
 def matched_run_length(edges: EdgeMap, m: Matches, tolerance_px: float,
@@ -871,6 +877,134 @@ def matched_run_length(edges: EdgeMap, m: Matches, tolerance_px: float,
             break
         root = nxt
     return np.bincount(root, minlength=k)[root]
+
+
+def hanging_runs(edges: EdgeMap, m: Matches, prev: np.ndarray, h: np.ndarray,
+                 max_height: float, tolerance_px: float, slope: float,
+                 only: np.ndarray | None = None, max_gap: int = 32) -> np.ndarray:
+    """Matches in runs that hang in the air over another depth: the run's lowest pixel is
+    more than ``max_height`` metres above the ground, and the same edge string goes on
+    below it (matched pixels within ``max_gap`` rows) but never at the run's disparity
+    (within ``tolerance_px`` + ``slope`` px per row of the gap). On a
+    repetitive texture a stretch of an edge matched a period off is such a run: a
+    wall's vertical streaks 8 m away, matched 43 px off for 12 rows, made an obstacle
+    "1.9 m away" out of a string whose other runs stand on the wall's foot. An edge of a
+    real obstacle broken by a texture change goes on below at its own depth.
+
+    Args:
+        edges: the left EdgeMap the matches index; m: the matches.
+        prev: :func:`run_links` of the matches.
+        h: (K,) height of each match above the ground plane, metres.
+        max_height: metres (``GpodConfig.max_floating_height_m``).
+        tolerance_px: largest disparity step within a run, pixels.
+        slope: |b| of the plane, pixels of disparity per row.
+        only: (K,) bool, or None: only the runs of edge strings with such a match are
+            tested (the obstacle pixels: the rest cannot matter).
+        max_gap: rows searched below a run's bottom.
+    Returns:
+        (K,) bool.
+    """
+    k = len(m)
+    out = np.zeros(k, bool)
+    if k == 0:
+        return out
+    is_prev = np.zeros(k, bool)
+    is_prev[prev[prev >= 0]] = True
+    cand = ~is_prev & (h > max_height)                        # floating run bottoms
+    if only is not None:
+        # ... of edge strings with a match of ``only``.
+        sid = m.string_id
+        has = np.zeros(int(sid.max()) + 1 if k else 0, bool)
+        has[sid[only]] = True
+        cand &= has[sid]
+    bottom = np.flatnonzero(cand)
+    if bottom.size == 0:
+        return out
+    feat_of_edge = np.full(len(edges), -1, np.int64)
+    feat_of_edge[m.left_index] = np.arange(k)
+    below = np.full(len(edges), -1, np.int64)
+    has = edges.string_prev >= 0
+    below[edges.string_prev[has]] = np.flatnonzero(has)
+    if _nb_hanging is not None:
+        return _nb_hanging(bottom, m.left_index.astype(np.int64), m.d.astype(np.float64),
+                           below, feat_of_edge, prev.astype(np.int64), k, int(max_gap),
+                           float(tolerance_px), float(slope))
+    d0 = m.d[bottom].astype(np.float64)
+    # A run held up only by a run that hangs itself hangs too (two stretches matched
+    # the same period off, one above the other): repeat until nothing changes.
+    for _ in range(_HANGING_PASSES):
+        e = m.left_index[bottom].astype(np.int64)
+        seen = np.zeros(bottom.size, bool)      # a matched pixel below
+        held = np.zeros(bottom.size, bool)      # ... at the run's depth, not hanging
+        for r in range(1, max_gap + 1):
+            live = ~held & (e >= 0)
+            if not live.any():
+                break
+            e = np.where(live, below[np.maximum(e, 0)], -1)
+            f = np.where(e >= 0, feat_of_edge[np.maximum(e, 0)], -1)
+            hit = f >= 0
+            seen |= hit
+            fh = f[hit]
+            held[hit] |= ((np.abs(m.d[fh] - d0[hit]) <= tolerance_px + slope * r)
+                          & ~out[fh])
+        hang = seen & ~held
+        new = np.zeros(k, bool)
+        cur = bottom[hang]                      # whole runs, from the bottom up
+        while cur.size:
+            new[cur] = True
+            cur = prev[cur]
+            cur = cur[cur >= 0]
+        if np.array_equal(new, out):
+            break
+        out = new
+    return out
+
+
+#: Passes of `hanging_runs` (a run held up only by a hanging run hangs: each pass
+#: follows one more such link).
+_HANGING_PASSES = 4
+
+
+def _hanging_kernel(bottom, left_index, d, below, feat_of_edge, prev, k, max_gap, tol,
+                    slope):
+    """:func:`hanging_runs` after its candidate run bottoms, as loops (for numba): the
+    same walk, tests and passes."""
+    out = np.zeros(k, np.bool_)
+    new = np.zeros(k, np.bool_)
+    for _ in range(_HANGING_PASSES):
+        new[:] = False
+        for i in range(bottom.shape[0]):
+            b = bottom[i]
+            e = left_index[b]
+            seen = False
+            held = False
+            for r in range(1, max_gap + 1):
+                e = below[e]
+                if e < 0:
+                    break
+                f = feat_of_edge[e]
+                if f < 0:
+                    continue
+                seen = True
+                if abs(d[f] - d[b]) <= tol + slope * r and not out[f]:
+                    held = True
+                    break
+            if seen and not held:
+                c = b
+                while c >= 0:
+                    new[c] = True
+                    c = prev[c]
+        same = True
+        for j in range(k):
+            if new[j] != out[j]:
+                same = False
+                out[j] = new[j]
+        if same:
+            break
+    return out
+
+
+_nb_hanging = _jit(_hanging_kernel)
 
 
 def smooth_along_runs(x: np.ndarray, prev: np.ndarray, window: int) -> np.ndarray:
@@ -1432,8 +1566,9 @@ def face_gap_points(xy: np.ndarray, group: np.ndarray, n_groups: int, q: np.ndar
     the gap is that face when visible ground lies in front of the line within the gap's
     bearings (``_FACE_BEHIND_MIN`` features at least: the gap is seen) and not behind it
     (fewer than ``_FACE_BEHIND_MIN`` and ``_FACE_BEHIND_FRACTION`` beyond the line by
-    ``_FACE_BEHIND_M``: a gap one could walk through shows the ground beyond). The
-    nearer obstacle of the pair is then placed at that foot.
+    ``_FACE_BEHIND_M``: a gap one could walk through shows the ground beyond; nor, within
+    ``_FACE_BAND_M`` of the line, ``_FACE_SEEN_THROUGH`` times as densely as in front).
+    The nearer obstacle of the pair is then placed at that foot.
 
     Args:
         xy: (S, 2) ground coordinates of the feet, metres.
@@ -1496,6 +1631,13 @@ def face_gap_points(xy: np.ndarray, group: np.ndarray, n_groups: int, q: np.ndar
         n_front, n_behind, n_wedge = _ground_across_line(ground, ct, d, ct + lo_t * d,
                                                          ct + hi_t * d)
         if n_front < _FACE_BEHIND_MIN or _ground_behind(n_behind, n_wedge):
+            continue
+        # Near the line, the ground behind the gap seen about as densely as in front of
+        # it: two objects with a way between them (a bollard and a wall 3.6 m apart once
+        # made a "face" 6 m away), not one face.
+        b_front, b_behind, _ = _ground_across_line(ground, ct, d, ct + lo_t * d,
+                                                   ct + hi_t * d, _FACE_BAND_M)
+        if b_behind >= max(_FACE_BEHIND_MIN, _FACE_SEEN_THROUGH * b_front):
             continue
         k = a if r_q[a] <= r_q[b] else b
         foot = ct + t_p * d
@@ -2013,6 +2155,9 @@ class GpodDetector:
         reliable = run >= need
         usable = reliable & in_range
         obst = (ex_mean > thr) & (h <= c.max_obstacle_height_m) & usable
+        if obst.any():
+            obst &= ~hanging_runs(el, m, prev, h, c.max_floating_height_m,
+                                  c.string_disparity_tolerance_px, slope, obst)
         drop = np.zeros_like(obst)
         if c.detect_drops:
             # Below the plane where the plane itself is within the detection range.
@@ -2517,14 +2662,18 @@ def _moved_roi(ob: GpodObstacle, foot: np.ndarray, normal_up: np.ndarray,
                cam: StereoCamera) -> tuple[int, int, int, int]:
     """The left-image region (x, y, w, h) of obstacle ``ob`` moved to stand on ``foot``
     ((3,) metres, left optical frame; ``normal_up`` the plane's unit normal): from its top
-    down to its foot, as wide as before scaled by the change of depth; clipped to the
+    down to its foot, as wide as before scaled by the change of depth, and as far beside
+    the foot's column as before (a foot placed off the obstacle's edges -- a wall's
+    nearest point beyond its edges -- must not drag the region off them); clipped to the
     image (at least 1 x 1)."""
     old_foot = ob.position - ob.height * normal_up
     top = foot + ob.height * normal_up
-    ends = np.stack([foot, top]).astype(float)
+    ends = np.stack([foot, top, old_foot]).astype(float)
     ends[:, 2] = np.maximum(ends[:, 2], 1e-3)
-    (u, _), (v_foot, v_top) = cam.project_left(ends)
-    w = ob.roi[2] * max(float(old_foot[2]), 1e-3) / ends[0, 2]
+    (u, _, u_old), (v_foot, v_top, _) = cam.project_left(ends)
+    scale = max(float(old_foot[2]), 1e-3) / ends[0, 2]
+    w = ob.roi[2] * scale
+    u = u + (ob.roi[0] + 0.5 * (ob.roi[2] - 1) - u_old) * scale
     x0 = int(np.clip(np.floor(u - w / 2), 0, cam.width - 1))
     x1 = int(np.clip(np.ceil(u + w / 2), 0, cam.width - 1))
     y0 = int(np.clip(np.floor(min(v_top, v_foot)), 0, cam.height - 1))
