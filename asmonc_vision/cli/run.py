@@ -356,7 +356,7 @@ def run(args) -> int:
                      'running the walk model only')
 
     import rclpy
-    from rclpy.executors import MultiThreadedExecutor
+    from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 
     log_dir = Path(tempfile.mkdtemp(prefix='asmonc-run-'))
     ctx = rclpy.Context()
@@ -371,12 +371,16 @@ def run(args) -> int:
             Parameter('output', value=str(args.out)),
             Parameter('topics', value=list(OUTPUT_TOPICS)),
             Parameter('compression', value='zstd')])
-    executor = MultiThreadedExecutor(num_threads=2, context=ctx)
-    executor.add_node(monitor.node)
+    # The monitor spins on its own thread: the recorder's callbacks (compressing debug
+    # images) must not delay the count of finished frames, which decides when the alarm
+    # node is stopped -- late, it announces the end of the replay as a FAULT.
+    executors = [SingleThreadedExecutor(context=ctx)]
+    executors[0].add_node(monitor.node)
     if recorder is not None:
-        executor.add_node(recorder)
-    spin = threading.Thread(target=executor.spin, daemon=True)
-    spin.start()
+        executors.append(MultiThreadedExecutor(num_threads=2, context=ctx))
+        executors[1].add_node(recorder)
+    for ex in executors:
+        threading.Thread(target=ex.spin, daemon=True).start()
 
     ros_params = []
     for pf in args.params_file:
@@ -460,7 +464,8 @@ def run(args) -> int:
         for name in ['player', 'alarm', *children]:
             if name in children:
                 children[name].stop()
-        executor.shutdown(timeout_sec=2.0)
+        for ex in executors:
+            ex.shutdown(timeout_sec=2.0)
         if recorder is not None:
             recorder.close()
             recorder.destroy_node()
