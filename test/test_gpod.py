@@ -866,11 +866,15 @@ def test_moved_roi_keeps_its_place_beside_the_foot():
                       width=0.1, disparity_excess=2.0, confidence=1.0,
                       roi=(140, 60, 8, 40), num_edge_pixels=20,
                       string_ids=np.zeros(0, np.int32))
-    x, y, w, h = _moved_roi(ob, foot, up, CAM)          # not moved: the same columns
-    assert abs(x - 140) <= 1 and abs(w - 8) <= 2, (x, w)
+    assert _moved_roi(ob, foot, up, CAM) == ob.roi      # not moved: the same region
     shifted = foot + np.array([0.5, 0.0, 0.0])          # moved 0.5 m right: +30 px
-    x2, _, w2, _ = _moved_roi(ob, shifted, up, CAM)
-    assert abs((x2 + w2 / 2) - (x + w / 2) - 30.0) <= 1.5, (x2, w2)
+    x2, y2, w2, h2 = _moved_roi(ob, shifted, up, CAM)
+    assert abs(x2 - 170) <= 1 and y2 == 60 and abs(w2 - 8) <= 1 and h2 == 40
+    nearer = foot * 0.5                                 # twice as near: twice the size,
+    x3, y3, w3, h3 = _moved_roi(ob, nearer, up, CAM)    # about the foot's image point
+    assert abs(w3 - 16) <= 2 and y3 == 0, (w3, y3)     # (its top now above the image)
+    u_f = CAM.cx + CAM.f * nearer[0] / nearer[2]
+    assert abs((x3 - u_f) - 2 * (140 - (CAM.cx + CAM.f * foot[0] / foot[2]))) <= 2
 
 
 def test_hanging_runs():

@@ -443,7 +443,7 @@ def run(args) -> int:
                 last, last_change = monitor.frames, time.monotonic()
             elif time.monotonic() - last_change > args.settle:
                 break
-        time.sleep(0.3)  # the alarm for the last frame
+        time.sleep(0.1)  # the alarm for the last frame (the alarm node has the frame too)
         show_alarms()
         # The replay is over: stop the alarm node before it reports the silence as a fault.
         if 'alarm' in children:

@@ -2661,23 +2661,23 @@ def _same_object(a: GpodObstacle, b: GpodObstacle, radius: float = math.inf) -> 
 def _moved_roi(ob: GpodObstacle, foot: np.ndarray, normal_up: np.ndarray,
                cam: StereoCamera) -> tuple[int, int, int, int]:
     """The left-image region (x, y, w, h) of obstacle ``ob`` moved to stand on ``foot``
-    ((3,) metres, left optical frame; ``normal_up`` the plane's unit normal): from its top
-    down to its foot, as wide as before scaled by the change of depth, and as far beside
-    the foot's column as before (a foot placed off the obstacle's edges -- a wall's
-    nearest point beyond its edges -- must not drag the region off them); clipped to the
-    image (at least 1 x 1)."""
+    ((3,) metres, left optical frame; ``normal_up`` the plane's unit normal): its region
+    carried with its foot's image point and scaled about it by the change of depth, so
+    that it keeps its place beside and above the foot (a foot placed off the obstacle's
+    edges -- a wall's nearest point, the near one of two boxes -- must not drag the
+    region off them); clipped to the image (at least 1 x 1)."""
     old_foot = ob.position - ob.height * normal_up
-    top = foot + ob.height * normal_up
-    ends = np.stack([foot, top, old_foot]).astype(float)
+    ends = np.stack([old_foot, foot]).astype(float)
     ends[:, 2] = np.maximum(ends[:, 2], 1e-3)
-    (u, _, u_old), (v_foot, v_top, _) = cam.project_left(ends)
-    scale = max(float(old_foot[2]), 1e-3) / ends[0, 2]
-    w = ob.roi[2] * scale
-    u = u + (ob.roi[0] + 0.5 * (ob.roi[2] - 1) - u_old) * scale
-    x0 = int(np.clip(np.floor(u - w / 2), 0, cam.width - 1))
-    x1 = int(np.clip(np.ceil(u + w / 2), 0, cam.width - 1))
-    y0 = int(np.clip(np.floor(min(v_top, v_foot)), 0, cam.height - 1))
-    y1 = int(np.clip(np.ceil(max(v_top, v_foot)), 0, cam.height - 1))
+    (u0, u1), (v0, v1) = cam.project_left(ends)
+    scale = ends[0, 2] / ends[1, 2]
+    x, y, w, h = ob.roi
+    xa, xb = u1 + (x - u0) * scale, u1 + (x + w - 1 - u0) * scale
+    ya, yb = v1 + (y - v0) * scale, v1 + (y + h - 1 - v0) * scale
+    x0 = int(np.clip(np.floor(xa), 0, cam.width - 1))
+    x1 = int(np.clip(np.ceil(xb), 0, cam.width - 1))
+    y0 = int(np.clip(np.floor(ya), 0, cam.height - 1))
+    y1 = int(np.clip(np.ceil(yb), 0, cam.height - 1))
     return (x0, y0, max(x1 - x0 + 1, 1), max(y1 - y0 + 1, 1))
 
 
