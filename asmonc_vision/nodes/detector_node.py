@@ -94,12 +94,47 @@ class DetectorNode(StereoInputNode):
         if self.node_config.use_egomotion:
             self.create_subscription(TransformStamped, '/egomotion', self._on_egomotion,
                                      RESULT_QOS)
+        # The debug image is drawn and published on its own thread, newest frame only:
+        # a slow subscriber of that large RELIABLE image (a recorder compressing it) must
+        # never hold back the next /obstacles (at 640x480 it once held the worker for
+        # 1.9 s, and the alarm node announced a FAULT).
+        self._debug_slot = None
+        self._debug_cv = threading.Condition()
+        self._debug_stop = False
+        self._debug_thread = None
+        if self.node_config.publish_debug_image:
+            self._debug_thread = threading.Thread(target=self._debug_work,
+                                                  name='detector-debug', daemon=True)
+            self._debug_thread.start()
         self.start_stereo_input(self.node_config)
         self.get_logger().info('detector ready: waiting for /stereo/{left,right}/image_rect')
 
     def restart(self) -> None:
         self.detector.reset()
         self._prev_seq = None
+
+    def _debug_work(self) -> None:
+        while True:
+            with self._debug_cv:
+                while self._debug_slot is None and not self._debug_stop:
+                    self._debug_cv.wait(timeout=0.5)
+                if self._debug_stop:
+                    return
+                left, result, header = self._debug_slot
+                self._debug_slot = None
+            try:
+                self.pub_debug.publish(array_to_image_msg(draw_debug(left, result), header))
+            except Exception as exc:  # noqa: BLE001 - the debug view must not stop the node
+                self.get_logger().warn(f'debug image not published: {exc}',
+                                       throttle_duration_sec=5.0)
+
+    def destroy_node(self):
+        with self._debug_cv:
+            self._debug_stop = True
+            self._debug_cv.notify_all()
+        if self._debug_thread is not None:
+            self._debug_thread.join(timeout=2.0)
+        return super().destroy_node()
 
     def _on_egomotion(self, msg: TransformStamped) -> None:
         q = msg.transform.rotation
@@ -157,7 +192,9 @@ class DetectorNode(StereoInputNode):
         if self.node_config.publish_markers and self.pub_markers.get_subscription_count() > 0:
             self.pub_markers.publish(markers_msg(result, header))
         if self.node_config.publish_debug_image and self.pub_debug.get_subscription_count() > 0:
-            self.pub_debug.publish(array_to_image_msg(draw_debug(left, result), header))
+            with self._debug_cv:
+                self._debug_slot = (left, result, header)   # replaces one not yet drawn
+                self._debug_cv.notify()
         level = Diagnostics.OK if result.status == 'tracking' else Diagnostics.WARN
         self.diag.update(level, f'{result.status}: {len(result.obstacles)} obstacles',
                          frames_in=self.frames_in, frames_done=self.frames_done + 1,
