@@ -6,11 +6,13 @@ Per stereo pair:
 2. Row-wise PMF matching of the edges (:mod:`.matching`): features (u_left, u_right, v, d).
 3. The ground plane ``d = a*u + b*v + c`` (cyclopean, :mod:`.ground_plane`): calibrated
    from the features of the first ``init_frames`` frames (assumed obstacle-free, as in
-   the paper, but fitted robustly anyway), then either kept fixed (``'fixed'``, the
-   paper's GPOD) or refitted every frame (``'refit'``, so that a walking wearer keeps a
-   plane): a coarse robust fit on the nearer half of the features within
+   the paper, but fitted robustly anyway; from the last frame alone when the frames'
+   planes disagree: a walk from the first frame), then either kept fixed (``'fixed'``,
+   the paper's GPOD) or refitted every frame (``'refit'``, so that a walking wearer
+   keeps a plane): a coarse robust fit on the nearer half of the features within
    ``refit_gate_px`` of the predicted plane, then a fine fit on the features within
-   ``refit_gate_m`` of the coarse plane, accepted if it moved the plane plausibly little
+   ``refit_gate_m`` of the coarse plane (standing still, or when that took another
+   surface: of the current plane), accepted if it moved the plane plausibly little
    and smoothed by a constant-plane Kalman filter. This is a step towards the paper's
    dynamic recalibration, which will add a motion model to the prediction. The RANSAC
    fits weigh features by disparity cubed: of two surfaces, the near one -- the ground
@@ -32,11 +34,15 @@ Per stereo pair:
    string is an obstacle if it has at least ``min_obstacle_pixels`` of them (1 is the
    paper's rule "any pixel"; weak edges count less, ``obstacle_min_strength``), comes
    down to the ground (``max_floating_height_m``) and is not a repetitive pattern
-   matched a period off (``ambiguity_fraction``). Pixels below the plane by more than the
+   matched a period off (``ambiguity_fraction``; nor is a run of it that hangs in the
+   air over another depth of its own string, `hanging_runs`). Pixels below the plane by more than the
    threshold (a disparity deficit where the ground should be) make drop-offs: hazards
    with negative height. Obstacle strings are clustered by the proximity of their feet
    on the ground, and each cluster is reported with its top, height, range and bearing
-   of its nearest point, width, disparity excess, confidence and image region.
+   of its nearest point, width, disparity excess, confidence and image region; a
+   cluster joined from parts farther apart than ``part_radius_m`` is also reported part
+   by part. A drop-off is placed at its nearest visible lower ground, for a straight
+   brink at the foot of the perpendicular from the camera (`_brink_bearings`).
 6. The nearest point of an obstacle (range and bearing of one point): each obstacle
    string's matched run is followed down to where it meets the ground (its excess falls
    to the noise), giving one ground foot per string. A foot nearer than the outermost
@@ -48,7 +54,10 @@ Per stereo pair:
    impossible, and the one whose contact polyline L-N-R follows the image's intensity
    edges best is taken -- unless it hardly bulges from the chord LR (a frontal face),
    when the feet's probably nearest point is reported (their mean weighted by the
-   probability of being the nearest: the middle of a frontal face).
+   probability of being the nearest: the middle of a frontal face), as it is when the
+   corner would lie beyond the feet. A face running out of the view, or seen as two
+   obstacles with a blank middle, is placed at its nearest point (`view_edge_points`,
+   `face_gap_points`), unless the ground is seen through its line.
 
 Status per frame: ``'initialising'`` (not enough calibration frames yet), ``'tracking'``
 (a plane is valid for this frame, refitted or carried over for up to
