@@ -176,35 +176,37 @@ def _damaged_source(path, problem: BagError):
         raise problem from exc
 
 
+def bag_summary(path) -> tuple[dict[str, tuple[str, int]], str | None]:
+    """(`bag_topics`, `bag_damage`) of a bag, opening (or, when damaged, scanning) it
+    once. Raises BagError when nothing can be read."""
+    try:
+        reader = open_reader(path)
+    except BagError as exc:
+        src = _damaged_source(path, exc)
+        return ({t.name: (t.msgtype, t.count) for t in src.info.topics.values()},
+                src.info.truncated or str(exc))
+    try:
+        out: dict[str, tuple[str, int]] = {}
+        for c in reader.connections:
+            t, n = out.get(c.topic, (c.msgtype, 0))
+            out[c.topic] = (t, n + c.msgcount)
+        return out, None
+    finally:
+        reader.close()
+
+
 def bag_damage(path) -> str | None:
     """Why a bag cannot be read to its end (a truncated or damaged MCAP file whose
     messages before the damage can still be read), or None for an intact bag.
     Raises BagError when nothing can be read."""
-    try:
-        open_reader(path).close()
-        return None
-    except BagError as exc:
-        src = _damaged_source(path, exc)
-        return src.info.truncated or str(exc)
+    return bag_summary(path)[1]
 
 
 def bag_topics(path) -> dict[str, tuple[str, int]]:
     """topic -> (message type, message count) of a bag; of a truncated or damaged MCAP
     bag, those of the messages before the damage (`bag_damage` says why). Raises
     BagError."""
-    try:
-        reader = open_reader(path)
-    except BagError as exc:
-        src = _damaged_source(path, exc)
-        return {t.name: (t.msgtype, t.count) for t in src.info.topics.values()}
-    try:
-        out: dict[str, tuple[str, int]] = {}
-        for c in reader.connections:
-            t, n = out.get(c.topic, (c.msgtype, 0))
-            out[c.topic] = (t, n + c.msgcount)
-        return out
-    finally:
-        reader.close()
+    return bag_summary(path)[0]
 
 
 def read_messages(path, topics):

@@ -294,8 +294,7 @@ def run(args) -> int:
         console_err(f'asmonc run: --rate must be in [0.01, 100], got {args.rate}')
         return 2
     try:
-        topics = bagio.bag_topics(bag)
-        damage = bagio.bag_damage(bag)
+        topics, damage = bagio.bag_summary(bag)
     except bagio.BagError as exc:
         console_err(f'asmonc run: {exc}')
         return 2

@@ -81,7 +81,8 @@ from .edges import EdgeMap, detect_vertical_edges
 from .edges import warm_up as edges_warm_up
 from .obstacle_tracks import ObstacleTracker
 from .ground_plane import PlaneFit, PlausiblePlaneConfig, fit_ground_plane, plane_is_plausible
-from .matching import Candidates, Matches, _jit, pmf_match
+from .jit import jit as _jit
+from .matching import Candidates, Matches, pmf_match
 from .matching import warm_up as matching_warm_up
 
 #: Obstacle pixels this far above the plane (pixels) or more are checked for a ground
@@ -1454,20 +1455,32 @@ def nearest_point(xy: np.ndarray, sr: np.ndarray, ground_xy: np.ndarray,
                           None if score is None else _single_score(score), at_border)[0]
 
 
+def _fit_line(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """Total least squares line through ground points p (N, 2), metres: (centroid (2,),
+    unit direction (2,), (N,) coordinates along it from the centroid, orthogonal RMS
+    residual)."""
+    c = p.mean(axis=0)
+    _, sv, vt = np.linalg.svd(p - c, full_matrices=False)
+    d = vt[0]
+    return c, d, (p - c) @ d, float(sv[1]) / math.sqrt(p.shape[0])
+
+
 def _ground_across_line(ground: np.ndarray, c: np.ndarray, d: np.ndarray, a: np.ndarray,
-                        b: np.ndarray, band: float = math.inf) -> tuple[int, int, int]:
+                        b: np.ndarray) -> tuple[int, int, int, int, int]:
     """Visible ground on either side of the ground line through ``c`` along unit ``d``,
     within the bearings of its points ``a`` and ``b`` ((2,) each, metres): the numbers of
-    ground features (G, 2) more than ``_FACE_BEHIND_M`` (and at most ``band`` metres) in
-    front of it (the camera's side) and behind it, and of all features within those
-    bearings."""
+    ground features (G, 2) more than ``_FACE_BEHIND_M`` in front of it (the camera's side)
+    and behind it, of all features within those bearings, and of those in front and
+    behind within ``_FACE_BAND_M`` of the line."""
     b0, b1 = math.atan2(a[1], a[0]), math.atan2(b[1], b[0])
     bg = np.arctan2(ground[:, 1], ground[:, 0])
     w = ground[(bg >= min(b0, b1)) & (bg <= max(b0, b1))]
     nrm = np.array([-d[1], d[0]])
     off = math.copysign(1.0, float(nrm @ -c)) * ((w - c) @ nrm)
-    return (int(np.count_nonzero((off > _FACE_BEHIND_M) & (off <= band))),
-            int(np.count_nonzero((off < -_FACE_BEHIND_M) & (off >= -band))), int(w.shape[0]))
+    front, behind = off > _FACE_BEHIND_M, off < -_FACE_BEHIND_M
+    near = np.abs(off) <= _FACE_BAND_M
+    return (int(np.count_nonzero(front)), int(np.count_nonzero(behind)), int(w.shape[0]),
+            int(np.count_nonzero(front & near)), int(np.count_nonzero(behind & near)))
 
 
 def _ground_behind(n_behind: int, n_wedge: int) -> bool:
@@ -1475,6 +1488,13 @@ def _ground_behind(n_behind: int, n_wedge: int) -> bool:
     ``_FACE_BEHIND_MIN`` features and ``_FACE_BEHIND_FRACTION`` of those in its bearings
     (a few are texture on the face matched at the ground's disparity)."""
     return n_behind >= max(_FACE_BEHIND_MIN, _FACE_BEHIND_FRACTION * n_wedge)
+
+
+def _seen_through(band_front: int, band_behind: int) -> bool:
+    """Whether the ground within ``_FACE_BAND_M`` behind a line is seen at least
+    ``_FACE_SEEN_THROUGH`` times as densely as within as far in front of it (and by
+    ``_FACE_BEHIND_MIN`` features): separate objects in a row, not one face."""
+    return band_behind >= max(_FACE_BEHIND_MIN, _FACE_SEEN_THROUGH * band_front)
 
 
 def view_edge_points(xy: np.ndarray, group: np.ndarray, n_groups: int, to_image,
@@ -1510,13 +1530,9 @@ def view_edge_points(xy: np.ndarray, group: np.ndarray, n_groups: int, to_image,
     counts = np.bincount(group, minlength=n_groups)
     ground = None
     for k in np.flatnonzero(counts >= _FACE_MIN_FEET):
-        p = xy[group == k]
-        c = p.mean(axis=0)
-        _, sv, vt = np.linalg.svd(p - c, full_matrices=False)
-        d = vt[0]
-        along = (p - c) @ d
+        c, d, along, rms = _fit_line(xy[group == k])
         span = float(along.max() - along.min())
-        if span < _FACE_MIN_SPAN_M or sv[1] / math.sqrt(p.shape[0]) > _FACE_MAX_RMS_M:
+        if span < _FACE_MIN_SPAN_M or rms > _FACE_MAX_RMS_M:
             continue
         # The end of the face nearer the camera (range falls along the line towards it).
         ends = (c + along.min() * d, c + along.max() * d)
@@ -1551,11 +1567,10 @@ def view_edge_points(xy: np.ndarray, group: np.ndarray, n_groups: int, to_image,
             ground = ground_xy() if callable(ground_xy) else ground_xy
         # Ground seen through the line between the feet: separate objects, not a face.
         far = ends[1] if e is ends[0] else ends[0]
-        n_front, n_through, _ = _ground_across_line(ground, c, d, far, e, _FACE_BAND_M)
-        if n_through >= max(_FACE_BEHIND_MIN, _FACE_SEEN_THROUGH * n_front):
+        if _seen_through(*_ground_across_line(ground, c, d, far, e)[3:]):
             continue
         # Visible ground behind the extension shows the face ends before the view's edge.
-        _, n_behind, n_wedge = _ground_across_line(ground, c, d, e, q)
+        _, n_behind, n_wedge, _, _ = _ground_across_line(ground, c, d, e, q)
         if _ground_behind(n_behind, n_wedge):
             continue
         out[k] = q
@@ -1637,16 +1652,13 @@ def face_gap_points(xy: np.ndarray, group: np.ndarray, n_groups: int, q: np.ndar
             ground = ground_xy() if callable(ground_xy) else ground_xy
         if ground.shape[0] == 0:
             continue
-        n_front, n_behind, n_wedge = _ground_across_line(ground, ct, d, ct + lo_t * d,
-                                                         ct + hi_t * d)
-        if n_front < _FACE_BEHIND_MIN or _ground_behind(n_behind, n_wedge):
-            continue
+        n_front, n_behind, n_wedge, b_front, b_behind = _ground_across_line(
+            ground, ct, d, ct + lo_t * d, ct + hi_t * d)
         # Near the line, the ground behind the gap seen about as densely as in front of
         # it: two objects with a way between them (a bollard and a wall 3.6 m apart once
         # made a "face" 6 m away), not one face.
-        b_front, b_behind, _ = _ground_across_line(ground, ct, d, ct + lo_t * d,
-                                                   ct + hi_t * d, _FACE_BAND_M)
-        if b_behind >= max(_FACE_BEHIND_MIN, _FACE_SEEN_THROUGH * b_front):
+        if (n_front < _FACE_BEHIND_MIN or _ground_behind(n_behind, n_wedge)
+                or _seen_through(b_front, b_behind)):
             continue
         k = a if r_q[a] <= r_q[b] else b
         foot = ct + t_p * d
@@ -2632,19 +2644,20 @@ def _brink_bearings(xy: np.ndarray, group: np.ndarray, bearing: np.ndarray) -> n
         # beyond it (texture on the lower ground) is dropped and the line refitted
         # (most of the strings must stay: a scatter has no brink).
         for _ in range(3):
-            c = p.mean(axis=0)
-            _, sv, vt = np.linalg.svd(p - c, full_matrices=False)
-            d = vt[0]
+            c, d, _, rms = _fit_line(p)
+            n_fit = p.shape[0]
             nrm = np.array([-d[1], d[0]])
             behind = math.copysign(1.0, float(nrm @ c)) * ((p - c) @ nrm)
             keep = behind <= _BRINK_MAX_RMS_M
             if keep.all() or np.count_nonzero(keep) < _BRINK_MIN_POINTS:
                 break
             p = p[keep]
+        # (after three trimmings the last fit's line with the points it kept)
         along = (p - c) @ d
+        rms *= math.sqrt(n_fit / p.shape[0])
         if (keep.sum() < max(_BRINK_MIN_POINTS, _BRINK_MIN_KEPT * n_all)
                 or float(along.max() - along.min()) < _BRINK_MIN_SPAN_M
-                or sv[1] / math.sqrt(p.shape[0]) > _BRINK_MAX_RMS_M):
+                or rms > _BRINK_MAX_RMS_M):
             continue
         t = float(np.clip(-(c @ d), along.min(), along.max()))
         q = c + t * d

@@ -208,44 +208,41 @@ class BagPlayerNode(Node):
 
     def wait_for_targets(self, targets: dict[str, int], timeout: float) -> bool:
         """Wait until each published topic of ``targets`` has that many subscribers
-        (topics not played are left out, with a warning)."""
+        (topics not played are left out, with a warning).
+
+        Args:
+            targets: {topic: subscribers needed}.
+            timeout: seconds; <= 0 waits without limit (until `stop`).
+        Returns:
+            True when they are there, False on timeout or stop.
+        """
         known = {t: n for t, n in targets.items() if t in self._pubs}
         if len(known) < len(targets):
             self.get_logger().warning(
                 'not waiting for subscribers of ' + ', '.join(sorted(set(targets) - set(known)))
                 + ': not played from this bag')
-        ok = True
-        for n in sorted(set(known.values())):
-            ok &= self.wait_for_subscribers(n, timeout, [t for t, c in known.items() if c == n])
-        return ok
+        deadline = None if timeout <= 0 else time.monotonic() + timeout
+        while not self._stop.is_set():
+            missing = {t: (have, n) for t, n in known.items()
+                       if (have := self._pubs[t].get_subscription_count()) < n}
+            if not missing:
+                return True
+            if deadline is not None and time.monotonic() > deadline:
+                self.get_logger().warning(
+                    f'waited {timeout:g} s for subscribers; still missing on '
+                    + ', '.join(f'{t} ({have} of {n})' for t, (have, n) in sorted(missing.items()))
+                    + ': playing anyway')
+                return False
+            self._stop.wait(0.02)
+        return False
 
     def wait_for_subscribers(self, count: int, timeout: float,
                              topics: Iterable[str] | None = None) -> bool:
         """Wait until each of `topics` (default: the image and camera_info topics: a
         stereo node needs both, and a message published before its subscriber is
-        matched is lost) has `count` subscribers.
-
-        Args:
-            count: subscribers needed per topic.
-            timeout: seconds; <= 0 waits without limit (until `stop`).
-        Returns:
-            True when they are there, False on timeout or stop.
-        """
-        topics = list(self.camera_topics if topics is None else topics)
-        deadline = None if timeout <= 0 else time.monotonic() + timeout
-        while not self._stop.is_set():
-            missing = {t: n for t in topics
-                       if (n := self._pubs[t].get_subscription_count()) < count}
-            if not missing:
-                return True
-            if deadline is not None and time.monotonic() > deadline:
-                self.get_logger().warning(
-                    f'waited {timeout:g} s for {count} subscriber(s); still missing on '
-                    + ', '.join(f'{t} ({n})' for t, n in sorted(missing.items()))
-                    + ': playing anyway')
-                return False
-            self._stop.wait(0.02)
-        return False
+        matched is lost) has `count` subscribers (`wait_for_targets`)."""
+        topics = self.camera_topics if topics is None else topics
+        return self.wait_for_targets({t: count for t in topics}, timeout)
 
     def _run(self) -> None:
         cfg = self.config
