@@ -608,6 +608,21 @@ def test_cli(tmp_path, capsys):
     assert '2 stereo frames 160x120' in text
     assert main(['clear_static', str(out), '--duration', '0.1', '--quiet']) == 2
     assert main(['clear_static', str(out), '--duration', '0.1', '--quiet', '--force']) == 0
+    # Other rig settings; wrong names, types and ranges are usage errors.
+    capsys.readouterr()
+    for bad, words in ((['--rig', 'baseline'], 'FIELD=VALUE'),
+                       (['--rig', 'no_such=1'], "unknown rig setting 'no_such'"),
+                       (['--rig', 'baseline=wide'], 'expected a float'),
+                       (['--rig', 'baseline=9'], 'baseline')):
+        assert main(['clear_static', str(tmp_path / 'bad'), '--quiet', *bad]) == 2
+        assert words in capsys.readouterr().err
+    assert not (tmp_path / 'bad').exists()
+    rigged = tmp_path / 'rigged'
+    assert main(['clear_static', str(rigged), '--duration', '0.1', '--quiet', '--width', '160',
+                 '--height', '120', '--rig', 'baseline=0.2', '--rig', 'camera_height=1.0']) == 0
+    from asmonc_vision.bagio import read_messages
+    _, _, info = next(read_messages(rigged, ['/stereo/right/camera_info']))
+    assert info.p[3] == pytest.approx(-info.p[0] * 0.2)     # Tx = -f B
 
 
 def test_render_speed_report(capsys):

@@ -1,7 +1,7 @@
 """Command line: render a scenario to a rosbag2 directory.
 
     python -m asmonc_vision.sim SCENARIO OUT_DIR [--seed N] [--duration S] [--fps F]
-        [--width W --height H --focal F] [--force] [--list]
+        [--width W --height H --focal F] [--rig FIELD=VALUE ...] [--force] [--list]
 
 (console script ``asmonc-sim``). Exit status 0 on success, 2 on a usage error (unknown
 scenario, existing non-empty OUT_DIR without --force, bad settings).
@@ -34,10 +34,38 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument('--width', type=int, default=None, help='image width, px (default 320)')
     p.add_argument('--height', type=int, default=None, help='image height, px (default 240)')
     p.add_argument('--focal', type=float, default=None, help='focal length, px (default 300)')
+    p.add_argument('--rig', action='append', default=[], metavar='FIELD=VALUE',
+                   help='any other rig setting, e.g. baseline=0.2, camera_height=1.0, '
+                        'camera_pitch_deg=30, noise_sigma=5 (repeatable; fields and ranges: '
+                        'asmonc_vision.sim.rig.RigSettings)')
     p.add_argument('--force', action='store_true',
                    help='replace OUT_DIR if it is an existing rosbag2 directory')
     p.add_argument('--quiet', action='store_true', help='no progress output')
     return p
+
+
+def _rig_changes(items: list[str]) -> dict:
+    """``FIELD=VALUE`` strings as RigSettings changes, each value converted to its field's
+    type.
+
+    Raises:
+        ValueError: not FIELD=VALUE, an unknown field, or a value of the wrong type.
+    """
+    fields = {f.name: f for f in dataclasses.fields(RigSettings)}
+    out = {}
+    for item in items:
+        name, sep, text = item.partition('=')
+        name = name.strip()
+        if not sep or not name:
+            raise ValueError(f"--rig expects FIELD=VALUE, got '{item}'")
+        if name not in fields:
+            raise ValueError(f"--rig: unknown rig setting '{name}'; known: {', '.join(fields)}")
+        kind = type(getattr(RigSettings(), name))
+        try:
+            out[name] = kind(text)
+        except ValueError:
+            raise ValueError(f"--rig {name}: expected a {kind.__name__}, got '{text}'") from None
+    return out
 
 
 def _is_bag_dir(path: Path) -> bool:
@@ -83,9 +111,10 @@ def main(argv: list[str] | None = None) -> int:
         else:
             out.rmdir()
     try:
-        changes = {k: v for k, v in (('fps', args.fps), ('width', args.width),
-                                     ('height', args.height), ('focal', args.focal))
-                   if v is not None}
+        changes = _rig_changes(args.rig)
+        changes.update({k: v for k, v in (('fps', args.fps), ('width', args.width),
+                                          ('height', args.height), ('focal', args.focal))
+                        if v is not None})
         rig = dataclasses.replace(RigSettings(), **changes)
         if args.duration is not None and not args.duration > 0:
             raise ValueError(f'--duration must be > 0 s, got {args.duration}')
