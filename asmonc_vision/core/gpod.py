@@ -152,6 +152,15 @@ _FACE_BAND_M = 1.0
 _FACE_SEEN_THROUGH = 0.5
 #: Least span (metres) of the feet of two obstacles taken for one face (`face_gap_points`).
 _GAP_MIN_SPAN_M = 1.0
+#: `soft_nearest` averages the nearest foot with the feet as near as it only over one
+#: body: not with a foot more than _BODY_GAP_SPAN_M away from it when at least
+#: _FACE_BEHIND_MIN ground features lie between the two, _BODY_GAP_BAND_M[0] to [1]
+#: metres behind the line joining them and _BODY_GAP_END_M clear of either foot. Behind
+#: a face (a box's front, its side) the body and its shadow hide that strip; between two
+#: obstacles side by side the ground is seen there.
+_BODY_GAP_SPAN_M = 0.2
+_BODY_GAP_BAND_M = (0.05, 0.3)
+_BODY_GAP_END_M = 0.1
 
 #: Placement-only silhouette feet (`silhouette_owners`): an edge string that is no
 #: obstacle may still be the other silhouette edge of a detected one. Its pixels above
@@ -383,6 +392,10 @@ class GpodConfig(PlausiblePlaneConfig):
         20, 'Obstacle pixels at which the confidence is no longer reduced for small '
         'evidence (confidence = P(any pixel truly beyond the threshold) * '
         'min(1, pixels / this))', range=(1, 100000))
+    track_confidence_frames: int = param(
+        3, 'Obstacle tracks: a tracked obstacle\'s confidence combines its detections in up '
+        'to this many of its latest frames, 1 - prod(1 - confidence) (evidence accumulated '
+        'over frames; 1 = the latest detection\'s alone)', range=(1, 100))
     track_coast_s: float = param(
         1.0, 'Obstacle tracks (DGPR): an obstacle detected before is still reported for up to '
         'this long after its last detection, at its tracked place (moved by the camera '
@@ -450,7 +463,10 @@ class GpodObstacle:
         width: metres, lateral extent of the feet seen (0 for a single edge string).
         disparity_excess: pixels, measured minus plane disparity, largest in magnitude
             over the obstacle's pixels (negative for a drop-off).
-        confidence: 0..1.
+        confidence: 0..1. A detection's: P(any of its pixels truly beyond the threshold)
+            * min(1, pixels / ``confidence_full_pixels``). A reported (tracked) obstacle's:
+            1 - prod(1 - c) over the detection confidences c of its track's latest
+            ``track_confidence_frames`` detections.
         roi: (x, y, w, h) ints, region in the left image (from the top of the obstacle
             down to its foot on the ground).
         num_edge_pixels: matched edge pixels beyond the threshold in the obstacle.
@@ -1215,15 +1231,52 @@ def string_feet(ctx: _FrameContext, start: np.ndarray) -> tuple[np.ndarray, np.n
     return xy, np.abs(ground_range(0.5) - ground_range(-0.5)) * rows
 
 
-def soft_nearest(xy: np.ndarray, sr: np.ndarray) -> np.ndarray:
+def soft_nearest(xy: np.ndarray, sr: np.ndarray, ground_xy=None) -> np.ndarray:
     """The expected nearest of points with uncertain ranges: their mean weighted by
     ``exp(-dr^2 / 2(s_i^2 + s_0^2))``, dr the range beyond the nearest point's (whose
     sigma is s_0). Points as near as the nearest to within their noise share the weight
-    (a frontal face: its middle), clearly farther ones do not count."""
+    (a frontal face: its middle), clearly farther ones do not count.
+
+    Args:
+        xy: (S, 2) ground coordinates of the feet, metres; sr: (S,) their range sigmas.
+        ground_xy: (G, 2) visible ground, or a callable returning it, or None. Given,
+            a foot that visible ground separates from the nearest one (`_body_gap`: two
+            obstacles side by side, not one face) does not share the weight.
+    Returns:
+        (2,) ground coordinates, metres.
+    """
     r = np.hypot(xy[:, 0], xy[:, 1])
     j = int(np.argmin(r))
     w = np.exp(-0.5 * (r - r[j]) ** 2 / np.maximum(sr ** 2 + sr[j] ** 2, 1e-12))
+    if ground_xy is not None:
+        far = np.flatnonzero((w > 0.01) & (np.hypot(*(xy - xy[j]).T) > _BODY_GAP_SPAN_M))
+        if far.size:
+            g = ground_xy() if callable(ground_xy) else ground_xy
+            for i in far.tolist():
+                if _body_gap(g, xy[j], xy[i]):
+                    w[i] = 0.0
     return (w[:, None] * xy).sum(axis=0) / w.sum()
+
+
+def _body_gap(ground: np.ndarray, a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether visible ground (G, 2) separates the feet a and b ((2,), metres, ground
+    coordinates from the camera): at least ``_FACE_BEHIND_MIN`` features in the strip
+    ``_BODY_GAP_BAND_M`` behind the segment a-b (away from the camera), more than
+    ``_BODY_GAP_END_M`` from its ends along it."""
+    e = b - a
+    length = float(np.hypot(*e))
+    if ground.shape[0] == 0 or length <= 2.0 * _BODY_GAP_END_M:
+        return False
+    t = e / length
+    nrm = np.array([-t[1], t[0]])
+    if nrm @ (0.5 * (a + b)) < 0.0:         # pointing away from the camera
+        nrm = -nrm
+    rel = ground - a
+    along, behind = rel @ t, rel @ nrm
+    lo, hi = _BODY_GAP_BAND_M
+    inside = ((along > _BODY_GAP_END_M) & (along < length - _BODY_GAP_END_M)
+              & (behind > lo) & (behind < hi))
+    return int(np.count_nonzero(inside)) >= _FACE_BEHIND_MIN
 
 
 def _ground_inside(g: np.ndarray, a: np.ndarray, n: np.ndarray, b: np.ndarray,
@@ -1394,6 +1447,14 @@ def nearest_points(xy: np.ndarray, sr: np.ndarray, group: np.ndarray, n_groups: 
     brg_all = np.arctan2(xy[:, 1], xy[:, 0])
     r_all = np.hypot(xy[:, 0], xy[:, 1])
     search, pair, soft = [], [], []
+    cache: list = []
+
+    def ground() -> np.ndarray:
+        # the visible ground, fetched once and only if a foot needs it
+        if not cache:
+            cache.append(ground_xy() if callable(ground_xy) else ground_xy)
+        return cache[0]
+
     for k in range(n_groups):
         sel = order[first[k]:last[k]]
         if sel.size == 0:
@@ -1424,11 +1485,11 @@ def nearest_points(xy: np.ndarray, sr: np.ndarray, group: np.ndarray, n_groups: 
             # A corner beyond the nearest foot is not the nearest point (two bodies
             # in one cluster: the corner of the far one, the near one's foot nearer).
             sel = order[first[k]:last[k]]
-            qs = soft_nearest(xy[sel], sr[sel])
+            qs = soft_nearest(xy[sel], sr[sel], ground)
             out[k] = qk if np.hypot(*qk) <= np.hypot(*qs) else qs
     for k in soft:
         sel = order[first[k]:last[k]]
-        out[k] = soft_nearest(xy[sel], sr[sel])
+        out[k] = soft_nearest(xy[sel], sr[sel], ground)
     return out
 
 
@@ -1786,6 +1847,9 @@ class GpodDetector:
                                         process_noise_m=c.track_process_noise_m,
                                         confirm_hits=c.track_confirm_hits,
                                         min_hit_fraction=c.track_min_hit_fraction)
+        #: track id -> the detection confidences of its latest track_confidence_frames
+        #: detections
+        self._track_conf: dict[int, deque] = {}
 
     @property
     def calibrated_plane(self) -> PlaneFit | None:
@@ -2304,17 +2368,37 @@ class GpodDetector:
         out = list(drops)
         feet_t = np.array([tr.foot for tr in tracks]).reshape(-1, 3)
         rngs, brgs = ground_range_bearing(metric, feet_t)
-        for tr, rng_k, brg_k in zip(tracks, rngs.tolist(), brgs.tolist()):
+        confs = self._track_confidences(tracks)
+        for tr, rng_k, brg_k, conf in zip(tracks, rngs.tolist(), brgs.tolist(), confs):
             ob = tr.payload
             seen = tr.index >= 0
             roi = ob.roi if (seen or not moved) else _moved_roi(ob, tr.foot, n, cam)
             out.append(dataclasses.replace(
-                ob, position=tr.foot + ob.height * n, range=rng_k, roi=roi,
+                ob, position=tr.foot + ob.height * n, range=rng_k, roi=roi, confidence=conf,
                 bearing=brg_k, track_id=tr.track_id, age_s=tr.age_s,
                 string_ids=ob.string_ids if seen else np.zeros(0, np.int32),
                 num_edge_pixels=ob.num_edge_pixels if seen else 0))
         out.sort(key=lambda o: o.range)
         return tuple(out)
+
+    def _track_confidences(self, tracks) -> list[float]:
+        """The confidence of each track (`ObstacleTracker.update`'s outputs) reported this
+        frame: 1 - prod(1 - c) over the detection confidences c of its latest
+        ``track_confidence_frames`` detections, this frame's included when it was
+        detected (each frame's evidence taken as independent of the others'). Forgets
+        the tracks that ended."""
+        k = self.config.track_confidence_frames
+        old, self._track_conf = self._track_conf, {}
+        out = []
+        for tr in tracks:
+            hist = old.get(tr.track_id) or deque(maxlen=k)
+            if tr.index >= 0:
+                hist.append(float(tr.payload.confidence))
+            self._track_conf[tr.track_id] = hist
+            # 1 - prod(1 - c_i)
+            q = math.prod(1.0 - c for c in hist) if hist else 1.0 - tr.payload.confidence
+            out.append(float(min(max(1.0 - q, 0.0), 1.0)))
+        return out
 
     def _foot_covariance(self, feet: np.ndarray, cam: StereoCamera) -> np.ndarray:
         """(N, 3, 3) covariance of detected feet (N, 3), m²: triangulation of the foot's
