@@ -1430,7 +1430,8 @@ def nearest_points(xy: np.ndarray, sr: np.ndarray, group: np.ndarray, n_groups: 
     Args:
         xy: (S, 2) ground coordinates of the feet, sr (S,) their range sigmas.
         group: (S,) obstacle of each foot, 0..n_groups-1.
-        ground_xy: (G, 2) visible ground, or a callable returning it.
+        ground_xy: (G, 2) visible ground, or a callable returning it (called only when a
+            search or `soft_nearest` needs it).
         score: batched contact-edge score (`hidden_corners`), or None (no search).
         at_border: (S,) bool, feet of strings at the image's left or right border.
     Returns:
@@ -1447,13 +1448,6 @@ def nearest_points(xy: np.ndarray, sr: np.ndarray, group: np.ndarray, n_groups: 
     brg_all = np.arctan2(xy[:, 1], xy[:, 0])
     r_all = np.hypot(xy[:, 0], xy[:, 1])
     search, pair, soft = [], [], []
-    cache: list = []
-
-    def ground() -> np.ndarray:
-        # the visible ground, fetched once and only if a foot needs it
-        if not cache:
-            cache.append(ground_xy() if callable(ground_xy) else ground_xy)
-        return cache[0]
 
     for k in range(n_groups):
         sel = order[first[k]:last[k]]
@@ -1485,11 +1479,11 @@ def nearest_points(xy: np.ndarray, sr: np.ndarray, group: np.ndarray, n_groups: 
             # A corner beyond the nearest foot is not the nearest point (two bodies
             # in one cluster: the corner of the far one, the near one's foot nearer).
             sel = order[first[k]:last[k]]
-            qs = soft_nearest(xy[sel], sr[sel], ground)
+            qs = soft_nearest(xy[sel], sr[sel], ground_xy)
             out[k] = qk if np.hypot(*qk) <= np.hypot(*qs) else qs
     for k in soft:
         sel = order[first[k]:last[k]]
-        out[k] = soft_nearest(xy[sel], sr[sel], ground)
+        out[k] = soft_nearest(xy[sel], sr[sel], ground_xy)
     return out
 
 
