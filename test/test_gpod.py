@@ -386,13 +386,42 @@ def test_refit_follows_a_pitch_change(scenes):
 
 
 # ---------------------------------------------------------------- helpers, drawing
-def test_cluster_points_2d():
+@pytest.mark.parametrize('use_numba', [True, False])
+def test_cluster_points_2d(monkeypatch, use_numba):
+    from asmonc_vision.core import gpod
+    gpod._warm_up()
+    if use_numba and gpod._nb_link_groups is None:
+        pytest.skip('numba not installed')
+    if not use_numba:
+        monkeypatch.setattr(gpod, '_nb_link_groups', None)
     pts = np.array([[0.0, 0.0], [0.2, 0.0], [1.0, 0.0], [1.1, 0.05], [5.0, 5.0], [0.45, 0.0]])
     grp = np.array([0, 1, 2, 3, 4, 1])
     lab = cluster_points_2d(pts, grp, 0.3)
     assert lab[0] == lab[1] == lab[5] and lab[2] == lab[3] and lab[4] not in lab[:4]
     assert len(set(lab.tolist())) == 3
     assert cluster_points_2d(np.zeros((0, 2)), np.zeros(0, int), 0.3).size == 0
+
+
+def test_cluster_points_2d_paths_agree(monkeypatch):
+    """The compiled all-pairs kernel, the numpy all-pairs path and the numpy grid path
+    give the same labels (numbered by each cluster's first group)."""
+    from asmonc_vision.core import gpod
+    gpod._warm_up()
+    if gpod._nb_link_groups is None:
+        pytest.skip('numba not installed')
+    rng = np.random.default_rng(5)
+    for n, spread in ((40, 2.0), (300, 3.0), (1500, 6.0)):
+        g = rng.integers(0, n // 3, n)                 # strings of ~3 points each
+        centre = rng.uniform(0.0, spread, (n // 3, 2))
+        pts = centre[g] + rng.normal(0.0, 0.05, (n, 2))
+        grp = g * 7                                    # sparse, unordered group ids
+        ref = cluster_points_2d(pts, grp, 0.25)
+        with monkeypatch.context() as mp:
+            mp.setattr(gpod, '_nb_link_groups', None)
+            np.testing.assert_array_equal(cluster_points_2d(pts, grp, 0.25), ref)
+            mp.setattr(gpod, '_PAIRWISE_POINTS', 0)          # the grid search
+            np.testing.assert_array_equal(cluster_points_2d(pts, grp, 0.25), ref)
+        assert 1 < ref.max() + 1 < n
 
 
 def test_draw_debug(scenes):

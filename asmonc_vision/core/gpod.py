@@ -177,6 +177,8 @@ _WEAK_HEIGHT_RATIO = 2.0
 #: `cluster_points_2d` links up to this many (thinned) points by testing all pairs, more
 #: on a grid.
 _PAIRWISE_POINTS = 256
+#: ... and, compiled (`_link_groups_kernel`), up to this many.
+_JIT_PAIRWISE_POINTS = 4096
 
 #: The residual spread sigma of the initial fit is taken over the calibration features
 #: within this many ``plane_inlier_px`` of the fitted plane.
@@ -701,6 +703,9 @@ def cluster_points_2d(points: np.ndarray, group: np.ndarray, radius: float) -> n
     _, rep = np.unique(fkey, return_index=True)
     pts, gr = points[rep], g[rep]
     nr = pts.shape[0]
+    if _nb_link_groups is not None and nr <= _JIT_PAIRWISE_POINTS:
+        # All pairs, union-find, compiled: the same links and labels as below.
+        return _nb_link_groups(pts, gr, n_g, float(radius) * float(radius))[g]
     if nr <= _PAIRWISE_POINTS:
         # Few points: all pairs at once (the same links as the grid search below).
         pi, pj = np.nonzero(gr[:, None] != gr[None, :])
@@ -740,6 +745,51 @@ def cluster_points_2d(points: np.ndarray, group: np.ndarray, radius: float) -> n
         pair = np.unique(a * n_g + b)
         a, b = pair // n_g, pair % n_g
     return _components(n_g, a, b)[g]
+
+
+def _link_groups_kernel(pts, gr, n_g, r2):
+    """The links and components of :func:`cluster_points_2d` (for numba), all pairs of
+    the thinned points ``pts`` (nr, 2) of groups ``gr`` (nr,): (n_g,) int64 label of
+    each group, 0..C-1 in order of each component's first group (as `_components`)."""
+    parent = np.arange(n_g)
+    nr = pts.shape[0]
+    for i in range(nr):
+        gi = gr[i]
+        for j in range(i + 1, nr):
+            gj = gr[j]
+            if gj == gi:
+                continue
+            dx = pts[i, 0] - pts[j, 0]
+            dy = pts[i, 1] - pts[j, 1]
+            if dx * dx + dy * dy <= r2:
+                x = gi
+                while parent[x] != x:
+                    parent[x] = parent[parent[x]]
+                    x = parent[x]
+                y = gj
+                while parent[y] != y:
+                    parent[y] = parent[parent[y]]
+                    y = parent[y]
+                if x != y:
+                    if x < y:
+                        parent[y] = x
+                    else:
+                        parent[x] = y
+    label = np.empty(n_g, np.int64)
+    name = np.full(n_g, -1, np.int64)
+    n_c = 0
+    for x in range(n_g):
+        r = x
+        while parent[r] != r:
+            r = parent[r]
+        if name[r] < 0:
+            name[r] = n_c
+            n_c += 1
+        label[x] = name[r]
+    return label
+
+
+_nb_link_groups = _jit(_link_groups_kernel)
 
 
 def run_links(edges: EdgeMap, m: Matches, tolerance_px: float) -> np.ndarray:
@@ -857,14 +907,19 @@ _warm = False
 def _warm_up() -> None:
     """Compile the numba kernels once per process (see `matching.warm_up`), before the
     first frame; falls back to the numpy paths if numba is missing or fails."""
-    global _warm, _nb_occluded, _nb_hanging
+    global _warm, _nb_occluded, _nb_hanging, _nb_link_groups
     if _warm:
         return
     _warm = True
     edges_warm_up()
     if not matching_warm_up() or _nb_occluded is None:
-        _nb_occluded = _nb_hanging = None
+        _nb_occluded = _nb_hanging = _nb_link_groups = None
         return
+    if _nb_link_groups is not None:
+        try:
+            _nb_link_groups(np.zeros((2, 2)), np.arange(2), 2, 1.0)
+        except Exception:   # pragma: no cover - a broken numba/llvmlite install
+            _nb_link_groups = None
     try:
         z = np.zeros(2)
         _nb_occluded(np.zeros(2, np.int64), np.ones(2, bool), z, z, z, 1.0, 1)
