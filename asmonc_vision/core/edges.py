@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .jit import jit
+from .jit import jit, warmed
 
 #: Sobel 3x3 normalisation: the kernel sums |weights| to 8 on each side, so that
 #: ``sobel / 8`` is the intensity derivative in grey levels per pixel.
@@ -497,13 +497,7 @@ def warm_up() -> bool:
     that the first frame does not pay for it; without numba, or if compiling fails, the
     numpy path is used. Returns whether numba is in use."""
     global _nb_edges
-    if _nb_edges is None:
-        return False
-    try:
-        img = np.zeros((3, 5), np.uint8)
-        s = np.zeros((3, 5), np.int16)
-        _nb_edges(s, img, s, 1, 0.5, 3)
-    except Exception:       # pragma: no cover - a broken numba/llvmlite install
-        _nb_edges = None
-        return False
-    return True
+    img = np.zeros((3, 5), np.uint8)
+    s = np.zeros((3, 5), np.int16)
+    _nb_edges = warmed(_nb_edges, s, img, s, 1, 0.5, 3)
+    return _nb_edges is not None

@@ -82,6 +82,7 @@ from .edges import warm_up as edges_warm_up
 from .obstacle_tracks import ObstacleTracker
 from .ground_plane import PlaneFit, PlausiblePlaneConfig, fit_ground_plane, plane_is_plausible
 from .jit import jit as _jit
+from .jit import warmed as _warmed
 from .matching import Candidates, Matches, pmf_match
 from .matching import warm_up as matching_warm_up
 
@@ -915,22 +916,11 @@ def _warm_up() -> None:
     if not matching_warm_up() or _nb_occluded is None:
         _nb_occluded = _nb_hanging = _nb_link_groups = None
         return
-    if _nb_link_groups is not None:
-        try:
-            _nb_link_groups(np.zeros((2, 2)), np.arange(2), 2, 1.0)
-        except Exception:   # pragma: no cover - a broken numba/llvmlite install
-            _nb_link_groups = None
-    try:
-        z = np.zeros(2)
-        _nb_occluded(np.zeros(2, np.int64), np.ones(2, bool), z, z, z, 1.0, 1)
-    except Exception:       # pragma: no cover - a broken numba/llvmlite install
-        _nb_occluded = None
-    if _nb_hanging is not None:
-        try:
-            i = np.zeros(1, np.int64)
-            _nb_hanging(i, i, np.zeros(1), i - 1, i, i - 1, 1, 2, 1.0, 0.1)
-        except Exception:   # pragma: no cover - a broken numba/llvmlite install
-            _nb_hanging = None
+    _nb_link_groups = _warmed(_nb_link_groups, np.zeros((2, 2)), np.arange(2), 2, 1.0)
+    z, i = np.zeros(2), np.zeros(1, np.int64)
+    _nb_occluded = _warmed(_nb_occluded, np.zeros(2, np.int64), np.ones(2, bool), z, z, z,
+                           1.0, 1)
+    _nb_hanging = _warmed(_nb_hanging, i, i, np.zeros(1), i - 1, i, i - 1, 1, 2, 1.0, 0.1)
 
 
 def matched_run_length(edges: EdgeMap, m: Matches, tolerance_px: float,

@@ -21,3 +21,17 @@ def jit(fn):
         return _numba.njit(cache=True, nogil=True)(fn)
     except Exception:       # no writable cache location: compile at every start
         return _numba.njit(cache=False, nogil=True)(fn)
+
+
+def warmed(kernel, *args):
+    """``kernel`` once it has been called on ``args`` (tiny inputs of the real argument
+    types: compiled, or loaded from numba's disk cache, before the first frame); None if
+    ``kernel`` is None or that call fails (a broken numba/llvmlite install: the numpy
+    path is used then)."""
+    if kernel is None:
+        return None
+    try:
+        kernel(*args)
+    except Exception:       # pragma: no cover - a broken numba/llvmlite install
+        return None
+    return kernel
