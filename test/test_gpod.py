@@ -424,6 +424,43 @@ def test_cluster_points_2d_paths_agree(monkeypatch):
         assert 1 < ref.max() + 1 < n
 
 
+def test_corner_search_compiled_equals_numpy(monkeypatch):
+    """The compiled free-space test and contact-edge sampling of the hidden-corner search,
+    and the compiled walk of `string_feet`, give exactly the numpy paths' results on a
+    real frame (a box; random silhouette pairs around it, visible ground from the
+    frame)."""
+    from asmonc_vision.core import gpod
+    det = GpodDetector(GpodConfig())
+    for _ in range(2):
+        det.process(*render_pair(seed=4), CAM)
+    if gpod._nb_corner_free is None:
+        pytest.skip('numba not installed')
+    det.process(*render_pair(boxes=[(-0.4, 0.2, 3.0, 3.4, 0.3)], seed=4), CAM)
+    ctx = det._ctx
+    assert ctx is not None and ctx.ground_xy.shape[0] > 50
+    rng = np.random.default_rng(3)
+    mid = rng.uniform([2.5, -1.0], [4.5, 1.0], (60, 2))
+    half = rng.uniform(0.1, 0.6, (60, 1)) * np.stack([np.cos(t := rng.uniform(0, 6.3, 60)),
+                                                        np.sin(t)], axis=1)
+    a, b, sig = mid - half, mid + half, rng.uniform(0.005, 0.05, 60)
+    start = np.flatnonzero(ctx.usable)[::7]
+    m_n = gpod._CORNER_ARC_POINTS
+    n = mid[:, None, :] + rng.normal(0.0, 0.3, (60, m_n, 2))
+    ok = rng.random((60, m_n)) < 0.8
+
+    def run():
+        return (gpod.hidden_corners(a, b, sig, ctx.ground_xy, ctx.contact_edge_scores),
+                ctx.contact_edge_scores(a, n, b, ok),
+                *gpod.string_feet(ctx, start))
+
+    fast = run()
+    assert np.isfinite(fast[0][:, 0]).sum() >= 3 and np.isnan(fast[0][:, 0]).sum() >= 3
+    for name in ('_nb_corner_free', '_nb_contact', '_nb_walk_down'):
+        monkeypatch.setattr(gpod, name, None)
+    for x, y in zip(fast, run()):
+        np.testing.assert_array_equal(x, y)
+
+
 def test_draw_debug(scenes):
     det, _ = _calibrated(scenes['free'])
     r = det.process(*scenes['box'], CAM)

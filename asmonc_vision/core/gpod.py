@@ -908,14 +908,23 @@ _warm = False
 def _warm_up() -> None:
     """Compile the numba kernels once per process (see `matching.warm_up`), before the
     first frame; falls back to the numpy paths if numba is missing or fails."""
-    global _warm, _nb_occluded, _nb_hanging, _nb_link_groups
+    global _warm, _nb_occluded, _nb_hanging, _nb_link_groups, _nb_corner_free, _nb_contact, \
+        _nb_walk_down
     if _warm:
         return
     _warm = True
     edges_warm_up()
     if not matching_warm_up() or _nb_occluded is None:
-        _nb_occluded = _nb_hanging = _nb_link_groups = None
+        _nb_occluded = _nb_hanging = _nb_link_groups = _nb_corner_free = _nb_contact = None
+        _nb_walk_down = None
         return
+    f2, f1, i1 = np.zeros((1, 2)), np.zeros(1), np.zeros(1, np.int64)
+    _nb_corner_free = _warmed(_nb_corner_free, f2, f2, f2, f2, f1 + 1.0, np.zeros((1, 1, 2)),
+                               0.05)
+    _nb_contact = _warmed(_nb_contact, f1, f1, f1, f1, f2[:, :1], f2[:, :1],
+                          np.ones((1, 1), bool), i1, i1 + 1, i1, i1 + 1, 0, 0,
+                          np.zeros((1, 1), np.float32), np.zeros((1, 1), np.float32))
+    _nb_walk_down = _warmed(_nb_walk_down, i1, i1 - 1, f1, f1, 2.0, 1)
     _nb_link_groups = _warmed(_nb_link_groups, np.zeros((2, 2)), np.arange(2), 2, 1.0)
     z, i = np.zeros(2), np.zeros(1, np.int64)
     _nb_occluded = _warmed(_nb_occluded, np.zeros(2, np.int64), np.ones(2, bool), z, z, z,
@@ -1199,6 +1208,10 @@ class _FrameContext:
         patch = self._left[gy0:gy1, gx0:gx1].astype(np.float32)
         gx = cv2.Sobel(patch, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
         gy = cv2.Sobel(patch, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+        if _nb_contact is not None:
+            return _nb_contact(ua, va, ub, vb, np.ascontiguousarray(un),
+                               np.ascontiguousarray(vn), np.ascontiguousarray(ok), x0, x1,
+                               y0, y1, gx0, gy0, gx, gy)
         # Segments (T, 2, M): a -> n and b -> n, in each search's patch coordinates.
         fx, fy = x0.astype(np.float64)[:, None, None], y0.astype(np.float64)[:, None, None]
         u0 = np.stack([ua, ub], axis=1)[:, :, None] - fx
@@ -1235,6 +1248,73 @@ class _FrameContext:
         return np.where(ok, score, -inf)
 
 
+def _contact_kernel(ua, va, ub, vb, un, vn, ok, x0, x1, y0, y1, gx0, gy0, gx, gy):
+    """The sampling of `_FrameContext.contact_edge_scores` (for numba): the same samples,
+    clipping and arithmetic, the mean of 16 samples as numpy's pairwise sum; (T, M)."""
+    t_n, m = ok.shape
+    out = np.full((t_n, m), -np.inf)
+    best = np.empty(16)
+    for t in range(t_n):
+        fx, fy = np.float64(x0[t]), np.float64(y0[t])
+        w_max, h_max = x1[t] - x0[t] - 1, y1[t] - y0[t] - 1
+        ox, oy = x0[t] - gx0, y0[t] - gy0
+        for k in range(m):
+            if not ok[t, k]:
+                continue
+            u1, v1 = un[t, k] - fx, vn[t, k] - fy
+            tot = 0.0
+            lsum = 0.0
+            for s in range(2):
+                u0 = (ua[t] if s == 0 else ub[t]) - fx
+                v0 = (va[t] if s == 0 else vb[t]) - fy
+                du, dv = u1 - u0, v1 - v0
+                length = math.hypot(du, dv)
+                nu = -dv / max(length, 1e-9)
+                nv = du / max(length, 1e-9)
+                for i in range(16):
+                    ti = (i + 0.5) / 16.0
+                    uu, vv = u0 + ti * du, v0 + ti * dv
+                    bi = 0.0
+                    for o in range(3):
+                        off = o - 1.0
+                        ui = min(max(np.int64(np.rint(uu + off * nu)), 0), w_max)
+                        vi = min(max(np.int64(np.rint(vv + off * nv)), 0), h_max)
+                        val = abs(np.float64(gx[vi + oy, ui + ox]) * nu
+                                  + np.float64(gy[vi + oy, ui + ox]) * nv)
+                        bi = val if o == 0 else max(bi, val)
+                    best[i] = bi
+                # numpy's pairwise sum of 16: eight partial sums, then a tree
+                r0, r1, r2, r3 = best[0] + best[8], best[1] + best[9], best[2] + best[10], best[3] + best[11]
+                r4, r5, r6, r7 = best[4] + best[12], best[5] + best[13], best[6] + best[14], best[7] + best[15]
+                mean = (((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))) / 16.0
+                tot += mean * length
+                lsum += length
+            out[t, k] = tot / max(lsum, 1e-9)
+    return out
+
+
+_nb_contact = _jit(_contact_kernel)
+
+
+def _walk_down_kernel(start, nxt, exm, sig, k, steps):
+    """The walk of `string_feet` down each matched run (for numba): from each start,
+    follow ``nxt`` while there is a next pixel and the excess is above ``k`` sigmas, at
+    most ``steps`` times; (S,) int64 the pixels reached."""
+    out = start.copy()
+    for s in range(out.shape[0]):
+        c = out[s]
+        for _ in range(steps):
+            n = nxt[c]
+            if n < 0 or not exm[c] > k * sig[c]:
+                break
+            c = n
+        out[s] = c
+    return out
+
+
+_nb_walk_down = _jit(_walk_down_kernel)
+
+
 def string_feet(ctx: _FrameContext, start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The ground foot of edge strings, from their lowest obstacle pixels ``start``.
 
@@ -1256,12 +1336,15 @@ def string_feet(ctx: _FrameContext, start: np.ndarray) -> tuple[np.ndarray, np.n
     nxt[ctx.prev[has]] = np.flatnonzero(has)
     cur = np.asarray(start, np.int64)
     exm, sig = ctx.excess_mean, ctx.sigma
-    for _ in range(int(ctx.cam.height)):
-        n = nxt[cur]
-        go = (n >= 0) & (exm[cur] > _FOOT_SIGMAS * sig[cur])
-        if not go.any():
-            break
-        cur = np.where(go, n, cur)
+    if _nb_walk_down is not None:
+        cur = _nb_walk_down(cur, nxt, exm, sig, _FOOT_SIGMAS, int(ctx.cam.height))
+    else:
+        for _ in range(int(ctx.cam.height)):
+            n = nxt[cur]
+            go = (n >= 0) & (exm[cur] > _FOOT_SIGMAS * sig[cur])
+            if not go.any():
+                break
+            cur = np.where(go, n, cur)
     u, v = ctx.u[cur], ctx.v[cur]
     p = ctx.cam.triangulate(u, v, ctx.pd[cur] + np.maximum(exm[cur], 0.0))
     xy = ctx.to_xy(p)
@@ -1358,6 +1441,64 @@ def _ground_inside(g: np.ndarray, a: np.ndarray, n: np.ndarray, b: np.ndarray,
     return out & (np.abs(area2) > 1e-12)
 
 
+def _corner_free_kernel(g, a, b, c, r, n, margin):
+    """The free-space test of `hidden_corners` (for numba): (T, M) bool, whether no ground
+    point g (G, 2) lies inside the triangle a[t]-n[t, k]-b[t] by more than ``margin``
+    (c, r (T, 2), (T,): the searches' circles). The same prefilters and arithmetic as
+    the numpy path (bounding box of all circles, off the chord and inside the circle,
+    then `_ground_inside`)."""
+    t_n, m = n.shape[0], n.shape[1]
+    ok = np.ones((t_n, m), np.bool_)
+    lo0, lo1, hi0, hi1 = np.inf, np.inf, -np.inf, -np.inf
+    for t in range(t_n):
+        lo0 = min(lo0, c[t, 0] - r[t])
+        lo1 = min(lo1, c[t, 1] - r[t])
+        hi0 = max(hi0, c[t, 0] + r[t])
+        hi1 = max(hi1, c[t, 1] + r[t])
+    lo0 -= margin
+    lo1 -= margin
+    hi0 += margin
+    hi1 += margin
+    area2 = np.empty(m)
+    for t in range(t_n):
+        ax, ay, bx, by = a[t, 0], a[t, 1], b[t, 0], b[t, 1]
+        ex, ey = ax - bx, ay - by
+        chord = max(math.hypot(ex, ey), 1e-12)
+        rr = (r[t] * 1.001) ** 2
+        for k in range(m):
+            area2[k] = ((n[t, k, 0] - ax) * (by - ay) - (n[t, k, 1] - ay) * (bx - ax))
+        for p in range(g.shape[0]):
+            gx, gy = g[p, 0], g[p, 1]
+            if not (gx >= lo0 and gx <= hi0 and gy >= lo1 and gy <= hi1):
+                continue
+            off = abs(ex * (gy - by) - ey * (gx - bx))
+            dx, dy = gx - c[t, 0], gy - c[t, 1]
+            if not (off > (margin * 0.999) * chord and dx * dx + dy * dy < rr):
+                continue
+            for k in range(m):
+                if not ok[t, k] or not abs(area2[k]) > 1e-12:
+                    continue
+                sgn = 1.0 if area2[k] > 0 else -1.0
+                nx, ny = n[t, k, 0], n[t, k, 1]
+                # side(p0, p1): signed distance from the line p0 -> p1 (left positive)
+                e0x, e0y = nx - ax, ny - ay                     # a -> n
+                l0 = max(math.hypot(e0x, e0y), 1e-12)
+                if not sgn * ((e0x * (gy - ay) - e0y * (gx - ax)) / l0) > margin:
+                    continue
+                e1x, e1y = bx - nx, by - ny                     # n -> b
+                l1 = max(math.hypot(e1x, e1y), 1e-12)
+                if not sgn * ((e1x * (gy - ny) - e1y * (gx - nx)) / l1) > margin:
+                    continue
+                e2x, e2y = ax - bx, ay - by                     # b -> a
+                l2 = max(math.hypot(e2x, e2y), 1e-12)
+                if sgn * ((e2x * (gy - by) - e2y * (gx - bx)) / l2) > margin:
+                    ok[t, k] = False
+    return ok
+
+
+_nb_corner_free = _jit(_corner_free_kernel)
+
+
 def hidden_corners(a: np.ndarray, b: np.ndarray, sigma: np.ndarray, ground_xy,
                    score) -> np.ndarray:
     """`hidden_corner` of several pairs of silhouette feet at once.
@@ -1402,12 +1543,13 @@ def hidden_corners(a: np.ndarray, b: np.ndarray, sigma: np.ndarray, ground_xy,
          + np.array(rhos)[:, None, None] * np.stack([np.cos(ang), np.sin(ang)], axis=2))
     margin = _FREE_SPACE_MARGIN_M
     g = ground_xy() if callable(ground_xy) else ground_xy
-    if g.size:
+    cj, rj = np.array(cs), np.array(rhos)
+    if g.size and _nb_corner_free is not None:      # the same tests, compiled
+        ok = _nb_corner_free(np.ascontiguousarray(g, np.float64), aj, bj, cj, rj, n, margin)
+    elif g.size:
         # Only ground inside a search's circle (its triangles are inscribed) and off its
         # chord by more than the margin can be inside one of its triangles (a cheap test
         # of every ground point, the exact one of the few left).
-        cj = np.array(cs)
-        rj = np.array(rhos)
         # Ground within the bounding box of all the circles first (one cheap pass).
         lo = (cj - rj[:, None]).min(axis=0) - margin
         hi = (cj + rj[:, None]).max(axis=0) + margin
