@@ -86,6 +86,58 @@ def test_clear_path_standing_still_gives_no_alarm(tmp_path):
     assert sum(len(f) for f in det.values()) <= 1
 
 
+def _without_right_images(src, dst, drop):
+    """Copy the bag ``src`` to ``dst`` without the right images of indices ``drop``."""
+    from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+    right = bagio.TOPICS['right_image'][0]
+    with Reader(src) as reader:
+        stamps = [t for c, t, _ in reader.messages() if c.topic == right]
+        gone = {stamps[i] for i in drop}
+        with Writer(dst, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+            conns = {c.id: writer.add_connection(
+                c.topic, c.msgtype, msgdef=c.msgdef.data, rihs01=c.digest,
+                offered_qos_profiles=c.ext.offered_qos_profiles) for c in reader.connections}
+            for c, t, raw in reader.messages():
+                if not (c.topic == right and t in gone):
+                    writer.write(conns[c.id], t, raw)
+    return len(gone)
+
+
+def test_missing_right_images_are_not_announced_as_a_fault(tmp_path):
+    """A recording that lost right images (one mid-way, the last one): those pairs give
+    no result, the others are processed, and the end of the replay, which leaves the
+    results short of the pairs, is not announced to the wearer as a fault (the alarm
+    node is stopped once every frame has been played and the results have stopped)."""
+    bag = tmp_path / 'lost_right'
+    assert _without_right_images(BAGS / 'clear_static', bag, [5, -1]) == 2
+    out = tmp_path / 'out'
+    res = asmonc_run(bag, '--out', out, '--no-progress')
+    assert res.returncode == 1, res.stdout + res.stderr       # 1: frames were dropped
+    assert '28 of 30 processed, 2 dropped' in res.stdout
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['dropped_frames'] == 2 and not summary['errors']
+    assert summary['processed_frames'] == summary['input_pairs'] - 2
+    levels = [m.level for _, _, m in bagio.read_messages(out, ['/alarms'])]
+    assert levels[0] == 4 and 0 in levels                    # "starting up", then clear
+    assert 4 not in levels[levels.index(0):], levels         # no FAULT after that
+
+
+def test_the_alarm_timeout_comes_from_the_params_files(tmp_path):
+    """`asmonc run` stops the alarm node after half its timeout of silence at the end:
+    the timeout is the alarm node's own (default, or the last params file setting it)."""
+    from asmonc_vision.cli.run import _alarm_timeout
+    from asmonc_vision.core.alarm import AlarmConfig
+    assert _alarm_timeout([]) == AlarmConfig().timeout
+    a, b, bad = tmp_path / 'a.yaml', tmp_path / 'b.yaml', tmp_path / 'bad.yaml'
+    a.write_text('alarm_node:\n  ros__parameters:\n    timeout: 2.5\n'
+                 'detector_node:\n  ros__parameters:\n    timeout: 9.0\n')
+    b.write_text('/**:\n  ros__parameters:\n    timeout: 0.4\n')
+    bad.write_text('alarm_node: [unclosed\n')
+    assert _alarm_timeout([a]) == 2.5
+    assert _alarm_timeout([a, b]) == 0.4
+    assert _alarm_timeout([a, bad, tmp_path / 'missing.yaml']) == 2.5
+
+
 def test_missing_bag_is_a_clear_error(tmp_path):
     res = asmonc_run(tmp_path / 'no_such_bag')
     assert res.returncode == 2

@@ -112,6 +112,17 @@ class _Monitor:
         self.gait_states = 0
         self.gait_walking = 0
         self.node.create_subscription(GaitState, '/gait/state', self._on_gait, RESULT_QOS)
+        # The left camera_info the player sends with each image: how far the replay is
+        # (its own subscription, which the player waits for: `_wait_topics`).
+        from rclpy.qos import qos_profile_sensor_data
+        from sensor_msgs.msg import CameraInfo
+        self.infos_played = 0
+        self.node.create_subscription(CameraInfo, bagio.TOPICS['left_info'][0],
+                                      self._on_info, qos_profile_sensor_data)
+
+    def _on_info(self, msg) -> None:
+        with self.lock:
+            self.infos_played += 1
 
     def _on_gait(self, msg) -> None:
         with self.lock:
@@ -140,6 +151,12 @@ class _Monitor:
     def frames(self) -> int:
         with self.lock:
             return len(self.detections)
+
+    @property
+    def played(self) -> int:
+        """Left camera_info messages received from the player so far."""
+        with self.lock:
+            return self.infos_played
 
 
 def frame_from_obstacle_array(msg) -> FrameObstacles:
@@ -425,22 +442,43 @@ def run(args) -> int:
                 console.line(f'{_bag_time(a["stamp_ns"], t0)}  '
                              f'{LEVEL_NAMES.get(a["level"], a["level"]):8s} {a["text"]}')
 
+        stopped: set[str] = set()
+
         def check_nodes() -> None:
             for name in nodes:
-                if not children[name].alive():
+                if name not in stopped and not children[name].alive():
                     raise RuntimeError(f'{name} node died; see {children[name].log_path}')
 
         # Until every pair has its result (or, with no cameras, the bag has been played),
         # or the player has ended and nothing more comes.
+        alarm_quiet = 0.5 * _alarm_timeout(args.params_file)
+        n_infos = topics.get(bagio.TOPICS['left_info'][0], ('', 0))[1]
         last, last_change = monitor.frames, time.monotonic()
+        player_end = played_at = None
         while (monitor.frames < n_pairs) if n_pairs else children['player'].alive():
             show_alarms()
             console.bar(monitor.frames)
             check_nodes()
             time.sleep(0.1)
-            if monitor.frames != last or children['player'].alive():
-                last, last_change = monitor.frames, time.monotonic()
-            elif time.monotonic() - last_change > args.settle:
+            now = time.monotonic()
+            if monitor.frames != last:
+                last, last_change = monitor.frames, now
+            if player_end is None and not children['player'].alive():
+                player_end = now
+            if played_at is None and (player_end is not None
+                                      or (n_infos and monitor.played >= n_infos)):
+                played_at = now
+            if (played_at is not None and 'alarm' in children and 'alarm' not in stopped
+                    and now - max(last_change, played_at) > alarm_quiet):
+                # Every frame has been played and the results have stopped short of the
+                # pairs: some pairs give none (a right image missing from the recording,
+                # an image the detector refused). The replay is over: stop the alarm node
+                # before its timeout announces the silence as a fault, then wait out
+                # --settle for late results (recorded, but no longer alarmed).
+                show_alarms()
+                children['alarm'].stop()
+                stopped.add('alarm')
+            if player_end is not None and now - max(last_change, player_end) > args.settle:
                 break
         time.sleep(0.1)  # the alarm for the last frame (the alarm node has the frame too)
         show_alarms()
@@ -486,6 +524,30 @@ def run(args) -> int:
     return 0
 
 
+def _alarm_timeout(params_files: list[Path]) -> float:
+    """The alarm node's ``timeout`` (s, FAULT after this long without /obstacles): the
+    last of ``params_files`` that sets it for ``alarm_node`` (or ``/**``), else the
+    default (`AlarmConfig`). Unreadable files are left to the nodes to report."""
+    import yaml
+
+    from asmonc_vision.core.alarm import AlarmConfig
+    timeout = AlarmConfig().timeout
+    for pf in params_files:
+        try:
+            data = yaml.safe_load(Path(pf).read_text())
+        except (OSError, yaml.YAMLError):
+            continue
+        if not isinstance(data, dict):
+            continue
+        for key in ('/**', 'alarm_node', '/alarm_node'):
+            params = data.get(key)
+            params = params.get('ros__parameters') if isinstance(params, dict) else None
+            value = params.get('timeout') if isinstance(params, dict) else None
+            if isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0:
+                timeout = float(value)
+    return timeout
+
+
 def _wait_topics(nodes: dict[str, NodeSpec], topics: dict) -> list[str]:
     """The player's ``wait_topics``: each bag input topic with its number of readers
     among ``nodes`` ('topic=N'); every stereo node reads both images and both
@@ -493,6 +555,8 @@ def _wait_topics(nodes: dict[str, NodeSpec], topics: dict) -> list[str]:
     stereo = sum(bagio.TOPICS['left_image'][0] in spec.inputs for spec in nodes.values())
     want = {bagio.TOPICS[k][0]: stereo
             for k in ('left_image', 'right_image', 'left_info', 'right_info')}
+    if stereo:
+        want[bagio.TOPICS['left_info'][0]] += 1      # `_Monitor` counts the frames played
     imu = bagio.TOPICS['imu'][0]
     want[imu] = sum(imu in spec.inputs for spec in nodes.values())
     return [f'{t}={n}' for t, n in want.items() if n > 0 and t in topics]
