@@ -83,7 +83,14 @@ def msg_class(msgtype: str):
 # --- images -------------------------------------------------------------------------
 
 #: encodings accepted on the image topics, with (channels, dtype)
-IMAGE_ENCODINGS = {'mono8': (1, np.uint8), 'rgb8': (3, np.uint8), 'bgr8': (3, np.uint8)}
+IMAGE_ENCODINGS = {'mono8': (1, np.uint8), 'rgb8': (3, np.uint8), 'bgr8': (3, np.uint8),
+                   # as cv_bridge reads them: 8UC1 is mono8, 8UC3 is bgr8; rgba8 / bgra8
+                   # (e.g. ZED cameras) lose their alpha
+                   '8UC1': (1, np.uint8), '8UC3': (3, np.uint8),
+                   'rgba8': (4, np.uint8), 'bgra8': (4, np.uint8)}
+#: OpenCV conversion to grey of each multi-channel encoding
+_TO_GRAY = {'rgb8': 'COLOR_RGB2GRAY', 'bgr8': 'COLOR_BGR2GRAY', '8UC3': 'COLOR_BGR2GRAY',
+            'rgba8': 'COLOR_RGBA2GRAY', 'bgra8': 'COLOR_BGRA2GRAY'}
 
 
 class ImageFormatError(ValueError):
@@ -94,7 +101,8 @@ def image_to_gray(encoding: str, height: int, width: int, step: int, data) -> np
     """Convert raw image fields (any message representation) to a mono8 array.
 
     Args:
-        encoding: 'mono8', 'rgb8' or 'bgr8'.
+        encoding: one of `IMAGE_ENCODINGS` ('mono8'; 'rgb8', 'bgr8', 'rgba8', 'bgra8'
+            converted to grey; '8UC1', '8UC3' read as mono8, bgr8).
         height, width, step: as in sensor_msgs/Image.
         data: bytes-like or uint8 array of length >= height * step.
     Returns:
@@ -119,9 +127,8 @@ def image_to_gray(encoding: str, height: int, width: int, step: int, data) -> np
         return img.copy()
     import cv2
 
-    img = img.reshape(height, width, 3)
-    code = cv2.COLOR_RGB2GRAY if encoding == 'rgb8' else cv2.COLOR_BGR2GRAY
-    return cv2.cvtColor(np.ascontiguousarray(img), code)
+    img = img.reshape(height, width, ch)
+    return cv2.cvtColor(np.ascontiguousarray(img), getattr(cv2, _TO_GRAY[encoding]))
 
 
 def decode_compressed(fmt: str, data) -> np.ndarray:

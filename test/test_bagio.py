@@ -63,6 +63,14 @@ def test_image_to_gray_encodings_and_errors():
     padded = np.zeros((4, 8), np.uint8)
     padded[:, :6] = mono
     np.testing.assert_array_equal(bagio.image_to_gray('mono8', 4, 6, 8, padded.tobytes()), mono)
+    # 8UC1 / 8UC3 as cv_bridge reads them; the 4-channel encodings drop their alpha
+    np.testing.assert_array_equal(bagio.image_to_gray('8UC1', 4, 6, 8, padded.tobytes()), mono)
+    np.testing.assert_array_equal(bagio.image_to_gray('8UC3', 4, 6, 18, rgb.tobytes()), b)
+    rgba = np.concatenate([rgb, np.full((4, 6, 1), 77, np.uint8)], axis=2)
+    np.testing.assert_array_equal(bagio.image_to_gray('rgba8', 4, 6, 24, rgba.tobytes()), g)
+    np.testing.assert_array_equal(bagio.image_to_gray('bgra8', 4, 6, 24, rgba.tobytes()), b)
+    with pytest.raises(bagio.ImageFormatError, match='bad image geometry'):
+        bagio.image_to_gray('bgra8', 4, 6, 18, bytes(96))
     with pytest.raises(bagio.ImageFormatError, match="unsupported image encoding '16UC1'"):
         bagio.image_to_gray('16UC1', 4, 6, 12, bytes(48))
     with pytest.raises(bagio.ImageFormatError, match='header says'):

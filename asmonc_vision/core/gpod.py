@@ -1284,8 +1284,10 @@ def _contact_kernel(ua, va, ub, vb, un, vn, ok, x0, x1, y0, y1, gx0, gy0, gx, gy
                         bi = val if o == 0 else max(bi, val)
                     best[i] = bi
                 # numpy's pairwise sum of 16: eight partial sums, then a tree
-                r0, r1, r2, r3 = best[0] + best[8], best[1] + best[9], best[2] + best[10], best[3] + best[11]
-                r4, r5, r6, r7 = best[4] + best[12], best[5] + best[13], best[6] + best[14], best[7] + best[15]
+                r0, r1 = best[0] + best[8], best[1] + best[9]
+                r2, r3 = best[2] + best[10], best[3] + best[11]
+                r4, r5 = best[4] + best[12], best[5] + best[13]
+                r6, r7 = best[6] + best[14], best[7] + best[15]
                 mean = (((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))) / 16.0
                 tot += mean * length
                 lsum += length

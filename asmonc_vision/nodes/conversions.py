@@ -16,7 +16,8 @@ __all__ = ['ImageFormatError', 'image_msg_to_gray', 'array_to_image_msg',
 
 
 def image_msg_to_gray(msg: Image) -> np.ndarray:
-    """sensor_msgs/Image (mono8, rgb8 or bgr8) to a (H, W) uint8 array.
+    """sensor_msgs/Image (mono8, or another encoding `bagio.image_to_gray` converts) to
+    a (H, W) uint8 array.
 
     Raises:
         ImageFormatError: unsupported encoding or inconsistent size/step/data.
