@@ -199,7 +199,9 @@ class StereoInputNode(Node):
             self.frames_bad += 1
             self.get_logger().warn(
                 f'{s} image at stamp {t / 1e9:.3f} s has no partner with the same stamp; '
-                'dropped (left and right must share one stamp)', throttle_duration_sec=2.0)
+                'dropped (left and right must share one stamp, or differ by at most the '
+                f'max_stamp_skew parameter, now {self._settings.max_stamp_skew:g} s)',
+                throttle_duration_sec=2.0)
         if pair is None:
             return
         self.frames_in += 1
