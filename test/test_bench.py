@@ -11,9 +11,10 @@ from conftest import BAGS
 def test_bench_prints_both_methods_at_both_sizes(tmp_path, capsys):
     out = tmp_path / 'bench.json'
     rc = main(['bench', str(BAGS / 'static_obstacles'), '--frames', '6', '--warmup', '2',
-               '--large-frames', '1', '--json', str(out)])
+               '--large-frames', '1', '--repeat', '2', '--json', str(out)])
     assert rc == 0
     lines = capsys.readouterr().out.splitlines()
+    assert sum('fastest of 2 passes' in ln for ln in lines) == 2
     gpod = [ln for ln in lines if ln.strip().startswith('gpod ')]
     sgbm = [ln for ln in lines if ln.strip().startswith('sgbm ')]
     assert len(gpod) == 2 and len(sgbm) == 2, lines
@@ -29,6 +30,20 @@ def test_bench_prints_both_methods_at_both_sizes(tmp_path, capsys):
     large = doc['640x480']['static_obstacles (rendered, seed 0)']
     assert large['gpod']['size'] == '640x480' and large['sgbm']['frames'] == 1
     assert large['sgbm']['eligible'] > 0          # the obstacles are in the rendered frame
+
+
+def test_fastest_pass_takes_each_frames_minimum():
+    from asmonc_vision.cli.bench import FrameRun, fastest_pass
+    a = [FrameRun(1, 'tracking', 'A1', None, 5.0, {'edges': 1.0}, 4.0),
+         FrameRun(2, 'tracking', 'A2', None, 9.0, {'edges': 2.0}, 8.0)]
+    b = [FrameRun(1, 'tracking', 'B1', None, 6.0, {'edges': 0.5}, 3.0),
+         FrameRun(2, 'tracking', 'B2', None, 7.0, {'edges': 3.0}, 7.5)]
+    best = fastest_pass([a, b])
+    assert [r.latency_ms for r in best] == [5.0, 7.0]
+    assert [r.cpu_ms for r in best] == [3.0, 7.5]
+    assert [r.timings['edges'] for r in best] == [0.5, 2.0]
+    assert [r.obstacles for r in best] == ['A1', 'A2']        # the first pass's outputs
+    assert fastest_pass([a]) is a
 
 
 def test_bench_refuses_too_few_pairs(capsys):
