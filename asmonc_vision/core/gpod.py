@@ -1541,11 +1541,10 @@ def hidden_corners(a: np.ndarray, b: np.ndarray, sigma: np.ndarray, ground_xy,
     aj, bj = a[jobs], b[jobs]
     lin = np.linspace(0.0, 1.0, _CORNER_ARC_POINTS)
     ang = np.array(a0s)[:, None] + lin * np.array(spans)[:, None]
-    n = (np.array(cs)[:, None, :]
-         + np.array(rhos)[:, None, None] * np.stack([np.cos(ang), np.sin(ang)], axis=2))
+    cj, rj = np.array(cs), np.array(rhos)
+    n = cj[:, None, :] + rj[:, None, None] * np.stack([np.cos(ang), np.sin(ang)], axis=2)
     margin = _FREE_SPACE_MARGIN_M
     g = ground_xy() if callable(ground_xy) else ground_xy
-    cj, rj = np.array(cs), np.array(rhos)
     if g.size and _nb_corner_free is not None:      # the same tests, compiled
         ok = _nb_corner_free(np.ascontiguousarray(g, np.float64), aj, bj, cj, rj, n, margin)
     elif g.size:
@@ -1573,7 +1572,7 @@ def hidden_corners(a: np.ndarray, b: np.ndarray, sigma: np.ndarray, ground_xy,
     best = np.argmax(score(aj, n, bj, ok), axis=1)
     q = n[np.arange(jobs.size), best]
     e = bj - aj
-    rho = np.array(rhos)[live]
+    rho = rj[live]
     bulge = np.abs(e[:, 0] * (q[:, 1] - aj[:, 1]) - e[:, 1] * (q[:, 0] - aj[:, 0])) / (2.0 * rho)
     keep = bulge > _CORNER_SIGMAS * sigma[jobs]
     out[jobs[keep]] = q[keep]
