@@ -23,7 +23,10 @@ def load_frames(bag, indices):
 @pytest.fixture
 def graph(ros_context):
     ctx = ros_context
-    det = DetectorNode(context=ctx, parameter_overrides=[Parameter('publish_debug_image', value=True)])
+    # (debug image scaled down to 160 px wide: the scaling path is exercised at 320x240)
+    det = DetectorNode(context=ctx, parameter_overrides=[
+        Parameter('publish_debug_image', value=True),
+        Parameter('debug_image_max_width', value=160)])
     probe = Node('probe', context=ctx)
     got = {'obstacles': [], 'plane': [], 'debug': []}
     probe.create_subscription(ObstacleArray, '/obstacles', got['obstacles'].append, RESULT_QOS)
@@ -59,6 +62,8 @@ def test_one_result_per_pair_and_obstacles_found(graph):
     assert len(got['obstacles'][-1].obstacles) >= 3  # boxes, post and bollard are up
     assert spin_until(ex, lambda: len(got['debug']) >= 1)
     assert got['debug'][-1].encoding == 'bgr8'
+    assert (got['debug'][-1].width, got['debug'][-1].height) == (160, 120)
+    assert got['debug'][-1].step == 3 * 160 and len(got['debug'][-1].data) == 3 * 160 * 120
 
 
 def test_walking_tracks_take_egomotion_as_their_motion_input(graph):
