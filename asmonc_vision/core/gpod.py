@@ -1803,9 +1803,10 @@ def view_edge_points(xy: np.ndarray, group: np.ndarray, n_groups: int, to_image,
     least squares, orthogonal RMS <= ``_FACE_MAX_RMS_M``, spanning >= ``_FACE_MIN_SPAN_M``)
     whose range falls towards its outermost foot, the line is followed beyond that foot
     (by at most the feet's span) to where it leaves the image (left or right border, or
-    the bottom row). Feet with the ground seen through their line (between them, within
-    ``_FACE_BAND_M``, ``_FACE_SEEN_THROUGH`` times as densely as in front) are separate
-    objects in a row, not a face. The point is given unless visible ground lies behind
+    the bottom row). Feet with the ground seen through their line (between them, or
+    within their widest gap if it is ``_FACE_GAP_SEEN_M`` or wider; within
+    ``_FACE_BAND_M``, ``_FACE_SEEN_THROUGH`` times as densely, range-weighted, as in
+    front) are separate objects in a row, not a face. The point is given unless visible ground lies behind
     the extended line within that wedge of bearings (``_FACE_BEHIND_MIN`` and ``_FACE_BEHIND_FRACTION``
     of its ground features beyond the line by ``_FACE_BEHIND_M``: then the face ends
     inside the view).
