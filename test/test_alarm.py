@@ -9,8 +9,8 @@ import pytest
 import yaml
 
 from asmonc_vision.core.alarm import (TEXT_CLEAR, TEXT_GROUND_LOST, TEXT_NO_DATA,
-                                      TEXT_STARTING, AlarmConfig, AlarmLevel, AlarmLogic,
-                                      GroundStatus, ObstacleInfo, direction_words,
+                                      TEXT_NOT_STARTED, TEXT_STARTING, AlarmConfig, AlarmLevel,
+                                      AlarmLogic, GroundStatus, ObstacleInfo, direction_words,
                                       obstacle_text, range_words)
 
 L = AlarmLevel
@@ -48,7 +48,26 @@ def test_no_data_ever_becomes_a_fault_after_the_grace_period():
     logic = AlarmLogic(AlarmConfig(startup_grace=3.0), t0=0.0)
     assert logic.check_timeout(2.9) is None
     d = logic.check_timeout(3.1)
-    assert d.level == L.FAULT and d.text == TEXT_NO_DATA
+    assert d.level == L.FAULT and d.text == TEXT_NOT_STARTED and logic.fault == 'not_started'
+
+
+def test_a_slow_detector_start_is_not_taken_for_a_lost_ground():
+    # The detector's first list comes after the grace (it compiled for 8 s): its ground
+    # plane gets the grace from then on, and the wearer hears "starting up", not "cannot
+    # see the ground", while it calibrates.
+    logic = AlarmLogic(AlarmConfig(startup_grace=3.0), t0=0.0)
+    assert logic.check_timeout(3.1).text == TEXT_NOT_STARTED
+    d = logic.update(8.0, [])
+    assert d.level == L.FAULT and d.text == TEXT_STARTING
+    assert logic.update(8.1, []) is None and logic.check_timeout(8.9) is None
+    logic.ground_status(9.0, GroundStatus.INITIALISING)
+    logic.ground_status(9.5, GroundStatus.TRACKING)
+    assert logic.update(9.6, []).level == L.CLEAR
+    # ... but a ground plane that never comes is still a fault, a grace after the first list
+    late = AlarmLogic(AlarmConfig(startup_grace=3.0), t0=0.0)
+    late.update(8.0, [])
+    assert late.update(10.9, []) is None
+    assert late.update(11.1, []).text == TEXT_GROUND_LOST
 
 
 def test_no_all_clear_before_the_ground_is_seen():

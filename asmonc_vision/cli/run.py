@@ -407,25 +407,31 @@ def run(args) -> int:
         failed.append(f'bag not read to its end: {damage}')
     player_rc = None
     try:
-        for name, spec in nodes.items():
-            cmd = [sys.executable, '-m', spec.module, '--ros-args', *ros_params]
-            # the alarm node's warnings are its alarms, which are printed anyway
-            children[name] = _Child(name, cmd, log_dir, lambda s: console.line(s, err=True), env,
-                                    echo_warnings=(name != 'alarm'))
-        # Wait until the graph is connected, so no frame is lost to discovery: each node
-        # publishes its outputs and subscribes its inputs, and the recorder (if any) has
-        # subscribed every output.
-        deadline = time.monotonic() + 60.0
-        while time.monotonic() < deadline:
-            if all(_connected(monitor.node, spec, recorder is not None) for spec in nodes.values()):
-                break
-            dead = [n for n, c in children.items() if not c.alive()]
-            if dead:
-                raise RuntimeError(f'{", ".join(dead)} node exited at start; see '
-                                   f'{children[dead[0]].log_path}')
-            time.sleep(0.1)
-        else:
+        def start(names: list[str]) -> None:
+            for name in names:
+                cmd = [sys.executable, '-m', nodes[name].module, '--ros-args', *ros_params]
+                # the alarm node's warnings are its alarms, which are printed anyway
+                children[name] = _Child(name, cmd, log_dir, lambda s: console.line(s, err=True),
+                                        env, echo_warnings=(name != 'alarm'))
+            # Wait until they are connected, so no frame is lost to discovery: each node
+            # publishes its outputs and subscribes its inputs, and the recorder (if any)
+            # has subscribed every output.
+            deadline = time.monotonic() + 60.0
+            while time.monotonic() < deadline:
+                if all(_connected(monitor.node, nodes[n], recorder is not None) for n in names):
+                    return
+                dead = [n for n, c in children.items() if not c.alive()]
+                if dead:
+                    raise RuntimeError(f'{", ".join(dead)} node exited at start; see '
+                                       f'{children[dead[0]].log_path}')
+                time.sleep(0.1)
             raise RuntimeError('the nodes did not connect within 60 s')
+
+        # The alarm node last: its start-up grace (FAULT "not started" after it) runs
+        # from its own start, and the detector may take seconds to be ready (compiling
+        # its kernels on a first run).
+        start([n for n in nodes if n != 'alarm'])
+        start([n for n in nodes if n == 'alarm'])
 
         # The player itself must also see every reader of the bag's inputs (images and
         # their camera_info, the inclinometer) before the first message: a message sent

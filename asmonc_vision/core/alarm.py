@@ -63,6 +63,7 @@ class GroundStatus(enum.IntEnum):
 #: Plain-speech texts of the faults (FAULT level).
 TEXT_STARTING = 'starting up, hold still'
 TEXT_NO_DATA = 'fault, obstacle detection has stopped, walk with care'
+TEXT_NOT_STARTED = 'fault, obstacle detection has not started, walk with care'
 TEXT_GROUND_LOST = 'fault, cannot see the ground, walk with care'
 TEXT_CLEAR = 'all clear'
 
@@ -245,6 +246,7 @@ class AlarmLogic:
         self._cfg = config or AlarmConfig()
         self._t0 = float(t0)
         self._last_obstacles_t: float | None = None
+        self._first_obstacles_t: float | None = None
         self._ground: GroundStatus | None = None
         self._ground_since = float(t0)
         self._fault: str | None = 'starting'
@@ -264,7 +266,8 @@ class AlarmLogic:
 
     @property
     def fault(self) -> str | None:
-        """None, or why the level is FAULT: 'starting', 'no_data' or 'ground_lost'."""
+        """None, or why the level is FAULT: 'starting', 'not_started' (no obstacle list
+        within ``startup_grace``), 'no_data' (none for ``timeout``) or 'ground_lost'."""
         return self._fault if self._current.level == AlarmLevel.FAULT else None
 
     def set_config(self, config: AlarmConfig) -> None:
@@ -321,6 +324,8 @@ class AlarmLogic:
         """A new obstacle list arrived at time t (s). Returns an announcement or None."""
         t = float(t)
         self._last_obstacles_t = t
+        if self._first_obstacles_t is None:
+            self._first_obstacles_t = t
         fault = self._fault_reason(t)
         if fault is not None:
             return self._announce_fault(t, fault)
@@ -386,11 +391,14 @@ class AlarmLogic:
     def _fault_reason(self, t: float) -> str | None:
         c = self._cfg
         if self._last_obstacles_t is None:
-            return 'starting' if t - self._t0 <= c.startup_grace else 'no_data'
+            return 'starting' if t - self._t0 <= c.startup_grace else 'not_started'
         if t - self._last_obstacles_t > c.timeout:
             return 'no_data'
         if self._ground is None and c.require_ground_plane:
-            return 'starting' if t - self._t0 <= c.startup_grace else 'ground_lost'
+            # The ground plane's grace runs from the first obstacle list (the detector may
+            # take long to start, e.g. compiling), not from this node's start.
+            since = max(self._t0, self._first_obstacles_t)
+            return 'starting' if t - since <= c.startup_grace else 'ground_lost'
         if self._ground == GroundStatus.INITIALISING:
             return 'starting' if t - self._ground_since <= c.startup_grace else 'ground_lost'
         if self._ground == GroundStatus.LOST and t - self._ground_since > c.timeout:
@@ -407,7 +415,7 @@ class AlarmLogic:
         self._fault = reason
         self._below_since = None
         text = {'starting': TEXT_STARTING, 'no_data': TEXT_NO_DATA,
-                'ground_lost': TEXT_GROUND_LOST}[reason]
+                'not_started': TEXT_NOT_STARTED, 'ground_lost': TEXT_GROUND_LOST}[reason]
         return self._announce(Decision(AlarmLevel.FAULT, text, t=t))
 
     def _decide(self, t: float, level: AlarmLevel, tgt: ObstacleInfo | None,

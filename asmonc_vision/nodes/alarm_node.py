@@ -139,6 +139,8 @@ class AlarmNode(Node):
                               **values)
         elif fault == 'no_data':
             self._diag.update(Diagnostics.ERROR, 'no /obstacles within the timeout', **values)
+        elif fault == 'not_started':
+            self._diag.update(Diagnostics.ERROR, 'no /obstacles since the start', **values)
         else:
             self._diag.update(Diagnostics.ERROR, 'ground plane lost', **values)
 
