@@ -1867,14 +1867,12 @@ def view_edge_points(xy: np.ndarray, group: np.ndarray, n_groups: int, to_image,
         # the ground behind themselves, which dilutes the whole span's share (a post and
         # a box 0.66 m apart, 4-5 m ahead, once made a "face" leaving the view 1.2 m
         # nearer, where the pavement was clear).
-        far = ends[1] if e is ends[0] else ends[0]
-        if _seen_through(*_ground_across_line(ground, c, d, far, e)[3:]):
-            continue
+        spans = [(ends[1] if e is ends[0] else ends[0], e)]
         t_s = np.sort(along)
         i_gap = int(np.argmax(np.diff(t_s)))
-        if (t_s[i_gap + 1] - t_s[i_gap] >= _FACE_GAP_SEEN_M and _seen_through(
-                *_ground_across_line(ground, c, d, c + t_s[i_gap] * d,
-                                     c + t_s[i_gap + 1] * d)[3:])):
+        if t_s[i_gap + 1] - t_s[i_gap] >= _FACE_GAP_SEEN_M:
+            spans.append((c + t_s[i_gap] * d, c + t_s[i_gap + 1] * d))
+        if any(_seen_through(*_ground_across_line(ground, c, d, a, b)[3:]) for a, b in spans):
             continue
         # Visible ground behind the extension shows the face ends before the view's edge.
         _, n_behind, n_wedge, *_ = _ground_across_line(ground, c, d, e, q)
@@ -2512,7 +2510,7 @@ class GpodDetector:
                                   & usable[sel])
             o_sel = obst[sel]
             n_piece = np.bincount(piece[o_sel], weights=weight[sel][o_sel],
-                                  minlength=int(piece.max()) + 1 if piece.size else 0)
+                                  minlength=int(piece.max()) + 1)
             obst[sel] &= n_piece[piece] + 1e-9 >= c.min_obstacle_pixels
         n_obst = np.bincount(sid[obst], weights=weight[obst], minlength=n_s) + 1e-9
         n_drop = np.bincount(sid[drop], weights=weight[drop], minlength=n_s) + 1e-9
