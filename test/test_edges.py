@@ -2,7 +2,8 @@
 import numpy as np
 import pytest
 
-from asmonc_vision.core.edges import EdgeMap, detect_vertical_edges, horizontal_gradient
+from asmonc_vision.core.edges import (EdgeMap, detect_vertical_edges, gradient_noise_gain,
+                                      horizontal_gradient, image_noise_sigma)
 
 
 def _step_image(h, w, x0, lo=50.0, hi=150.0, slope=0.0):
@@ -177,3 +178,30 @@ def test_compiled_edges_equal_the_numpy_path(monkeypatch, kw):
             x, y = getattr(a, name), getattr(b, name)
             assert x.dtype == y.dtype, name
             np.testing.assert_array_equal(x, y, err_msg=name)
+
+
+@pytest.mark.parametrize('sigma', [1.0, 2.0, 5.0])
+def test_image_noise_sigma_measures_the_noise_not_the_scene(sigma):
+    rng = np.random.default_rng(11)
+    h, w = 240, 320
+    flat = np.full((h, w), 120.0)
+    # a scene with structure: tiles of different shades (edges), a ramp, a dark slab
+    yy, xx = np.mgrid[0:h, 0:w]
+    scene = 60.0 + 40.0 * (((yy // 30) + (xx // 40)) % 3) + 0.2 * xx
+    scene[150:200, 100:180] = 20.0
+    for base in (flat, scene):
+        img = base + rng.normal(0.0, sigma, base.shape)
+        as_u8 = np.clip(np.rint(img), 0, 255).astype(np.uint8)
+        assert image_noise_sigma(img) == pytest.approx(sigma, rel=0.08)
+        assert image_noise_sigma(as_u8) == pytest.approx(sigma, rel=0.08)
+    clean = np.clip(np.rint(scene), 0, 255).astype(np.uint8)
+    assert image_noise_sigma(clean) < 0.3
+    with pytest.raises(ValueError, match='at least 3 x 3'):
+        image_noise_sigma(np.zeros((2, 10)))
+
+
+@pytest.mark.parametrize('blur', [0.0, 0.7, 1.5])
+def test_gradient_noise_gain_is_the_deviation_of_the_gradient_of_unit_noise(blur):
+    noise = np.random.default_rng(5).normal(0.0, 1.0, (300, 300)).astype(np.float32)
+    gx, _ = horizontal_gradient(noise, blur)
+    assert float(gx[20:-20, 20:-20].std()) == pytest.approx(gradient_noise_gain(blur), rel=0.03)

@@ -77,7 +77,7 @@ import numpy as np
 
 from .camera import MetricPlane, StereoCamera, ground_range_bearing, plane_disparity
 from .config import param
-from .edges import EdgeMap, detect_vertical_edges
+from .edges import EdgeMap, detect_vertical_edges, gradient_noise_gain, image_noise_sigma
 from .edges import warm_up as edges_warm_up
 from .obstacle_tracks import ObstacleTracker
 from .ground_plane import PlaneFit, PlausiblePlaneConfig, fit_ground_plane, plane_is_plausible
@@ -191,6 +191,10 @@ _JIT_PAIRWISE_POINTS = 4096
 #: within this many ``plane_inlier_px`` of the fitted plane.
 _SIGMA_GATE = 3.0
 
+#: The left image's pixel noise is estimated (`edges.image_noise_sigma`, 0.2 ms at
+#: 320 x 240) on the first frame and then every this many frames.
+_NOISE_EVERY = 8
+
 #: Detector statuses (GroundPlane.msg: INITIALISING = 0, TRACKING = 1, LOST = 2).
 STATUSES = ('initialising', 'tracking', 'lost')
 
@@ -227,6 +231,11 @@ class GpodConfig(PlausiblePlaneConfig):
         'from which an obstacle or drop pixel counts fully towards min_obstacle_pixels and '
         'min_drop_pixels; a weaker one counts as (strength / this)^2 of a pixel (weak edges '
         'are often mismatched)', range=(0.0, 255.0))
+    obstacle_min_edge_snr: float = param(
+        5.0, "The same in units of the image's gradient noise (the deviation of |dI/du| "
+        "that the left image's pixel noise gives, estimated every few frames): the larger "
+        'of obstacle_min_strength and this times the gradient noise applies, so that on a '
+        'noisy camera edges made by the noise count less (0 = off)', range=(0.0, 1000.0))
     temporal_frames: int = param(
         5, 'While the rig stands still, the disparity excess of each edge pixel is averaged '
         'over about this many consecutive frames (exponentially weighted) before the '
@@ -2083,6 +2092,12 @@ class GpodDetector:
         self._prev_edges: np.ndarray | None = None
         self._acc: tuple[np.ndarray, np.ndarray] | None = None
         self._frame_thr = np.zeros(0)
+        #: the left image's pixel noise (grey levels, NaN until estimated) and the frame
+        #: it was estimated on
+        self._image_noise = float('nan')
+        self._noise_frame = 0
+        #: obstacle_min_strength in force (raised on a noisy camera)
+        self._min_strength = self.config.obstacle_min_strength
         #: the current left image and the current frame's context for describing obstacles
         self._left: np.ndarray | None = None
         self._ctx: _FrameContext | None = None
@@ -2338,6 +2353,7 @@ class GpodDetector:
         timings: dict[str, float] = {}
 
         t0 = time.perf_counter()
+        self._estimate_noise(left)
         edge_kw = dict(abs_threshold=c.edge_threshold, rel_threshold=c.edge_rel_threshold,
                        max_angle_deg=c.edge_max_angle_deg, min_string_length=c.min_string_length,
                        blur_sigma=c.edge_blur_sigma)
@@ -2402,6 +2418,24 @@ class GpodDetector:
             obstacles=obstacles, features=features, threshold_px=threshold,
             num_edges=(len(el), len(er)), timings_ms=timings, sigma_px=self._sigma,
             still=still, detections=detections)
+
+    @property
+    def image_noise_sigma(self) -> float:
+        """The left image's pixel noise as last estimated (:func:`edges.image_noise_sigma`),
+        grey levels (NaN before the first frame)."""
+        return self._image_noise
+
+    def _estimate_noise(self, left: np.ndarray) -> None:
+        """Estimate the left image's pixel noise on the first frame and every
+        ``_NOISE_EVERY`` frames after, and set the obstacle edge strength in force from it
+        (``obstacle_min_edge_snr``)."""
+        c = self.config
+        if np.isfinite(self._image_noise) and self._frame - self._noise_frame < _NOISE_EVERY:
+            return
+        self._image_noise = image_noise_sigma(left)
+        self._noise_frame = self._frame
+        self._min_strength = max(c.obstacle_min_strength, c.obstacle_min_edge_snr
+                                 * gradient_noise_gain(c.edge_blur_sigma) * self._image_noise)
 
     def _stillness(self, el: EdgeMap) -> bool:
         """Whether the rig stood still since the previous frame: most left edge pixels
@@ -2495,9 +2529,10 @@ class GpodDetector:
                     & (h >= -c.max_drop_depth_m) & usable)
         sid = m.string_id
         n_s = max(el.num_strings, int(sid.max()) + 1 if sid.size else 0)
-        # Weak edges are often mismatched: a pixel weaker than obstacle_min_strength
-        # counts as the fraction (strength / obstacle_min_strength)^2 of a pixel.
-        weight = np.minimum(m.strength / max(c.obstacle_min_strength, 1e-6), 1.0) ** 2
+        # Weak edges are often mismatched: a pixel weaker than obstacle_min_strength (or
+        # obstacle_min_edge_snr times the gradient noise) counts as the fraction
+        # (strength / that)^2 of a pixel.
+        weight = np.minimum(m.strength / max(self._min_strength, 1e-6), 1.0) ** 2
         if obst.any():
             # The edge-string rule holds for each piece of a string between stretches of
             # it on the ground (`string_pieces`): a noisy pixel far below a post, on the

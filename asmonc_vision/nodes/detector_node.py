@@ -210,6 +210,7 @@ class DetectorNode(StereoInputNode):
                          frames_in=self.frames_in, frames_done=self.frames_done + 1,
                          frames_dropped=self.frames_dropped, frames_bad=self.frames_bad,
                          motions_used=self.motions_used,
+                         image_noise=f'{self.detector.image_noise_sigma:.2f}',
                          total_ms=f"{result.timings.get('total', float('nan')):.1f}")
 
 
