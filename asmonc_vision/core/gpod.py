@@ -2092,10 +2092,8 @@ class GpodDetector:
         self._prev_edges: np.ndarray | None = None
         self._acc: tuple[np.ndarray, np.ndarray] | None = None
         self._frame_thr = np.zeros(0)
-        #: the left image's pixel noise (grey levels, NaN until estimated) and the frame
-        #: it was estimated on
+        #: the left image's pixel noise, grey levels (NaN until estimated)
         self._image_noise = float('nan')
-        self._noise_frame = 0
         #: obstacle_min_strength in force (raised on a noisy camera)
         self._min_strength = self.config.obstacle_min_strength
         #: the current left image and the current frame's context for describing obstacles
@@ -2429,11 +2427,10 @@ class GpodDetector:
         """Estimate the left image's pixel noise on the first frame and every
         ``_NOISE_EVERY`` frames after, and set the obstacle edge strength in force from it
         (``obstacle_min_edge_snr``)."""
-        c = self.config
-        if np.isfinite(self._image_noise) and self._frame - self._noise_frame < _NOISE_EVERY:
+        if (self._frame - 1) % _NOISE_EVERY:
             return
+        c = self.config
         self._image_noise = image_noise_sigma(left)
-        self._noise_frame = self._frame
         self._min_strength = max(c.obstacle_min_strength, c.obstacle_min_edge_snr
                                  * gradient_noise_gain(c.edge_blur_sigma) * self._image_noise)
 
