@@ -54,6 +54,25 @@ def test_a_track_seen_in_too_few_frames_is_not_coasted():
     assert step(tr, 0.2, []) == []          # 1 of 3 frames: ended
 
 
+def test_a_track_seen_often_enough_is_coasted_whatever_its_hit_fraction():
+    # seen in 3 frames, then missed: 3 of 7 frames is under the fraction, but 3 sure hits
+    # carry it on until coast_s; without sure_hits it ends at 3 of 7
+    p = [0.0, 1.2, 5.0]
+    for sure, alive_until in ((3, 1.2), (0, 0.5)):
+        tr = ObstacleTracker(coast_s=1.0, min_hit_fraction=0.5, sure_hits=sure)
+        for k in range(3):
+            step(tr, 0.1 * k, [p])
+        alive = [len(step(tr, 0.1 * k, [])) == 1 for k in range(3, 15)]
+        last = 0.1 * (2 + sum(alive))
+        assert alive == sorted(alive, reverse=True)          # ends once, stays ended
+        assert last == pytest.approx(alive_until), sure
+    # two hits are not sure: 2 of 5 frames ends it
+    tr = ObstacleTracker(coast_s=1.0, min_hit_fraction=0.5, sure_hits=3)
+    step(tr, 0.0, [p])
+    step(tr, 0.1, [p])
+    assert [len(step(tr, 0.1 * k, [])) for k in range(2, 5)] == [1, 1, 0]
+
+
 def test_confirm_hits():
     tr = ObstacleTracker(confirm_hits=2, min_hit_fraction=0.0)
     step(tr, 0.0, [[0.0, 1.2, 3.0]])
@@ -120,7 +139,7 @@ def test_time_going_back_ends_the_tracks():
 
 @pytest.mark.parametrize('kw', [dict(coast_s=-1.0), dict(gate_chi2=0.0),
                                 dict(process_noise_m=-0.1), dict(confirm_hits=0),
-                                dict(min_hit_fraction=1.5)])
+                                dict(min_hit_fraction=1.5), dict(sure_hits=-1)])
 def test_bad_settings_name_the_field(kw):
     with pytest.raises(ValueError, match=next(iter(kw))):
         ObstacleTracker(**kw)

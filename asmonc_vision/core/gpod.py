@@ -434,6 +434,11 @@ class GpodConfig(PlausiblePlaneConfig):
         'while it was detected in at least this fraction of the frames since it began (M of '
         'N: an obstacle is seen in most frames, ground texture that sometimes passes the '
         'threshold is not)', range=(0.0, 1.0))
+    track_sure_hits: int = param(
+        3, 'Obstacle tracks: a track detected in at least this many frames is carried '
+        'through frames without a detection whatever its hit fraction, for up to '
+        'track_coast_s, unless the frame shows ground where it stood (0 = off)',
+        range=(0, 100000))
     track_position_sigma_m: float = param(
         0.05, 'Obstacle tracks: placement uncertainty of a detected foot added to its '
         'triangulation noise (which corner of the obstacle is nearest), metres',
@@ -443,8 +448,9 @@ class GpodConfig(PlausiblePlaneConfig):
         range=(0.01, 100.0))
     track_free_min_features: int = param(
         5, 'Obstacle tracks: a track not detected in a frame ends when its image region '
-        'holds at least this many reliably matched edge pixels on the ground plane and '
-        'three times as many as above it (the obstacle went away)', range=(1, 100000))
+        'holds at least this many reliably matched edge pixels on the ground plane, where '
+        'the obstacle would have stood out above it, and three times as many as above it '
+        '(the obstacle went away)', range=(1, 100000))
     track_frame_period_s: float = param(
         0.1, 'Time between frames assumed when process() is given no stamp, s',
         range=(1e-4, 10.0))
@@ -2103,7 +2109,8 @@ class GpodDetector:
         self._tracker = ObstacleTracker(coast_s=c.track_coast_s, gate_chi2=c.track_gate_chi2,
                                         process_noise_m=c.track_process_noise_m,
                                         confirm_hits=c.track_confirm_hits,
-                                        min_hit_fraction=c.track_min_hit_fraction)
+                                        min_hit_fraction=c.track_min_hit_fraction,
+                                        sure_hits=c.track_sure_hits)
         #: track id -> the detection confidences of its latest track_confidence_frames
         #: detections
         self._track_conf: dict[int, deque] = {}
@@ -2715,7 +2722,9 @@ class GpodDetector:
         """Whether this frame shows an undetected track's place free: its foot out of
         view, or its image region (``ob.roi``) holding at least
         ``track_free_min_features`` reliably matched edge pixels on the ground plane
-        (within half their threshold) and three times as many as above it."""
+        (within half their threshold) where the obstacle would have stood out (the foot's
+        disparity at least the threshold above the plane's), and three times as many as
+        above it."""
         cam, ctx = self._cam, self._ctx
         if foot[2] <= 1e-3:
             return True
@@ -2727,7 +2736,12 @@ class GpodDetector:
                   & (ctx.v >= y) & (ctx.v <= y + h - 1))
         ex = ctx.excess_mean[inside]
         thr = self._frame_thr[inside]
-        on_ground = int(np.count_nonzero(np.abs(ex) <= 0.5 * thr))
+        # Ground evidence counts only where the obstacle would have shown: a point of its
+        # face, at about the foot's disparity, stands above the plane there by
+        # d_foot - d_plane >= the threshold (its lowest rows are at the plane's
+        # disparity under either hypothesis and say nothing).
+        informative = (cam.fb / foot[2] - ctx.pd[inside]) >= thr
+        on_ground = int(np.count_nonzero((np.abs(ex) <= 0.5 * thr) & informative))
         above = int(np.count_nonzero(ex > 0.5 * thr))
         return on_ground >= self.config.track_free_min_features and on_ground >= 3 * above
 

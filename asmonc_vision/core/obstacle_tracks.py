@@ -88,19 +88,25 @@ class ObstacleTracker:
         min_hit_fraction: a track is coasted only while it was detected in at least this
             fraction of the frames since its birth (M of N: an obstacle is seen in most
             frames, a texture that sometimes passes the threshold is not).
+        sure_hits: a track detected in at least this many frames is coasted whatever its
+            hit fraction (0: off): an obstacle seen that often is not a texture passing
+            the threshold by chance, and it does not go away because its evidence dips
+            for longer than it was seen. It still ends after ``coast_s`` without a
+            detection, or when the free-space test sees ground in its place.
     Raises:
         ValueError: a setting out of its range (the message names it).
     """
 
     def __init__(self, coast_s: float = 1.0, gate_chi2: float = CHI2_3_99,
                  process_noise_m: float = 0.05, confirm_hits: int = 1,
-                 min_hit_fraction: float = 0.5) -> None:
+                 min_hit_fraction: float = 0.5, sure_hits: int = 0) -> None:
         self.coast_s, self.gate_chi2 = float(coast_s), float(gate_chi2)
         self.process_noise_m, self.confirm_hits = float(process_noise_m), int(confirm_hits)
         self.min_hit_fraction = float(min_hit_fraction)
+        self.sure_hits = int(sure_hits)
         for name, lo, hi in (('coast_s', 0.0, 3600.0), ('gate_chi2', 0.01, 1e6),
                              ('process_noise_m', 0.0, 100.0), ('confirm_hits', 1, 1000),
-                             ('min_hit_fraction', 0.0, 1.0)):
+                             ('min_hit_fraction', 0.0, 1.0), ('sure_hits', 0, 100000)):
             val = getattr(self, name)
             if not lo <= val <= hi:
                 raise ValueError(f'ObstacleTracker.{name} = {val} is out of range '
@@ -237,8 +243,9 @@ class ObstacleTracker:
                 self._hits[i] += 1
                 self._last_seen[i] = stamp
                 continue
+            sure = 0 < self.sure_hits <= self._hits[i]
             alive = (self._hits[i] >= self.confirm_hits
-                     and self._hits[i] >= self.min_hit_fraction * self._frames[i]
+                     and (sure or self._hits[i] >= self.min_hit_fraction * self._frames[i])
                      and stamp - self._last_seen[i] <= self.coast_s + 1e-9)
             if alive and is_free is not None:
                 alive = not is_free(self._payload[i], self._x[i].copy())
