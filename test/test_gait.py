@@ -491,3 +491,104 @@ def test_lag_correction_is_the_difference_of_the_model_attitudes():
         # (model() interpolates the response from tables: 1e-8 rad)
         assert ekf.lag_correction(s, pf) == pytest.approx(expect, abs=1e-7)
         assert ekf.attitude(s, pf) == pytest.approx(ekf.model(s, pf)[0], abs=1e-7)
+
+
+# ---------------------------------------------------------------- compiled kernels
+
+def _kernels():
+    """(module, name) of every numba kernel of the filter step (``core.jit``)."""
+    from asmonc_vision.core.gait import detector, model, tracker
+    return ([(model, n) for n in ('_nb_imm_predict', '_nb_imm_update', '_nb_combine',
+                                  '_nb_predict_attitude')]
+            + [(detector, '_nb_stop_sums'), (tracker, '_nb_nis2'), (tracker, '_nb_score')])
+
+
+def _need_kernels():
+    GaitTracker()                               # compiles (or loads) the kernels
+    if any(getattr(mod, name) is None for mod, name in _kernels()):
+        pytest.skip('numba not installed')
+
+
+def _numpy_path(mp):
+    """Switch the kernels off: the numpy path runs."""
+    for mod, name in _kernels():
+        mp.setattr(mod, name, None)
+
+
+def test_compiled_filter_step_equals_the_numpy_path(monkeypatch):
+    """The filter step's kernels give what its numpy path gives, sample by sample, over
+    walk starts, stops and turns: the same operations and BLAS/LAPACK calls (bit-identical
+    where numba's BLAS is numpy's; 1e-12 rad allowed)."""
+    _need_kernels()
+    for name in ('stop', 'turn'):
+        case = ev.make_case(name, 0)
+        runs = []
+        for numpy_path in (False, True):
+            with monkeypatch.context() as mp:
+                if numpy_path:
+                    _numpy_path(mp)
+                runs.append(ev.run_tracker(case.imu_times, case.imu_rpy, case.imu_variance))
+        a, b = runs
+        assert a.events == b.events and a.events, name
+        for f in ('walking', 'attitude', 'predicted', 'predicted_std', 'phase', 'frequency',
+                  'motion'):
+            np.testing.assert_allclose(getattr(a, f), getattr(b, f), rtol=0, atol=1e-12,
+                                       err_msg=f'{name} {f}')
+
+
+@pytest.mark.parametrize('mu_turn', [0.3, 0.05])        # both iterated / the turn one step
+def test_compiled_imm_prediction_and_update_equal_the_numpy_path(monkeypatch, mu_turn):
+    _need_kernels()
+    pf = Prefilter(16.0, 6.0, 2, sensor_lag=0.08)
+    z = np.radians([1.4, 20.1, 31.0])
+    R = np.diag(np.radians([1.2, 1.0, 1.5]) ** 2)
+    out = []
+    for numpy_path in (False, True):
+        with monkeypatch.context() as mp:
+            if numpy_path:
+                _numpy_path(mp)
+            ekf = _walking_ekf()
+            ekf.mu = np.array([1.0 - mu_turn, mu_turn])
+            ekf._mx[1][I_R] += 0.1                       # the models differ
+            ekf._mx[1][I_TH] += 0.2
+            ekf.predict_to(1.0 / 16.0)
+            got = [ekf.mu.copy(), ekf._mx.copy(), ekf._mP.copy(), ekf.x.copy(), ekf.P.copy()]
+            got.append(ekf.update_attitude(z, R, -0.02, pf))           # measured attitude
+            got += [ekf.mu.copy(), ekf._mx.copy(), ekf._mP.copy(), ekf.x.copy(),
+                    ekf.P.copy(), ekf.last_y, ekf.last_S, ekf.iterations_used]
+            got += list(ekf.predict_attitude(0.5))
+            ekf.update_attitude(z + 0.01, R)                           # true attitude
+            got += [ekf.x.copy(), ekf.P.copy(), ekf.mu.copy()]
+            ekf.stop_walking()                                         # not walking
+            ekf.predict_to(2.0 / 16.0)
+            ekf.update_attitude(z, R, 0.0, pf)
+            got += [ekf.x.copy(), ekf.P.copy(), ekf.mu.copy()]
+            got += list(ekf.predict_attitude(0.5))
+            out.append(got)
+    for i, (a, b) in enumerate(zip(*out)):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-13, err_msg=str(i))
+
+
+@pytest.mark.parametrize('n', [4, 7, 8, 10, 37, 64])    # numpy sums 8 at a time from 8 on
+def test_compiled_stop_test_sums_equal_the_numpy_path(n):
+    from asmonc_vision.core.gait import detector
+    _need_kernels()
+    rng = np.random.default_rng(n)
+    tau = (np.arange(n) - n + 1) / 16.0
+    z, m = rng.normal(0.0, 0.02, (n, 2)), rng.normal(0.0, 0.02, (n, 2))
+    q = detector._trend_basis(tau)
+    assert detector._nb_stop_sums(q, z, m) == pytest.approx(detector._stop_sums(q, z, m),
+                                                            rel=1e-13, abs=0.0)
+
+
+def test_compiled_normalised_innovation_equals_the_numpy_path(monkeypatch):
+    from asmonc_vision.core.gait import tracker
+    _need_kernels()
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        a = rng.normal(size=(3, 3))
+        S, y = a @ a.T + np.eye(3), rng.normal(size=3)
+        with monkeypatch.context() as mp:
+            mp.setattr(tracker, '_nb_nis2', None)
+            expect = tracker._nis2(y, S)
+        assert tracker._nis2(y, S) == pytest.approx(expect, rel=1e-13, abs=0.0)

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from asmonc_vision.core.gait.model import GaitConfig
+from asmonc_vision.core.jit import jit, warmed
 
 _D2R = np.pi / 180.0
 #: a refit replaces the tracked frequency only if it explains this much more of the
@@ -233,6 +234,7 @@ class WalkDetector:
     """
 
     def __init__(self, config: GaitConfig) -> None:
+        _warm_up()
         self.cfg = config
         span = max(config.detect_window, config.stop_window, config.nis_window,
                    config.relock_window) + 0.5
@@ -240,10 +242,14 @@ class WalkDetector:
         self._t: deque[float] = deque()
         self._z: deque[np.ndarray] = deque()
         self._nis: deque[tuple[float, float]] = deque()
+        self._nis_values: deque[float] = deque()      # the values of _nis alone
         step = 0.02
         self.freqs = np.arange(config.min_frequency, config.max_frequency + 1e-9, step)
         self._low_count = 0
-        self._arrays = None
+        # the samples of the deques as arrays (rows start:end), for ``window``
+        self._tb = np.zeros(256)
+        self._zb = np.zeros((256, 3))
+        self._start = self._end = 0
         #: (mean, sd) of the step-frequency prior of the grid criteria, Hz (or None)
         self.frequency_prior = ((config.prior_frequency, config.prior_frequency_sd)
                                 if config.prior_frequency_sd > 0 else None)
@@ -267,41 +273,53 @@ class WalkDetector:
         self._t.clear()
         self._z.clear()
         self._nis.clear()
-        self._arrays = None
+        self._nis_values.clear()
+        self._start = self._end = 0
 
     def reset(self) -> None:
         """Forget the window (after a gap in the stream)."""
-        self._arrays = None
+        self._start = self._end = 0
         self._t.clear()
         self._z.clear()
         self._nis.clear()
+        self._nis_values.clear()
         self._low_count = 0
 
     def push(self, t: float, z) -> None:
         """Add a prefiltered (3,) sample at time t (s)."""
         self._t.append(float(t))
         self._z.append(np.asarray(z, float))
+        if self._end == self._tb.size:              # full: move the window to the front
+            n = self._end - self._start
+            size = self._tb.size * (2 if n > self._tb.size // 2 else 1)
+            tb, zb = np.zeros(size), np.zeros((size, 3))
+            tb[:n] = self._tb[self._start:self._end]
+            zb[:n] = self._zb[self._start:self._end]
+            self._tb, self._zb, self._start, self._end = tb, zb, 0, n
+        self._tb[self._end] = self._t[-1]
+        self._zb[self._end] = self._z[-1]
+        self._end += 1
         while self._t and self._t[0] < t - self._span:
             self._t.popleft()
             self._z.popleft()
-        self._arrays = None
+            self._start += 1
 
     def push_nis(self, t: float, nis_per_dof: float) -> None:
         """Record the EKF's normalised innovation squared per measurement dimension."""
         self._nis.append((float(t), float(nis_per_dof)))
+        self._nis_values.append(float(nis_per_dof))
         while self._nis and self._nis[0][0] < t - self.cfg.nis_window:
             self._nis.popleft()
+            self._nis_values.popleft()
 
     def window(self, seconds: float) -> tuple[np.ndarray, np.ndarray]:
         """(tau (N,), z (N, 3)) of the samples in the last `seconds` (tau <= 0)."""
         if not self._t:
             return np.zeros(0), np.zeros((0, 3))
-        if self._arrays is None:
-            t = np.fromiter(self._t, float, len(self._t))
-            self._arrays = (t - t[-1], np.array(self._z))
-        tau, z = self._arrays
+        t = self._tb[self._start:self._end]
+        tau = t - t[-1]
         i = int(np.searchsorted(tau, -seconds - 1e-9))
-        return tau[i:], z[i:]
+        return tau[i:], self._zb[self._start + i:self._end]
 
     def span_seconds(self) -> float:
         """Time covered by the buffered samples, s."""
@@ -383,27 +401,34 @@ class WalkDetector:
         if not (c.min_frequency * 0.9 + 1e-6 < f < c.max_frequency * 1.1 - 1e-6):
             return 'frequency'
         if self._nis and len(self._nis) >= 3:
-            mean = sum(v for _, v in self._nis) / len(self._nis)
+            mean = sum(self._nis_values) / len(self._nis)
             if mean > c.nis_threshold:
                 return 'movement'
         tau, z = self.window(c.stop_window)
         if tau.size >= 4:
             axes = [0, 1]                                # roll, pitch: turns bend the yaw
             m, a = oscillation(tau)
-            a_m = math.sqrt(float(np.mean(np.asarray(a, float)[axes] ** 2)))
-            amp = np.array(stop_amplitudes(tau, z[:, axes], m[:, axes], a_m))
+            a0, a1 = float(a[0]), float(a[1])
+            a_m = math.sqrt((a0 * a0 + a1 * a1) / 2.0)   # rms over the axes
+            amp = stop_amplitudes(tau, z[:, axes], m[:, axes], a_m)
             t = self._t[-1]
             if self._ref_t is None:
-                self._reference = amp.copy()
+                self._reference = np.array(amp)
             else:
                 a = min(1.0, (t - self._ref_t) / 3.0)
-                self._reference += a * (amp - self._reference)
+                self._reference += a * (np.array(amp) - self._reference)
             self._ref_t = t
-            self.reference_amplitude = float(self._reference[0])
-            fr = np.array([c.stop_fraction, STOP_MOTION_FRACTION])
-            limit = np.maximum(c.stop_amplitude_deg * _D2R, fr * self._reference)
+            ref = self._reference.tolist()
+            self.reference_amplitude = ref[0]
+            floor = c.stop_amplitude_deg * _D2R
+            low = True
+            # below max(floor, (stop_fraction, STOP_MOTION_FRACTION) * reference)
+            for v, frac, r in zip(amp, (c.stop_fraction, STOP_MOTION_FRACTION), ref):
+                lim = frac * r
+                lim = floor if floor >= lim else lim    # as np.maximum (NaN passes)
+                low = low and v < lim
             young = self._started is not None and t - self._started < c.stop_window
-            low = bool(np.all(amp < limit)) and not young
+            low = low and not young
             self._low_count = self._low_count + 1 if low else 0
             if self._low_count >= 2:
                 self._low_count = 0
@@ -417,7 +442,7 @@ _BASIS: dict = {}
 def _trend_basis(tau: np.ndarray) -> np.ndarray:
     """Orthonormal basis (N, 2) of offset and trend over the sample times tau (the
     windows repeat at a steady rate: cached)."""
-    key = np.round(tau, 6).tobytes()
+    key = tau.round(6).tobytes()
     q = _BASIS.get(key)
     if q is None:
         q, _ = np.linalg.qr(np.column_stack([np.ones(tau.size), tau]))
@@ -446,9 +471,74 @@ def stop_amplitudes(tau: np.ndarray, z: np.ndarray, m: np.ndarray, a_m: float
     Both are 0 when the model does not oscillate.
     """
     q = _trend_basis(tau)
-    zr, mr = z - q @ (q.T @ z), m - q @ (q.T @ m)           # offset and trend removed
-    mm = float(np.sum(mr * mr))
+    if _nb_stop_sums is not None and np.size(z) <= 128:
+        mm, zm, zz = _nb_stop_sums(q, np.ascontiguousarray(z, float),
+                                   np.ascontiguousarray(m, float))
+    else:
+        mm, zm, zz = _stop_sums(q, z, m)
     if mm <= 1e-18:
         return 0.0, 0.0
-    beta = float(np.sum(zr * mr)) / mm
-    return max(beta, 0.0) * a_m, math.sqrt(float(np.sum(zr * zr)) / mm) * a_m
+    beta = zm / mm
+    return max(beta, 0.0) * a_m, math.sqrt(zz / mm) * a_m
+
+
+def _stop_sums(q: np.ndarray, z: np.ndarray, m: np.ndarray) -> tuple[float, float, float]:
+    """<m_r, m_r>, <z_r, m_r>, <z_r, z_r> of ``stop_amplitudes``, q the trend basis."""
+    zr, mr = z - q @ (q.T @ z), m - q @ (q.T @ m)           # offset and trend removed
+    total = np.add.reduce                                   # np.sum of all elements
+    return (float(total(mr * mr, axis=None)), float(total(zr * mr, axis=None)),
+            float(total(zr * zr, axis=None)))
+
+
+# ``_stop_sums`` compiled by numba (``core.jit``) for windows of up to 128 values: the
+# same BLAS products and numpy's own summation order, so the same numbers (test_gait
+# compares them).
+
+def _pairwise_sum_kernel(a):
+    """sum(a) of up to 128 values as ``np.add.reduce`` adds a contiguous float64 array
+    (numpy's pairwise summation, which below 129 values is: in order below 8, else 8
+    partial sums over blocks of 8, combined pairwise, then the rest in order)."""
+    n = a.size
+    if n < 8:
+        res = 0.0
+        for i in range(n):
+            res += a[i]
+        return res
+    r0, r1, r2, r3, r4, r5, r6, r7 = a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7]
+    m = n - n % 8
+    for i in range(8, m, 8):
+        r0 += a[i]
+        r1 += a[i + 1]
+        r2 += a[i + 2]
+        r3 += a[i + 3]
+        r4 += a[i + 4]
+        r5 += a[i + 5]
+        r6 += a[i + 6]
+        r7 += a[i + 7]
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    for i in range(m, n):
+        res += a[i]
+    return res
+
+
+def _stop_sums_kernel(q, z, m):
+    """``_stop_sums`` (z, m of up to 128 values)."""
+    zr = z - np.dot(q, np.dot(q.T, z))
+    mr = m - np.dot(q, np.dot(q.T, m))
+    return (_nb_pairwise_sum((mr * mr).ravel()), _nb_pairwise_sum((zr * mr).ravel()),
+            _nb_pairwise_sum((zr * zr).ravel()))
+
+
+_nb_pairwise_sum = jit(_pairwise_sum_kernel)
+_nb_stop_sums = jit(_stop_sums_kernel)
+_warm = False
+
+
+def _warm_up() -> None:
+    """Compile ``_nb_stop_sums`` (or load it from numba's disk cache) once per process,
+    before the first sample; dropped (the numpy path runs) if that fails."""
+    global _warm, _nb_stop_sums
+    if not _warm:
+        _warm = True
+        _nb_stop_sums = warmed(_nb_stop_sums, np.ones((20, 2)), np.ones((20, 2)),
+                               np.ones((20, 2)))

@@ -54,6 +54,7 @@ from filterpy.kalman import KalmanFilter
 
 from asmonc_vision.core.config import check_fields, param
 from asmonc_vision.core.gait.rotations import wrap_angle
+from asmonc_vision.core.jit import jit, warmed
 
 I_F = 0
 I_TH = 1
@@ -249,6 +250,8 @@ class StateLayout:
         self.oscillation = np.r_[I_F, I_TH, self.alpha, self.beta]
         #: (3, M) 0/1: row a sums axis a's harmonics
         self.sum_matrix = (self.axis[None, :] == np.arange(3)[:, None]).astype(float)
+        self.k_row = self.k[None, :]
+        self.k_main = self.k[self.main]
 
     def of_axis(self, a: int) -> np.ndarray:
         """Positions (in 0..M-1) of axis a's harmonics, k ascending."""
@@ -303,6 +306,238 @@ def discretise(a: np.ndarray, qc: np.ndarray, dt: float) -> tuple[np.ndarray, np
     return f, q
 
 
+# ---------------------------------------------------------------------- compiled kernels
+# The filter step compiled by numba (``core.jit``): the model (``_model_kernel``), the
+# IMM prediction (``_imm_predict_kernel``), the iterated EKF update of both models with
+# the attitude measurement (``_imm_update_kernel``, ``_combine_kernel``) and the attitude
+# prediction (``_predict_attitude_kernel``). Each is the numpy path of ``WalkModelEKF``
+# beside it, equation by equation: the same operations in the same order and the same
+# BLAS/LAPACK calls (matrix products, the 3 x 3 inverse as a solve, the determinant from
+# the LU factors), so both give the same numbers (test_gait compares them); only the
+# Python and numpy call overhead on these small arrays is gone. Without numba, or if
+# compiling fails, the numpy path runs.
+
+#: (1 deg/s^2)^2: the straight model's yaw acceleration variance (``_no_accel``)
+_NO_ACCEL_VAR = (1.0 * _D2R) ** 2
+#: the prefilter table of no prefilter (gain 1, no phase)
+_NO_TABLE = np.zeros((0, 4))
+
+
+def _wrap_kernel(a):
+    """``wrap_angle`` of a float, [-pi, pi)."""
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _model_kernel(x, s, sy, walking, table, df, k, A, axis, alpha, beta):
+    """``WalkModelEKF.model`` at state x (n,): (h (3,), H (3, n)).
+
+    Args:
+        s: time offset from the filter time, s;  sy: the yaw ramp's (s minus the DC
+            delay of the prefilter, if any).
+        table: the prefilter's (|H|, arg H, d|H|/df, d arg H/df) on the grid 0, df,
+            2 df, ... Hz (``Prefilter._table``), or (0, 4) for the true attitude.
+        k, A, axis, alpha, beta: the ``StateLayout`` (A its sum_matrix).
+    """
+    n = x.shape[0]
+    H = np.zeros((3, n))
+    H[0, 2] = 1.0
+    H[1, 3] = 1.0
+    H[2, 4] = 1.0
+    r = x[5]
+    ya = x[6]
+    # h_a = o_a [+ r sy + a_yaw sy^2 / 2 for yaw]
+    h = np.empty(3)
+    h[0] = x[2]
+    h[1] = x[3]
+    h[2] = x[4] + r * sy + 0.5 * ya * sy * sy
+    H[2, 5] = sy
+    H[2, 6] = 0.5 * sy * sy
+    if not walking:
+        return h, H
+    f = x[0]
+    m = k.shape[0]
+    g = np.ones(m)
+    psi = np.zeros(m)
+    dg = np.zeros(m)
+    dpsi = np.zeros(m)
+    if table.shape[0] > 0:
+        # |H|, arg H and their derivatives at k f / 2 (``Prefilter.gain_phase_array``)
+        top = table.shape[0] - 1.0 - 1e-9          # the table's last interval
+        for j in range(m):
+            u = min(max(0.5 * k[j] * f / df, 0.0), top)
+            i = int(u)
+            w = u - i
+            v = 1.0 - w
+            g[j] = table[i, 0] * v + table[i + 1, 0] * w
+            psi[j] = table[i, 1] * v + table[i + 1, 1] * w
+            dg[j] = table[i, 2] * v + table[i + 1, 2] * w
+            dpsi[j] = table[i, 3] * v + table[i + 1, 3] * w
+    adv = x[1] + math.pi * f * s                   # theta + pi f s
+    ps = math.pi * s
+    gval = np.empty(m)
+    gder = np.empty(m)
+    dfh = np.empty(m)
+    for j in range(m):
+        u = k[j] * adv + psi[j]                    # u = k (theta + pi f s) + arg H
+        su = math.sin(u)
+        cu = math.cos(u)
+        al = x[alpha[j]]
+        be = x[beta[j]]
+        val = al * su + be * cu                    # the harmonic before the gain
+        der = al * cu - be * su                    # its derivative by u
+        gval[j] = g[j] * val
+        H[axis[j], alpha[j]] = g[j] * su           # dh/dalpha
+        H[axis[j], beta[j]] = g[j] * cu            # dh/dbeta
+        gder[j] = g[j] * k[j] * der
+        # dh/df: the gain and phase of H at k f / 2, and the phase advance k pi s
+        dfh[j] = 0.5 * k[j] * dg[j] * val + g[j] * der * k[j] * (ps + 0.5 * dpsi[j])
+    h += np.dot(A, gval)                           # each axis's harmonics summed
+    H[:, 1] = np.dot(A, gder)                      # dh/dtheta
+    H[:, 0] = np.dot(A, dfh)
+    return h, H
+
+
+def _mix_kernel(xs, Ps, w0, w1):
+    """``WalkModelEKF._mix``: (sum_i w_i x_i, sum_i w_i (P_i + e_i e_i^T)), the
+    stride-phase difference wrapped."""
+    n = xs.shape[1]
+    d = xs[1] - xs[0]
+    d[1] = _nb_wrap(d[1])
+    x = xs[0] + w1 * d
+    ww = w0 * w1
+    P = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            P[i, j] = w0 * Ps[0, i, j] + w1 * Ps[1, i, j] + ww * (d[i] * d[j])
+    return x, P
+
+
+def _combine_kernel(xs, Ps, mu, lo, hi):
+    """``WalkModelEKF._no_accel(0)`` (xs, Ps in place), then ``_combine``: the mixture
+    (x, P) of the models by mu, the stride phase wrapped and the step frequency kept
+    within [lo, hi]."""
+    n = xs.shape[1]
+    xs[0, 6] = 0.0
+    for i in range(n):
+        Ps[0, 6, i] = 0.0
+        Ps[0, i, 6] = 0.0
+    Ps[0, 6, 6] = _NO_ACCEL_VAR
+    x, P = _nb_mix(xs, Ps, mu[0], mu[1])
+    x[1] = _nb_wrap(x[1])
+    x[0] = min(max(x[0], lo), hi)
+    return x, P
+
+
+def _imm_predict_kernel(xs, Ps, mu, p01, p10, F0, Q0, F1, Q1, lo, hi):
+    """``WalkModelEKF.predict_to``: the IMM interaction, each model's Kalman prediction
+    (filterpy's arithmetic) and the combination; returns (xs, Ps, mu, x, P)."""
+    Pi = np.array([[1.0 - p01, p01], [p10, 1.0 - p10]])
+    c = np.maximum(np.dot(Pi.T, mu), 1e-12)       # c_j = sum_i Pi_ij mu_i
+    nxs = np.empty_like(xs)
+    nPs = np.empty_like(Ps)
+    for j in range(2):
+        # mu_i|j = Pi_ij mu_i / c_j;  x0_j, P0_j = the mixture by mu_i|j
+        x0, P0 = _nb_mix(xs, Ps, Pi[0, j] * mu[0] / c[j], Pi[1, j] * mu[1] / c[j])
+        F = F0 if j == 0 else F1
+        Q = Q0 if j == 0 else Q1
+        nxs[j] = np.dot(F, x0)                     # x = F x0
+        nPs[j] = 1.0 * np.dot(np.dot(F, P0), F.T) + Q   # P = F P0 F^T + Q
+    mu_new = c / (c[0] + c[1])                     # mu_j = c_j
+    x, P = _nb_combine(nxs, nPs, mu_new, lo, hi)
+    return nxs, nPs, mu_new, x, P
+
+
+def _iekf_kernel(xp, P, z, R, s, sy, walking, table, df, k, A, axis, alpha, beta,
+                 iterations, lo, hi):
+    """``WalkModelEKF._update_one`` with the attitude measurement model (yaw residual
+    wrapped): (x, P, y, S, S^-1 (first iterate), iterations used)."""
+    n = xp.shape[0]
+    eye3 = np.eye(3)
+    xi = xp
+    H = np.zeros((3, n))
+    K = np.zeros((n, 3))
+    y0 = np.zeros(3)
+    S0 = np.zeros((3, 3))
+    S0i = np.zeros((3, 3))
+    used = 0
+    for it in range(iterations):
+        h, H = _nb_model(xi, s, sy, walking, table, df, k, A, axis, alpha, beta)
+        y = z - h                                  # innovation
+        y[2] = _nb_wrap(y[2])
+        y = y - np.dot(H, xp - xi)
+        PHt = np.dot(P, H.T)
+        S = np.dot(H, PHt) + R                     # S = H P H^T + R
+        S_inv = np.ascontiguousarray(np.linalg.solve(S, eye3))
+        K = np.dot(PHt, S_inv)                     # K = P H^T S^-1
+        if it == 0:
+            y0, S0, S0i = y, S, S_inv
+        x_new = xp + np.dot(K, y)                  # x = x^- + K y
+        done = np.max(np.abs(x_new - xi)) < 1e-3
+        xi = x_new
+        used = it + 1
+        if done:
+            break
+    IKH = np.eye(n) - np.dot(K, H)
+    # Joseph form: P = (I - K H) P^- (I - K H)^T + K R K^T
+    P_new = np.dot(np.dot(IKH, P), IKH.T) + np.dot(np.dot(K, R), K.T)
+    xi = xi.copy()
+    xi[1] = _nb_wrap(xi[1])
+    xi[0] = min(max(xi[0], lo), hi)
+    return xi, P_new, y0, S0, S0i, used
+
+
+def _imm_update_kernel(xs, Ps, mu, z, R, s, sy, walking, table, df, k, A, axis, alpha,
+                       beta, iterations, lo, hi):
+    """``WalkModelEKF.update`` with the attitude measurement model up to the models'
+    probabilities: each model's iterated update (xs, Ps in place). Returns (log N(y_j;
+    0, S_j) (2,) up to a constant, y, S, y^T S^-1 y (first iterate, the more probable
+    model), iterations used (by the last model))."""
+    like = np.zeros(2)
+    best = 0 if mu[0] >= mu[1] else 1
+    nis_best = 0.0
+    y_best = np.zeros(3)
+    S_best = np.zeros((3, 3))
+    used = 0
+    for j in range(2):
+        # an improbable model gets one Gauss-Newton step (a plain EKF update)
+        its = iterations if mu[j] >= 0.1 else 1
+        x, P, y, S, S_inv, used = _nb_iekf(xs[j], Ps[j], z, R, s, sy, walking, table, df,
+                                           k, A, axis, alpha, beta, its, lo, hi)
+        xs[j] = x
+        Ps[j] = P
+        nis = np.dot(np.dot(y, S_inv), y)
+        # log N(y; 0, S) up to the common constant (det S from the LU factors)
+        sign, logdet = np.linalg.slogdet(S)
+        like[j] = -0.5 * nis - 0.5 * math.log(max(sign * np.exp(logdet), 1e-300))
+        if j == best:
+            nis_best = nis
+            y_best, S_best = y, S
+    return like, y_best, S_best, nis_best, used
+
+
+def _predict_attitude_kernel(F, Q0, Q1, mu0, mu1, x, P, walking, k, A, axis, alpha, beta):
+    """``WalkModelEKF.predict_attitude``: (h (3,), H Ps H^T (3, 3)) with xs = F x,
+    Ps = F P F^T + mu_0 Q_0 + mu_1 Q_1, h, H = model(0, xs)."""
+    Q = mu0 * Q0 + mu1 * Q1
+    xs = np.dot(F, x)
+    Ps = np.dot(np.dot(F, P), F.T) + Q
+    h, H = _nb_model(xs, 0.0, 0.0, walking, _NO_TABLE, 1.0, k, A, axis, alpha, beta)
+    return h, np.dot(np.dot(H, Ps), H.T)
+
+
+# the kernels index the state by number: offsets 2-4, yaw rate 5, yaw acceleration 6
+assert (I_F, I_TH, tuple(I_O), I_R, I_YA) == (0, 1, (2, 3, 4), 5, 6)
+_nb_wrap = jit(_wrap_kernel)
+_nb_model = jit(_model_kernel)
+_nb_mix = jit(_mix_kernel)
+_nb_combine = jit(_combine_kernel)
+_nb_imm_predict = jit(_imm_predict_kernel)
+_nb_iekf = jit(_iekf_kernel)
+_nb_imm_update = jit(_imm_update_kernel)
+_nb_predict_attitude = jit(_predict_attitude_kernel)
+_warm = False
+
+
 class WalkModelEKF:
     """The walk model's iterated EKF (see the module doc for the state).
 
@@ -344,14 +579,20 @@ class WalkModelEKF:
         # continuous process noise by (walking, model): model 0 straight, 1 turning
         self._qc = {(True, 0): q, (False, 0): qs, (True, 1): q_turn, (False, 1): qs_turn}
         self._a = {w: continuous_system(lay, w) for w in (True, False)}
-        #: the models' own estimates (x (n,), P (n, n)) and probabilities mu
-        self._mx = [np.zeros(n), np.zeros(n)]
-        self._mP = [np.eye(n), np.eye(n)]
+        #: the models' own estimates (x (2, n), P (2, n, n): rows straight, turning) and
+        #: probabilities mu
+        self._mx = np.zeros((2, n))
+        self._mP = np.stack([np.eye(n), np.eye(n)])
         self.mu = np.array([1.0, 0.0])
         self._fq_cache: dict = {}
         self.last_nis: float = 0.0
         self.iterations_used = 0
         self._eye = np.eye(n)
+        self._bounds = (0.9 * config.min_frequency, 1.1 * config.max_frequency)
+        #: the coefficients of the state whose bytes are the key (``_harmonics``)
+        self._coef_key: bytes | None = None
+        self._coef_cache: dict = {}
+        _warm_up(self)
         #: innovation (first iterate) and its covariance of the latest update
         self.last_y: np.ndarray | None = None
         self.last_S: np.ndarray | None = None
@@ -385,13 +626,33 @@ class WalkModelEKF:
         x = self.x if x is None else x
         return x[self.layout.alpha] + 1j * x[self.layout.beta]
 
+    def _harmonics(self, prefilter=None, lag: bool = False) -> np.ndarray:
+        """``coefficients()`` of the current state, times the prefilter's response at
+        k f / 2 if given (times 1 - that response if lag: what the prefilter and the
+        sensor lag take away). Cached until the state changes (each sample asks for
+        them several times); not to be modified."""
+        x = self.x
+        key = x.tobytes()
+        if key != self._coef_key:
+            self._coef_key = key
+            self._coef_cache = {(None, False): self.coefficients(x)}
+        ck = (prefilter, lag)
+        c = self._coef_cache.get(ck)
+        if c is None:
+            c = self._coef_cache[(None, False)]
+            if prefilter is not None:
+                resp = prefilter.response(0.5 * self.layout.k * float(x[I_F]))
+                c = c * (1.0 - resp) if lag else c * resp
+            self._coef_cache[ck] = c
+        return c
+
     def amplitude_phase(self, s: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """Amplitude (rad) and phase (rad) of each axis's main harmonic (roll, yaw: the
         stride; pitch: the step) at filter time + s: axis = A sin(phase) + the rest."""
         lay = self.layout
-        c = self.coefficients()[lay.main]
+        c = self._harmonics()[lay.main]
         th = float(self.x[I_TH]) + (np.pi * float(self.x[I_F]) * s if self.walking else 0.0)
-        return np.abs(c), wrap_angle(lay.k[lay.main] * th + np.angle(c))
+        return np.abs(c), wrap_angle(lay.k_main * th + np.arctan2(c.imag, c.real))
 
     def initialise(self, t: float, rpy, var) -> None:
         """Start (not walking) at time t from a (lag-free) attitude and its variances."""
@@ -487,12 +748,12 @@ class WalkModelEKF:
         The offsets take over the oscillation's current value (the attitude estimate
         does not jump)."""
         osc_now = self.oscillation(0.0)[0]
-        for x in [self.kf.x[:, 0]] + self._mx:
+        for x in (self.kf.x[:, 0], self._mx[0], self._mx[1]):
             x[I_O] += osc_now
         self.walking = False
         osc = self.oscillation_indices()
         rest = np.setdiff1d(np.arange(self.n), osc)
-        for P in [self.kf.P] + self._mP:
+        for P in (self.kf.P, self._mP[0], self._mP[1]):
             P[np.ix_(osc, rest)] = 0.0
             P[np.ix_(rest, osc)] = 0.0
 
@@ -527,20 +788,29 @@ class WalkModelEKF:
         dt = t - self.t
         p01 = 1.0 - math.exp(-self.cfg.turn_start_rate * dt)
         p10 = 1.0 - math.exp(-self.cfg.turn_end_rate * dt)
+        if _nb_imm_predict is not None:
+            F0, Q0 = self.transition(dt, model=0)
+            F1, Q1 = self.transition(dt, model=1)
+            self._mx, self._mP, self.mu, x, P = _nb_imm_predict(
+                self._mx, self._mP, self.mu, p01, p10, F0, Q0, F1, Q1, *self._bounds)
+            self.kf.x, self.kf.P = x[:, None], P
+            self.kf.F, self.kf.Q = F1, Q1
+            self.t = float(t)
+            return
         Pi = np.array([[1.0 - p01, p01], [p10, 1.0 - p10]])
         c = Pi.T @ self.mu                                   # c_j = sum_i Pi_ij mu_i
         c = np.maximum(c, 1e-12)
         mix = Pi * self.mu[:, None] / c[None, :]             # mu_i|j
         xs, Ps = self._mx, self._mP
-        new_x, new_P = [], []
+        new_x, new_P = np.empty_like(xs), np.empty_like(Ps)
         for j in range(2):
             x0, P0 = self._mix(xs, Ps, mix[:, j])
             F, Q = self.transition(dt, model=j)
             self.kf.x, self.kf.P = x0[:, None], P0
             self.kf.F, self.kf.Q = F, Q
             self.kf.predict()          # x = F x;  P = F P F^T + Q
-            new_x.append(self.kf.x[:, 0].copy())
-            new_P.append(self.kf.P.copy())
+            new_x[j] = self.kf.x[:, 0]
+            new_P[j] = self.kf.P
         self._mx, self._mP = new_x, new_P
         self.mu = c / c.sum()
         self._no_accel(0)
@@ -566,7 +836,7 @@ class WalkModelEKF:
         P = self._mP[j]
         P[I_YA, :] = 0.0
         P[:, I_YA] = 0.0
-        P[I_YA, I_YA] = (1.0 * _D2R) ** 2
+        P[I_YA, I_YA] = _NO_ACCEL_VAR
 
     def _combine(self) -> None:
         """The output: the probability-weighted mixture of the models."""
@@ -634,8 +904,8 @@ class WalkModelEKF:
         """``model(s, prefilter)``'s attitude without the Jacobian (cheaper), (3,) rad."""
         x = self.x
         sy = s - prefilter.dc_delay if prefilter is not None else s
-        h = np.array([x[I_O[0]], x[I_O[1]],
-                      x[I_O[2]] + x[I_R] * sy + 0.5 * x[I_YA] * sy * sy], float)
+        o_r, o_p, o_y, r, ya = x[2:7].tolist()
+        h = np.array([o_r, o_p, o_y + r * sy + 0.5 * ya * sy * sy])
         if self.walking:
             h += self.oscillation(s, prefilter)[0]
         return h
@@ -650,7 +920,7 @@ class WalkModelEKF:
         if self.walking:
             lay = self.layout
             f = float(x[I_F])
-            c = self.coefficients() * (1.0 - prefilter.response(0.5 * lay.k * f))
+            c = self._harmonics(prefilter, lag=True)
             u = lay.k * (float(x[I_TH]) + math.pi * f * s)
             out += lay.sum_matrix @ np.imag(c * np.exp(1j * u))
         return out
@@ -659,17 +929,15 @@ class WalkModelEKF:
         """The oscillation part of the model (no offsets, no yaw ramp) at filter time + s
         for an array of offsets s (N,): (N, 3) rad, measured through ``prefilter`` if
         given. Zero when not walking."""
-        s = np.atleast_1d(np.asarray(s, float))
+        s = np.array([s]) if isinstance(s, float) else np.atleast_1d(np.asarray(s, float))
         if not self.walking:
             return np.zeros((s.size, 3))
         lay = self.layout
         x = self.x
         f = float(x[I_F])
-        c = self.coefficients()
-        if prefilter is not None:
-            c = c * prefilter.response(0.5 * lay.k * f)
-        u = lay.k[None, :] * (float(x[I_TH]) + math.pi * f * s[:, None])
-        val = np.imag(c[None, :] * np.exp(1j * u))                 # (N, M)
+        c = self._harmonics(prefilter)
+        u = lay.k_row * (float(x[I_TH]) + math.pi * f * s[:, None])
+        val = np.imag(c * np.exp(1j * u))                          # (N, M)
         return val @ lay.sum_matrix.T
 
     def oscillation_amplitude(self, prefilter=None) -> np.ndarray:
@@ -678,11 +946,8 @@ class WalkModelEKF:
         if given; zero when not walking."""
         if not self.walking:
             return np.zeros(3)
-        lay = self.layout
-        c = self.coefficients()
-        if prefilter is not None:
-            c = c * prefilter.response(0.5 * lay.k * float(self.x[I_F]))
-        return np.sqrt(lay.sum_matrix @ np.abs(c) ** 2)
+        c = self._harmonics(prefilter)
+        return np.sqrt(self.layout.sum_matrix @ np.square(np.abs(c)))
 
     def predict_attitude(self, s: float) -> tuple[np.ndarray, np.ndarray]:
         """True attitude at filter time + s (s >= 0) and its (3, 3) covariance.
@@ -692,7 +957,14 @@ class WalkModelEKF:
         Q the models' probability-weighted process noise.
         """
         F, Q0 = self.transition(max(s, 0.0), model=0)
-        Q = self.mu[0] * Q0 + self.mu[1] * self.transition(max(s, 0.0), model=1)[1]
+        Q1 = self.transition(max(s, 0.0), model=1)[1]
+        if _nb_predict_attitude is not None:
+            lay = self.layout
+            return _nb_predict_attitude(F, Q0, Q1, float(self.mu[0]), float(self.mu[1]),
+                                        np.ascontiguousarray(self.x),
+                                        np.ascontiguousarray(self.P), self.walking, lay.k,
+                                        lay.sum_matrix, lay.axis, lay.alpha, lay.beta)
+        Q = self.mu[0] * Q0 + self.mu[1] * Q1
         xs = F @ self.x
         Ps = F @ self.P @ F.T + Q
         h, H = self.model(0.0, x=xs)
@@ -705,13 +977,14 @@ class WalkModelEKF:
 
         x_j(s) = F_j(s) x_j;  h_a = o_a + sum_k Im[(alpha_ak + i beta_ak) exp(i k theta)]
         (the yaw ramp is in F: o_y(s) = o_y + r s + a s^2 / 2)."""
-        xs = np.array([self.transition(max(s, 0.0), model=j)[0] @ self._mx[j]
-                       for j in range(2)])                          # (2, n)
-        out = xs[:, I_O].copy()
+        s = max(s, 0.0)
+        xs = np.array([self.transition(s, model=0)[0] @ self._mx[0],
+                       self.transition(s, model=1)[0] @ self._mx[1]])     # (2, n)
+        out = xs[:, 2:5].copy()                                         # I_O
         if self.walking:
             lay = self.layout
             c = xs[:, lay.alpha] + 1j * xs[:, lay.beta]                # (2, M)
-            u = lay.k[None, :] * xs[:, I_TH][:, None]
+            u = lay.k_row * xs[:, I_TH:I_TH + 1]
             out += np.imag(c * np.exp(1j * u)) @ lay.sum_matrix.T
         return out
 
@@ -752,14 +1025,24 @@ class WalkModelEKF:
             if j == best:
                 nis_best = nis
                 self.last_y, self.last_S = y, S
-        w = np.log(np.maximum(self.mu, 1e-300)) + like
-        w = np.exp(w - w.max())
-        self.mu = np.maximum(w / w.sum(), 1e-6)
-        self.mu /= self.mu.sum()
+        self._probabilities(like)
         self._no_accel(0)
         self._combine()
         self.last_nis = nis_best
         return nis_best
+
+    def _probabilities(self, like: np.ndarray) -> None:
+        """The models' probabilities after an update with log-likelihoods like (2,):
+        mu_j ∝ mu_j N(y_j; 0, S_j), at least 1e-6 each."""
+        # (numpy's log and exp; the rest as floats, the same arithmetic)
+        lm0, lm1 = np.log(np.maximum(self.mu, 1e-300)).tolist()
+        w0, w1 = lm0 + float(like[0]), lm1 + float(like[1])   # w = log mu + like
+        wm = w0 if w0 >= w1 else w1
+        w0, w1 = np.exp(np.array([w0 - wm, w1 - wm])).tolist()  # w = exp(w - max w)
+        tot = w0 + w1
+        m0, m1 = max(w0 / tot, 1e-6), max(w1 / tot, 1e-6)
+        tot = m0 + m1
+        self.mu = np.array([m0 / tot, m1 / tot])
 
     def _update_one(self, x_prior, P, z, R, hfun, wrap_yaw, iterations: int):
         """The iterated update of one model: (x, P, y, S, S^-1) (first-iterate y, S)."""
@@ -795,7 +1078,24 @@ class WalkModelEKF:
     def update_attitude(self, z, R, s: float = 0.0, prefilter=None) -> float | None:
         """Update with an (optionally prefiltered) attitude measurement made at filter
         time + s. z: (3,) roll, pitch, yaw (rad, yaw continuous); R: (3, 3)."""
-        return self.update(z, R, lambda x: self.model(s, prefilter, x))
+        if z is None or _nb_imm_update is None:
+            return self.update(z, R, lambda x: self.model(s, prefilter, x))
+        if prefilter is None:
+            table, df, sy = _NO_TABLE, 1.0, s
+        else:
+            table, df, sy = prefilter._table, prefilter._df, s - prefilter.dc_delay
+        lay = self.layout
+        like, y, S, nis, its = _nb_imm_update(
+            self._mx, self._mP, self.mu, np.asarray(z, float), np.ascontiguousarray(R, float),
+            float(s), float(sy), bool(self.walking), table, df, lay.k, lay.sum_matrix,
+            lay.axis, lay.alpha, lay.beta, int(self.cfg.iterations), *self._bounds)
+        self._probabilities(like)
+        # _no_accel(0), then _combine (the mixture) and _normalise
+        x, P = _nb_combine(self._mx, self._mP, self.mu, *self._bounds)
+        self.kf.x, self.kf.P = x[:, None], P
+        self.last_y, self.last_S, self.last_nis = y, S, nis
+        self.iterations_used = its
+        return nis
 
     def update_increment(self, dz, R, s_a: float, s_b: float) -> float | None:
         """Update with an attitude increment dz = rpy(t_b) - rpy(t_a) (rad) of the true
@@ -820,4 +1120,28 @@ class WalkModelEKF:
     @property
     def frequency_bounds(self) -> tuple[float, float]:
         """The step frequency is kept within these, Hz."""
-        return 0.9 * self.cfg.min_frequency, 1.1 * self.cfg.max_frequency
+        return self._bounds
+
+
+def _warm_up(ekf: WalkModelEKF) -> None:
+    """Compile the filter-step kernels (or load them from numba's disk cache) on ekf's
+    own state, once per process, before the first sample; a kernel that fails is
+    dropped (its numpy path runs)."""
+    global _warm, _nb_imm_predict, _nb_imm_update, _nb_combine, _nb_predict_attitude
+    if _warm:
+        return
+    _warm = True
+    lay = ekf.layout
+    xs, Ps, mu = ekf._mx.copy(), ekf._mP.copy(), np.array([0.5, 0.5])
+    F, Q = ekf.transition(0.0625, walking=True, model=0)
+    z, R = np.zeros(3), np.eye(3)
+    _nb_imm_predict = warmed(_nb_imm_predict, xs, Ps, mu, 0.01, 0.01, F, Q, F, Q, 1.0, 2.0)
+    for table in (np.ones((8, 4)), _NO_TABLE):
+        _nb_imm_update = warmed(_nb_imm_update, xs, Ps, mu, z, R, 0.0, 0.0, True, table, 0.5,
+                                lay.k, lay.sum_matrix, lay.axis, lay.alpha, lay.beta, 2, 1.0,
+                                2.0)
+    _nb_combine = warmed(_nb_combine, xs, Ps, mu, 1.0, 2.0)
+    _nb_predict_attitude = warmed(_nb_predict_attitude, F, Q, Q, 0.5, 0.5, xs[0], Ps[0], True,
+                                  lay.k, lay.sum_matrix, lay.axis, lay.alpha, lay.beta)
+    if _nb_combine is None:
+        _nb_imm_update = None

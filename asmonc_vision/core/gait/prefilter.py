@@ -20,6 +20,21 @@ import numpy as np
 from scipy import signal
 
 
+_MINUS_2J_PI = -2j * np.pi
+_2J_PI = 2j * np.pi
+
+
+def _polyval(p: list, x: np.ndarray) -> np.ndarray:
+    """``np.polyval(p, x)`` (p floats, highest power first; x complex), its first step
+    0 x + p_0 = p_0 taken directly (the same numbers, fewer numpy calls)."""
+    if len(p) < 2 or p[0] == 0.0:
+        return np.polyval(p, x)
+    y = p[0] * x + p[1]
+    for pv in p[2:]:
+        y = y * x + pv
+    return y
+
+
 class Prefilter:
     """A causal low-pass Butterworth filter run sample by sample on (roll, pitch, yaw).
 
@@ -52,7 +67,11 @@ class Prefilter:
         self._b = np.pad(self.b, (0, n - len(self.b)))
         self._a = np.pad(self.a, (0, n - len(self.a)))
         self._zi_unit = signal.lfilter_zi(self.b, self.a) if n > 1 else np.zeros(0)
-        self._z: np.ndarray | None = None           # (n - 1, 3) filter state
+        self._z: list | None = None                 # (n - 1) x 3 filter state (floats)
+        self._bl = self._b.tolist()                 # the coefficients as floats
+        self._al = self._a.tolist()
+        self._b_rev = self.b[::-1].tolist()         # ... highest power of z^-1 first
+        self._a_rev = self.a[::-1].tolist()
         self._resp_key: bytes | None = None
         self._resp_value = None
         h = signal.lfilter(self.b, self.a, np.r_[1.0, np.zeros(int(20 * rate) + 64)])
@@ -91,15 +110,20 @@ class Prefilter:
         if self._a.size == 1:
             return x.copy()
         if self._z is None:
-            self._z = self._zi_unit[:, None] * x[None, :]
+            self._z = (self._zi_unit[:, None] * x[None, :]).tolist()
         z = self._z
-        # direct form II transposed:  y = b0 x + z0;  z_i = b_{i+1} x + z_{i+1} - a_{i+1} y
-        y = self._b[0] * x + z[0]
-        n = z.shape[0]
-        for i in range(n - 1):
-            z[i] = self._b[i + 1] * x + z[i + 1] - self._a[i + 1] * y
-        z[n - 1] = self._b[n] * x - self._a[n] * y
-        return y
+        b, a = self._bl, self._al
+        n = len(z)
+        out = []
+        # direct form II transposed, per angle (floats: the same arithmetic as on arrays):
+        # y = b0 x + z0;  z_i = b_{i+1} x + z_{i+1} - a_{i+1} y;  z_{n-1} = b_n x - a_n y
+        for j, xj in enumerate(x.tolist()):
+            y = b[0] * xj + z[0][j]
+            for i in range(n - 1):
+                z[i][j] = b[i + 1] * xj + z[i + 1][j] - a[i + 1] * y
+            z[n - 1][j] = b[n] * xj - a[n] * y
+            out.append(y)
+        return np.array(out)
 
     def response(self, f) -> np.ndarray:
         """Complex response H(f) of prefilter times sensor lag at frequencies f (Hz)."""
@@ -107,10 +131,10 @@ class Prefilter:
         key = f.tobytes()
         if key == self._resp_key:                   # asked again for the same frequencies
             return self._resp_value
-        zinv = np.exp(-2j * np.pi * f / self.rate)
-        num = np.polyval(self.b[::-1], zinv)
-        den = np.polyval(self.a[::-1], zinv)
-        h = num / den / (1.0 + 2j * np.pi * f * self.sensor_lag)
+        zinv = np.exp(_MINUS_2J_PI * f / self.rate)
+        num = _polyval(self._b_rev, zinv)
+        den = _polyval(self._a_rev, zinv)
+        h = num / den / (1.0 + _2J_PI * f * self.sensor_lag)
         self._resp_key, self._resp_value = key, h
         return h
 

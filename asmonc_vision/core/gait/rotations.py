@@ -56,5 +56,18 @@ def euler_rate_matrix(rpy) -> np.ndarray:
 def relative_rotation(rpy_a, rpy_b) -> np.ndarray:
     """Rotation of the body at attitude ``rpy_b`` expressed in the body frame at
     ``rpy_a``: ``R(a)^T R(b)`` (..., 3, 3)."""
-    ra, rb = rpy_to_matrix(rpy_a), rpy_to_matrix(rpy_b)
+    a, b = np.asarray(rpy_a, float), np.asarray(rpy_b, float)
+    if a.shape == (3,) and b.shape == (3,):                 # one pair: floats (faster)
+        ra, rb = _rpy_to_matrix_1(*a.tolist()), _rpy_to_matrix_1(*b.tolist())
+    else:
+        ra, rb = rpy_to_matrix(a), rpy_to_matrix(b)
     return np.swapaxes(ra, -1, -2) @ rb
+
+
+def _rpy_to_matrix_1(r: float, p: float, y: float) -> np.ndarray:
+    """``rpy_to_matrix`` of one attitude (math's sin and cos: the values of numpy's)."""
+    cr, sr, cp, sp = math.cos(r), math.sin(r), math.cos(p), math.sin(p)
+    cy, sy = math.cos(y), math.sin(y)
+    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                     [-sp, cp * sr, cp * cr]])

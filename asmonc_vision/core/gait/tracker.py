@@ -7,6 +7,7 @@ roll/pitch/yaw of ``inclinometer_link`` in ``world``.
 """
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass, field
 
@@ -18,6 +19,7 @@ from asmonc_vision.core.gait.prefilter import Prefilter
 from asmonc_vision.core.gait.rotations import (egomotion_to_body, euler_rate_matrix,
                                                relative_rotation, rpy_increment,
                                                wrap_angle)
+from asmonc_vision.core.jit import jit, warmed
 
 _D2R = np.pi / 180.0
 #: visual-motion increments whose normalised innovation exceeds this are outliers
@@ -42,6 +44,79 @@ def wrap_diff(a, b) -> np.ndarray:
     d = np.asarray(a, float) - np.asarray(b, float)
     d[2] = wrap_angle(float(d[2]))
     return d
+
+
+def _towards(a: list, b: list, w: list) -> list:
+    """a + w * wrap_diff(b, a) of three floats each."""
+    d0, d1, d2 = b[0] - a[0], b[1] - a[1], wrap_angle(b[2] - a[2])
+    return [a[0] + w[0] * d0, a[1] + w[1] * d1, a[2] + w[2] * d2]
+
+
+def _nis2(y: np.ndarray, S: np.ndarray) -> float:
+    """The roll and pitch part of the normalised innovation, y[:2]^T S[:2, :2]^-1 y[:2]."""
+    if _nb_nis2 is not None:
+        return _nb_nis2(y, S)
+    return float(y[:2] @ np.linalg.solve(S[:2, :2], y[:2]))
+
+
+# Compiled by numba (``core.jit``), each beside its numpy path (``_nis2``; the loop of
+# ``GaitTracker._score_past``) with the same operations in the same order and the same
+# LAPACK/BLAS calls: the same numbers (test_gait compares them).
+
+def _wrap_kernel(a):
+    """``wrap_angle`` of a float, [-pi, pi)."""
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _nis2_kernel(y, S):
+    """``_nis2``."""
+    return np.dot(y[:2], np.linalg.solve(S[:2, :2], y[:2]))
+
+
+def _score_kernel(u, z0, zc, pm, held, y0, y1, a, e2m, e2h, emh, b, long_):
+    """One prediction of ``GaitTracker._score_past`` scored (e2m, e2h, emh and, if b > 0,
+    long_ updated in place): the truth z0 + u wrap_diff(zc, z0); the errors of the
+    model's prediction pm (per IMM model its own yaw y0, y1) and of the held
+    measurement; running means with weight a (b)."""
+    d = zc - z0
+    d[2] = _nb_wrap(d[2])
+    truth = z0 + u * d
+    em = pm - truth
+    eh = held - truth
+    em[2] = _nb_wrap(em[2])
+    eh[2] = _nb_wrap(eh[2])
+    for j in range(2):
+        for i in range(3):
+            e = em[i] if i < 2 else _nb_wrap((y0 if j == 0 else y1) - truth[2])
+            e2m[j, i] += a * (e * e - e2m[j, i])
+            emh[j, i] += a * (e * eh[i] - emh[j, i])
+    for i in range(3):
+        e2h[i] += a * (eh[i] * eh[i] - e2h[i])
+    if b > 0.0:
+        for i in range(3):
+            long_[0, i] += b * (em[i] * em[i] - long_[0, i])
+            long_[1, i] += b * (eh[i] * eh[i] - long_[1, i])
+            long_[2, i] += b * (em[i] * eh[i] - long_[2, i])
+
+
+_nb_wrap = jit(_wrap_kernel)
+_nb_nis2 = jit(_nis2_kernel)
+_nb_score = jit(_score_kernel)
+_warm = False
+
+
+def _warm_up() -> None:
+    """Compile the tracker's kernels (or load them from numba's disk cache) once per
+    process, before the first sample; a kernel that fails is dropped (its numpy path
+    runs)."""
+    global _warm, _nb_nis2, _nb_score
+    if _warm:
+        return
+    _warm = True
+    y, S = np.zeros(3), np.eye(3)
+    _nb_nis2 = warmed(_nb_nis2, y, S)
+    _nb_score = warmed(_nb_score, 1.0, y, y, y, y, 0.0, 0.0, 0.1, np.zeros((2, 3)),
+                       np.zeros(3), np.zeros((2, 3)), 0.1, np.zeros((3, 3)))
 
 
 #: visual-motion intervals ending more than this before the filter time are too old, s
@@ -148,6 +223,8 @@ class GaitTracker:
         self._last_yaw_raw = 0.0
         self._yaw_cont = 0.0
         self._default_var = (0.5 * _D2R) ** 2
+        self._model_var = (c.model_error_deg * _D2R) ** 2
+        _warm_up()
 
     @property
     def walking(self) -> bool:
@@ -173,7 +250,7 @@ class GaitTracker:
         """
         t = float(t)
         rpy = np.asarray(rpy, float)
-        if not np.all(np.isfinite(rpy)):
+        if not all(map(math.isfinite, rpy.ravel().tolist())):
             raise ValueError(f'inclinometer angles must be finite, got {rpy}')
         if self._last_t is not None and t <= self._last_t:
             self.stats.out_of_order += 1
@@ -183,7 +260,8 @@ class GaitTracker:
             v = np.full(3, (c.inclinometer_sigma_deg * _D2R) ** 2)
         else:
             v = np.full(3, self._default_var) if var is None else np.asarray(var, float)
-            v = np.where(np.isfinite(v) & (v > 0), v, self._default_var)
+            if not all(math.isfinite(vi) and vi > 0 for vi in v.ravel().tolist()):
+                v = np.where(np.isfinite(v) & (v > 0), v, self._default_var)
         event = None
         if self._last_t is None:
             self._yaw_cont = rpy[2]
@@ -215,7 +293,8 @@ class GaitTracker:
         # model error: at least the configured one, more where the walk model fits worse
         # (an adaptive R: running mean of the squared post-fit residual, 3 s)
         floor = self._resid2 if self.ekf.walking else 0.0
-        R = np.diag(v + np.maximum((c.model_error_deg * _D2R) ** 2, floor))
+        R = np.zeros((3, 3))
+        R.flat[::4] = v + np.maximum(self._model_var, floor)        # diagonal
         settling = self._settle > 0
         if settling:
             self._settle -= 1
@@ -235,8 +314,7 @@ class GaitTracker:
             if self.ekf.walking and nis is not None:
                 # non-walking movement shows in roll and pitch (yaw jumps at turns)
                 y, S = self.ekf.last_y, self.ekf.last_S
-                self.detector.push_nis(t, float(y[:2] @ np.linalg.solve(S[:2, :2], y[:2]))
-                                       / 2.0)
+                self.detector.push_nis(t, _nis2(y, S) / 2.0)
             if event is None:
                 event = self._detect(t)
         if event is not None:
@@ -274,19 +352,25 @@ class GaitTracker:
         while past and past[0][0] + h <= t + 1e-9:
             ti, pm, held, yaw_j = past.popleft()
             u = 1.0 if t <= t0 else min(max((ti + h - t0) / (t - t0), 0.0), 1.0)
-            truth = z0 + u * wrap_diff(zc, z0)
-            em = pm - truth
-            eh = held - truth
-            em[2], eh[2] = wrap_angle(em[2]), wrap_angle(eh[2])
-            emj = np.tile(em, (2, 1))                # per model: own yaw error
-            emj[:, 2] = [wrap_angle(float(y - truth[2])) for y in yaw_j]
-            self._e2m += a * (emj * emj - self._e2m)
-            self._e2h += a * (eh * eh - self._e2h)
-            self._emh += a * (emj * eh - self._emh)
+            b = 0.0                                  # the long memory's weight, walking
             if self.ekf.walking:
                 b = 1.0 / max(SKILL_LONG_MEMORY * self.cfg.sample_rate, 1.0)
                 self._long_n += 1.0
                 b = max(b, 1.0 / self._long_n)
+            if _nb_score is not None:
+                _nb_score(u, z0, zc, pm, held, float(yaw_j[0]), float(yaw_j[1]), a,
+                          self._e2m, self._e2h, self._emh, b, self._long)
+                continue
+            truth = z0 + u * wrap_diff(zc, z0)
+            em = pm - truth
+            eh = held - truth
+            em[2], eh[2] = wrap_angle(em[2]), wrap_angle(eh[2])
+            emj = np.array([em, em])                 # per model: own yaw error
+            emj[:, 2] = [wrap_angle(float(y - truth[2])) for y in yaw_j]
+            self._e2m += a * (emj * emj - self._e2m)
+            self._e2h += a * (eh * eh - self._e2h)
+            self._emh += a * (emj * eh - self._emh)
+            if b > 0.0:
                 self._long += b * (np.array([em * em, eh * eh, em * eh]) - self._long)
 
     def _turn_check(self) -> None:
@@ -494,7 +578,7 @@ class GaitTracker:
         and axis (roll and pitch the same for both)."""
         num = self._e2h - self._emh
         den = self._e2m + self._e2h - 2.0 * self._emh
-        return np.clip(num / np.maximum(den, 1e-12), 0.0, 1.0)
+        return (num / np.maximum(den, 1e-12)).clip(0.0, 1.0)
 
     def estimate(self, t: float | None = None, event: str | None = None) -> GaitEstimate:
         """The estimate at stamp t (default the latest inclinometer stamp)."""
@@ -516,15 +600,21 @@ class GaitTracker:
         fresh = (self._zc_prev is not None
                  and abs(t - self._zc_prev[0]) <= 0.5 / self.cfg.sample_rate)
         if self.cfg.skill_weighting and fresh:
-            w = self.skill_weights()
-            held = self._z_raw
-            pred = held + w * wrap_diff(pred_model, held)
-            cov = (w[:, None] * cov * w[None, :]) + np.diag((1.0 - w) ** 2 * self._e2h)
+            # (as floats: 3-vectors, the arithmetic of the array expressions in comments)
+            w = self.skill_weights().tolist()
+            pm, att_l = pred_model.tolist(), att.tolist()
+            # pred = held + w * wrap_diff(pred_model, held)
+            pred = np.array(_towards(self._z_raw.tolist(), pm, w))
+            # cov = w_i cov_ij w_j + diag((1 - w)^2 e2h)
+            cv, e2h = cov.tolist(), self._e2h.tolist()
+            cov = np.array([[w[i] * cv[i][j] * w[j]
+                             + ((1.0 - w[i]) * (1.0 - w[i]) * e2h[i] if i == j else 0.0)
+                             for j in range(3)] for i in range(3)])
             # the motion likewise: holding predicts none
-            target = att + w * wrap_diff(pred_model, att)
+            target = np.array(_towards(att_l, pm, w))
         amplitude, phase = ekf.amplitude_phase(s)
-        offset = x[I_O].copy()
-        offset[2] += x[I_R] * s + 0.5 * x[I_YA] * s * s
+        o_r, o_p, o_y, r, ya = x[2:7].tolist()                     # I_O, I_R, I_YA
+        offset = np.array([o_r, o_p, o_y + (r * s + 0.5 * ya * s * s)])
         return GaitEstimate(
             stamp=float(t), walking=bool(ekf.walking), step_frequency=float(x[I_F]),
             step_frequency_variance=float(ekf.P[I_F, I_F]), amplitude=amplitude,
