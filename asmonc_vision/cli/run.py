@@ -178,13 +178,20 @@ def frame_from_obstacle_array(msg) -> FrameObstacles:
 
 # --- child processes ----------------------------------------------------------------------
 
+#: the bag player's log line once it has published the whole bag (`nodes.player_node`)
+_PLAYED_MARK = ']: published '
+
+
 class _Child:
     """A node in its own process; its log goes to a file, warnings and errors to stderr."""
 
     def __init__(self, name: str, cmd: list[str], log_dir: Path, echo, env: dict,
-                 echo_warnings: bool = True):
+                 echo_warnings: bool = True, done_mark: str | None = None):
         self.name = name
         self._marks = ('[ERROR]', '[FATAL]', 'Traceback') + (('[WARN]',) if echo_warnings else ())
+        #: set when a log line contains ``done_mark`` (the player's end-of-bag line)
+        self._done_mark = done_mark
+        self.done = threading.Event()
         self.log_path = log_dir / f'{name}.log'
         self._log = self.log_path.open('w')
         self._echo = echo
@@ -197,6 +204,8 @@ class _Child:
         for line in self.proc.stdout:
             self._log.write(line)
             self._log.flush()
+            if self._done_mark is not None and self._done_mark in line:
+                self.done.set()
             if any(m in line for m in self._marks):
                 self._echo(f'[{self.name}] {line.rstrip()}')
         self._log.flush()
@@ -441,7 +450,8 @@ def run(args) -> int:
                       '-p', f'wait_topics:={json.dumps(_wait_topics(nodes, topics))}',
                       '-p', 'exit_when_done:=true']
         children['player'] = _Child('player', player_cmd, log_dir,
-                                    lambda s: console.line(s, err=True), env)
+                                    lambda s: console.line(s, err=True), env,
+                                    done_mark=_PLAYED_MARK)
 
         def show_alarms() -> None:
             for a in monitor.take_new_alarms():
@@ -471,7 +481,10 @@ def run(args) -> int:
                 last, last_change = monitor.frames, now
             if player_end is None and not children['player'].alive():
                 player_end = now
-            if played_at is None and (player_end is not None
+            # Played: the player said so (its last line, before it waits for the
+            # subscribers' acknowledgements and exits), or every camera_info has come
+            # back, or the player has ended.
+            if played_at is None and (player_end is not None or children['player'].done.is_set()
                                       or (n_infos and monitor.played >= n_infos)):
                 played_at = now
             if (played_at is not None and 'alarm' in children and 'alarm' not in stopped
