@@ -249,6 +249,12 @@ class GpodConfig(PlausiblePlaneConfig):
         1.0, 'An edge pixel joins the running average of the pixel at its place in the '
         'previous frame only if its excess is within this of that average, pixels (else the '
         'average restarts there)', range=(0.01, 100.0))
+    temporal_gate_thr: float = param(
+        0.75, 'The running average also restarts where the excess moved by more than this '
+        "times the pixel's obstacle threshold (a change as large as an obstacle makes: a "
+        'small obstacle that appears is not averaged with the ground it stands on); the '
+        'smaller of this and temporal_gate_px applies (0 = temporal_gate_px alone)',
+        range=(0.0, 100.0))
     ambiguity_fraction: float = param(
         0.8, 'An obstacle string whose excess is above 3 px is dropped when at least this '
         'fraction of its obstacle pixels also had a candidate match on the ground plane (a '
@@ -2455,11 +2461,12 @@ class GpodDetector:
         return bool(hit.mean() >= self.config.still_overlap)
 
     def _temporal_excess(self, m: Matches, excess: np.ndarray, still: bool,
-                         shape: tuple[int, int]) -> np.ndarray:
+                         shape: tuple[int, int], thr: np.ndarray | None = None) -> np.ndarray:
         """The excess of each match averaged (exponentially, over about
         ``temporal_frames`` frames) with the running average found at its place (same
         row, within one column) in the previous frame, when the rig stood still and the
-        two agree to within ``temporal_gate_px``. Updates the running sums."""
+        two agree to within ``temporal_gate_px`` and ``temporal_gate_thr`` times the
+        pixel's threshold ``thr`` (K,) px, if given. Updates the running sums."""
         c = self.config
         h, w = shape
         k = len(m)
@@ -2477,7 +2484,10 @@ class GpodDetector:
             w0 = wp[np.arange(k), j].astype(np.float64)
             s0 = ps[vv, cols[np.arange(k), j]].astype(np.float64)
             with np.errstate(divide='ignore', invalid='ignore'):
-                ok = (w0 > 0) & (np.abs(excess - s0 / w0) <= c.temporal_gate_px)
+                gate = c.temporal_gate_px
+                if thr is not None and c.temporal_gate_thr > 0:
+                    gate = np.minimum(gate, c.temporal_gate_thr * thr)
+                ok = (w0 > 0) & (np.abs(excess - s0 / w0) <= gate)
             s_new = np.where(ok, s_new + lam * s0, s_new)
             w_new = np.where(ok, w_new + lam * w0, w_new)
         acc_s = np.zeros((h, w), np.float32)
@@ -2511,7 +2521,7 @@ class GpodDetector:
         in_range = ground_range <= c.max_range_m
         thr, thr_global = self.pixel_thresholds(_noise_key(m), v)
         ex_mean = self._temporal_excess(m, smooth_along_runs(excess, prev, c.string_window),
-                                        still, el.shape)
+                                        still, el.shape, thr)
         # Figural continuity: a run of min_matched_run pixels at least, and longer for a
         # larger excess -- an edge standing on the ground rises by |b| px of excess per
         # row, so an excess E needs about E / |b| rows of it (a fraction of them, up to
