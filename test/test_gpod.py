@@ -1212,3 +1212,375 @@ def test_a_noisy_camera_makes_no_obstacles_on_clear_pavement():
     assert abs(det.image_noise_sigma - 5.0) < 0.5
     assert tracking >= 50
     assert len(false) <= 2, false
+
+
+# ---------------------------------------------------------------- compiled paths (speed)
+# Session 12: more of the detector's loops compiled with numba, each beside its numpy
+# path; these tests check that both give exactly the same results (bit for bit).
+
+#: The kernels added in session 12 (gpod), each with a numpy path beside it.
+_NEW_GPOD_KERNELS = ('_nb_extremes', '_nb_soft_args', '_nb_arcs', '_nb_contact_bounds',
+                     '_nb_owners', '_nb_group_quantile', '_nb_extent', '_nb_runs',
+                     '_nb_occluded_all', '_nb_hanging_all', '_nb_on_ground', '_nb_still',
+                     '_nb_temporal', '_nb_thin')
+_NEW_MATCHING_KERNELS = ('_nb_candidates', '_nb_cells', '_nb_siblings', '_nb_link_rows')
+
+
+def _need_numba():
+    from asmonc_vision.core import gpod
+    from asmonc_vision.core import matching as mt
+    gpod._warm_up()
+    if any(getattr(gpod, k) is None for k in _NEW_GPOD_KERNELS) or any(
+            getattr(mt, k) is None for k in _NEW_MATCHING_KERNELS):
+        pytest.skip('numba not installed')
+    return gpod, mt
+
+
+def _without(monkeypatch, module, names):
+    for name in names:
+        monkeypatch.setattr(module, name, None)
+
+
+@pytest.fixture(scope='module')
+def box_frame():
+    """A detector after a frame with two boxes (its context: matches, runs, ground)."""
+    det = GpodDetector(GpodConfig())
+    for _ in range(2):
+        det.process(*render_pair(seed=4), CAM)
+    pair = render_pair(boxes=[(-0.4, 0.2, 3.0, 3.4, 0.3), (0.6, 0.9, 4.5, 4.8, 0.6)], seed=4)
+    r = det.process(*pair, CAM)
+    return det, pair, r
+
+
+def test_candidate_and_link_kernels_equal_the_numpy_path(box_frame, monkeypatch):
+    """The compiled candidate search, cell table, sibling disparities and link rows of
+    the matcher give the numpy paths' arrays (values and dtypes)."""
+    _, mt = _need_numba()
+    from asmonc_vision.core.edges import detect_vertical_edges
+    from asmonc_vision.core.matching import Candidates, candidate_matches, support_links
+    _, (left, right), _ = box_frame
+    el, er = detect_vertical_edges(left), detect_vertical_edges(right)
+    settings = [(0.1, 105.0, 0.5, 30.0), (5.0, 40.0, 0.6, 25.0), (0.5, 80.0, 0.2, 45.0),
+                (20.0, 20.5, 0.5, 30.0)]
+    fast = [candidate_matches(el, er, lo, hi, min_strength_ratio=r, max_orientation_diff_deg=o)
+            for lo, hi, r, o in settings]
+    c = fast[0]
+    links = [support_links(el, er, c, support_radius=3.0)]
+    o = np.lexsort((np.random.default_rng(1).random(len(c)), c.left))   # non-monotonic
+    shuffled = Candidates(c.left[o], c.right[o], c.d[o])
+    links.append(support_links(el, er, shuffled, support_radius=3.0))
+    # siblings by ascending disparity, every third candidate twice: steps of zero
+    # among positive ones (monotonic)
+    o = np.lexsort((c.d, c.left))
+    o = np.repeat(o, np.where(np.arange(o.size) % 3 == 0, 2, 1))
+    doubled = Candidates(c.left[o], c.right[o], c.d[o])
+    links.append(support_links(el, er, doubled, support_radius=3.0))
+    _without(monkeypatch, mt, _NEW_MATCHING_KERNELS)
+    slow = [candidate_matches(el, er, lo, hi, min_strength_ratio=r, max_orientation_diff_deg=o)
+            for lo, hi, r, o in settings]
+    assert len(slow[0]) > 2000 and len(slow[3]) > 0
+    assert len(slow[1]) < len(slow[2])
+    for x, y in zip(fast, slow):
+        for a, b in ((x.left, y.left), (x.right, y.right), (x.d, y.d)):
+            assert a.dtype == b.dtype
+            np.testing.assert_array_equal(a, b)
+    for x, cand in zip(links, (c, shuffled, doubled)):
+        y = support_links(el, er, cand, support_radius=3.0)
+        assert x.num_single == y.num_single
+        for f in ('cand', 'start', 'pair_link', 'pair_cand', 'pair_edge', 'pair_right',
+                  'weight'):
+            assert getattr(x, f).dtype == getattr(y, f).dtype, f
+            np.testing.assert_array_equal(getattr(x, f), getattr(y, f))
+
+
+def test_body_gap_kernel_decides_as_body_gap():
+    """The compiled body-gap test answers as `_body_gap` whenever it answers (0 or 1),
+    and leaves to it (-1) only a ground point within rounding distance of the strip."""
+    gpod, _ = _need_numba()
+    rng = np.random.default_rng(7)
+    counts = {0: 0, 1: 0, -1: 0}
+    for _ in range(3000):
+        a = rng.uniform([2.0, -1.5], [5.0, 1.5])
+        b = a + rng.normal(0.0, 0.4, 2)
+        g = a + rng.uniform(-0.6, 0.9, (int(rng.integers(0, 300)), 2))
+        k = gpod._nb_body_gap(g, a[0], a[1], b[0], b[1])
+        counts[k] += 1
+        if k >= 0:
+            assert bool(k) == gpod._body_gap(g, a, b)
+    assert counts[0] > 300 and counts[1] > 300 and counts[-1] == 0
+    # Points exactly on the strip's sides (at along = 0.1 m, behind = 0.3 m): undecided
+    # unless the others decide.
+    a, b = np.array([3.0, -0.5]), np.array([3.0, 0.5])
+    t, nrm = np.array([0.0, 1.0]), np.array([1.0, 0.0])
+    inside = a + 0.5 * t + 0.15 * nrm + np.array([[0.0, 0.01 * i] for i in range(4)])
+    edge = a + 0.1 * t + 0.2 * nrm
+    g = np.vstack([inside, edge[None]])
+    assert gpod._nb_body_gap(g, a[0], a[1], b[0], b[1]) == -1
+    assert gpod._nb_body_gap(np.vstack([g, inside[:1]]), a[0], a[1], b[0], b[1]) == 1
+    assert gpod._nb_body_gap(inside, a[0], a[1], b[0], b[1]) == 0
+
+
+def test_soft_nearest_groups_compiled_equals_numpy(monkeypatch):
+    """The soft nearest points of many groups at once, compiled, are `soft_nearest`'s:
+    its weights (numpy's exp), body gaps, sums in numpy's order (groups of 1-20 feet,
+    and one of 140, beyond the compiled pairwise sum)."""
+    gpod, _ = _need_numba()
+    rng = np.random.default_rng(11)
+    sizes = np.r_[rng.integers(1, 21, 60), 140]
+    group = np.repeat(np.arange(sizes.size), sizes)
+    rng.shuffle(group)
+    centre = rng.uniform([2.0, -2.0], [6.0, 2.0], (sizes.size, 2))
+    xy = centre[group] + rng.normal(0.0, 0.3, (group.size, 2))
+    # In most groups the two first feet are equal and the nearest: the first counts.
+    order = np.argsort(group, kind='stable')
+    first = np.searchsorted(group[order], np.arange(sizes.size))
+    for k in np.flatnonzero(sizes >= 2)[::2]:
+        i, j = order[first[k]], order[first[k] + 1]
+        xy[i] = xy[j] = 0.8 * centre[k]
+    # sigmas whose square numpy's scalar power (libm's pow) rounds unlike s * s
+    s = rng.uniform(0.01, 0.3, 20000)
+    s = s[np.array([np.float64(x) ** 2 for x in s]) != s * s]
+    sr = s[rng.integers(0, s.size, group.size)]
+    gx, gy = np.meshgrid(np.arange(1.5, 7.0, 0.05), np.arange(-2.5, 2.5, 0.05))
+    ground = np.stack([gx.ravel(), gy.ravel()], axis=1)
+    want = np.ones(sizes.size, bool)
+    want[::7] = False
+    fast = [gpod._soft_nearest_groups(xy, sr, group, sizes.size, want, g)
+            for g in (None, ground, lambda: ground)]
+    _without(monkeypatch, gpod, ('_nb_soft_args',))
+    slow = [gpod._soft_nearest_groups(xy, sr, group, sizes.size, want, g)
+            for g in (None, ground, lambda: ground)]
+    for x, y in zip(fast, slow):
+        np.testing.assert_array_equal(x, y)
+    assert np.isnan(fast[1][~want]).all() and np.isfinite(fast[1][want]).all()
+    # the visible ground separated some feet from their group's nearest one
+    assert (np.abs(fast[0] - fast[1]) > 1e-9).any()
+
+
+def test_nearest_points_compiled_equals_numpy(box_frame, monkeypatch):
+    """`nearest_points` with its per-obstacle choices, corner arcs and contact patches
+    compiled gives the numpy path's points, on a real frame's ground and image."""
+    gpod, _ = _need_numba()
+    det, _, _ = box_frame
+    ctx = det._ctx
+    rng = np.random.default_rng(3)
+    n_g = 40
+    sizes = rng.integers(1, 7, n_g)
+    group = np.repeat(np.arange(n_g), sizes)
+    centre = rng.uniform([2.5, -1.2], [5.0, 1.2], (n_g, 2))
+    xy = centre[group] + rng.normal(0.0, 0.25, (group.size, 2))
+    xy[1::3] = xy[::3][:xy[1::3].shape[0]]           # equal feet: the first of them counts
+    sr = rng.uniform(0.005, 0.05, group.size)
+    border = rng.random(group.size) < 0.1
+
+    def run():
+        return [gpod.nearest_points(xy, sr, group, n_g + 2, lambda: ctx.ground_xy,
+                                    ctx.contact_edge_scores, border),
+                gpod.nearest_points(xy, sr, group, n_g, ctx.ground_xy),
+                gpod.hidden_corners(xy[:30], xy[30:60], sr[:30], ctx.ground_xy,
+                                    ctx.contact_edge_scores)]
+
+    fast = run()
+    _without(monkeypatch, gpod, ('_nb_extremes', '_nb_soft_args', '_nb_arcs',
+                                 '_nb_contact_bounds'))
+    slow = run()
+    for x, y in zip(fast, slow):
+        np.testing.assert_array_equal(x, y)
+    assert np.isnan(fast[0][n_g:]).all() and np.isfinite(fast[0][:n_g]).all()
+    assert np.isfinite(fast[2][:, 0]).sum() >= 2
+
+
+def test_silhouette_owners_compiled_equals_numpy(monkeypatch):
+    """The compiled `silhouette_owners` (nearest matching obstacle, outermost candidate
+    per side, free-space test against the visible ground) assigns as the numpy path."""
+    gpod, _ = _need_numba()
+    rng = np.random.default_rng(5)
+    cases = []
+    for _ in range(40):
+        n_c = int(rng.integers(1, 5))
+        s_n = int(rng.integers(1, 12))
+        g_lab = np.sort(rng.integers(0, n_c, s_n))
+        g_lab[:n_c] = np.arange(min(n_c, s_n))
+        centre = rng.uniform([3.0, -1.0], [5.0, 1.0], (n_c, 2))
+        xy = centre[g_lab] + rng.normal(0.0, 0.2, (s_n, 2))
+        height = rng.uniform(0.05, 0.5, n_c)
+        w_n = int(rng.integers(0, 10))
+        xw = centre[rng.integers(0, n_c, w_n)] + rng.normal(0.0, 0.5, (w_n, 2))
+        top = rng.uniform(0.02, 0.6, w_n)
+        ground = rng.uniform([2.5, -1.5], [5.5, 1.5], (int(rng.integers(0, 300)), 2))
+        cases.append((xw, top, xy, g_lab, height, 0.7, ground))
+    fast = [gpod.silhouette_owners(*c) for c in cases]
+    _without(monkeypatch, gpod, ('_nb_owners',))
+    slow = [gpod.silhouette_owners(*c) for c in cases]
+    for x, y in zip(fast, slow):
+        np.testing.assert_array_equal(x, y)
+    flat = np.concatenate(fast)
+    assert (flat >= 0).sum() > 10 and (flat < 0).sum() > 10
+
+
+def test_group_quantile_and_thinning_compiled_equal_numpy(monkeypatch):
+    """The compiled per-group quantile and the thinning of `cluster_points_2d` give the
+    numpy paths' values and labels."""
+    gpod, _ = _need_numba()
+    rng = np.random.default_rng(9)
+    data = []
+    for _ in range(200):
+        n_g = int(rng.integers(1, 9))
+        n = int(rng.integers(1, 50))
+        g = rng.integers(0, n_g, n)
+        x = np.round(rng.normal(0.0, 1.0, n), int(rng.integers(0, 3)))   # with ties
+        data.append((g, x, float(rng.choice([0.1, 0.5, 0.9, 0.25])), n_g))
+    pts = [rng.uniform(0.0, 3.0, (int(rng.integers(1, 400)), 2)) for _ in range(20)]
+    grp = [rng.integers(0, 60, p.shape[0]) * 3 for p in pts]
+    fast = ([gpod._group_quantile(*d) for d in data]
+            + [cluster_points_2d(p, g, 0.25) for p, g in zip(pts, grp)])
+    _without(monkeypatch, gpod, ('_nb_group_quantile', '_nb_thin'))
+    slow = ([gpod._group_quantile(*d) for d in data]
+            + [cluster_points_2d(p, g, 0.25) for p, g in zip(pts, grp)])
+    for x, y in zip(fast, slow):
+        np.testing.assert_array_equal(x, y)
+
+
+def test_run_and_string_kernels_equal_numpy(box_frame, monkeypatch):
+    """On a real frame's matches: the compiled runs (links, lengths, smoothing), the
+    half-occlusion test with its ordering, the hanging runs with their run bottoms and
+    the ground candidates of the ambiguity test equal the numpy paths'."""
+    gpod, _ = _need_numba()
+    from asmonc_vision.core.edges import detect_vertical_edges
+    from asmonc_vision.core.matching import pmf_match
+    det, (left, right), _ = box_frame
+    el, er = detect_vertical_edges(left), detect_vertical_edges(right)
+    m, cand, _ = pmf_match(el, er, 0.5, 80.0)
+    assert len(cand) > len(m) > 1000
+    # disparities on a quarter-pixel grid: steps of exactly the tolerance occur
+    m = dataclasses.replace(m, d=(np.round(m.d * 4.0) / 4.0).astype(np.float32))
+    rng = np.random.default_rng(4)
+    x = rng.normal(0.0, 1.0, len(m))
+    perm = rng.permutation(len(m))                  # matches in no particular order
+    shuffled = dataclasses.replace(m, **{f.name: getattr(m, f.name)[perm]
+                                         for f in dataclasses.fields(m)})
+    k_runs = [gpod._nb_runs(el.string_prev, m.left_index, m.d, len(el), np.float32(tol),
+                            win, x) for tol, win in ((1.0, 5), (0.3, 3), (1.0, 1))]
+    trusted = rng.random(len(m)) < 0.7
+    h = rng.uniform(0.0, 1.5, len(m))
+    only = rng.random(len(m)) < 0.3
+    prev = k_runs[0][0]
+
+    def rest():
+        return ([gpod.occluded_matches(er, m, 1.0, trusted),
+                 gpod.occluded_matches(er, m, 0.5),
+                 gpod.occluded_matches(er, shuffled, 1.0, trusted[perm]),
+                 gpod.occluded_matches(er, shuffled, 0.5, trusted[perm], neighbours=1)]
+                + [gpod.hanging_runs(el, m, prev, h, top, 1.0, 0.1, sel)
+                   for top in (0.2, 0.5, 1.0) for sel in (None, only)]
+                + [gpod._ground_candidates(cand, el, er, det._abc, thr)
+                   for thr in (0.3, 0.8)])
+
+    fast = rest()
+    _without(monkeypatch, gpod, ('_nb_runs', '_nb_occluded_all', '_nb_hanging_all',
+                                 '_nb_on_ground', '_nb_occluded', '_nb_hanging'))
+    slow = rest()
+    for x_, y in zip(fast, slow):
+        np.testing.assert_array_equal(x_, y)
+    assert all(y.any() and not y.all() for y in slow)
+    np.testing.assert_array_equal(slow[2], slow[0][perm])
+    # (a match's neighbours are its string's matches in row order, whatever their order)
+    key = rng.integers(0, 50, 1000)
+    rows = np.flatnonzero(rng.random(1000) < 0.6)
+    np.testing.assert_array_equal(gpod._nb_stable_order(key, rows, 50),
+                                  rows[np.argsort(key[rows], kind='stable')])
+    for (pk, rk, sk, nk), (tol, win) in zip(k_runs, ((1.0, 5), (0.3, 3), (1.0, 1))):
+        p = gpod.run_links(el, m, tol)
+        np.testing.assert_array_equal(pk, p)
+        np.testing.assert_array_equal(rk, gpod.matched_run_length(el, m, tol, p))
+        np.testing.assert_array_equal(sk, gpod.smooth_along_runs(x, p, win))
+        nxt = np.full(len(m), -1, np.int64)
+        nxt[p[p >= 0]] = np.flatnonzero(p >= 0)
+        np.testing.assert_array_equal(nk, nxt)
+    assert (k_runs[0][1] > 1).any() and (k_runs[1][0] < 0).sum() > (k_runs[0][0] < 0).sum()
+
+
+def test_detector_outputs_equal_without_the_new_kernels(monkeypatch):
+    """The whole detector, with the session-12 kernels and without them (the numpy
+    paths), gives the same results, field for field: calibration, standing still
+    (averaged excess), walking frames with boxes, and a step down."""
+    gpod, mt = _need_numba()
+    frames = ([render_pair(seed=6)] * 3
+              + [render_pair(boxes=[(-0.5, 0.0, 3.0, 3.3, 0.2), (0.4, 0.8, 4.2, 4.6, 0.5)],
+                             seed=6)] * 3
+              + [render_pair(boxes=[(-0.3, 0.3, 2.5 + 0.2 * i, 2.9 + 0.2 * i, 0.3)],
+                             seed=10 + i) for i in range(3)]
+              + [render_pair(step=(4.0, 0.2), seed=8)] * 2)
+
+    def run():
+        det = GpodDetector(GpodConfig())
+        return [det.process(left, right, CAM, stamp_ns=100_000_000 * i)
+                for i, (left, right) in enumerate(frames)]
+
+    def same(x, y, where):
+        if isinstance(x, np.ndarray):
+            assert x.dtype == y.dtype and x.shape == y.shape, where
+            np.testing.assert_array_equal(x, y, err_msg=where)
+        elif dataclasses.is_dataclass(x):
+            for f in dataclasses.fields(x):
+                if f.name != 'timings_ms':
+                    same(getattr(x, f.name), getattr(y, f.name), f'{where}.{f.name}')
+        elif isinstance(x, (tuple, list)):
+            assert len(x) == len(y), where
+            for i, (a, b) in enumerate(zip(x, y)):
+                same(a, b, f'{where}[{i}]')
+        elif isinstance(x, float) and math.isnan(x):
+            assert math.isnan(y), where
+        else:
+            assert x == y, where
+
+    fast = run()
+    assert any(r.still for r in fast) and not all(r.still for r in fast[3:])
+    assert sum(len(r.detections) for r in fast) >= 6
+    assert any(o.is_drop for r in fast for o in r.detections)
+    _without(monkeypatch, gpod, _NEW_GPOD_KERNELS)
+    _without(monkeypatch, mt, _NEW_MATCHING_KERNELS)
+    for i, (x, y) in enumerate(zip(fast, run())):
+        same(x, y, f'frame {i}')
+        same(x.metric_plane, y.metric_plane, f'frame {i} plane')
+
+
+def test_stillness_and_temporal_kernels_equal_numpy(box_frame, monkeypatch):
+    """The compiled stillness test (edge pixels within one column of the previous
+    frame's) and running average of the excess give the numpy paths' decisions, sums
+    and state, for edges shifted by 0-2 columns and rows."""
+    gpod, _ = _need_numba()
+    from asmonc_vision.core.edges import detect_vertical_edges
+    det, (left, _), r = box_frame
+    el0 = detect_vertical_edges(left)
+    shifted = [detect_vertical_edges(np.roll(left, (dv, du), axis=(0, 1)))
+               for dv, du in ((0, 0), (0, 1), (0, -1), (0, 2), (1, 0))]
+    from asmonc_vision.core.matching import pmf_match
+    rng = np.random.default_rng(2)
+    m = pmf_match(el0, detect_vertical_edges(left), 0.0, 10.0)[0]     # matches to average
+    excess = [rng.normal(0.0, 1.0, len(m)) for _ in range(3)]
+    thr = rng.uniform(0.3, 1.5, len(m))
+
+    def run():
+        d = GpodDetector(dataclasses.replace(det.config, still_overlap=0.5))
+        still = []
+        for el in shifted:
+            d._prev_edges = None
+            d._stillness(el0)
+            still.append(d._stillness(el))
+            still.append(d._prev_edges.copy())
+        sums = []
+        d._acc = None
+        for i, ex in enumerate(excess):
+            sums.append(d._temporal_excess(m, ex, i > 0, el0.shape, thr if i else None))
+            sums.extend(d._acc)
+        return still + sums
+
+    fast = run()
+    _without(monkeypatch, gpod, ('_nb_still', '_nb_temporal'))
+    slow = run()
+    for x, y in zip(fast, slow):
+        np.testing.assert_array_equal(x, y)
+    decisions = fast[0:10:2]
+    assert decisions[0] and decisions[1] and decisions[2] and not decisions[3]
+    assert not np.array_equal(fast[-3], excess[2])          # averaged with the sums

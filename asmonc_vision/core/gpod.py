@@ -81,6 +81,7 @@ from .edges import EdgeMap, detect_vertical_edges, gradient_noise_gain, image_no
 from .edges import warm_up as edges_warm_up
 from .obstacle_tracks import ObstacleTracker
 from .ground_plane import PlaneFit, PlausiblePlaneConfig, fit_ground_plane, plane_is_plausible
+from .ground_plane import _median
 from .jit import jit as _jit
 from .jit import warmed as _warmed
 from .matching import Candidates, Matches, pmf_match
@@ -186,6 +187,8 @@ _WEAK_HEIGHT_RATIO = 2.0
 _PAIRWISE_POINTS = 256
 #: ... and, compiled (`_link_groups_kernel`), up to this many.
 _JIT_PAIRWISE_POINTS = 4096
+#: The compiled thinning (`_thin_kernel`) counts cells up to this many columns plus rows.
+_THIN_MAX_CELLS = 1 << 16
 
 #: The residual spread sigma of the initial fit is taken over the calibration features
 #: within this many ``plane_inlier_px`` of the fitted plane.
@@ -651,6 +654,14 @@ class GpodResult:
         return self.timings_ms
 
 
+def _cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.cross(a, b)`` of two (3,) float64 vectors, with its arithmetic
+    (a1 b2 - a2 b1, a2 b0 - a0 b2, a0 b1 - a1 b0), without its overhead."""
+    a0, a1, a2 = float(a[0]), float(a[1]), float(a[2])
+    b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+
+
 def _normal_cdf(x: np.ndarray) -> np.ndarray:
     """Standard normal CDF (Abramowitz & Stegun 7.1.26 erf, |error| < 1.5e-7)."""
     z = np.abs(np.asarray(x, np.float64)) / math.sqrt(2.0)
@@ -722,6 +733,13 @@ def cluster_points_2d(points: np.ndarray, group: np.ndarray, radius: float) -> n
     n = points.shape[0]
     if n == 0:
         return np.zeros(0, np.int64)
+    if _nb_link_groups is not None and _nb_thin is not None:
+        # The same groups, thinning and links, compiled (the labels do not depend on the
+        # order of the thinned points).
+        g, pts, gr, n_g = _nb_thin(np.ascontiguousarray(points, np.float64),
+                                   np.asarray(group, np.int64), float(radius) / 4.0)
+        if n_g > 0 and pts.shape[0] <= _JIT_PAIRWISE_POINTS:
+            return _nb_link_groups(pts, gr, n_g, float(radius) * float(radius))[g]
     _, g = np.unique(group, return_inverse=True)
     g = g.astype(np.int64)
     n_g = int(g.max()) + 1
@@ -773,6 +791,66 @@ def cluster_points_2d(points: np.ndarray, group: np.ndarray, radius: float) -> n
         pair = np.unique(a * n_g + b)
         a, b = pair // n_g, pair % n_g
     return _components(n_g, a, b)[g]
+
+
+def _thin_kernel(points, group, cell):
+    """The groups and thinning of :func:`cluster_points_2d` (for numba): (N,) int64 the
+    rank of each point's group among the distinct groups, the thinned points (nr, 2) and
+    their groups (nr,) -- the first point of each (group, cell), cells of side ``cell``
+    from the points' minimum, in the order of the cell keys (counting sorts by group,
+    column and row) -- and the number of groups (-1, nothing thinned, when the points
+    span more than ``_THIN_MAX_CELLS`` cells across: the numpy path thins them)."""
+    n = points.shape[0]
+    g_lo, g_hi = group[0], group[0]
+    for i in range(n):
+        g_lo, g_hi = min(g_lo, group[i]), max(g_hi, group[i])
+    gk = np.empty(n, np.int64)
+    for i in range(n):
+        gk[i] = group[i] - g_lo
+    order = _nb_stable_order(gk, np.arange(n), g_hi - g_lo + 1)
+    g = np.empty(n, np.int64)
+    n_g = 0
+    for t in range(n):
+        i = order[t]
+        if t > 0 and group[i] != group[order[t - 1]]:
+            n_g += 1
+        g[i] = n_g
+    n_g += 1
+    lo0, lo1 = points[0, 0], points[0, 1]
+    for i in range(1, n):
+        lo0, lo1 = min(lo0, points[i, 0]), min(lo1, points[i, 1])
+    f0 = np.empty(n, np.int64)
+    f1 = np.empty(n, np.int64)
+    m0, m1 = 0, 0
+    for i in range(n):
+        f0[i] = np.int64(math.floor((points[i, 0] - lo0) / cell))
+        f1[i] = np.int64(math.floor((points[i, 1] - lo1) / cell))
+        m0, m1 = max(m0, f0[i]), max(m1, f1[i])
+    if m0 + m1 > _THIN_MAX_CELLS:           # points too far apart to count cells: numpy
+        return g, np.empty((0, 2)), np.empty(0, np.int64), -1
+    key = np.empty(n, np.int64)
+    for i in range(n):
+        key[i] = (g[i] * (m0 + 1) + f0[i]) * (m1 + 1) + f1[i]
+    # stably by the key, i.e. by (group, f0, f1): the first of equal keys first
+    ko = _nb_stable_order(g, _nb_stable_order(f0, _nb_stable_order(f1, np.arange(n), m1 + 1),
+                                              m0 + 1), n_g)
+    nr = 0
+    for t in range(n):
+        if t == 0 or key[ko[t]] != key[ko[t - 1]]:
+            nr += 1
+    pts = np.empty((nr, 2))
+    gr = np.empty(nr, np.int64)
+    nr = 0
+    for t in range(n):
+        i = ko[t]
+        if t == 0 or key[i] != key[ko[t - 1]]:
+            pts[nr, 0], pts[nr, 1] = points[i, 0], points[i, 1]
+            gr[nr] = g[i]
+            nr += 1
+    return g, pts, gr, n_g
+
+
+_nb_thin = _jit(_thin_kernel)
 
 
 def _link_groups_kernel(pts, gr, n_g, r2):
@@ -846,6 +924,77 @@ def run_links(edges: EdgeMap, m: Matches, tolerance_px: float) -> np.ndarray:
     return np.where(link, prev, -1)
 
 
+def _runs_kernel(string_prev, left_index, d, n_edges, tol, window, x):
+    """`run_links`, `matched_run_length` and `smooth_along_runs` of the matches (for
+    numba), with their tests and order of summation.
+
+    Args:
+        string_prev: (E,) int32 the left EdgeMap's ``string_prev``; left_index (K,) int32,
+            d (K,) float32 the matches' left edges and disparities; n_edges: E.
+        tol: float32 largest disparity step within a run, pixels.
+        window: smoothing window, pixels; x (K,) float64 the values smoothed.
+    Returns:
+        prev (K,) int64 the match one row up in the same run (-1 at a run's top); run
+        (K,) int64 its run's length; smooth (K,) float64 the mean of x over up to
+        ``window // 2`` pixels of the run on either side (in the order: itself, up, down);
+        nxt (K,) int64 the match one row down (-1 at a run's bottom).
+    """
+    k = left_index.shape[0]
+    feat_of_edge = np.full(n_edges, -1, np.int64)
+    for i in range(k):
+        feat_of_edge[left_index[i]] = i
+    prev = np.full(k, -1, np.int64)
+    for i in range(k):
+        pe = string_prev[left_index[i]]
+        if pe >= 0:
+            p = feat_of_edge[pe]
+            if p >= 0 and abs(d[i] - d[p]) <= tol:
+                prev[i] = p
+    nxt = np.full(k, -1, np.int64)
+    for i in range(k):
+        if prev[i] >= 0:
+            nxt[prev[i]] = i
+    # run lengths: the matches per run top
+    root = np.empty(k, np.int64)
+    for i in range(k):
+        p = prev[i]
+        if p < 0:
+            root[i] = i
+        elif p < i:
+            root[i] = root[p]
+        else:
+            r = p
+            while prev[r] >= 0:
+                r = prev[r]
+            root[i] = r
+    size = np.zeros(k, np.int64)
+    for i in range(k):
+        size[root[i]] += 1
+    run = np.empty(k, np.int64)
+    for i in range(k):
+        run[i] = size[root[i]]
+    half = max(window, 1) // 2
+    smooth = x.copy()
+    if half > 0:
+        for i in range(k):
+            total, count = x[i], 1.0
+            c = i
+            for _ in range(half):
+                c = prev[c] if c >= 0 else -1
+                total += x[c] if c >= 0 else 0.0
+                count += 1.0 if c >= 0 else 0.0
+            c = i
+            for _ in range(half):
+                c = nxt[c] if c >= 0 else -1
+                total += x[c] if c >= 0 else 0.0
+                count += 1.0 if c >= 0 else 0.0
+            smooth[i] = total / count
+    return prev, run, smooth, nxt
+
+
+_nb_runs = _jit(_runs_kernel)
+
+
 def occluded_matches(right: EdgeMap, m: Matches, gradient_limit: float,
                      trusted: np.ndarray | None = None, neighbours: int = 16) -> np.ndarray:
     """Matches hidden in the right image behind a nearer surface (half-occlusion).
@@ -875,8 +1024,13 @@ def occluded_matches(right: EdgeMap, m: Matches, gradient_limit: float,
     occ = np.zeros(k, bool)
     if k < 2:
         return occ
-    rs = right.string_id[m.right_index].astype(np.int64)
     tr = np.ones(k, bool) if trusted is None else np.asarray(trusted, bool)
+    if _nb_occluded_all is not None:
+        # The same selection, order and pair tests, compiled (one pass).
+        return _nb_occluded_all(right.string_id, m.right_index, np.ascontiguousarray(tr),
+                                m.v, m.d, m.u_left, m.u_right, float(gradient_limit),
+                                int(neighbours))
+    rs = right.string_id[m.right_index].astype(np.int64)
     if not tr.any():
         return occ
     # only the right strings with a trusted match can hide anything
@@ -922,13 +1076,84 @@ def _occluded_kernel(rs_o, tr_o, d_o, u_o, v_o, gradient_limit, neighbours):
             dd = d_o[j] - d_o[i]
             if not (tr_o[j] if dd > 0 else tr_o[i]):
                 continue
+            if gradient_limit > 0 and abs(dd) <= gradient_limit:
+                continue        # within limit * max(dist, 1) >= limit, whatever dist
             dist = math.hypot(u_o[j] - u_o[i], v_o[j] - v_o[i])
             if abs(dd) > gradient_limit * max(dist, 1.0):
                 far[i if dd > 0 else j] = True
     return far
 
 
+def _stable_order(key, rows, n_keys):
+    """``rows[np.argsort(key[rows], kind='stable')]`` for int keys 0..n_keys-1 (for
+    numba): a counting sort."""
+    count = np.zeros(n_keys + 1, np.int64)
+    for r in rows:
+        count[key[r] + 1] += 1
+    for q in range(n_keys):
+        count[q + 1] += count[q]
+    out = np.empty(rows.shape[0], np.int64)
+    for r in rows:
+        out[count[key[r]]] = r
+        count[key[r]] += 1
+    return out
+
+
+def _occluded_all_kernel(r_string, right_index, tr, v, d, u_left, u_right, gradient_limit,
+                         neighbours):
+    """`occluded_matches` (for numba): the matches of the right strings with a trusted
+    match, in the order of ``np.lexsort((v, right string))``, the same coordinates
+    (float64 d, cyclopean u, v) and `_occluded_kernel`'s pair tests; (K,) bool."""
+    k = right_index.shape[0]
+    occ = np.zeros(k, np.bool_)
+    if k < 2:
+        return occ
+    rs = np.empty(k, np.int64)
+    n_rs, n_v, any_tr = 0, 0, False
+    for i in range(k):
+        rs[i] = r_string[right_index[i]]
+        n_rs = max(n_rs, rs[i] + 1)
+        n_v = max(n_v, np.int64(v[i]) + 1)
+        any_tr = any_tr or tr[i]
+    if not any_tr:
+        return occ
+    has = np.zeros(n_rs, np.bool_)
+    for i in range(k):
+        if tr[i]:
+            has[rs[i]] = True
+    n = 0
+    for i in range(k):
+        n += has[rs[i]]
+    sub = np.empty(n, np.int64)
+    n = 0
+    for i in range(k):
+        if has[rs[i]]:
+            sub[n] = i
+            n += 1
+    vk = np.empty(k, np.int64)
+    for i in range(k):
+        vk[i] = v[i]
+    order = _nb_stable_order(rs, _nb_stable_order(vk, sub, n_v), n_rs)
+    rs_o = np.empty(n, np.int64)
+    tr_o = np.empty(n, np.bool_)
+    d_o = np.empty(n)
+    u_o = np.empty(n)
+    v_o = np.empty(n)
+    for t in range(n):
+        i = order[t]
+        rs_o[t], tr_o[t], d_o[t] = rs[i], tr[i], np.float64(d[i])
+        u_o[t] = 0.5 * (np.float64(u_left[i]) + np.float64(u_right[i]))
+        v_o[t] = np.float64(v[i])
+    far = _nb_occluded(rs_o, tr_o, d_o, u_o, v_o, gradient_limit, min(neighbours, n - 1))
+    for t in range(n):
+        if far[t]:
+            occ[order[t]] = True
+    return occ
+
+
 _nb_occluded = _jit(_occluded_kernel)
+_nb_stable_order = _jit(_stable_order)
+_nb_occluded_all = _jit(_occluded_all_kernel)
 _warm = False
 
 
@@ -936,14 +1161,18 @@ def _warm_up() -> None:
     """Compile the numba kernels once per process (see `matching.warm_up`), before the
     first frame; falls back to the numpy paths if numba is missing or fails."""
     global _warm, _nb_occluded, _nb_hanging, _nb_link_groups, _nb_corner_free, _nb_contact, \
-        _nb_walk_down
+        _nb_walk_down, _nb_extremes, _nb_soft_args, _nb_arcs, _nb_contact_bounds, _nb_owners, \
+        _nb_group_quantile, _nb_extent, _nb_runs, _nb_occluded_all, _nb_hanging_all, \
+        _nb_on_ground, _nb_still, _nb_temporal, _nb_thin
     if _warm:
         return
     _warm = True
     edges_warm_up()
     if not matching_warm_up() or _nb_occluded is None:
         _nb_occluded = _nb_hanging = _nb_link_groups = _nb_corner_free = _nb_contact = None
-        _nb_walk_down = None
+        _nb_walk_down = _nb_extremes = _nb_soft_args = _nb_arcs = _nb_contact_bounds = None
+        _nb_owners = _nb_group_quantile = _nb_extent = _nb_runs = _nb_occluded_all = None
+        _nb_hanging_all = _nb_on_ground = _nb_still = _nb_temporal = _nb_thin = None
         return
     f2, f1, i1 = np.zeros((1, 2)), np.zeros(1), np.zeros(1, np.int64)
     _nb_corner_free = _warmed(_nb_corner_free, f2, f2, f2, f2, f1 + 1.0, np.zeros((1, 1, 2)),
@@ -952,11 +1181,47 @@ def _warm_up() -> None:
                           np.ones((1, 1), bool), i1, i1 + 1, i1, i1 + 1, 0, 0,
                           np.zeros((1, 1), np.float32), np.zeros((1, 1), np.float32))
     _nb_walk_down = _warmed(_nb_walk_down, i1, i1 - 1, f1, f1, 2.0, 1)
+    _nb_arcs = _warmed(_nb_arcs, f2, f2, f1)
+    _nb_group_quantile = _warmed(_nb_group_quantile, i1, f1, 0.5, 1)
+    v1, u1 = np.zeros(1, np.int32), np.zeros(1, np.float32)
+    _nb_still = _warmed(_nb_still, np.zeros((1, 3), bool), True, v1, v1, 1, 1)
+    _nb_temporal = _warmed(_nb_temporal, v1, u1, f1, f1, True, 0.5, 0.75, 0.8, True,
+                           np.zeros((1, 1), np.float32), np.ones((1, 1), np.float32), 1, 1)
+    _nb_on_ground = _warmed(_nb_on_ground, i1, i1, f1, np.zeros(1, np.float32),
+                            np.zeros(1, np.int32), np.zeros(1, np.float32), np.zeros(3), 1.0, 1)
+    _nb_runs = _warmed(_nb_runs, np.full(1, -1, np.int32), np.zeros(1, np.int32),
+                       np.zeros(1, np.float32), 1, np.float32(1.0), 5, f1)
+    _nb_extent = _warmed(_nb_extent, i1, 1, f2, f1, f1, f1 + 1.0, f1,
+                         np.zeros(1, np.float32), np.zeros(1, np.int32), np.zeros(1, np.int32),
+                         True)
+    _nb_owners = _warmed(_nb_owners, f2, f1, np.zeros((2, 2)), np.zeros(2, np.int64), f1 + 1.0,
+                         0.5, f1, np.zeros(2), f2, True)
+    _nb_contact_bounds = _warmed(_nb_contact_bounds, f1, f1, f1, f1, f2[:, :1], f2[:, :1],
+                                 np.ones((1, 1), bool), 2, 2)
     _nb_link_groups = _warmed(_nb_link_groups, np.zeros((2, 2)), np.arange(2), 2, 1.0)
+    _nb_thin = _warmed(_nb_thin, np.zeros((2, 2)), np.arange(2), 0.1)
     z, i = np.zeros(2), np.zeros(1, np.int64)
     _nb_occluded = _warmed(_nb_occluded, np.zeros(2, np.int64), np.ones(2, bool), z, z, z,
                            1.0, 1)
+    i32, f32 = np.zeros(2, np.int32), np.zeros(2, np.float32)
+    _nb_occluded_all = (None if _nb_occluded is None else _warmed(
+        _nb_occluded_all, i32, i32, np.ones(2, bool), i32, f32, f32, f32, 1.0, 16))
     _nb_hanging = _warmed(_nb_hanging, i, i, np.zeros(1), i - 1, i, i - 1, 1, 2, 1.0, 0.1)
+    _nb_hanging_all = (None if _nb_hanging is None else _warmed(
+        _nb_hanging_all, np.full(1, -1, np.int32), np.zeros(1, np.int32),
+        np.zeros(1, np.int32), np.zeros(1, np.float32), i - 1, np.ones(1), 0.5, True,
+        np.ones(1, bool), 32, 1.0, 0.1))
+    # The soft nearest points (four kernels, one switch) and the per-obstacle extremes.
+    one = np.ones(1, bool)
+    soft = _warmed(_nb_soft_args, f2, f1 + 1.0, i1, one, 1, 2.0)
+    if soft is not None:
+        idx, start, near, arg = soft(f2, f1 + 1.0, i1, one, 1, 2.0)
+        ok = (_warmed(_nb_soft_far, f2, idx, start, near, f1 + 1.0) is not None
+              and _warmed(_nb_soft_finish, f2, idx, start, near, f1 + 1.0, one, f2)
+              is not None)
+        soft = soft if ok else None
+    _nb_soft_args = soft
+    _nb_extremes = _warmed(_nb_extremes, i1, 1, f1, f1) if soft is not None else None
 
 
 def matched_run_length(edges: EdgeMap, m: Matches, tolerance_px: float,
@@ -1054,6 +1319,13 @@ def hanging_runs(edges: EdgeMap, m: Matches, prev: np.ndarray, h: np.ndarray,
     out = np.zeros(k, bool)
     if k == 0:
         return out
+    if _nb_hanging_all is not None:
+        # The same run bottoms and walk, compiled (one pass).
+        return _nb_hanging_all(edges.string_prev, m.left_index, m.string_id, m.d,
+                               np.asarray(prev, np.int64), np.asarray(h, np.float64),
+                               float(max_height), only is not None,
+                               np.zeros(k, bool) if only is None else np.asarray(only, bool),
+                               int(max_gap), float(tolerance_px), float(slope))
     is_prev = np.zeros(k, bool)
     is_prev[prev[prev >= 0]] = True
     cand = ~is_prev & (h > max_height)                        # floating run bottoms
@@ -1150,7 +1422,54 @@ def _hanging_kernel(bottom, left_index, d, below, feat_of_edge, prev, k, max_gap
     return out
 
 
+def _hanging_all_kernel(string_prev, left_index, string_id, d, prev, h, max_height, use_only,
+                        only, max_gap, tol, slope):
+    """`hanging_runs` (for numba): its candidate run bottoms (no match below in the run,
+    higher than ``max_height``; of strings with an ``only`` match when ``use_only``), the
+    edges below each edge and `_hanging_kernel`'s walk; (K,) bool."""
+    k = left_index.shape[0]
+    is_prev = np.zeros(k, np.bool_)
+    for i in range(k):
+        if prev[i] >= 0:
+            is_prev[prev[i]] = True
+    n_s = 0
+    for i in range(k):
+        n_s = max(n_s, np.int64(string_id[i]) + 1)
+    has = np.zeros(n_s, np.bool_)
+    for i in range(k):
+        if only[i]:
+            has[string_id[i]] = True
+    n_b = 0
+    cand = np.zeros(k, np.bool_)
+    for i in range(k):
+        cand[i] = (not is_prev[i] and h[i] > max_height
+                   and (has[string_id[i]] if use_only else True))
+        n_b += cand[i]
+    if n_b == 0:
+        return np.zeros(k, np.bool_)
+    bottom = np.empty(n_b, np.int64)
+    n_b = 0
+    for i in range(k):
+        if cand[i]:
+            bottom[n_b] = i
+            n_b += 1
+    n_e = string_prev.shape[0]
+    feat_of_edge = np.full(n_e, -1, np.int64)
+    li = np.empty(k, np.int64)
+    d64 = np.empty(k)
+    for i in range(k):
+        feat_of_edge[left_index[i]] = i
+        li[i] = left_index[i]
+        d64[i] = d[i]
+    below = np.full(n_e, -1, np.int64)
+    for e in range(n_e):
+        if string_prev[e] >= 0:
+            below[string_prev[e]] = e
+    return _nb_hanging(bottom, li, d64, below, feat_of_edge, prev, k, max_gap, tol, slope)
+
+
 _nb_hanging = _jit(_hanging_kernel)
+_nb_hanging_all = _jit(_hanging_all_kernel)
 
 
 def smooth_along_runs(x: np.ndarray, prev: np.ndarray, window: int) -> np.ndarray:
@@ -1194,8 +1513,10 @@ class _FrameContext:
     """
 
     def __init__(self, cam: StereoCamera, metric: MetricPlane, abc: np.ndarray, u, v, pd,
-                 excess_mean, sigma, prev, ground_points, left, u_left, usable) -> None:
+                 excess_mean, sigma, prev, ground_points, left, u_left, usable,
+                 nxt: np.ndarray | None = None) -> None:
         self.cam, self.metric, self.abc = cam, metric, abc
+        self._nxt = nxt
         self.u, self.v, self.pd = u, v, pd
         # the matches' left-image columns and whether each is reliably matched in range
         self.u_left, self.usable = u_left, usable
@@ -1203,7 +1524,7 @@ class _FrameContext:
         n = metric.normal_up
         fwd = np.array([0.0, 0.0, 1.0]) - n[2] * n
         self.fwd = fwd / np.linalg.norm(fwd)
-        self.lft = np.cross(n, self.fwd)
+        self.lft = _cross3(n, self.fwd)
         self.origin = -metric.height * n
         self._ground_points = ground_points
         # Placement-only silhouette candidates (`silhouette_owners`): the lowest
@@ -1212,6 +1533,18 @@ class _FrameContext:
         self.weak_top = np.zeros(0)
         self._ground_xy: np.ndarray | None = None
         self._left = left
+
+    @property
+    def nxt(self) -> np.ndarray:
+        """(K,) int64 the match one row down in the same matched run of each match (-1
+        at a run's bottom): the inverse of ``prev``."""
+        if self._nxt is None:
+            k = self.prev.shape[0]
+            nxt = np.full(k, -1, np.int64)
+            has = self.prev >= 0
+            nxt[self.prev[has]] = np.flatnonzero(has)
+            self._nxt = nxt
+        return self._nxt
 
     def to_xy(self, points: np.ndarray) -> np.ndarray:
         """(N, 2) ground coordinates of the feet (projections on the plane) of (N, 3)
@@ -1257,6 +1590,19 @@ class _FrameContext:
 
         t_n, m = ok.shape
         img_h, img_w = self._left.shape
+        if _nb_contact is not None and _nb_contact_bounds is not None:
+            # One projection of all the points (elementwise: the same pixels), the
+            # patches' bounds compiled (the same arithmetic).
+            uu, vv = self.to_image(np.concatenate((a, b, n.reshape(-1, 2))))
+            ua, ub, un = uu[:t_n], uu[t_n:2 * t_n], uu[2 * t_n:].reshape(t_n, m)
+            va, vb, vn = vv[:t_n], vv[t_n:2 * t_n], vv[2 * t_n:].reshape(t_n, m)
+            okc = np.ascontiguousarray(ok)
+            x0, x1, y0, y1 = _nb_contact_bounds(ua, va, ub, vb, un, vn, okc, img_w, img_h)
+            gx0, gx1, gy0, gy1 = int(x0.min()), int(x1.max()), int(y0.min()), int(y1.max())
+            patch = self._left[gy0:gy1, gx0:gx1].astype(np.float32)
+            gx = cv2.Sobel(patch, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
+            gy = cv2.Sobel(patch, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+            return _nb_contact(ua, va, ub, vb, un, vn, okc, x0, x1, y0, y1, gx0, gy0, gx, gy)
         ua, va = self.to_image(a)
         ub, vb = self.to_image(b)
         un, vn = self.to_image(n.reshape(-1, 2))
@@ -1312,6 +1658,33 @@ class _FrameContext:
         total = best.mean(axis=-1) * length
         score = (total[:, 0] + total[:, 1]) / np.maximum(length[:, 0] + length[:, 1], 1e-9)
         return np.where(ok, score, -inf)
+
+
+def _contact_bounds_kernel(ua, va, ub, vb, un, vn, ok, img_w, img_h):
+    """The patch of each search of `_FrameContext.contact_edge_scores` (for numba): the
+    bounding box of its feet (ua, va), (ub, vb) (T,) and candidates ``ok`` (un, vn)
+    (T, M), pixels, widened by 3 (4 past the far side), within the image: (T,) int64
+    x0, x1, y0, y1 each (x1, y1 exclusive), as numpy's floor, ceil and clipping give."""
+    t_n, m = ok.shape
+    x0 = np.empty(t_n, np.int64)
+    x1 = np.empty(t_n, np.int64)
+    y0 = np.empty(t_n, np.int64)
+    y1 = np.empty(t_n, np.int64)
+    for t in range(t_n):
+        u_lo, u_hi = min(ua[t], ub[t]), max(ua[t], ub[t])
+        v_lo, v_hi = min(va[t], vb[t]), max(va[t], vb[t])
+        for k in range(m):
+            if ok[t, k]:
+                u_lo, u_hi = min(u_lo, un[t, k]), max(u_hi, un[t, k])
+                v_lo, v_hi = min(v_lo, vn[t, k]), max(v_hi, vn[t, k])
+        x0[t] = min(max(np.int64(math.floor(u_lo)) - 3, 0), img_w - 1)
+        x1[t] = min(max(np.int64(math.ceil(u_hi)) + 4, x0[t] + 1), img_w)
+        y0[t] = min(max(np.int64(math.floor(v_lo)) - 3, 0), img_h - 1)
+        y1[t] = min(max(np.int64(math.ceil(v_hi)) + 4, y0[t] + 1), img_h)
+    return x0, x1, y0, y1
+
+
+_nb_contact_bounds = _jit(_contact_bounds_kernel)
 
 
 def _contact_kernel(ua, va, ub, vb, un, vn, ok, x0, x1, y0, y1, gx0, gy0, gx, gy):
@@ -1398,10 +1771,7 @@ def string_feet(ctx: _FrameContext, start: np.ndarray) -> tuple[np.ndarray, np.n
     Returns:
         ((S, 2) ground coordinates of the feet, (S,) range sigma, metres).
     """
-    k = ctx.prev.shape[0]
-    nxt = np.full(k, -1, np.int64)
-    has = ctx.prev >= 0
-    nxt[ctx.prev[has]] = np.flatnonzero(has)
+    nxt = ctx.nxt
     cur = np.asarray(start, np.int64)
     exm, sig = ctx.excess_mean, ctx.sigma
     if _nb_walk_down is not None:
@@ -1473,6 +1843,251 @@ def _body_gap(ground: np.ndarray, a: np.ndarray, b: np.ndarray) -> bool:
     inside = ((along > _BODY_GAP_END_M) & (along < length - _BODY_GAP_END_M)
               & (behind > lo) & (behind < hi))
     return int(np.count_nonzero(inside)) >= _FACE_BEHIND_MIN
+
+
+#: Relative rounding slack of the compiled `_body_gap` test (`_body_gap_kernel`): its
+#: sums of products may differ from numpy's BLAS products (fused multiply-adds) in the
+#: last bits; ground points this close to the strip's sides leave the decision to numpy.
+_GAP_SLACK = 1e-12
+
+
+def _body_gap_kernel(g, ax, ay, bx, by):
+    """`_body_gap` (for numba) of the feet (ax, ay), (bx, by) and ground g (G, 2): 1 when
+    it is sure to be True, 0 when sure to be False, -1 when a ground point (or the
+    camera's side of the segment) lies within rounding distance of the strip's sides
+    (``_GAP_SLACK`` times the size of the products): then only `_body_gap` decides.
+
+    The same quantities as `_body_gap`: e = b - a, t = e / |e|, nrm = (-t_y, t_x) turned
+    towards the camera's far side (nrm . (a + b) / 2 >= 0), and for each ground point
+    p - a its coordinates along t and along nrm."""
+    ex, ey = bx - ax, by - ay
+    length = math.hypot(ex, ey)
+    if g.shape[0] == 0 or length <= 2.0 * _BODY_GAP_END_M:
+        return 0
+    tx, ty = ex / length, ey / length
+    nx, ny = -ty, tx
+    mx, my = 0.5 * (ax + bx), 0.5 * (ay + by)
+    p0, p1 = nx * mx, ny * my
+    side = p0 + p1
+    if abs(side) <= _GAP_SLACK * (abs(p0) + abs(p1)):
+        return -1
+    if side < 0.0:                     # pointing away from the camera
+        nx, ny = -nx, -ny
+    lo, hi = _BODY_GAP_BAND_M
+    end0, end1 = _BODY_GAP_END_M, length - _BODY_GAP_END_M
+    sure, maybe = 0, 0
+    for p in range(g.shape[0]):
+        rx, ry = g[p, 0] - ax, g[p, 1] - ay
+        q0, q1 = rx * tx, ry * ty
+        along = q0 + q1
+        ta = _GAP_SLACK * (abs(q0) + abs(q1))
+        q0, q1 = rx * nx, ry * ny
+        behind = q0 + q1
+        tb = _GAP_SLACK * (abs(q0) + abs(q1))
+        if (along > end0 - ta and along < end1 + ta and behind > lo - tb
+                and behind < hi + tb):
+            maybe += 1
+            if (along > end0 + ta and along < end1 - ta and behind > lo + tb
+                    and behind < hi - tb):
+                sure += 1
+                if sure >= _FACE_BEHIND_MIN:
+                    return 1
+    return 0 if maybe < _FACE_BEHIND_MIN else -1
+
+
+def _pairwise_sum_kernel(a, lo, hi):
+    """``a[lo:hi].sum()`` of a contiguous float64 array as numpy adds it, for up to 128
+    values (for numba): its pairwise summation, which is in order below 8 values, else
+    8 partial sums over blocks of 8, combined pairwise, then the rest in order."""
+    n = hi - lo
+    if n < 8:
+        res = 0.0
+        for i in range(lo, hi):
+            res += a[i]
+        return res
+    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
+    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
+    m = lo + n - n % 8
+    for i in range(lo + 8, m, 8):
+        r0 += a[i]
+        r1 += a[i + 1]
+        r2 += a[i + 2]
+        r3 += a[i + 3]
+        r4 += a[i + 4]
+        r5 += a[i + 5]
+        r6 += a[i + 6]
+        r7 += a[i + 7]
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    for i in range(m, hi):
+        res += a[i]
+    return res
+
+
+def _first_min(x, k, best):
+    """Whether x[k] replaces x[best] as ``np.argmin``'s answer scanning in order: smaller,
+    or the first NaN (which numpy returns)."""
+    return not math.isnan(x[best]) and (math.isnan(x[k]) or x[k] < x[best])
+
+
+def _soft_args_kernel(xy, sr, group, want, n_groups, two):
+    """The per-foot exponents of `soft_nearest` for the feet of the groups ``want``
+    (n_groups,) bool (for numba). ``two`` is 2.0, passed at run time: the nearest
+    foot's sigma squared is ``pow(s_near, 2)`` as numpy squares a scalar (libm's pow,
+    which the compiler would otherwise turn into s * s).
+
+    Returns:
+        idx (P,) int64 the feet by group, ascending within each (as ``np.argsort(group,
+        kind='stable')``); start (n_groups + 1,) int64 each group's first row in idx;
+        near (n_groups,) int64 each group's nearest foot (``np.argmin`` of the range,
+        first of equals), -1 for none; arg (P,) float64
+        ``-0.5 (r - r_near)^2 / max(s^2 + s_near^2, 1e-12)`` (numpy's operations).
+    """
+    s_n = group.shape[0]
+    start = np.zeros(n_groups + 1, np.int64)
+    for i in range(s_n):
+        if want[group[i]]:
+            start[group[i] + 1] += 1
+    for k in range(n_groups):
+        start[k + 1] += start[k]
+    fill = start[:-1].copy()
+    idx = np.empty(start[n_groups], np.int64)
+    r = np.empty(s_n)
+    for i in range(s_n):
+        k = group[i]
+        if want[k]:
+            idx[fill[k]] = i
+            fill[k] += 1
+            r[i] = math.hypot(xy[i, 0], xy[i, 1])
+    near = np.full(n_groups, -1, np.int64)
+    arg = np.empty(idx.shape[0])
+    for k in range(n_groups):
+        if start[k] == start[k + 1]:
+            continue
+        j = idx[start[k]]
+        for p in range(start[k] + 1, start[k + 1]):
+            if _nb_first_min(r, idx[p], j):
+                j = idx[p]
+        near[k] = j
+        rj, sj2 = r[j], math.pow(sr[j], two)
+        for p in range(start[k], start[k + 1]):
+            i = idx[p]
+            dr = r[i] - rj
+            den = sr[i] * sr[i] + sj2
+            if not (den >= 1e-12 or math.isnan(den)):     # np.maximum(den, 1e-12)
+                den = 1e-12
+            arg[p] = -0.5 * (dr * dr) / den
+    return idx, start, near, arg
+
+
+def _soft_far_kernel(xy, idx, start, near, w):
+    """(P,) bool: the feet of `_soft_args_kernel`'s rows that `soft_nearest` tests for a
+    body gap: weight above 0.01 and more than ``_BODY_GAP_SPAN_M`` from the nearest foot
+    (for numba)."""
+    far = np.zeros(idx.shape[0], np.bool_)
+    for k in range(near.shape[0]):
+        j = near[k]
+        for p in range(start[k], start[k + 1]):
+            i = idx[p]
+            far[p] = (w[p] > 0.01 and math.hypot(xy[i, 0] - xy[j, 0], xy[i, 1] - xy[j, 1])
+                      > _BODY_GAP_SPAN_M)
+    return far
+
+
+def _soft_finish_kernel(xy, idx, start, near, w, far, g):
+    """The weighted means of `soft_nearest` (for numba): per group, the weights w (P,)
+    with those of the ``far`` feet that visible ground g (G, 2) separates from the
+    nearest foot set to 0 (`_body_gap_kernel`), then sum(w xy) / sum(w) in numpy's order
+    (the products' column sums in order, the weights' pairwise).
+
+    Returns:
+        ((n_groups, 2) float64 the points, NaN for groups without feet; (n_groups,) bool,
+        the groups left to numpy (a body-gap test too close to call, or more than 128
+        feet), their point not computed).
+    """
+    n_g = near.shape[0]
+    out = np.full((n_g, 2), np.nan)
+    undecided = np.zeros(n_g, np.bool_)
+    ww = w.copy()
+    for k in range(n_g):
+        j = near[k]
+        if j < 0:
+            continue
+        if start[k + 1] - start[k] > 128:       # numpy sums more values by halves
+            undecided[k] = True
+            continue
+        for p in range(start[k], start[k + 1]):
+            if not far[p]:
+                continue
+            i = idx[p]
+            gap = _nb_body_gap(g, xy[j, 0], xy[j, 1], xy[i, 0], xy[i, 1])
+            if gap < 0:
+                undecided[k] = True
+                break
+            if gap == 1:
+                ww[p] = 0.0
+        if undecided[k]:
+            continue
+        sx, sy = 0.0, 0.0
+        for p in range(start[k], start[k + 1]):
+            i = idx[p]
+            sx += ww[p] * xy[i, 0]
+            sy += ww[p] * xy[i, 1]
+        den = _nb_pairwise_sum(ww, start[k], start[k + 1])
+        out[k, 0] = sx / den
+        out[k, 1] = sy / den
+    return out, undecided
+
+
+def _soft_nearest_groups(xy: np.ndarray, sr: np.ndarray, group: np.ndarray, n_groups: int,
+                         want: np.ndarray, ground_xy=None) -> np.ndarray:
+    """`soft_nearest` of the feet of each group ``want`` at once.
+
+    Args:
+        xy: (S, 2) ground coordinates of the feet, metres; sr: (S,) their range sigmas.
+        group: (S,) int64 group of each foot, 0..n_groups-1.
+        want: (n_groups,) bool, the groups to compute (each with at least one foot).
+        ground_xy: as `soft_nearest`'s (an array, a callable returning one, or None).
+    Returns:
+        (n_groups, 2) float64, NaN for the groups not wanted.
+    """
+    out = np.full((n_groups, 2), np.nan)
+    if not want.any():
+        return out
+    if _nb_soft_args is None:
+        order = np.argsort(group, kind='stable')
+        first = np.searchsorted(group[order], np.arange(n_groups), side='left')
+        last = np.searchsorted(group[order], np.arange(n_groups), side='right')
+        for k in np.flatnonzero(want).tolist():
+            sel = order[first[k]:last[k]]
+            out[k] = soft_nearest(xy[sel], sr[sel], ground_xy)
+        return out
+    xy = np.ascontiguousarray(xy, np.float64)
+    idx, start, near, arg = _nb_soft_args(xy, np.ascontiguousarray(sr, np.float64),
+                                          np.asarray(group, np.int64), want, n_groups, 2.0)
+    w = np.exp(arg)                  # numpy's exp (the compiled one differs in last bits)
+    if ground_xy is None:
+        far = np.zeros(idx.shape[0], bool)
+        g = np.zeros((0, 2))
+    else:
+        far = _nb_soft_far(xy, idx, start, near, w)
+        g = np.zeros((0, 2))
+        if far.any():
+            g = ground_xy() if callable(ground_xy) else ground_xy
+            g = np.ascontiguousarray(g, np.float64)
+    q, undecided = _nb_soft_finish(xy, idx, start, near, w, far, g)
+    out[want] = q[want]
+    for k in np.flatnonzero(undecided).tolist():       # left to numpy
+        sel = idx[start[k]:start[k + 1]]
+        out[k] = soft_nearest(xy[sel], sr[sel], g)
+    return out
+
+
+_nb_pairwise_sum = _jit(_pairwise_sum_kernel)
+_nb_first_min = _jit(_first_min)
+_nb_body_gap = _jit(_body_gap_kernel)
+_nb_soft_args = _jit(_soft_args_kernel)
+_nb_soft_far = _jit(_soft_far_kernel)
+_nb_soft_finish = _jit(_soft_finish_kernel)
 
 
 def _ground_inside(g: np.ndarray, a: np.ndarray, n: np.ndarray, b: np.ndarray,
@@ -1567,6 +2182,49 @@ def _corner_free_kernel(g, a, b, c, r, n, margin):
 _nb_corner_free = _jit(_corner_free_kernel)
 
 
+#: The candidates' positions along the Thales arc, 0..1 (`hidden_corners`).
+_ARC_LIN = np.linspace(0.0, 1.0, _CORNER_ARC_POINTS)
+
+
+def _arcs_kernel(a, b, sigma):
+    """The circles and near arcs of `hidden_corners`' searches (for numba), with its
+    arithmetic (libm's hypot and atan2, Python's float modulo).
+
+    Args:
+        a, b: (T, 2) silhouette feet, metres; sigma: (T,) their range sigmas.
+    Returns:
+        ok (T,) bool, the searches whose corner could bulge enough (rho > 2 sigma) and
+        whose circle leaves out the camera's foot; c (T, 2) the circles' centres
+        (a + b) / 2, rho (T,) their radii |b - a| / 2; a0 (T,) the angle of a from c,
+        span (T,) the near arc from a to b, radians (negative: clockwise).
+    """
+    t_n = a.shape[0]
+    ok = np.zeros(t_n, np.bool_)
+    c = np.empty((t_n, 2))
+    rho = np.empty(t_n)
+    a0 = np.empty(t_n)
+    span = np.empty(t_n)
+    two_pi = 2 * math.pi
+    for t in range(t_n):
+        cx, cy = 0.5 * (a[t, 0] + b[t, 0]), 0.5 * (a[t, 1] + b[t, 1])
+        c[t, 0], c[t, 1] = cx, cy
+        r = 0.5 * math.hypot(b[t, 0] - a[t, 0], b[t, 1] - a[t, 1])
+        rho[t] = r
+        if r <= _CORNER_SIGMAS * sigma[t] or math.hypot(cx, cy) <= r:
+            continue
+        ang0 = math.atan2(a[t, 1] - cy, a[t, 0] - cx)
+        sp = (math.atan2(b[t, 1] - cy, b[t, 0] - cx) - ang0) % two_pi      # a -> b, ccw
+        if (math.atan2(-cy, -cx) - ang0) % two_pi > sp:                    # near half cw
+            sp -= two_pi
+        ok[t] = True
+        a0[t] = ang0
+        span[t] = sp
+    return ok, c, rho, a0, span
+
+
+_nb_arcs = _jit(_arcs_kernel)
+
+
 def hidden_corners(a: np.ndarray, b: np.ndarray, sigma: np.ndarray, ground_xy,
                    score) -> np.ndarray:
     """`hidden_corner` of several pairs of silhouette feet at once.
@@ -1584,30 +2242,39 @@ def hidden_corners(a: np.ndarray, b: np.ndarray, sigma: np.ndarray, ground_xy,
     """
     t_n = a.shape[0]
     out = np.full((t_n, 2), np.nan)
-    jobs, cs, rhos, a0s, spans = [], [], [], [], []
-    for t in range(t_n):
-        at, bt = a[t], b[t]
-        c = 0.5 * (at + bt)
-        rho = 0.5 * float(np.hypot(*(bt - at)))
-        cn = float(np.hypot(*c))
-        if rho <= _CORNER_SIGMAS * sigma[t] or cn <= rho:   # no corner could bulge enough
-            continue
-        a0 = math.atan2(at[1] - c[1], at[0] - c[0])
-        span = (math.atan2(bt[1] - c[1], bt[0] - c[0]) - a0) % (2 * math.pi)   # a -> b, ccw
-        if (math.atan2(-c[1], -c[0]) - a0) % (2 * math.pi) > span:   # the near half is cw
-            span -= 2 * math.pi
-        jobs.append(t)
-        cs.append(c)
-        rhos.append(rho)
-        a0s.append(a0)
-        spans.append(span)
-    if not jobs:
-        return out
-    jobs = np.array(jobs)
+    if _nb_arcs is not None:
+        # The same circles and arcs, compiled (one pass over the searches).
+        ok_t, c_all, rho_all, a0_all, span_all = _nb_arcs(
+            np.ascontiguousarray(a, np.float64), np.ascontiguousarray(b, np.float64),
+            np.ascontiguousarray(sigma, np.float64))
+        jobs = np.flatnonzero(ok_t)
+        if not jobs.size:
+            return out
+        cj, rj, a0j, spanj = c_all[jobs], rho_all[jobs], a0_all[jobs], span_all[jobs]
+    else:
+        jobs, cs, rhos, a0s, spans = [], [], [], [], []
+        for t in range(t_n):
+            at, bt = a[t], b[t]
+            c = 0.5 * (at + bt)
+            rho = 0.5 * float(np.hypot(*(bt - at)))
+            cn = float(np.hypot(*c))
+            if rho <= _CORNER_SIGMAS * sigma[t] or cn <= rho:   # no corner could bulge enough
+                continue
+            a0 = math.atan2(at[1] - c[1], at[0] - c[0])
+            span = (math.atan2(bt[1] - c[1], bt[0] - c[0]) - a0) % (2 * math.pi)  # a -> b, ccw
+            if (math.atan2(-c[1], -c[0]) - a0) % (2 * math.pi) > span:   # the near half is cw
+                span -= 2 * math.pi
+            jobs.append(t)
+            cs.append(c)
+            rhos.append(rho)
+            a0s.append(a0)
+            spans.append(span)
+        if not jobs:
+            return out
+        jobs = np.array(jobs)
+        cj, rj, a0j, spanj = np.array(cs), np.array(rhos), np.array(a0s), np.array(spans)
     aj, bj = a[jobs], b[jobs]
-    lin = np.linspace(0.0, 1.0, _CORNER_ARC_POINTS)
-    ang = np.array(a0s)[:, None] + lin * np.array(spans)[:, None]
-    cj, rj = np.array(cs), np.array(rhos)
+    ang = a0j[:, None] + _ARC_LIN * spanj[:, None]
     n = cj[:, None, :] + rj[:, None, None] * np.stack([np.cos(ang), np.sin(ang)], axis=2)
     margin = _FREE_SPACE_MARGIN_M
     g = ground_xy() if callable(ground_xy) else ground_xy
@@ -1695,6 +2362,9 @@ def nearest_points(xy: np.ndarray, sr: np.ndarray, group: np.ndarray, n_groups: 
     out = np.full((n_groups, 2), np.nan)
     if xy.shape[0] == 0:
         return out
+    if _nb_extremes is not None and _nb_soft_args is not None:
+        return _nearest_points_compiled(xy, sr, group, n_groups, ground_xy, score,
+                                        at_border)
     order = np.argsort(group, kind='stable')
     g_s = group[order]
     first = np.searchsorted(g_s, np.arange(n_groups), side='left')
@@ -1738,6 +2408,84 @@ def nearest_points(xy: np.ndarray, sr: np.ndarray, group: np.ndarray, n_groups: 
     for k in soft:
         sel = order[first[k]:last[k]]
         out[k] = soft_nearest(xy[sel], sr[sel], ground_xy)
+    return out
+
+
+def _extremes_kernel(group, n_groups, brg, r):
+    """Per group of feet (for numba): the number of feet, and the feet of largest and
+    smallest bearing and of smallest range, (n_groups,) int64 each (-1 for none): the
+    first of equals, or the first NaN, as ``np.argmax`` / ``np.argmin`` over the group's
+    feet in order."""
+    count = np.zeros(n_groups, np.int64)
+    i_max = np.full(n_groups, -1, np.int64)
+    i_min = np.full(n_groups, -1, np.int64)
+    i_near = np.full(n_groups, -1, np.int64)
+    for p in range(group.shape[0]):
+        k = group[p]
+        if count[k] == 0:
+            i_max[k] = i_min[k] = i_near[k] = p
+        else:
+            b, bm = brg[p], brg[i_max[k]]
+            if not math.isnan(bm) and (math.isnan(b) or b > bm):
+                i_max[k] = p
+            if _nb_first_min(brg, p, i_min[k]):
+                i_min[k] = p
+            if _nb_first_min(r, p, i_near[k]):
+                i_near[k] = p
+        count[k] += 1
+    return count, i_max, i_min, i_near
+
+
+_nb_extremes = _jit(_extremes_kernel)
+
+
+def _nearest_points_compiled(xy: np.ndarray, sr: np.ndarray, group: np.ndarray,
+                             n_groups: int, ground_xy, score,
+                             at_border: np.ndarray | None) -> np.ndarray:
+    """`nearest_points` with its per-obstacle loop compiled (`_extremes_kernel`) and the
+    soft nearest points of all obstacles at once (`_soft_nearest_groups`): the same
+    tests and arithmetic, so the same points (S >= 1 feet)."""
+    out = np.full((n_groups, 2), np.nan)
+    group = np.asarray(group, np.int64)
+    brg_all = np.arctan2(xy[:, 1], xy[:, 0])
+    r_all = np.hypot(xy[:, 0], xy[:, 1])
+    count, i, j, kk = _nb_extremes(group, n_groups, brg_all, r_all)
+    single = count == 1
+    out[single] = xy[i[single]]
+    multi = count > 1
+    # A foot between the outermost ones and clearly nearer than both is the near corner
+    # (a foot on a frontal face, e.g. of a texture stripe, is not clearly nearer).
+    seen = np.zeros(n_groups, bool)
+    for k in np.flatnonzero(multi & (kk != i) & (kk != j)).tolist():
+        ri, rj, rk = r_all[i[k]], r_all[j[k]], r_all[kk[k]]
+        si, sj, sk = sr[i[k]], sr[j[k]], sr[kk[k]]
+        seen[k] = min(ri, rj) - rk > _CORNER_SIGMAS * math.hypot(sk, max(si, sj))
+    search = multi & ~seen & (i != j)
+    if at_border is not None:
+        search &= ~(at_border[np.maximum(i, 0)] | at_border[np.maximum(j, 0)])
+    if score is None:
+        search[:] = False
+    soft = multi & ~search
+    found = np.zeros(n_groups, bool)
+    ks = np.flatnonzero(search)
+    if ks.size:
+        ii, jj = i[ks], j[ks]
+        si, sj = sr[ii], sr[jj]
+        q = hidden_corners(xy[ii], xy[jj], np.where(sj > si, sj, si).astype(np.float64),
+                           ground_xy, score)
+        hit = ~np.isnan(q[:, 0])
+        soft[ks[~hit]] = True
+        found[ks[hit]] = True
+        qk = np.full((n_groups, 2), np.nan)
+        qk[ks[hit]] = q[hit]
+    qs = _soft_nearest_groups(xy, sr, group, n_groups, soft | found, ground_xy)
+    out[soft] = qs[soft]
+    if found.any():
+        # A corner beyond the nearest foot is not the nearest point (two bodies in one
+        # cluster: the corner of the far one, the near one's foot nearer).
+        f = np.flatnonzero(found)
+        nearer = np.hypot(qk[f, 0], qk[f, 1]) <= np.hypot(qs[f, 0], qs[f, 1])
+        out[f] = np.where(nearer[:, None], qk[f], qs[f])
     return out
 
 
@@ -1903,6 +2651,23 @@ def view_edge_points(xy: np.ndarray, group: np.ndarray, n_groups: int, to_image,
     return out
 
 
+_PAIRS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _pairs_of(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``np.triu_indices(n, 1)``: (P,) int64 i < j of every pair of 0..n-1, in row-major
+    order (cached up to n = 256; read-only)."""
+    out = _PAIRS.get(n)
+    if out is None:
+        ia, ib = np.triu_indices(n, 1)
+        ia.flags.writeable = False
+        ib.flags.writeable = False
+        out = (ia, ib)
+        if n <= 256:
+            _PAIRS[n] = out
+    return out
+
+
 def face_gap_points(xy: np.ndarray, group: np.ndarray, n_groups: int, q: np.ndarray,
                     ground_xy) -> np.ndarray:
     """The nearest point of a straight face seen as two obstacles: a wall across the
@@ -1942,7 +2707,7 @@ def face_gap_points(xy: np.ndarray, group: np.ndarray, n_groups: int, q: np.ndar
     sxx = np.bincount(group, dev[:, 0] ** 2, n_groups)
     syy = np.bincount(group, dev[:, 1] ** 2, n_groups)
     sxy = np.bincount(group, dev[:, 0] * dev[:, 1], n_groups)
-    ia, ib = np.triu_indices(n_groups, 1)
+    ia, ib = _pairs_of(n_groups)
     na, nb = counts[ia], counts[ib]
     ok = (na > 0) & (nb > 0) & (na + nb >= _FACE_MIN_FEET + 1) & np.isfinite(r_q[ia]) \
         & np.isfinite(r_q[ib])
@@ -2021,6 +2786,18 @@ def silhouette_owners(xw: np.ndarray, top: np.ndarray, xy: np.ndarray, g_lab: np
     w_n = xw.shape[0]
     if w_n == 0 or xy.shape[0] == 0:
         return np.full(w_n, -1, np.int64)
+    if _nb_owners is not None:
+        # The same tests, compiled (numpy's bearings: its atan2 differs in last bits).
+        xw = np.ascontiguousarray(xw, np.float64)
+        xy = np.ascontiguousarray(xy, np.float64)
+        args = (xw, np.asarray(top, np.float64), xy, np.asarray(g_lab, np.int64),
+                np.asarray(height, np.float64), float(radius),
+                np.arctan2(xw[:, 1], xw[:, 0]), np.arctan2(xy[:, 1], xy[:, 0]))
+        out, need = _nb_owners(*args, np.zeros((0, 2)), False)
+        if need:            # a candidate to test against visible ground
+            g_all = ground_xy() if callable(ground_xy) else ground_xy
+            out, _ = _nb_owners(*args, np.ascontiguousarray(g_all, np.float64), True)
+        return out
     dist = np.hypot(xw[:, None, 0] - xy[None, :, 0], xw[:, None, 1] - xy[None, :, 1])
     tp = np.asarray(top, np.float64)[:, None]
     hk = np.asarray(height, np.float64)[g_lab][None, :]
@@ -2054,6 +2831,124 @@ def silhouette_owners(xw: np.ndarray, top: np.ndarray, xy: np.ndarray, g_lab: np
                 out[w] = k
                 break
     return out
+
+
+def _owners_kernel(xw, top, xy, g_lab, height, radius, bw, bf, g_all, have_g):
+    """`silhouette_owners` (for numba), with its tests and arithmetic; ``bw``, ``bf``
+    (W,), (S,) the bearings of the candidates and feet (numpy's arctan2).
+
+    Returns:
+        ((W,) int64 obstacle of each candidate, -1 for none; True when a candidate
+        needs the visible ground ``g_all`` (G, 2) and ``have_g`` is False: then call
+        again with it.)
+    """
+    w_n, s_n = xw.shape[0], xy.shape[0]
+    m_ = _FREE_SPACE_MARGIN_M
+    lab = np.full(w_n, -1, np.int64)
+    for w in range(w_n):
+        best, j = np.inf, 0
+        tp = top[w]
+        for q in range(s_n):
+            hk = height[g_lab[q]]
+            d = math.hypot(xw[w, 0] - xy[q, 0], xw[w, 1] - xy[q, 1])
+            if (d <= radius and tp * _WEAK_HEIGHT_RATIO >= hk and tp <= _WEAK_HEIGHT_RATIO * hk
+                    and d < best):
+                best, j = d, q
+        if best < np.inf:
+            lab[w] = g_lab[j]
+    out = np.full(w_n, -1, np.int64)
+    n_k = 0
+    for w in range(w_n):
+        n_k = max(n_k, lab[w] + 1)
+    for k in range(n_k):
+        # its feet, their bearings' extremes, its candidates
+        n_f = 0
+        b_hi, b_lo = -np.inf, np.inf
+        for q in range(s_n):
+            if g_lab[q] == k:
+                n_f += 1
+                b_hi = max(b_hi, bf[q])
+                b_lo = min(b_lo, bf[q])
+        if n_f == 0:
+            continue
+        f = np.empty((n_f, 2))
+        n_f = 0
+        for q in range(s_n):
+            if g_lab[q] == k:
+                f[n_f, 0], f[n_f, 1] = xy[q, 0], xy[q, 1]
+                n_f += 1
+        for sgn in (1.0, -1.0):
+            # the candidates beyond the feet on this side, outermost first (stable)
+            side = np.empty(w_n, np.int64)
+            n_side = 0
+            for w in range(w_n):
+                if lab[w] != k:
+                    continue
+                tol = m_ / max(math.hypot(xw[w, 0], xw[w, 1]), 1e-9)
+                if (bw[w] > b_hi + tol) if sgn > 0 else (bw[w] < b_lo - tol):
+                    side[n_side] = w
+                    n_side += 1
+            # outermost first: by -sgn * bearing, stably (insertion sort; a few each)
+            for t in range(1, n_side):
+                w, kw = side[t], -sgn * bw[side[t]]
+                q = t
+                while q > 0 and -sgn * bw[side[q - 1]] > kw:
+                    side[q] = side[q - 1]
+                    q -= 1
+                side[q] = w
+            for t in range(n_side):
+                w = side[t]
+                if n_f >= 2:
+                    if not have_g:
+                        return out, True
+                    if _nb_separated(xw[w, 0], xw[w, 1], f, g_all, m_):
+                        continue
+                out[w] = k
+                break
+    return out, False
+
+
+def _separated_kernel(wx, wy, f, g_all, margin):
+    """`_separated` (for numba): whether a ground point of g_all (G, 2) lies more than
+    ``margin`` inside a triangle w-p-q, p, q two of the points f (F, 2) (`_ground_inside`'s
+    arithmetic, triangles a = p, n = w, b = q)."""
+    if g_all.shape[0] == 0:
+        return False
+    lo0, lo1, hi0, hi1 = wx, wy, wx, wy
+    for i in range(f.shape[0]):
+        lo0, hi0 = min(lo0, f[i, 0]), max(hi0, f[i, 0])
+        lo1, hi1 = min(lo1, f[i, 1]), max(hi1, f[i, 1])
+    lo0, lo1, hi0, hi1 = lo0 - margin, lo1 - margin, hi0 + margin, hi1 + margin
+    for p in range(g_all.shape[0]):
+        gx, gy = g_all[p, 0], g_all[p, 1]
+        if not (gx >= lo0 and gx <= hi0 and gy >= lo1 and gy <= hi1):
+            continue
+        for i in range(f.shape[0]):
+            ax, ay = f[i, 0], f[i, 1]
+            for j in range(i + 1, f.shape[0]):
+                bx, by = f[j, 0], f[j, 1]
+                area2 = (wx - ax) * (by - ay) - (wy - ay) * (bx - ax)
+                if not abs(area2) > 1e-12:
+                    continue
+                sgn = 1.0 if area2 > 0 else -1.0
+                # side(p0, p1): signed distance from the line p0 -> p1 (left positive)
+                e0x, e0y = wx - ax, wy - ay                     # a -> w
+                l0 = max(math.hypot(e0x, e0y), 1e-12)
+                if not sgn * ((e0x * (gy - ay) - e0y * (gx - ax)) / l0) > margin:
+                    continue
+                e1x, e1y = bx - wx, by - wy                     # w -> b
+                l1 = max(math.hypot(e1x, e1y), 1e-12)
+                if not sgn * ((e1x * (gy - wy) - e1y * (gx - wx)) / l1) > margin:
+                    continue
+                e2x, e2y = ax - bx, ay - by                     # b -> a
+                l2 = max(math.hypot(e2x, e2y), 1e-12)
+                if sgn * ((e2x * (gy - by) - e2y * (gx - bx)) / l2) > margin:
+                    return True
+    return False
+
+
+_nb_separated = _jit(_separated_kernel)
+_nb_owners = _jit(_owners_kernel) if _nb_separated is not None else None
 
 
 def _separated(w: np.ndarray, f: np.ndarray, g_all: np.ndarray, margin: float) -> bool:
@@ -2162,11 +3057,14 @@ class GpodDetector:
         cosang = float(np.clip(np.dot(fit.metric.normal_up, cal.normal_up), -1.0, 1.0))
         return math.degrees(math.acos(cosang)) <= c.recover_max_angle_deg
 
-    def _close_to_current(self, fit: PlaneFit, cam: StereoCamera) -> bool:
-        """Whether a refit is within the per-frame change limits of the current plane."""
+    def _close_to_current(self, fit: PlaneFit, cam: StereoCamera,
+                          cur: MetricPlane | None = None) -> bool:
+        """Whether a refit is within the per-frame change limits of the current plane
+        (``cur``: its metric plane, if known)."""
         c = self.config
-        cur = plane_is_plausible(cam, self._abc, min_height_m=0.0, max_height_m=float('inf'),
-                                 max_tilt_deg=90.0)
+        if cur is None:
+            cur = plane_is_plausible(cam, self._abc, min_height_m=0.0,
+                                     max_height_m=float('inf'), max_tilt_deg=90.0)
         if cur is None or fit.metric is None:
             return False
         if abs(fit.metric.height - cur.height) > c.refit_max_height_change_m:
@@ -2283,14 +3181,14 @@ class GpodDetector:
             # take over.
             gate = np.abs(d - plane_disparity(self._abc, u, v)) <= c.refit_gate_px
             if gate.any():      # the coarse fit sees only the nearer half: the ground here
-                gate &= d >= np.median(d[gate])
+                gate &= d >= _median(d[gate])      # (np.median's arithmetic, finite d)
             coarse = self._fit(u[gate], v[gate], d[gate], cam)
             if coarse is not None:
                 height = coarse.metric.signed_height(cam.triangulate(u, v, d))
                 gate = ((np.abs(d - plane_disparity(coarse.abc, u, v)) <= c.refit_gate_px)
                         & (np.abs(height) <= c.refit_gate_m))
                 fit = self._fit(u[gate], v[gate], d[gate], cam)
-            if fit is not None and not self._close_to_current(fit, cam):
+            if fit is not None and not self._close_to_current(fit, cam, current):
                 fit = None
         if enough and current is not None and fit is None:
             # Standing still the current plane is where the ground is: refit from the
@@ -2301,7 +3199,7 @@ class GpodDetector:
             height = current.signed_height(cam.triangulate(u, v, d))
             gate = np.abs(height) <= c.refit_gate_m
             fit = self._fit(u[gate], v[gate], d[gate], cam)
-            if fit is not None and not self._close_to_current(fit, cam):
+            if fit is not None and not self._close_to_current(fit, cam, current):
                 fit = None
         if fit is None and enough and self._coast >= c.max_coast_frames:
             # Lost: recover from the nearer half of the features (the ground the wearer
@@ -2452,6 +3350,13 @@ class GpodDetector:
         are where an edge pixel was (same row, within one column). Remembers the edges."""
         h, w = el.shape
         prev = self._prev_edges
+        if _nb_still is not None:
+            # The same image and hits, compiled.
+            use = prev is not None and prev.shape == (h, w + 2) and len(el) > 0
+            img, hits = _nb_still(prev if use else np.zeros((1, 1), bool), use, el.v,
+                                  el.u_int, h, w)
+            self._prev_edges = img
+            return use and bool(hits / len(el) >= self.config.still_overlap)
         img = np.zeros((h, w + 2), bool)
         img[el.v, el.u_int + 1] = True
         self._prev_edges = img
@@ -2471,6 +3376,18 @@ class GpodDetector:
         h, w = shape
         k = len(m)
         lam = 1.0 - 1.0 / c.temporal_frames
+        if _nb_temporal is not None:
+            # The same neighbours, gate and sums, compiled.
+            use = bool(still and self._acc is not None and lam > 0 and k)
+            ps, pw = self._acc if use else (np.zeros((1, 1), np.float32),) * 2
+            gate_thr = thr is not None and c.temporal_gate_thr > 0
+            s_new, w_new, acc_s, acc_w = _nb_temporal(
+                m.v, m.u_left, np.asarray(excess, np.float64),
+                np.asarray(thr if gate_thr else np.zeros(0), np.float64), gate_thr,
+                float(c.temporal_gate_px), float(c.temporal_gate_thr), float(lam), use, ps,
+                pw, h, w)
+            self._acc = (acc_s, acc_w)
+            return s_new / w_new
         vv = m.v.astype(np.int64)
         uu = np.clip(np.rint(m.u_left).astype(np.int64), 0, w - 1)
         s_new = excess.astype(np.float64)
@@ -2516,12 +3433,21 @@ class GpodDetector:
         h = metric.signed_height(pts)
         feet = pts - h[:, None] * metric.normal_up[None, :]
         ground_range = np.linalg.norm(feet + metric.height * metric.normal_up[None, :], axis=1)
-        prev = run_links(el, m, c.string_disparity_tolerance_px)
-        run = matched_run_length(el, m, c.string_disparity_tolerance_px, prev)
+        tol = c.string_disparity_tolerance_px
+        nxt = None
+        if _nb_runs is not None and type(tol) in (float, int) and len(m):
+            # run_links, matched_run_length and smooth_along_runs in one compiled pass
+            # (the same links, lengths and sums; the tolerance compared in single
+            # precision, as numpy compares the float32 disparities with it).
+            prev, run, smooth, nxt = _nb_runs(el.string_prev, m.left_index, m.d, len(el),
+                                              np.float32(tol), int(c.string_window), excess)
+        else:
+            prev = run_links(el, m, tol)
+            run = matched_run_length(el, m, tol, prev)
+            smooth = smooth_along_runs(excess, prev, c.string_window)
         in_range = ground_range <= c.max_range_m
         thr, thr_global = self.pixel_thresholds(_noise_key(m), v)
-        ex_mean = self._temporal_excess(m, smooth_along_runs(excess, prev, c.string_window),
-                                        still, el.shape, thr)
+        ex_mean = self._temporal_excess(m, smooth, still, el.shape, thr)
         # Figural continuity: a run of min_matched_run pixels at least, and longer for a
         # larger excess -- an edge standing on the ground rises by |b| px of excess per
         # row, so an excess E needs about E / |b| rows of it (a fraction of them, up to
@@ -2600,7 +3526,7 @@ class GpodDetector:
         self._ctx = _FrameContext(cam=cam, metric=metric, abc=self._abc.copy(), u=u, v=v,
                                   pd=pd, excess_mean=ex_mean, sigma=thr / c.threshold_k,
                                   prev=prev, ground_points=pts[ground], left=self._left,
-                                  u_left=m.u_left, usable=usable)
+                                  u_left=m.u_left, usable=usable, nxt=nxt)
         if obst_string.any():
             # Candidate silhouette edges for placing detected obstacles (never obstacles):
             # strings neither obstacle, drop nor rejected as one (mismatch, repetitive
@@ -2680,11 +3606,13 @@ class GpodDetector:
             ob = tr.payload
             seen = tr.index >= 0
             roi = ob.roi if (seen or not moved) else _moved_roi(ob, tr.foot, n, cam)
-            out.append(dataclasses.replace(
-                ob, position=tr.foot + ob.height * n, range=rng_k, roi=roi, confidence=conf,
-                bearing=brg_k, track_id=tr.track_id, age_s=tr.age_s,
+            out.append(GpodObstacle(      # (as dataclasses.replace, without its overhead)
+                position=tr.foot + ob.height * n, height=ob.height, range=rng_k,
+                bearing=brg_k, width=ob.width, disparity_excess=ob.disparity_excess,
+                confidence=conf, roi=roi,
+                num_edge_pixels=ob.num_edge_pixels if seen else 0,
                 string_ids=ob.string_ids if seen else np.zeros(0, np.int32),
-                num_edge_pixels=ob.num_edge_pixels if seen else 0))
+                track_id=tr.track_id, age_s=tr.age_s))
         out.sort(key=lambda o: o.range)
         return tuple(out)
 
@@ -2762,10 +3690,7 @@ class GpodDetector:
         (> ``_AMBIGUOUS_EXCESS_PX``) but, for at least ``ambiguity_fraction`` of them,
         the left edge also had a candidate match on the ground (|excess| <= threshold):
         a repetitive pattern matched one period off."""
-        uc = 0.5 * (el.u[cand.left].astype(np.float64) + er.u[cand.right])
-        exc_c = cand.d - plane_disparity(self._abc, uc, el.v[cand.left].astype(np.float64))
-        on_ground = np.zeros(len(el), bool)
-        on_ground[cand.left[np.abs(exc_c) <= threshold]] = True
+        on_ground = _ground_candidates(cand, el, er, self._abc, threshold)
         alt = obst & (excess > _AMBIGUOUS_EXCESS_PX) & on_ground[m.left_index]
         n_alt = np.bincount(m.string_id[alt], minlength=n_s)
         n_obst = np.bincount(m.string_id[obst], minlength=n_s)
@@ -2782,7 +3707,7 @@ class GpodDetector:
         feet = p - hh[:, None] * n_up[None, :]
         fwd = np.array([0.0, 0.0, 1.0]) - n_up[2] * n_up
         fwd /= np.linalg.norm(fwd)
-        lft = np.cross(n_up, fwd)
+        lft = _cross3(n_up, fwd)
         origin = -metric.height * n_up
         g = feet - origin[None, :]
         g2 = np.stack([g @ fwd, g @ lft], axis=1)
@@ -2959,31 +3884,39 @@ class GpodDetector:
         mx = _group_quantile(label, g2[:, 0], 0.5, n_c)
         my = _group_quantile(label, g2[:, 1], 0.5, n_c)
         norm = np.maximum(np.hypot(mx, my), 1e-9)
-        lat = (g2[:, 1] * mx[label] - g2[:, 0] * my[label]) / norm[label]
-        order = np.argsort(label, kind='stable')
-        starts = np.flatnonzero(np.concatenate((_TRUE, np.diff(label[order]) != 0)))
-        lo_lat = np.minimum.reduceat(lat[order], starts)
-        hi_lat = np.maximum.reduceat(lat[order], starts)
         ex = excess[idx]
-        ex_o = ex[order]
-        exc = (np.maximum.reduceat(ex_o, starts) if sign > 0
-               else np.minimum.reduceat(ex_o, starts))
+        if _nb_extent is not None and count.min() > 0:
+            # The same extremes and string lists, compiled (one pass).
+            lo_lat, hi_lat, exc, x0, x1, y0, y1, sid_u, sid_start = _nb_extent(
+                np.asarray(label, np.int64), n_c, np.ascontiguousarray(g2, np.float64),
+                mx, my, norm, np.ascontiguousarray(ex, np.float64), m.u_left[idx],
+                m.v[idx], m.string_id[idx], sign > 0)
+        else:
+            lat = (g2[:, 1] * mx[label] - g2[:, 0] * my[label]) / norm[label]
+            order = np.argsort(label, kind='stable')
+            starts = np.flatnonzero(np.concatenate((_TRUE, np.diff(label[order]) != 0)))
+            lo_lat = np.minimum.reduceat(lat[order], starts)
+            hi_lat = np.maximum.reduceat(lat[order], starts)
+            ex_o = ex[order]
+            exc = (np.maximum.reduceat(ex_o, starts) if sign > 0
+                   else np.minimum.reduceat(ex_o, starts))
+            ul = m.u_left[idx][order]
+            vv = m.v[idx][order]
+            x0 = np.floor(np.minimum.reduceat(ul, starts)).astype(np.int64)
+            x1 = np.ceil(np.maximum.reduceat(ul, starts)).astype(np.int64)
+            y0 = np.minimum.reduceat(vv, starts).astype(np.int64)
+            y1 = np.maximum.reduceat(vv, starts).astype(np.int64)
+            sid = m.string_id[idx][order]
+            lab_o = label[order]
+            srt = np.lexsort((sid, lab_o))
+            sid_s, lab_s = sid[srt], lab_o[srt]
+            uniq = np.concatenate((_TRUE, (sid_s[1:] != sid_s[:-1]) | (lab_s[1:] != lab_s[:-1])))
+            sid_u, lab_u = sid_s[uniq], lab_s[uniq]
+            sid_start = np.searchsorted(lab_u, np.arange(n_c + 1))
         z = (np.abs(ex) - self._frame_thr[idx]) / c.disparity_sigma_px
         p_i = np.clip(_normal_cdf(z), 0.0, 1.0 - 1e-12)
         p_any = 1.0 - np.exp(np.bincount(label, weights=np.log1p(-p_i), minlength=n_c))
         conf = np.clip(p_any * np.minimum(1.0, count / c.confidence_full_pixels), 0.0, 1.0)
-        ul = m.u_left[idx][order]
-        vv = m.v[idx][order]
-        x0 = np.floor(np.minimum.reduceat(ul, starts)).astype(np.int64)
-        x1 = np.ceil(np.maximum.reduceat(ul, starts)).astype(np.int64)
-        y0 = np.minimum.reduceat(vv, starts).astype(np.int64)
-        y1 = np.maximum.reduceat(vv, starts).astype(np.int64)
-        sid = m.string_id[idx][order]
-        lab_o = label[order]
-        srt = np.lexsort((sid, lab_o))
-        sid_s, lab_s = sid[srt], lab_o[srt]
-        uniq = np.concatenate((_TRUE, (sid_s[1:] != sid_s[:-1]) | (lab_s[1:] != lab_s[:-1])))
-        sid_u, lab_u = sid_s[uniq], lab_s[uniq]
         out = []
         for k in range(n_c):
             if count[k] < min_pixels:
@@ -3002,8 +3935,179 @@ class GpodDetector:
                 range=float(r_near[k]), bearing=float(bearing[k]),
                 width=float(hi_lat[k] - lo_lat[k]), disparity_excess=float(exc[k]),
                 confidence=float(conf[k]), roi=roi, num_edge_pixels=int(count[k]),
-                string_ids=sid_u[lab_u == k].astype(np.int32)))
+                string_ids=sid_u[sid_start[k]:sid_start[k + 1]].astype(np.int32)))
         return out
+
+
+def _extent_kernel(label, n_c, g2, mx, my, norm, ex, ul, vv, sid, high):
+    """The per-obstacle extremes of `GpodDetector._describe` (for numba), every group
+    0..n_c-1 non-empty.
+
+    Args:
+        label: (N,) int64 obstacle of each pixel; g2 (N, 2) its foot on the ground, m;
+            mx, my, norm (n_c,): each obstacle's median foot and its distance (>= 1e-9).
+        ex: (N,) float64 disparity excess; ul (N,) float32 column, vv (N,) int32 row,
+            sid (N,) int32 edge string of each pixel; high: obstacles (the largest
+            excess), else drops (the smallest).
+    Returns:
+        lo_lat, hi_lat (n_c,) the extremes of the feet's lateral offset
+        ``(y mx - x my) / norm``; exc (n_c,) the excess extreme; x0, x1 (n_c,) int64 the
+        floor / ceil of the columns' extremes; y0, y1 (n_c,) int64 the rows' extremes;
+        sid_u (U,) int32 each obstacle's strings, ascending, from sid_start (n_c + 1,).
+    """
+    lo_lat = np.full(n_c, np.inf)
+    hi_lat = np.full(n_c, -np.inf)
+    exc = np.empty(n_c)
+    u_lo = np.empty(n_c, np.float32)
+    u_hi = np.empty(n_c, np.float32)
+    y0 = np.empty(n_c, np.int64)
+    y1 = np.empty(n_c, np.int64)
+    seen = np.zeros(n_c, np.bool_)
+    for i in range(label.shape[0]):
+        k = label[i]
+        lat = (g2[i, 1] * mx[k] - g2[i, 0] * my[k]) / norm[k]
+        if not seen[k]:
+            seen[k] = True
+            lo_lat[k] = hi_lat[k] = lat
+            exc[k] = ex[i]
+            u_lo[k] = u_hi[k] = ul[i]
+            y0[k] = y1[k] = vv[i]
+            continue
+        lo_lat[k] = min(lo_lat[k], lat)
+        hi_lat[k] = max(hi_lat[k], lat)
+        exc[k] = max(exc[k], ex[i]) if high else min(exc[k], ex[i])
+        u_lo[k] = min(u_lo[k], ul[i])
+        u_hi[k] = max(u_hi[k], ul[i])
+        y0[k] = min(y0[k], np.int64(vv[i]))
+        y1[k] = max(y1[k], np.int64(vv[i]))
+    x0 = np.empty(n_c, np.int64)
+    x1 = np.empty(n_c, np.int64)
+    for k in range(n_c):
+        x0[k] = np.int64(math.floor(u_lo[k]))
+        x1[k] = np.int64(math.ceil(u_hi[k]))
+    # the distinct strings of each obstacle, ascending: the pixels by (obstacle, string)
+    n_p = label.shape[0]
+    sk = np.empty(n_p, np.int64)
+    n_s = 0
+    for i in range(n_p):
+        sk[i] = sid[i]
+        n_s = max(n_s, sk[i] + 1)
+    by = _nb_stable_order(label, _nb_stable_order(sk, np.arange(n_p), n_s), n_c)
+    sid_u = np.empty(n_p, np.int32)
+    sid_start = np.zeros(n_c + 1, np.int64)
+    n = 0
+    for t in range(n_p):
+        i = by[t]
+        if t == 0 or label[i] != label[by[t - 1]] or sid[i] != sid[by[t - 1]]:
+            sid_u[n] = sid[i]
+            n += 1
+            sid_start[label[i] + 1] = n
+    for k in range(n_c):                  # (every obstacle has pixels)
+        sid_start[k + 1] = max(sid_start[k + 1], sid_start[k])
+    return lo_lat, hi_lat, exc, x0, x1, y0, y1, sid_u[:n].copy(), sid_start
+
+
+_nb_extent = _jit(_extent_kernel)
+
+
+def _ground_candidates(cand: Candidates, el: EdgeMap, er: EdgeMap, abc: np.ndarray,
+                       threshold: float) -> np.ndarray:
+    """(N_left,) bool: the left edges with a candidate match on the ground plane ``abc``
+    (its disparity within ``threshold`` pixels of the plane's at the candidate's
+    cyclopean position)."""
+    if _nb_on_ground is not None and type(threshold) in (float, int):
+        return _nb_on_ground(cand.left, cand.right, cand.d, el.u, el.v, er.u,
+                             np.asarray(abc, np.float64), float(threshold), len(el))
+    uc = 0.5 * (el.u[cand.left].astype(np.float64) + er.u[cand.right])
+    exc_c = cand.d - plane_disparity(abc, uc, el.v[cand.left].astype(np.float64))
+    on_ground = np.zeros(len(el), bool)
+    on_ground[cand.left[np.abs(exc_c) <= threshold]] = True
+    return on_ground
+
+
+def _on_ground_kernel(c_left, c_right, c_d, u_l, v_l, u_r, abc, threshold, n_left):
+    """`GpodDetector._ambiguous_strings`' left edges with a candidate match on the ground
+    (for numba): (n_left,) bool, some candidate's disparity within ``threshold`` pixels
+    of the plane ``abc`` at its cyclopean position (``(a u + b v) + c``, as
+    `plane_disparity`)."""
+    out = np.zeros(n_left, np.bool_)
+    a, b, c = abc[0], abc[1], abc[2]
+    for q in range(c_left.shape[0]):
+        e = c_left[q]
+        uc = 0.5 * (np.float64(u_l[e]) + np.float64(u_r[c_right[q]]))
+        if abs(c_d[q] - (a * uc + b * np.float64(v_l[e]) + c)) <= threshold:
+            out[e] = True
+    return out
+
+
+_nb_on_ground = _jit(_on_ground_kernel)
+
+
+def _still_kernel(prev, use, v, u_int, h, w):
+    """`GpodDetector._stillness` (for numba): the (h, w + 2) bool image of the edge
+    pixels (rows ``v``, columns ``u_int`` + 1), and, when ``use``, how many of them were
+    within one column of an edge pixel of ``prev`` (the previous frame's image)."""
+    img = np.zeros((h, w + 2), np.bool_)
+    hits = 0
+    for i in range(v.shape[0]):
+        r, c = v[i], u_int[i]
+        img[r, c + 1] = True
+        if use and (prev[r, c] or prev[r, c + 1] or prev[r, c + 2]):
+            hits += 1
+    return img, hits
+
+
+def _temporal_kernel(v, u_left, excess, thr, gate_thr, gate_px, thr_factor, lam, use, ps,
+                     pw, h, w):
+    """`GpodDetector._temporal_excess` (for numba), with its arithmetic.
+
+    Args:
+        v: (K,) int32 rows, u_left (K,) float32 columns of the matches; excess (K,)
+            float64 their (smoothed) excess, pixels.
+        thr: (K,) float64 their thresholds, used when ``gate_thr``: the gate is
+            ``min(gate_px, thr_factor * thr)``, else ``gate_px``.
+        lam: the running average's decay; use: average with the previous sums ps, pw
+            (h, w) float32 (the rig stood still).
+    Returns:
+        (K,) float64 sums and weights (the averaged excess is their ratio), and the new
+        (h, w) float32 running sums and weights at the matches' pixels.
+    """
+    k = v.shape[0]
+    s_new = excess.copy()
+    w_new = np.ones(k)
+    uu = np.empty(k, np.int64)
+    for i in range(k):
+        uu[i] = min(max(np.int64(np.rint(u_left[i])), 0), w - 1)
+    if use:
+        for i in range(k):
+            r = v[i]
+            # the largest previous weight at the column, left, right (the first of equals)
+            best = min(max(uu[i], 0), w - 1)
+            wb = pw[r, best]
+            for dc in (-1, 1):
+                col = min(max(uu[i] + dc, 0), w - 1)
+                if not math.isnan(wb) and (math.isnan(pw[r, col]) or pw[r, col] > wb):
+                    best, wb = col, pw[r, col]
+            w0 = np.float64(wb)
+            s0 = np.float64(ps[r, best])
+            gate = gate_px
+            if gate_thr:
+                g = thr_factor * thr[i]
+                if g < gate or math.isnan(g):
+                    gate = g
+            if w0 > 0 and abs(excess[i] - s0 / w0) <= gate:
+                s_new[i] = s_new[i] + lam * s0
+                w_new[i] = w_new[i] + lam * w0
+    acc_s = np.zeros((h, w), np.float32)
+    acc_w = np.zeros((h, w), np.float32)
+    for i in range(k):
+        acc_s[v[i], uu[i]] = np.float32(s_new[i])
+        acc_w[v[i], uu[i]] = np.float32(w_new[i])
+    return s_new, w_new, acc_s, acc_w
+
+
+_nb_still = _jit(_still_kernel)
+_nb_temporal = _jit(_temporal_kernel)
 
 
 def _planes_agree(abc0: np.ndarray, abc1: np.ndarray, cam: StereoCamera,
@@ -3107,6 +4211,9 @@ def _group_quantile(group: np.ndarray, x: np.ndarray, q: float, n_groups: int) -
     out = np.full(n_groups, np.nan)
     if x.size == 0:
         return out
+    if _nb_group_quantile is not None:
+        return _nb_group_quantile(np.asarray(group, np.int64), np.asarray(x, np.float64),
+                                  float(q), n_groups)
     order = np.lexsort((x, group))
     g, xs = group[order], x[order]
     count = np.bincount(g, minlength=n_groups)
@@ -3119,6 +4226,50 @@ def _group_quantile(group: np.ndarray, x: np.ndarray, q: float, n_groups: int) -
     s = start[has]
     out[has] = xs[s + lo] + (xs[s + hi] - xs[s + lo]) * frac
     return out
+
+
+def _by_group(group, n_groups):
+    """The rows of each group (for numba): (N,) int64 row indices by group, ascending
+    within each (a stable counting sort), and (n_groups + 1,) int64 group starts."""
+    start = np.zeros(n_groups + 1, np.int64)
+    for g in group:
+        start[g + 1] += 1
+    for k in range(n_groups):
+        start[k + 1] += start[k]
+    fill = start[:-1].copy()
+    rows = np.empty(group.shape[0], np.int64)
+    for i in range(group.shape[0]):
+        g = group[i]
+        rows[fill[g]] = i
+        fill[g] += 1
+    return rows, start
+
+
+def _group_quantile_kernel(group, x, q, n_groups):
+    """`_group_quantile` (for numba): each group's values sorted, then numpy's linear
+    interpolation between the order statistics at ``q * (count - 1)``."""
+    out = np.full(n_groups, np.nan)
+    rows, start = _nb_by_group(group, n_groups)
+    for k in range(n_groups):
+        c = start[k + 1] - start[k]
+        if c == 0:
+            continue
+        xs = _nb_sorted(x[rows[start[k]:start[k + 1]]])
+        pos = q * np.float64(c - 1)
+        lo = np.int64(math.floor(pos))
+        hi = min(lo + 1, c - 1)
+        out[k] = xs[lo] + (xs[hi] - xs[lo]) * (pos - np.float64(lo))
+    return out
+
+
+def _sorted(x):
+    """``np.sort(x)`` (for numba; one compiled sort that the kernels share)."""
+    return np.sort(x)
+
+
+_nb_by_group = _jit(_by_group)
+_nb_sorted = _jit(_sorted)
+_nb_group_quantile = _jit(_group_quantile_kernel) if _nb_by_group is not None else None
 
 
 def _features(m: Matches, excess: np.ndarray, obst: np.ndarray | None = None,

@@ -172,6 +172,15 @@ def candidate_matches(left: EdgeMap, right: EdgeMap, d_min: float, d_max: float,
     if len(left) == 0 or len(right) == 0 or d_max < d_min:
         z = np.zeros(0, np.intp)
         return Candidates(z, z, np.zeros(0))
+    if (_nb_candidates is not None and type(min_strength_ratio) in (float, int)
+            and type(max_orientation_diff_deg) in (float, int)):
+        # The same keys, ranges and tests, compiled (one pass, no temporaries).
+        li, rj, d = _nb_candidates(
+            left.polarity, left.v, left.u, left.strength, left.orientation,
+            right.polarity, right.v, right.u, right.strength, right.orientation,
+            int(left.shape[0]), float(left.shape[1]), float(d_min), float(d_max),
+            np.float32(min_strength_ratio), float(np.deg2rad(max_orientation_diff_deg)))
+        return Candidates(left=li, right=rj, d=d)
     # Right edges of the same polarity and row, within the disparity range: one
     # contiguous range of the right edges sorted by (polarity, row, column).
     h = left.shape[0]
@@ -198,6 +207,104 @@ def candidate_matches(left: EdgeMap, right: EdgeMap, d_min: float, d_max: float,
     keep = np.flatnonzero(ok)
     li, rj = li[keep], rj[keep]
     return Candidates(left=li, right=rj, d=left.u[li].astype(np.float64) - right.u[rj])
+
+
+def _search_left(a: np.ndarray, x: float, start: int) -> int:
+    """``np.searchsorted(a, x, side='left')`` of an ascending float64 array (for numba):
+    the first index with ``a[i] >= x`` (len(a) if none), found by walking from
+    ``start`` (the previous answer: queries come nearly in order)."""
+    n = a.shape[0]
+    i = min(max(start, 0), n)
+    while i < n and a[i] < x:
+        i += 1
+    while i > 0 and not a[i - 1] < x:
+        i -= 1
+    return i
+
+
+def _search_right(a: np.ndarray, x: float, start: int) -> int:
+    """``np.searchsorted(a, x, side='right')`` of an ascending float64 array (for
+    numba): the first index with ``a[i] > x`` (len(a) if none), walking from ``start``."""
+    n = a.shape[0]
+    i = min(max(start, 0), n)
+    while i < n and a[i] <= x:
+        i += 1
+    while i > 0 and a[i - 1] > x:
+        i -= 1
+    return i
+
+
+def _candidates_kernel(pol_l, v_l, u_l, s_l, o_l, pol_r, v_r, u_r, s_r, o_r, h, width,
+                       d_min, d_max, ratio, max_dori):
+    """:func:`candidate_matches` as loops (for numba), with its keys, searches and tests.
+
+    Args:
+        pol_l, v_l, u_l, s_l, o_l: (N_l,) polarity (int8), row (int32), sub-pixel column,
+            strength and orientation (float32) of the left edges; ``*_r`` of the right.
+        h: image height, rows; width: image width, pixels (float).
+        d_min, d_max: disparity range, pixels.
+        ratio: float32 least strength ratio; max_dori: largest orientation difference,
+            radians (float64).
+    Returns:
+        (left (M,) intp, right (M,) intp, d (M,) float64) as `Candidates`.
+    """
+    n_l, n_r = pol_l.shape[0], pol_r.shape[0]
+    # The key of an edge: ((polarity plane * h + row) * span + u), float64, as numpy's;
+    # the right edges sorted by (plane, index): each plane is in (row, column) order.
+    span = width + abs(d_max) + abs(d_min) + 4.0
+    order_r = np.empty(n_r, np.intp)
+    n0 = 0
+    for j in range(n_r):
+        if not pol_r[j] < 0:
+            order_r[n0] = j
+            n0 += 1
+    k = n0
+    for j in range(n_r):
+        if pol_r[j] < 0:
+            order_r[k] = j
+            k += 1
+    key_r = np.empty(n_r)
+    for k in range(n_r):
+        j = order_r[k]
+        plane = np.int64(1) if pol_r[j] < 0 else np.int64(0)
+        key_r[k] = np.float64(plane * h + np.int64(v_r[j])) * span + np.float64(u_r[j])
+    lo = np.empty(n_l, np.intp)
+    hi = np.empty(n_l, np.intp)
+    total = 0
+    a, b = 0, 0
+    for neg in (False, True):           # the left edges by plane: keys nearly in order
+        for i in range(n_l):
+            if (pol_l[i] < 0) != neg:
+                continue
+            plane = np.int64(1) if neg else np.int64(0)
+            key = np.float64(plane * h + np.int64(v_l[i])) * span + np.float64(u_l[i])
+            a = _nb_search_left(key_r, key - d_max, a)
+            b = _nb_search_right(key_r, key - d_min, b)
+            lo[i] = a
+            hi[i] = b
+            total += max(b - a, 0)
+    li = np.empty(total, np.intp)
+    rj = np.empty(total, np.intp)
+    d = np.empty(total)
+    two_pi = np.float32(2.0 * np.pi)
+    n = 0
+    for i in range(n_l):
+        sl, ol, ul = s_l[i], o_l[i], np.float64(u_l[i])
+        for p in range(lo[i], hi[i]):
+            j = order_r[p]
+            sr = s_r[j]
+            # min(sl, sr) >= ratio * max(sl, sr), in single precision (as numpy's)
+            if not (min(sl, sr) >= ratio * max(sl, sr)):
+                continue
+            dori = abs(ol - o_r[j])
+            dori = min(dori, two_pi - dori)
+            if not (np.float64(dori) <= max_dori):
+                continue
+            li[n] = i
+            rj[n] = j
+            d[n] = ul - np.float64(u_r[j])
+            n += 1
+    return li[:n].copy(), rj[:n].copy(), d[:n].copy()
 
 
 def disc_offsets(radius: float) -> tuple[np.ndarray, np.ndarray]:
@@ -250,6 +357,8 @@ def _empty_links(m: int) -> SupportLinks:
 def _cell_table(s_cell: np.ndarray, size: int) -> np.ndarray:
     """(size + 1,) int: ``table[k]`` = number of the sorted cells ``s_cell`` below k."""
     m = s_cell.shape[0]
+    if _nb_cells is not None:
+        return _nb_cells(s_cell, size)
     first = np.ones(m, bool)
     first[1:] = s_cell[1:] != s_cell[:-1]
     at = np.flatnonzero(first)
@@ -262,6 +371,54 @@ def _cell_table(s_cell: np.ndarray, size: int) -> np.ndarray:
     table = np.zeros(size + 1, np.int64)
     np.cumsum(np.bincount(s_cell, minlength=size), out=table[1:])
     return table
+
+
+def _cells_kernel(s_cell, size):
+    """:func:`_cell_table` as a loop (for numba): (size + 1,) int64, ``table[k]`` the
+    number of the sorted cells ``s_cell`` (M,) below k (a count per cell, then its
+    prefix sum)."""
+    table = np.zeros(size + 1, np.int64)
+    for c in s_cell:
+        table[c + 1] += 1
+    for k in range(1, size + 1):
+        table[k] += table[k - 1]
+    return table
+
+
+def _siblings_kernel(left, d):
+    """:func:`_sibling_disparities` as a loop (for numba): the disparities (M,) float64
+    of the previous and next candidate of the same left edge (NaN if none), and whether
+    they are monotonic within every left edge (all steps <= 0, or all >= 0)."""
+    m = left.shape[0]
+    d_prev = np.full(m, np.nan)
+    d_next = np.full(m, np.nan)
+    all_le, all_ge = True, True
+    for k in range(1, m):
+        if left[k] == left[k - 1]:
+            d_prev[k] = d[k - 1]
+            d_next[k - 1] = d[k]
+            step = d[k] - d[k - 1]
+            all_le = all_le and step <= 0.0
+            all_ge = all_ge and step >= 0.0
+    return d_prev, d_next, all_le or all_ge
+
+
+def _link_rows_kernel(start, n, c2, c_left, c_right):
+    """The per-supporter rows of :class:`SupportLinks` (for numba): (n,) int64 link of
+    each supporter (``start`` (Q,) ascending, the links' first supporters), and the left
+    and right edges of the supporting candidates ``c2`` (n,)."""
+    pair_link = np.empty(n, np.int64)
+    q_n = start.shape[0]
+    for q in range(q_n):
+        end = start[q + 1] if q + 1 < q_n else n
+        for p in range(start[q], end):
+            pair_link[p] = q
+    pair_edge = np.empty(n, c_left.dtype)
+    pair_right = np.empty(n, c_right.dtype)
+    for p in range(n):
+        pair_edge[p] = c_left[c2[p]]
+        pair_right[p] = c_right[c2[p]]
+    return pair_link, pair_edge, pair_right
 
 
 def _sibling_disparities(cand: Candidates) -> tuple[np.ndarray, np.ndarray, bool]:
@@ -438,6 +595,12 @@ def _pairs_kernel(table, half, w, s_uc, s_d64, s_v, rad2, lim2):
 _nb_pairs = _jit(_pairs_kernel)
 _nb_select = None          # set after _select_kernel
 _nb_group = None
+_nb_search_left = _jit(_search_left)
+_nb_search_right = _jit(_search_right)
+_nb_candidates = _jit(_candidates_kernel) if _nb_search_left is not None else None
+_nb_cells = _jit(_cells_kernel)
+_nb_siblings = _jit(_siblings_kernel)
+_nb_link_rows = _jit(_link_rows_kernel)
 
 
 def _group_links(cand: Candidates, n_left: int, a: np.ndarray, b: np.ndarray,
@@ -446,13 +609,19 @@ def _group_links(cand: Candidates, n_left: int, a: np.ndarray, b: np.ndarray,
     separations s2 (``tol``: lim * rad, with slack)."""
     m = len(cand)
     if _nb_group is not None:
-        d_prev, d_next, monotonic = _sibling_disparities(cand)
+        d_prev, d_next, monotonic = (_sibling_disparities(cand) if _nb_siblings is None
+                                     else _nb_siblings(cand.left, cand.d))
         c, start, c2, sep2, n1 = _nb_group(a, b, s2, cand.d, d_prev, d_next, monotonic,
                                            float(tol), cand.left, n_left)
-        pair_link = np.repeat(np.arange(start.size), np.diff(np.append(start, c2.size)))
+        if _nb_link_rows is not None:
+            pair_link, pair_edge, pair_right = _nb_link_rows(start, c2.size, c2, cand.left,
+                                                             cand.right)
+        else:
+            pair_link = np.repeat(np.arange(start.size), np.diff(np.append(start, c2.size)))
+            pair_edge, pair_right = cand.left[c2], cand.right[c2]
         return SupportLinks(num_candidates=m, cand=c, start=start, pair_link=pair_link,
-                            pair_cand=c2, pair_edge=cand.left[c2],
-                            pair_right=cand.right[c2], weight=sep2, num_single=int(n1))
+                            pair_cand=c2, pair_edge=pair_edge,
+                            pair_right=pair_right, weight=sep2, num_single=int(n1))
     # Each pair (a, b) is used both ways: a supported by b, and b by a. Links group the
     # supporters by (supported candidate, supporter's left edge). Two supporters of c
     # on one left edge both lie within lim * rad of c's disparity, so a supporter can
@@ -852,18 +1021,29 @@ def warm_up() -> bool:
     """Compile (or load from the disk cache) the numba kernels on tiny inputs of the
     real argument types, so that the first frame does not pay for it; without numba, or
     if compiling fails, the numpy paths are used. Returns whether numba is in use."""
-    global _nb_pairs, _nb_select, _nb_group
-    if _nb_pairs is None or _nb_select is None or _nb_group is None:
+    global _nb_pairs, _nb_select, _nb_group, _nb_candidates, _nb_cells, _nb_siblings, \
+        _nb_link_rows
+    if (_nb_pairs is None or _nb_select is None or _nb_group is None
+            or _nb_candidates is None or _nb_cells is None or _nb_siblings is None
+            or _nb_link_rows is None):
         _nb_pairs = _nb_select = _nb_group = None
+        _nb_candidates = _nb_cells = _nb_siblings = _nb_link_rows = None
         return False
     i64, f64 = np.zeros(2, np.int64), np.zeros(2)
+    i8, i32, f32 = np.ones(2, np.int8), np.zeros(2, np.int32), np.ones(2, np.float32)
     try:
         for table in (np.zeros(9, np.int32), np.zeros(9, np.int64)):
             _nb_pairs(table, np.ones(2), 2, f64, f64, i64, 9.0, 1.0)
         _nb_select(i64, i64, 2, 2, i64, i64, i64, f64, 3, 0.5)
         for mono in (True, False):
             _nb_group(i64, i64, f64 + 1.0, f64, f64, f64, mono, 3.0, i64, 2)
+        _nb_candidates(i8, i32, f32, f32, f32, i8, i32, f32, f32, f32, 2, 2.0, 0.5, 1.0,
+                       np.float32(0.5), 0.5)
+        _nb_cells(i64, 2)
+        _nb_siblings(i64, f64)
+        _nb_link_rows(i64, 2, i64, i64, i64)
     except Exception:       # pragma: no cover - a broken numba/llvmlite install
         _nb_pairs = _nb_select = _nb_group = None
+        _nb_candidates = _nb_cells = _nb_siblings = _nb_link_rows = None
         return False
     return True
