@@ -83,6 +83,7 @@ from .obstacle_tracks import ObstacleTracker
 from .ground_plane import PlaneFit, PlausiblePlaneConfig, fit_ground_plane, plane_is_plausible
 from .ground_plane import _median
 from .jit import jit as _jit
+from .jit import nb_pairwise_sum as _nb_pairwise_sum
 from .jit import warmed as _warmed
 from .matching import Candidates, Matches, pmf_match
 from .matching import warm_up as matching_warm_up
@@ -1895,34 +1896,6 @@ def _body_gap_kernel(g, ax, ay, bx, by):
     return 0 if maybe < _FACE_BEHIND_MIN else -1
 
 
-def _pairwise_sum_kernel(a, lo, hi):
-    """``a[lo:hi].sum()`` of a contiguous float64 array as numpy adds it, for up to 128
-    values (for numba): its pairwise summation, which is in order below 8 values, else
-    8 partial sums over blocks of 8, combined pairwise, then the rest in order."""
-    n = hi - lo
-    if n < 8:
-        res = 0.0
-        for i in range(lo, hi):
-            res += a[i]
-        return res
-    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
-    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
-    m = lo + n - n % 8
-    for i in range(lo + 8, m, 8):
-        r0 += a[i]
-        r1 += a[i + 1]
-        r2 += a[i + 2]
-        r3 += a[i + 3]
-        r4 += a[i + 4]
-        r5 += a[i + 5]
-        r6 += a[i + 6]
-        r7 += a[i + 7]
-    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-    for i in range(m, hi):
-        res += a[i]
-    return res
-
-
 def _first_min(x, k, best):
     """Whether x[k] replaces x[best] as ``np.argmin``'s answer scanning in order: smaller,
     or the first NaN (which numpy returns)."""
@@ -2082,7 +2055,6 @@ def _soft_nearest_groups(xy: np.ndarray, sr: np.ndarray, group: np.ndarray, n_gr
     return out
 
 
-_nb_pairwise_sum = _jit(_pairwise_sum_kernel)
 _nb_first_min = _jit(_first_min)
 _nb_body_gap = _jit(_body_gap_kernel)
 _nb_soft_args = _jit(_soft_args_kernel)
@@ -2124,6 +2096,27 @@ def _ground_inside(g: np.ndarray, a: np.ndarray, n: np.ndarray, b: np.ndarray,
     return out & (np.abs(area2) > 1e-12)
 
 
+def _inside_by_kernel(ax, ay, nx, ny, bx, by, gx, gy, sgn, margin):
+    """Whether the point g lies more than ``margin`` inside the triangle a-n-b of
+    orientation ``sgn`` (+1 counter-clockwise), metres (for numba): each side's signed
+    distance side(p0, p1) from the line p0 -> p1 (left positive) times sgn exceeds it
+    (`_ground_inside`'s arithmetic)."""
+    e0x, e0y = nx - ax, ny - ay                             # a -> n
+    l0 = max(math.hypot(e0x, e0y), 1e-12)
+    if not sgn * ((e0x * (gy - ay) - e0y * (gx - ax)) / l0) > margin:
+        return False
+    e1x, e1y = bx - nx, by - ny                             # n -> b
+    l1 = max(math.hypot(e1x, e1y), 1e-12)
+    if not sgn * ((e1x * (gy - ny) - e1y * (gx - nx)) / l1) > margin:
+        return False
+    e2x, e2y = ax - bx, ay - by                             # b -> a
+    l2 = max(math.hypot(e2x, e2y), 1e-12)
+    return sgn * ((e2x * (gy - by) - e2y * (gx - bx)) / l2) > margin
+
+
+_nb_inside_by = _jit(_inside_by_kernel)
+
+
 def _corner_free_kernel(g, a, b, c, r, n, margin):
     """The free-space test of `hidden_corners` (for numba): (T, M) bool, whether no ground
     point g (G, 2) lies inside the triangle a[t]-n[t, k]-b[t] by more than ``margin``
@@ -2162,19 +2155,8 @@ def _corner_free_kernel(g, a, b, c, r, n, margin):
                 if not ok[t, k] or not abs(area2[k]) > 1e-12:
                     continue
                 sgn = 1.0 if area2[k] > 0 else -1.0
-                nx, ny = n[t, k, 0], n[t, k, 1]
-                # side(p0, p1): signed distance from the line p0 -> p1 (left positive)
-                e0x, e0y = nx - ax, ny - ay                     # a -> n
-                l0 = max(math.hypot(e0x, e0y), 1e-12)
-                if not sgn * ((e0x * (gy - ay) - e0y * (gx - ax)) / l0) > margin:
-                    continue
-                e1x, e1y = bx - nx, by - ny                     # n -> b
-                l1 = max(math.hypot(e1x, e1y), 1e-12)
-                if not sgn * ((e1x * (gy - ny) - e1y * (gx - nx)) / l1) > margin:
-                    continue
-                e2x, e2y = ax - bx, ay - by                     # b -> a
-                l2 = max(math.hypot(e2x, e2y), 1e-12)
-                if sgn * ((e2x * (gy - by) - e2y * (gx - bx)) / l2) > margin:
+                if _nb_inside_by(ax, ay, n[t, k, 0], n[t, k, 1], bx, by, gx, gy, sgn,
+                                 margin):
                     ok[t, k] = False
     return ok
 
@@ -2931,18 +2913,7 @@ def _separated_kernel(wx, wy, f, g_all, margin):
                 if not abs(area2) > 1e-12:
                     continue
                 sgn = 1.0 if area2 > 0 else -1.0
-                # side(p0, p1): signed distance from the line p0 -> p1 (left positive)
-                e0x, e0y = wx - ax, wy - ay                     # a -> w
-                l0 = max(math.hypot(e0x, e0y), 1e-12)
-                if not sgn * ((e0x * (gy - ay) - e0y * (gx - ax)) / l0) > margin:
-                    continue
-                e1x, e1y = bx - wx, by - wy                     # w -> b
-                l1 = max(math.hypot(e1x, e1y), 1e-12)
-                if not sgn * ((e1x * (gy - wy) - e1y * (gx - wx)) / l1) > margin:
-                    continue
-                e2x, e2y = ax - bx, ay - by                     # b -> a
-                l2 = max(math.hypot(e2x, e2y), 1e-12)
-                if sgn * ((e2x * (gy - by) - e2y * (gx - bx)) / l2) > margin:
+                if _nb_inside_by(ax, ay, wx, wy, bx, by, gx, gy, sgn, margin):
                     return True
     return False
 

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from asmonc_vision.core.gait.model import GaitConfig
-from asmonc_vision.core.jit import jit, warmed
+from asmonc_vision.core.jit import jit, nb_pairwise_sum as _nb_pairwise_sum, warmed
 
 _D2R = np.pi / 180.0
 #: a refit replaces the tracked frequency only if it explains this much more of the
@@ -494,42 +494,15 @@ def _stop_sums(q: np.ndarray, z: np.ndarray, m: np.ndarray) -> tuple[float, floa
 # same BLAS products and numpy's own summation order, so the same numbers (test_gait
 # compares them).
 
-def _pairwise_sum_kernel(a):
-    """sum(a) of up to 128 values as ``np.add.reduce`` adds a contiguous float64 array
-    (numpy's pairwise summation, which below 129 values is: in order below 8, else 8
-    partial sums over blocks of 8, combined pairwise, then the rest in order)."""
-    n = a.size
-    if n < 8:
-        res = 0.0
-        for i in range(n):
-            res += a[i]
-        return res
-    r0, r1, r2, r3, r4, r5, r6, r7 = a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7]
-    m = n - n % 8
-    for i in range(8, m, 8):
-        r0 += a[i]
-        r1 += a[i + 1]
-        r2 += a[i + 2]
-        r3 += a[i + 3]
-        r4 += a[i + 4]
-        r5 += a[i + 5]
-        r6 += a[i + 6]
-        r7 += a[i + 7]
-    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-    for i in range(m, n):
-        res += a[i]
-    return res
-
-
 def _stop_sums_kernel(q, z, m):
     """``_stop_sums`` (z, m of up to 128 values)."""
     zr = z - np.dot(q, np.dot(q.T, z))
     mr = m - np.dot(q, np.dot(q.T, m))
-    return (_nb_pairwise_sum((mr * mr).ravel()), _nb_pairwise_sum((zr * mr).ravel()),
-            _nb_pairwise_sum((zr * zr).ravel()))
+    mm, zm, zz = (mr * mr).ravel(), (zr * mr).ravel(), (zr * zr).ravel()
+    return (_nb_pairwise_sum(mm, 0, mm.size), _nb_pairwise_sum(zm, 0, zm.size),
+            _nb_pairwise_sum(zz, 0, zz.size))
 
 
-_nb_pairwise_sum = jit(_pairwise_sum_kernel)
 _nb_stop_sums = jit(_stop_sums_kernel)
 _warm = False
 
