@@ -3577,13 +3577,11 @@ class GpodDetector:
             ob = tr.payload
             seen = tr.index >= 0
             roi = ob.roi if (seen or not moved) else _moved_roi(ob, tr.foot, n, cam)
-            out.append(GpodObstacle(      # (as dataclasses.replace, without its overhead)
-                position=tr.foot + ob.height * n, height=ob.height, range=rng_k,
-                bearing=brg_k, width=ob.width, disparity_excess=ob.disparity_excess,
-                confidence=conf, roi=roi,
-                num_edge_pixels=ob.num_edge_pixels if seen else 0,
+            out.append(dataclasses.replace(
+                ob, position=tr.foot + ob.height * n, range=rng_k, roi=roi, confidence=conf,
+                bearing=brg_k, track_id=tr.track_id, age_s=tr.age_s,
                 string_ids=ob.string_ids if seen else np.zeros(0, np.int32),
-                track_id=tr.track_id, age_s=tr.age_s))
+                num_edge_pixels=ob.num_edge_pixels if seen else 0))
         out.sort(key=lambda o: o.range)
         return tuple(out)
 
