@@ -66,3 +66,37 @@ def test_matching_is_on_the_ground_not_at_the_top():
     det = {1: _frame(1, [(0, 0.0, 0.2, 3.0, 1.0, 3.05, 0.06, ROI)])}
     score, _ = score_sequence(det, truth, match_radius=0.3)
     assert score.detected == 1
+
+
+def test_a_report_of_a_true_obstacle_that_has_left_the_view_is_remembered_not_false():
+    """Truth lists obstacles in view only; carried by the true poses, an obstacle listed
+    earlier explains a later report at its place (remembered), but nothing else does."""
+    from asmonc_vision.core.camera import MetricPlane
+    from asmonc_vision.core.evaluation import out_of_view_truth
+
+    plane = MetricPlane(normal_up=np.array([0.0, -1.0, 0.0]), height=1.2)
+    s = 100_000_000                                       # 10 Hz, ns
+    # the camera walks 0.5 m forward per frame along the world's z; the obstacle's foot
+    # stands 3 m ahead of the first frame; it is listed while at 3.0 and 2.5 m only
+    truth, poses = {}, {}
+    for k in range(8):
+        poses[k * s] = (np.eye(3), np.array([0.0, 0.0, 0.5 * k]))
+        z = 3.0 - 0.5 * k
+        truth[k * s] = (_frame(k * s, [(7, 0.0, 0.7, z, 0.5, z, 0.0, ROI)]) if k < 2
+                        else FrameObstacles.empty(k * s))
+    away = out_of_view_truth(truth, poses, {k: plane for k in poses})
+    assert len(away[0]) == 0 and len(away[s]) == 0       # listed: not remembered
+    assert set(away[2 * s].ids) == {7}
+    assert away[2 * s].range == pytest.approx([2.0, 2.0])   # both listed feet, carried
+    assert away[2 * s].position[:, 1] == pytest.approx([0.7, 0.7])  # top: 0.5 m up
+    assert len(away[7 * s]) == 0                          # passed: behind the camera
+    det = {2 * s: _frame(2 * s, [(3, 0.05, 1.2, 2.0, 0.5, 2.0, 0.02, FAR_ROI),
+                                 (4, 1.5, 1.2, 2.6, 0.5, 3.0, -0.5, FAR_ROI)])}
+    score, _ = score_sequence(det, {2 * s: truth[2 * s]}, away)
+    assert (score.remembered, score.false_obstacles) == (1, 1)
+    score, _ = score_sequence(det, {2 * s: truth[2 * s]})  # without the poses: both false
+    assert (score.remembered, score.false_obstacles) == (0, 2)
+    assert score.as_dict()['remembered_out_of_view'] == 0
+    # beyond the memory an obstacle is forgotten
+    assert len(out_of_view_truth(truth, poses, {k: plane for k in poses},
+                                 memory_s=0.05)[2 * s]) == 0

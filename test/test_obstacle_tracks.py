@@ -92,6 +92,39 @@ def test_free_space_ends_an_undetected_track_at_once():
     assert seen and seen[0][0] == 0 and np.allclose(seen[0][1], [0.0, 1.2, 3.0])
 
 
+def test_an_obstacle_walked_up_to_is_remembered_below_the_view():
+    """A sure track whose place has left the view is carried for unseen_coast_s, not
+    coast_s; the free-space test still ends it; a track not sure ends at once."""
+    p = [0.0, 1.2, 1.0]
+    below = lambda payload, foot: True       # noqa: E731  (every place out of view)
+
+    def run(hits, free=None):
+        tr = ObstacleTracker(coast_s=0.3, min_hit_fraction=0.5, sure_hits=3,
+                             unseen_coast_s=2.0)
+        for k in range(hits):
+            step(tr, 0.1 * k, [p])
+        alive = 0
+        for k in range(hits, hits + 40):
+            tr.predict(0.1 * k, STILL)
+            out = tr.update(np.zeros((0, 3)), np.zeros((0, 3, 3)), [], free, None, below)
+            if not out:
+                break
+            assert out[0].age_s > 0 and np.allclose(out[0].foot, p)
+            alive += 1
+        return alive
+
+    assert run(3) == 20                      # 2.0 s after the last detection, not 0.3 s
+    assert run(2) == 0                       # 2 hits are not sure: out of view ends it
+    assert run(3, free=lambda payload, foot: True) == 0
+    # without the unseen test the same track ends after coast_s
+    tr = ObstacleTracker(coast_s=0.3, min_hit_fraction=0.5, sure_hits=3, unseen_coast_s=2.0)
+    for k in range(3):
+        step(tr, 0.1 * k, [p])
+    assert [len(step(tr, 0.1 * k, [])) for k in range(3, 7)] == [1, 1, 1, 0]
+    with pytest.raises(ValueError, match='unseen_coast_s'):
+        ObstacleTracker(unseen_coast_s=-1.0)
+
+
 def test_gating_a_far_detection_starts_a_new_track():
     tr = ObstacleTracker(min_hit_fraction=0.0)
     step(tr, 0.0, [[0.0, 1.2, 3.0]])

@@ -277,6 +277,19 @@ def run_method(frames: list[Frame], method: str = 'gpod', threshold_px: float | 
     return out
 
 
+def out_of_view_for(frames: list[Frame]) -> dict:
+    """stamp_ns -> true obstacles out of view in that frame
+    (`core.evaluation.out_of_view_truth`), from the frames' truth, true poses and true
+    planes; empty when they have none."""
+    from asmonc_vision.core.evaluation import out_of_view_truth
+
+    have = [f for f in frames if f.truth is not None and f.pose is not None
+            and f.truth_plane is not None]
+    return out_of_view_truth({f.stamp_ns: f.truth for f in have},
+                             {f.stamp_ns: f.pose for f in have},
+                             {f.stamp_ns: f.truth_plane for f in have})
+
+
 def score_runs(frames: list[Frame], runs: list[FrameRun], evaluation=None, warmup: int = 0,
                **criteria):
     """Score a method's output against the frames' truth (frames without truth are skipped).
@@ -291,11 +304,13 @@ def score_runs(frames: list[Frame], runs: list[FrameRun], evaluation=None, warmu
     from asmonc_vision.core.evaluation import SequenceEvaluation
 
     ev = evaluation if evaluation is not None else SequenceEvaluation(**criteria)
+    away = out_of_view_for(frames)
     for i, (f, r) in enumerate(zip(frames, runs)):
         if f.truth is None:
             continue
         ev.add_frame(r.obstacles, f.truth, plane=r.plane, truth_plane=f.truth_plane,
-                     latency_ms=r.latency_ms if i >= warmup else None, status=r.status)
+                     latency_ms=r.latency_ms if i >= warmup else None, status=r.status,
+                     remembered=away.get(f.stamp_ns))
     return ev
 
 

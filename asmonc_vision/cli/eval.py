@@ -39,8 +39,8 @@ import sys
 from pathlib import Path
 
 from asmonc_vision import bagio
-from asmonc_vision.cli.bench import METHODS, load_frames, make_method, plane_from_msg, \
-    run_method, score_runs
+from asmonc_vision.cli.bench import METHODS, load_frames, make_method, out_of_view_for, \
+    plane_from_msg, run_method, score_runs
 
 STATUS_NAMES = {0: 'initialising', 1: 'tracking', 2: 'lost'}
 
@@ -125,6 +125,7 @@ def score_outputs(frames, outputs: Path, evaluation) -> None:
             dets[f.stamp_ns] = f
         else:
             planes[bagio.header_stamp_ns(m)] = m
+    away = out_of_view_for(frames)
     for f in frames:
         if f.truth is None:
             continue
@@ -136,7 +137,7 @@ def score_outputs(frames, outputs: Path, evaluation) -> None:
         evaluation.add_frame(det, f.truth, plane=plane_from_msg(pm, f.cam) if pm else None,
                              truth_plane=f.truth_plane,
                              status=STATUS_NAMES.get(int(pm.status), str(pm.status))
-                             if pm else 'no /ground_plane')
+                             if pm else 'no /ground_plane', remembered=away.get(f.stamp_ns))
 
 
 def egomotion_scores(bag: Path, outputs: Path | None, frames: int = 0) -> dict | None:
@@ -200,7 +201,9 @@ def format_summary(title: str, s: dict) -> list[str]:
     fo = s['false_obstacles']
     lines.append(f"false obstacles: {fo['total']} in {s['frames']} frames = "
                  f"{_f(fo['per_frame'], '.3f')} per frame = {_f(fo['per_minute'], '.1f')} per "
-                 f"minute ({fo['frames_with_false']} frames with any)")
+                 f"minute ({fo['frames_with_false']} frames with any); "
+                 f"{fo.get('remembered_out_of_view', 0)} more reports of true obstacles "
+                 f"out of view (remembered, not false)")
     re_, be = s['range_error'], s['bearing_error']
     lines.append(f"range error: median |e| {_f(re_['median_abs_m'], '.3f')} m = "
                  f"{_f(re_['median_abs_pct_of_range'], '.1f')} % of range (signed median "

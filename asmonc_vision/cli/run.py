@@ -275,6 +275,32 @@ def read_truth(bag: Path) -> dict[int, FrameObstacles]:
     return out
 
 
+def read_out_of_view_truth(bag: Path, truth: dict[int, FrameObstacles]
+                           ) -> dict[int, FrameObstacles] | None:
+    """stamp_ns -> true obstacles out of view (`core.evaluation.out_of_view_truth`), from
+    the bag's /ground_truth/camera_pose and /ground_truth/ground_plane; None when it has
+    no poses."""
+    from asmonc_vision.cli.bench import plane_from_msg
+    from asmonc_vision.core.evaluation import out_of_view_truth
+    from asmonc_vision.core.rotations import quaternion_to_matrix
+
+    t_pose, t_plane = bagio.TOPICS['gt_camera_pose'][0], bagio.TOPICS['gt_ground_plane'][0]
+    poses, planes = {}, {}
+    for topic, _, m in bagio.read_messages(bag, [t_pose, t_plane]):
+        stamp = bagio.header_stamp_ns(m)
+        if topic == t_pose:
+            q, c = m.pose.orientation, m.pose.position
+            poses[stamp] = (quaternion_to_matrix([q.x, q.y, q.z, q.w]),
+                            np.array([c.x, c.y, c.z]))
+        else:
+            plane = plane_from_msg(m)
+            if plane is not None:
+                planes[stamp] = plane
+    if not poses:
+        return None
+    return out_of_view_truth(truth, poses, planes)
+
+
 def first_image_stamp(bag: Path) -> int | None:
     topic = bagio.TOPICS['left_image'][0]
     for _, _, m in bagio.read_messages(bag, [topic]):
@@ -365,10 +391,12 @@ def run(args) -> int:
     if domain != preferred:
         console.line(f'asmonc run: ROS domain {preferred} is in use by another asmonc run; '
                      f'this one uses domain {domain} (ROS_DOMAIN_ID={domain} to watch it)')
-    t0, truth = 0, {}
+    t0, truth, out_of_view = 0, {}, None
     try:
         t0 = first_image_stamp(bag) or 0
         truth = read_truth(bag) if bagio.TOPICS['gt_obstacles'][0] in topics else {}
+        if truth and bagio.TOPICS['gt_camera_pose'][0] in topics:
+            out_of_view = read_out_of_view_truth(bag, truth)
     except bagio.BagError as exc:
         truth = getattr(exc, 'partial', truth)
         if not damage:
@@ -528,7 +556,7 @@ def run(args) -> int:
         monitor.node.destroy_node()
         rclpy.try_shutdown(context=ctx)
 
-    summary = summarise(monitor, truth, n_pairs, args)
+    summary = summarise(monitor, truth, n_pairs, args, out_of_view)
     summary['player_exit_code'] = player_rc
     summary['errors'] = failed
     print_summary(summary, console)
@@ -601,8 +629,11 @@ def _bag_time(stamp_ns: int, t0: int) -> str:
     return f'{t:7.1f} s' if t0 and -60.0 < t < 86400.0 else '   (live)'
 
 
-def summarise(monitor: _Monitor, truth: dict, n_pairs: int, args) -> dict:
-    """Counts, alarms and the score against ground truth, as a JSON-ready dict."""
+def summarise(monitor: _Monitor, truth: dict, n_pairs: int, args,
+              out_of_view: dict | None = None) -> dict:
+    """Counts, alarms and the score against ground truth, as a JSON-ready dict.
+    ``out_of_view``: stamp_ns -> true obstacles out of view (`read_out_of_view_truth`):
+    reports of them are counted as remembered, not false."""
     with monitor.lock:
         detections = dict(monitor.detections)
         alarms = list(monitor.alarms)
@@ -613,7 +644,9 @@ def summarise(monitor: _Monitor, truth: dict, n_pairs: int, args) -> dict:
            'obstacle_reports': int(sum(len(d) for d in detections.values())),
            'gait_states': monitor.gait_states, 'gait_walking_states': monitor.gait_walking}
     if truth:
-        score, missing = score_sequence(detections, truth, match_radius=args.match_radius,
+        score, missing = score_sequence(detections, truth,
+                                        out_of_view,
+                                        match_radius=args.match_radius,
                                         min_height=args.min_height, max_range=args.max_range)
         out['ground_truth'] = score.as_dict()
         out['ground_truth']['criteria'] = {'match_radius_m': args.match_radius,
@@ -650,7 +683,9 @@ def print_summary(s: dict, console: _Console) -> None:
         p(f"recall per frame: {gt['detected']}/{gt['eligible']}"
           + (f' = {recall:.1%}' if gt['eligible'] else ''))
         p(f"false obstacles: {gt['false_obstacles']} in {gt['frames']} frames "
-          f"({gt['false_per_frame']:.3f} per frame)")
+          f"({gt['false_per_frame']:.3f} per frame); "
+          f"{gt.get('remembered_out_of_view', 0)} more reports of true obstacles out of view "
+          f"(remembered, not false)")
         if gt['range_error_median_m'] is not None:
             p(f"median |range error| {gt['range_error_median_m']:.3f} m, "
               f"median |bearing error| {gt['bearing_error_median_deg']:.2f} deg")

@@ -10,6 +10,13 @@ A true obstacle counts as *detected* in a frame when a detection lies within
 true obstacle: it is neither within `match_radius` of one, nor inside one's image
 region (so a detection on the far end of a wall is not false, though the wall's true
 position is its nearest visible part).
+
+The ground truth lists only obstacles in view. A detector that remembers an obstacle
+after it has left the view (walked up to, below the image's bottom edge) reports a
+real obstacle the frame's truth does not list. Where the true camera poses are known,
+`out_of_view_truth` carries the places where each true obstacle was listed into the
+later frames that no longer list it; a detection within `match_radius` of one of those
+is counted as *remembered*, neither false nor detected.
 """
 from __future__ import annotations
 
@@ -18,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .camera import MetricPlane
+from .camera import MetricPlane, ground_range_bearing
 
 
 @dataclass
@@ -82,6 +89,8 @@ class DetectionScore:
     detected: int = 0
     false_obstacles: int = 0
     frames_with_false: int = 0
+    #: reports that explain only a true obstacle out of view (`out_of_view_truth`)
+    remembered: int = 0
     range_errors: list = field(default_factory=list)
     bearing_errors: list = field(default_factory=list)
     obstacles: dict = field(default_factory=dict)
@@ -108,6 +117,7 @@ class DetectionScore:
             'recall': self.recall, 'false_obstacles': self.false_obstacles,
             'false_per_frame': self.false_per_frame,
             'frames_with_false': self.frames_with_false,
+            'remembered_out_of_view': self.remembered,
             'range_error_median_m': float(np.median(np.abs(re))) if re.size else None,
             'bearing_error_median_deg': float(np.degrees(np.median(np.abs(be))))
             if be.size else None,
@@ -130,23 +140,29 @@ class FrameMatch:
         truth_det: (M,) int, index of the detection that found true obstacle m, or -1.
         eligible: (M,) bool, true obstacle m counts in the recall (height and range).
         false: (N,) bool, detection n explains no true obstacle.
+        remembered: (N,) bool, detection n explains only a true obstacle out of view
+            (not false).
     """
 
     truth_det: np.ndarray
     eligible: np.ndarray
     false: np.ndarray
+    remembered: np.ndarray | None = None
 
 
 def match_frame(det: FrameObstacles, truth: FrameObstacles, *, match_radius: float = 0.3,
                 min_height: float = 0.10, max_range: float = 5.0,
-                roi_margin: float = 4.0) -> FrameMatch:
+                roi_margin: float = 4.0,
+                remembered: FrameObstacles | None = None) -> FrameMatch:
     """Pair one frame's detections with its true obstacles, on the ground.
 
     First the eligible true obstacles (|height| >= min_height, range <= max_range), nearest
     first, each take the nearest unused detection within match_radius of it on the
     ground (greedy); then the other true obstacles, nearest first, take what is left. So
     low or far obstacles never take a detection from an eligible one, and the eligible
-    matches are exactly those `score_frame` counts.
+    matches are exactly those `score_frame` counts. A detection that would be false but
+    lies within match_radius of a ``remembered`` place (true obstacles out of view, from
+    `out_of_view_truth`) is marked remembered instead.
     """
     m, n = len(truth), len(det)
     dist = (np.linalg.norm(truth.ground_xy()[:, None, :] - det.ground_xy()[None, :, :], axis=2)
@@ -170,7 +186,13 @@ def match_frame(det: FrameObstacles, truth: FrameObstacles, *, match_radius: flo
         in_roi = (_inside_roi(truth.roi, det_uv, roi_margin).any(axis=0)
                   if m else np.zeros(n, bool))
         false = ~(used | near_any | in_roi)
-    return FrameMatch(truth_det=truth_det, eligible=eligible, false=false)
+    kept = np.zeros(n, bool)
+    if n and remembered is not None and len(remembered):
+        dr = np.linalg.norm(remembered.ground_xy()[:, None, :] - det.ground_xy()[None, :, :],
+                            axis=2)
+        kept = false & (dr <= match_radius).any(axis=0)
+        false = false & ~kept
+    return FrameMatch(truth_det=truth_det, eligible=eligible, false=false, remembered=kept)
 
 
 def score_frame(det: FrameObstacles, truth: FrameObstacles, score: DetectionScore, *,
@@ -212,28 +234,94 @@ def score_frame(det: FrameObstacles, truth: FrameObstacles, score: DetectionScor
         nf = int(match.false.sum())
         score.false_obstacles += nf
         score.frames_with_false += int(nf > 0)
+        if match.remembered is not None:
+            score.remembered += int(match.remembered.sum())
 
 
 def score_sequence(detections: dict[int, FrameObstacles], truth: dict[int, FrameObstacles],
+                   remembered: dict[int, FrameObstacles] | None = None,
                    **kwargs) -> tuple[DetectionScore, list[int]]:
     """Score every ground-truth frame; frames with no detection message are *missing*.
 
     Args:
         detections: stamp_ns -> detections of that frame (absent: the frame was dropped).
         truth: stamp_ns -> true obstacles of that frame.
-        **kwargs: passed to `score_frame`.
+        remembered: stamp_ns -> true obstacles out of view (`out_of_view_truth`), or None.
+        **kwargs: passed to `score_frame` (its criteria).
     Returns:
         (score over the frames that have detections, stamps of the missing frames).
     """
     score = DetectionScore()
     missing = []
+    crit = {k: kwargs[k] for k in ('match_radius', 'min_height', 'max_range', 'roi_margin')
+            if k in kwargs}
     for stamp in sorted(truth):
         det = detections.get(stamp)
         if det is None:
             missing.append(stamp)
             continue
-        score_frame(det, truth[stamp], score, **kwargs)
+        rem = remembered.get(stamp) if remembered else None
+        match = (match_frame(det, truth[stamp], remembered=rem, **crit)
+                 if rem is not None else None)
+        score_frame(det, truth[stamp], score, match=match, **kwargs)
     return score, missing
+
+
+def out_of_view_truth(truth: dict[int, FrameObstacles], poses: dict[int, tuple],
+                      planes: dict[int, MetricPlane], memory_s: float = 10.0,
+                      places_per_obstacle: int = 30) -> dict[int, FrameObstacles]:
+    """True obstacles out of view, carried into each frame by the true camera poses.
+
+    An obstacle's listed place is its nearest *visible* part, so when the wearer walks up
+    to it and it leaves the bottom of the image it is no longer listed, though it is
+    still there. For each frame, every obstacle listed in an earlier frame (within
+    ``memory_s``) but not in this one is given by the places where it was listed (its
+    latest ``places_per_obstacle`` feet), carried by the poses into this frame.
+    Obstacles are taken to stand still in the world (as in the simulator).
+
+    Args:
+        truth: stamp_ns -> true obstacles of that frame.
+        poses: stamp_ns -> (R (3, 3), t (3,)) pose of the left optical frame in the world
+            (``X_world = R X + t``, metres).
+        planes: stamp_ns -> the true ground plane of that frame (left optical frame).
+        memory_s: how long an obstacle is remembered after it was last listed, s.
+        places_per_obstacle: feet kept per obstacle.
+    Returns:
+        stamp_ns -> FrameObstacles of the remembered places in that frame (ids repeat:
+        one row per place; roi zero), for frames with truth, pose and plane; places
+        behind the camera are left out.
+    """
+    feet: dict[int, list] = {}          # id -> [(world foot (3,), height)]
+    last: dict[int, int] = {}           # id -> stamp last listed
+    out: dict[int, FrameObstacles] = {}
+    for stamp in sorted(truth):
+        T, pose, plane = truth[stamp], poses.get(stamp), planes.get(stamp)
+        if pose is None or plane is None:
+            continue
+        R, t = (np.asarray(x, float) for x in pose)
+        n = np.asarray(plane.normal_up, float)
+        listed = set(int(i) for i in T.ids)
+        rows = [(i, f, h) for i, pl in feet.items() if i not in listed
+                and (stamp - last[i]) / 1e9 <= memory_s for f, h in pl]
+        if rows:
+            w = np.array([r[1] for r in rows])
+            h = np.array([r[2] for r in rows])
+            foot = (w - t[None]) @ R                # X = Rᵀ (X_world - t)
+            ok = foot[:, 2] > 1e-3
+            foot, h, ids = foot[ok], h[ok], np.array([r[0] for r in rows], int)[ok]
+            rng, brg = ground_range_bearing(plane, foot)
+            out[stamp] = FrameObstacles(stamp, ids, foot + h[:, None] * n[None], h, rng, brg,
+                                        np.zeros((len(ids), 4), int))
+        else:
+            out[stamp] = FrameObstacles.empty(stamp)
+        for k in range(len(T)):
+            i = int(T.ids[k])
+            foot_k = np.asarray(T.position[k], float) - float(T.height[k]) * n
+            pl = feet.setdefault(i, [])
+            pl.append((R @ foot_k + t, float(T.height[k])))
+            del pl[:-places_per_obstacle]
+            last[i] = stamp
+    return out
 
 
 # --- a whole evaluation: recall per bin, errors, ground plane, latency ---------------------
@@ -349,10 +437,12 @@ class SequenceEvaluation:
 
     def add_frame(self, det: FrameObstacles, truth: FrameObstacles, *,
                   plane: MetricPlane | None = None, truth_plane: MetricPlane | None = None,
-                  latency_ms: float | None = None, status: str | None = None) -> FrameMatch:
+                  latency_ms: float | None = None, status: str | None = None,
+                  remembered: FrameObstacles | None = None) -> FrameMatch:
         """Score one frame: its detections against its truth, its ground plane (None: the
-        detector had none this frame) against the true one, and its latency."""
-        match = match_frame(det, truth, **self.criteria)
+        detector had none this frame) against the true one, and its latency.
+        ``remembered``: true obstacles out of view in this frame (`out_of_view_truth`)."""
+        match = match_frame(det, truth, remembered=remembered, **self.criteria)
         score_frame(det, truth, self.score, match=match, **self.criteria)
         self.stamps.append(int(truth.stamp_ns))
         # (1 um: a 5 cm box stored as 0.0499999... is in the 5-10 cm bin)
@@ -407,6 +497,7 @@ class SequenceEvaluation:
             s.detected += t.detected
             s.false_obstacles += t.false_obstacles
             s.frames_with_false += t.frames_with_false
+            s.remembered += t.remembered
             s.range_errors += t.range_errors
             s.bearing_errors += t.bearing_errors
             for k, rec in t.obstacles.items():      # ids are per sequence: 'part:id'
@@ -480,7 +571,8 @@ class SequenceEvaluation:
                             'detected': self.bin_detected.tolist(), 'recall': recall.tolist()},
             'false_obstacles': {'total': s.false_obstacles, 'per_frame': s.false_per_frame,
                                 'per_minute': (s.false_obstacles / dur * 60.0) if dur else None,
-                                'frames_with_false': s.frames_with_false},
+                                'frames_with_false': s.frames_with_false,
+                                'remembered_out_of_view': s.remembered},
             'range_error': {'n': len(s.range_errors),
                             'median_abs_m': gt['range_error_median_m'],
                             'median_m': _median(s.range_errors),

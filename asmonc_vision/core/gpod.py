@@ -449,6 +449,13 @@ class GpodConfig(PlausiblePlaneConfig):
         'through frames without a detection whatever its hit fraction, for up to '
         'track_coast_s, unless the frame shows ground where it stood (0 = off)',
         range=(0, 100000))
+    track_unseen_coast_s: float = param(
+        5.0, 'Obstacle tracks: a track detected in at least track_sure_hits frames whose '
+        'foot has left the bottom of the image (an obstacle walked up to, nearer than the '
+        'ground the camera sees) is still reported, carried by the camera motion, for up '
+        'to this long after its last detection, unless a part of its image region still in '
+        'view shows ground; it ends once passed (behind the camera, or out to the side), s',
+        range=(0.0, 600.0))
     track_position_sigma_m: float = param(
         0.05, 'Obstacle tracks: placement uncertainty of a detected foot added to its '
         'triangulation noise (which corner of the obstacle is nearest), metres',
@@ -2982,7 +2989,8 @@ class GpodDetector:
                                         process_noise_m=c.track_process_noise_m,
                                         confirm_hits=c.track_confirm_hits,
                                         min_hit_fraction=c.track_min_hit_fraction,
-                                        sure_hits=c.track_sure_hits)
+                                        sure_hits=c.track_sure_hits,
+                                        unseen_coast_s=c.track_unseen_coast_s)
         #: track id -> the detection confidences of its latest track_confidence_frames
         #: detections
         self._track_conf: dict[int, deque] = {}
@@ -3554,9 +3562,10 @@ class GpodDetector:
         feet = np.array([o.position - o.height * n for o in obst]).reshape(-1, 3)
         cov = self._foot_covariance(feet, cam)
         moved = motion is not None
-        is_free = ((lambda ob, foot: self._track_is_free(
-            dataclasses.replace(ob, roi=_moved_roi(ob, foot, n, cam)), foot))
-            if moved else self._track_is_free)
+
+        def is_free(ob: GpodObstacle, foot: np.ndarray) -> bool:
+            roi = _moved_roi(ob, foot, n, cam, require_in_view=True) if moved else ob.roi
+            return self._track_is_free(ob, foot, roi)
         # While the view stands still an obstacle's nearest visible point is one fixed
         # point, so a detection of the same obstacle placed elsewhere (its far corner when
         # one silhouette edge dips) keeps its track seen; in motion the nearest visible
@@ -3568,7 +3577,8 @@ class GpodDetector:
         radius = self.config.cluster_radius_m
         tracks = self._tracker.update(
             feet, cov, obst, is_free,
-            (lambda a, b: _same_object(a, b, radius)) if still else None)
+            (lambda a, b: _same_object(a, b, radius)) if still else None,
+            lambda ob, foot: _below_view(cam, foot))
         out = list(drops)
         feet_t = np.array([tr.foot for tr in tracks]).reshape(-1, 3)
         rngs, brgs = ground_range_bearing(metric, feet_t)
@@ -3625,20 +3635,34 @@ class GpodDetector:
         return (np.einsum('nij,jk,nlk->nil', J, S, J)
                 + (c.track_position_sigma_m ** 2) * np.eye(3)[None])
 
-    def _track_is_free(self, ob: GpodObstacle, foot: np.ndarray) -> bool:
-        """Whether this frame shows an undetected track's place free: its foot out of
-        view, or its image region (``ob.roi``) holding at least
-        ``track_free_min_features`` reliably matched edge pixels on the ground plane
-        (within half their threshold) where the obstacle would have stood out (the foot's
-        disparity at least the threshold above the plane's), and three times as many as
-        above it."""
+    def _track_is_free(self, ob: GpodObstacle, foot: np.ndarray,
+                       roi: tuple[int, int, int, int] | None) -> bool:
+        """Whether this frame shows an undetected track's place free.
+
+        Args:
+            ob: the track's latest detection.
+            foot: (3,) its predicted foot, metres, left optical frame.
+            roi: its image region (x, y, w, h) in this frame, left-image pixels, clipped
+                to the image; None when the region lies wholly outside the image.
+        Returns:
+            True when the foot is behind the camera or out of view to the side or above
+            (passed, or gone from view), or when the region holds at least
+            ``track_free_min_features`` reliably matched edge pixels on the ground plane
+            (within half their threshold) where the obstacle would have stood out (the
+            foot's disparity at least the threshold above the plane's), and three times
+            as many as above it. A foot below the image (an obstacle walked up to) is
+            free only by that evidence, from the part of its region still in view.
+        """
         cam, ctx = self._cam, self._ctx
         if foot[2] <= 1e-3:
             return True
         uf, vf = (float(w[0]) for w in cam.project_left(foot))
-        if not (0 <= uf <= cam.width - 1 and 0 <= vf <= cam.height - 1):
+        if not _below_view(cam, foot) and not (0 <= uf <= cam.width - 1
+                                               and 0 <= vf <= cam.height - 1):
             return True
-        x, y, w, h = ob.roi
+        if roi is None:
+            return False
+        x, y, w, h = roi
         inside = (ctx.usable & (ctx.u_left >= x) & (ctx.u_left <= x + w - 1)
                   & (ctx.v >= y) & (ctx.v <= y + h - 1))
         ex = ctx.excess_mean[inside]
@@ -4151,14 +4175,26 @@ def _same_object(a: GpodObstacle, b: GpodObstacle, radius: float = math.inf) -> 
     return ix * iy >= 0.5 * min(aw * ah, bw * bh)
 
 
+def _below_view(cam: StereoCamera, foot: np.ndarray) -> bool:
+    """Whether a foot ((3,) metres, left optical frame) is in front of the camera but
+    projects below the left image's bottom row: ground nearer than the camera sees, where
+    an obstacle the wearer walks up to goes (from about 1.4 m on the paper's rig)."""
+    if foot[2] <= 1e-3:
+        return False
+    return float(cam.project_left(np.asarray(foot, float))[1][0]) > cam.height - 1
+
+
 def _moved_roi(ob: GpodObstacle, foot: np.ndarray, normal_up: np.ndarray,
-               cam: StereoCamera) -> tuple[int, int, int, int]:
+               cam: StereoCamera, require_in_view: bool = False
+               ) -> tuple[int, int, int, int] | None:
     """The left-image region (x, y, w, h) of obstacle ``ob`` moved to stand on ``foot``
     ((3,) metres, left optical frame; ``normal_up`` the plane's unit normal): its region
     carried with its foot's image point and scaled about it by the change of depth, so
     that it keeps its place beside and above the foot (a foot placed off the obstacle's
     edges -- a wall's nearest point, the near one of two boxes -- must not drag the
-    region off them); clipped to the image (at least 1 x 1)."""
+    region off them); clipped to the image (at least 1 x 1). With ``require_in_view``,
+    None when the moved region lies wholly outside the image (an obstacle walked up to,
+    below the view)."""
     old_foot = ob.position - ob.height * normal_up
     ends = np.stack([old_foot, foot]).astype(float)
     ends[:, 2] = np.maximum(ends[:, 2], 1e-3)
@@ -4167,6 +4203,8 @@ def _moved_roi(ob: GpodObstacle, foot: np.ndarray, normal_up: np.ndarray,
     x, y, w, h = ob.roi
     xa, xb = u1 + (x - u0) * scale, u1 + (x + w - 1 - u0) * scale
     ya, yb = v1 + (y - v0) * scale, v1 + (y + h - 1 - v0) * scale
+    if require_in_view and (xb < 0 or xa > cam.width - 1 or yb < 0 or ya > cam.height - 1):
+        return None
     x0 = int(np.clip(np.floor(xa), 0, cam.width - 1))
     x1 = int(np.clip(np.ceil(xb), 0, cam.width - 1))
     y0 = int(np.clip(np.floor(ya), 0, cam.height - 1))

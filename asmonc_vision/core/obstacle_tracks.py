@@ -32,6 +32,13 @@ ground (the obstacle went away) or its foot is out of view. Coasting bridges the
 in which a small obstacle's evidence dips under the threshold: an obstacle does not
 vanish because one frame's disparities were noisy.
 
+A track whose place the caller's ``unseen`` test says the camera cannot see (an
+obstacle the wearer walks up to leaves the bottom of the image about 1.4 m ahead on the
+paper's rig, nearer than the alarm's stop range) is not detected because it cannot be,
+not because it went away: a *sure* track (``sure_hits``) is then remembered, carried by
+the motion, for up to ``unseen_coast_s`` (the free-space test still ends it when a part
+of its region in view shows ground); a track not sure ends, as before.
+
 A detection outside a track's gate that the caller's ``same_object`` test says shows
 the same obstacle (another point of it reported as its nearest, e.g. a box's far corner
 when one silhouette edge dips) keeps the track seen without moving it.
@@ -93,20 +100,26 @@ class ObstacleTracker:
             the threshold by chance, and it does not go away because its evidence dips
             for longer than it was seen. It still ends after ``coast_s`` without a
             detection, or when the free-space test sees ground in its place.
+        unseen_coast_s: longest time a sure track is reported without a detection while
+            its place is out of the camera's view (the ``unseen`` test of ``update``), s;
+            None: ``coast_s``.
     Raises:
         ValueError: a setting out of its range (the message names it).
     """
 
     def __init__(self, coast_s: float = 1.0, gate_chi2: float = CHI2_3_99,
                  process_noise_m: float = 0.05, confirm_hits: int = 1,
-                 min_hit_fraction: float = 0.5, sure_hits: int = 0) -> None:
+                 min_hit_fraction: float = 0.5, sure_hits: int = 0,
+                 unseen_coast_s: float | None = None) -> None:
         self.coast_s, self.gate_chi2 = float(coast_s), float(gate_chi2)
+        self.unseen_coast_s = float(coast_s if unseen_coast_s is None else unseen_coast_s)
         self.process_noise_m, self.confirm_hits = float(process_noise_m), int(confirm_hits)
         self.min_hit_fraction = float(min_hit_fraction)
         self.sure_hits = int(sure_hits)
         for name, lo, hi in (('coast_s', 0.0, 3600.0), ('gate_chi2', 0.01, 1e6),
                              ('process_noise_m', 0.0, 100.0), ('confirm_hits', 1, 1000),
-                             ('min_hit_fraction', 0.0, 1.0), ('sure_hits', 0, 100000)):
+                             ('min_hit_fraction', 0.0, 1.0), ('sure_hits', 0, 100000),
+                             ('unseen_coast_s', 0.0, 3600.0)):
             val = getattr(self, name)
             if not lo <= val <= hi:
                 raise ValueError(f'ObstacleTracker.{name} = {val} is out of range '
@@ -171,7 +184,8 @@ class ObstacleTracker:
 
     def update(self, feet: np.ndarray, feet_cov: np.ndarray, payloads: Sequence[object],
                is_free: Callable[[object, np.ndarray], bool] | None = None,
-               same_object: Callable[[object, object], bool] | None = None
+               same_object: Callable[[object, object], bool] | None = None,
+               unseen: Callable[[object, np.ndarray], bool] | None = None
                ) -> list[TrackOutput]:
         """Associate this frame's detections with the (predicted) tracks and update.
 
@@ -188,6 +202,12 @@ class ObstacleTracker:
                 the obstacle measured as its nearest, e.g. a far corner) but shows the
                 same obstacle. It keeps the track seen (its coasting time and hit count
                 go on as if detected) without moving it.
+            unseen: ``unseen(payload, foot) -> bool`` for an undetected track: True when
+                its place is out of the camera's view where no frame can show it or its
+                absence (below the image). A sure track (``sure_hits``) is then reported
+                for up to ``unseen_coast_s`` after its last detection, whatever its hit
+                fraction, unless ``is_free`` sees ground in its place; a track not sure
+                ends.
         Returns:
             The tracks reported this frame: every detection's (in detection order), then
             the coasted ones.
@@ -244,9 +264,15 @@ class ObstacleTracker:
                 self._last_seen[i] = stamp
                 continue
             sure = 0 < self.sure_hits <= self._hits[i]
-            alive = (self._hits[i] >= self.confirm_hits
-                     and (sure or self._hits[i] >= self.min_hit_fraction * self._frames[i])
-                     and stamp - self._last_seen[i] <= self.coast_s + 1e-9)
+            age = stamp - self._last_seen[i]
+            if unseen is not None and unseen(self._payload[i], self._x[i].copy()):
+                # Out of view: no evidence either way. Only a sure track is remembered.
+                alive = (sure and self._hits[i] >= self.confirm_hits
+                         and age <= self.unseen_coast_s + 1e-9)
+            else:
+                alive = (self._hits[i] >= self.confirm_hits
+                         and (sure or self._hits[i] >= self.min_hit_fraction * self._frames[i])
+                         and age <= self.coast_s + 1e-9)
             if alive and is_free is not None:
                 alive = not is_free(self._payload[i], self._x[i].copy())
             keep[i] = alive
