@@ -1586,11 +1586,14 @@ def test_stillness_and_temporal_kernels_equal_numpy(box_frame, monkeypatch):
     assert not np.array_equal(fast[-3], excess[2])          # averaged with the sums
 
 
-def test_an_obstacle_walked_up_to_is_still_reported_once_its_foot_leaves_the_view():
+@pytest.mark.parametrize('missing', [(), (89, 90)])
+def test_an_obstacle_walked_up_to_is_still_reported_once_its_foot_leaves_the_view(missing):
     """The paper's rig sees the ground from about 1.4 m, the alarm stops at 1.2 m: an
     84 cm bollard walked up to (simulator, true camera motion as the tracks' input) must
     go on being reported, coasted, at its true place once its foot has left the bottom
-    of the image -- not dropped there as passed."""
+    of the image -- not dropped there as passed. With the motion of two pairs missing
+    (a missed /egomotion) the tracks are carried by the motion before
+    (``track_motion_hold_frames``)."""
     from asmonc_vision.sim import StereoRenderer, make_scenario, simulate_frame
 
     sc = make_scenario('walk_obstacles', seed=3002)
@@ -1599,7 +1602,7 @@ def test_an_obstacle_walked_up_to_is_still_reported_once_its_foot_leaves_the_vie
     for k in range(78, 93):
         f = simulate_frame(sc, k, rend)
         motion = None
-        if prev is not None:       # X_prev = R X_curr + t
+        if prev is not None and k not in missing:       # X_prev = R X_curr + t
             motion = (prev.rotation.T @ f.left_pose.rotation,
                       prev.rotation.T @ (f.left_pose.centre - prev.centre))
         prev = f.left_pose
@@ -1617,5 +1620,7 @@ def test_an_obstacle_walked_up_to_is_still_reported_once_its_foot_leaves_the_vie
                          [o for o in r.obstacles if o.height > 0][best].age_s
                          if best >= 0 else None))
     assert len(near) >= 3, near                         # 1.10, 0.98, 0.87, 0.81 m
-    assert all(e <= 0.12 for _, e, _ in near), near
+    # carried by a guessed motion for two pairs the place is less sure (measured 0.16 m)
+    tol = 0.25 if missing else 0.12
+    assert all(e <= tol for _, e, _ in near), near
     assert any(age is not None and age > 0 for _, _, age in near), near   # coasted

@@ -456,6 +456,12 @@ class GpodConfig(PlausiblePlaneConfig):
         'to this long after its last detection, unless a part of its image region still in '
         'view shows ground; it ends once passed (behind the camera, or out to the side), s',
         range=(0.0, 600.0))
+    track_motion_hold_frames: int = param(
+        2, 'Obstacle tracks: a pair that comes without a motion while the rig moves carries '
+        'the tracks by the previous given motion, scaled to the time between the pairs, '
+        'its translation uncertain by half its length, for at most this many pairs in a '
+        'row (a missed /egomotion must not make the obstacles walked up to forget); '
+        '0 = such a pair ends all tracks', range=(0, 100))
     track_position_sigma_m: float = param(
         0.05, 'Obstacle tracks: placement uncertainty of a detected foot added to its '
         'triangulation noise (which corner of the obstacle is nearest), metres',
@@ -2994,6 +3000,11 @@ class GpodDetector:
         #: track id -> the detection confidences of its latest track_confidence_frames
         #: detections
         self._track_conf: dict[int, deque] = {}
+        #: the last given motion (R, t, dt s), the pairs carried by it since, the stamp
+        #: of the last tracked pair (s)
+        self._last_motion: tuple | None = None
+        self._motion_held = 0
+        self._track_stamp: float | None = None
 
     @property
     def calibrated_plane(self) -> PlaneFit | None:
@@ -3285,6 +3296,7 @@ class GpodDetector:
             obstacles = self._track(detections, stamp_s, still, cam, metric, motion)
         else:
             self._tracker.reset()
+            self._last_motion = None
             if status == 'tracking':          # smoothing made an implausible plane
                 status = 'lost'
             self._acc = None
@@ -3552,6 +3564,7 @@ class GpodDetector:
         detected is still seen when a detection's image region overlaps its own by half
         (the same obstacle placed at another point)."""
         n = metric.normal_up
+        motion = self._motion_or_held(motion, stamp_s, still)
         if motion is not None:
             mcov = motion[2] if len(motion) > 2 else None
             self._tracker.predict(stamp_s, (motion[0], motion[1]), mcov)
@@ -3594,6 +3607,39 @@ class GpodDetector:
                 num_edge_pixels=ob.num_edge_pixels if seen else 0))
         out.sort(key=lambda o: o.range)
         return tuple(out)
+
+    def _motion_or_held(self, motion, stamp_s: float, still: bool):
+        """The tracks' motion input for the pair at ``stamp_s`` (s): ``motion`` when given
+        (and remembered); else, while the rig moves, the last given motion scaled to this
+        pair's time step (rotation vector and translation times dt / dt_last, at most
+        3x), with a translation covariance of (|t| / 2)² I, for at most
+        ``track_motion_hold_frames`` pairs in a row; else None (the identity while
+        standing still, the tracks end otherwise)."""
+        dt = None if self._track_stamp is None else stamp_s - self._track_stamp
+        self._track_stamp = stamp_s
+        if motion is not None:
+            self._last_motion = ((np.asarray(motion[0], float), np.asarray(motion[1], float),
+                                  dt) if dt is not None and dt > 0 else None)
+            self._motion_held = 0
+            return motion
+        last = self._last_motion
+        if still or last is None or dt is None or dt <= 0:
+            self._last_motion = None
+            return None
+        if self._motion_held >= self.config.track_motion_hold_frames:
+            return None
+        R0, t0, dt0 = last
+        k = dt / dt0
+        if k > 3.0:
+            return None
+        import cv2
+
+        self._motion_held += 1
+        rvec, _ = cv2.Rodrigues(R0)
+        R, _ = cv2.Rodrigues(rvec * k)
+        t = t0 * k
+        # the walker may have changed pace or turned: half the step either way
+        return R, t, (0.5 * float(np.linalg.norm(t))) ** 2 * np.eye(3)
 
     def _track_confidences(self, tracks) -> list[float]:
         """The confidence of each track (`ObstacleTracker.update`'s outputs) reported this
