@@ -101,6 +101,16 @@ class Frame:
     frame_id: str = ''
 
 
+def pose_from_msg(msg) -> tuple[np.ndarray, np.ndarray]:
+    """(R (3, 3), t (3,)) of a PoseStamped (rosbags or rclpy): ``X_world = R X + t``."""
+    from asmonc_vision.core.rotations import quaternion_to_matrix
+
+    p = msg.pose
+    return (quaternion_to_matrix([p.orientation.x, p.orientation.y, p.orientation.z,
+                                  p.orientation.w]),
+            np.array([p.position.x, p.position.y, p.position.z]))
+
+
 def plane_from_msg(msg, cam=None):
     """MetricPlane of a GroundPlane message (rosbags or rclpy), or None when its status is
     not TRACKING. Uses its `normal`/`height`; when the normal is unset (zero) and a camera
@@ -131,7 +141,6 @@ def load_frames(bag: Path, limit: int = 0, images: bool = True) -> list[Frame]:
     """
     from asmonc_vision.cli.run import frame_from_obstacle_array
     from asmonc_vision.core.camera import StereoCamera
-    from asmonc_vision.core.rotations import quaternion_to_matrix
 
     T = {k: bagio.TOPICS[k][0] for k in ('left_image', 'right_image', 'left_info', 'right_info',
                                          'gt_obstacles', 'gt_ground_plane', 'gt_camera_pose')}
@@ -165,12 +174,7 @@ def load_frames(bag: Path, limit: int = 0, images: bool = True) -> list[Frame]:
                  if T['gt_obstacles'] in s else None)
         tplane = (plane_from_msg(s[T['gt_ground_plane']], cam)
                   if T['gt_ground_plane'] in s else None)
-        pose = None
-        if T['gt_camera_pose'] in s:
-            p = s[T['gt_camera_pose']].pose
-            pose = (quaternion_to_matrix([p.orientation.x, p.orientation.y, p.orientation.z,
-                                          p.orientation.w]),
-                    np.array([p.position.x, p.position.y, p.position.z]))
+        pose = pose_from_msg(s[T['gt_camera_pose']]) if T['gt_camera_pose'] in s else None
         frame_id = s[T['left_image']].header.frame_id if images else ''
         frames.append(Frame(stamp, left, right, cam, truth, tplane, pose, frame_id))
         if limit and len(frames) >= limit:

@@ -280,18 +280,15 @@ def read_out_of_view_truth(bag: Path, truth: dict[int, FrameObstacles]
     """stamp_ns -> true obstacles out of view (`core.evaluation.out_of_view_truth`), from
     the bag's /ground_truth/camera_pose and /ground_truth/ground_plane; None when it has
     no poses."""
-    from asmonc_vision.cli.bench import plane_from_msg
+    from asmonc_vision.cli.bench import plane_from_msg, pose_from_msg
     from asmonc_vision.core.evaluation import out_of_view_truth
-    from asmonc_vision.core.rotations import quaternion_to_matrix
 
     t_pose, t_plane = bagio.TOPICS['gt_camera_pose'][0], bagio.TOPICS['gt_ground_plane'][0]
     poses, planes = {}, {}
     for topic, _, m in bagio.read_messages(bag, [t_pose, t_plane]):
         stamp = bagio.header_stamp_ns(m)
         if topic == t_pose:
-            q, c = m.pose.orientation, m.pose.position
-            poses[stamp] = (quaternion_to_matrix([q.x, q.y, q.z, q.w]),
-                            np.array([c.x, c.y, c.z]))
+            poses[stamp] = pose_from_msg(m)
         else:
             plane = plane_from_msg(m)
             if plane is not None:

@@ -198,18 +198,21 @@ def match_frame(det: FrameObstacles, truth: FrameObstacles, *, match_radius: flo
 def score_frame(det: FrameObstacles, truth: FrameObstacles, score: DetectionScore, *,
                 match_radius: float = 0.3, min_height: float = 0.10,
                 max_range: float = 5.0, roi_margin: float = 4.0,
-                match: FrameMatch | None = None) -> None:
+                match: FrameMatch | None = None,
+                remembered: FrameObstacles | None = None) -> None:
     """Add one frame's outcome to `score` (in place).
 
     Eligible true obstacles: |height| >= min_height and range <= max_range.
     Each eligible one is detected if an unused detection lies within match_radius of
     it on the ground (greedy, nearest true obstacle first). Range and bearing errors
     are taken from those matches. `match` (from `match_frame` with the same criteria)
-    saves matching twice.
+    saves matching twice; ``remembered`` (true obstacles out of view, see `match_frame`)
+    is used when it is not given.
     """
     if match is None:
         match = match_frame(det, truth, match_radius=match_radius, min_height=min_height,
-                            max_range=max_range, roi_margin=roi_margin)
+                            max_range=max_range, roi_margin=roi_margin,
+                            remembered=remembered)
     score.frames += 1
     order = np.argsort(truth.range) if len(truth) else np.zeros(0, int)
     for i in order:
@@ -253,17 +256,13 @@ def score_sequence(detections: dict[int, FrameObstacles], truth: dict[int, Frame
     """
     score = DetectionScore()
     missing = []
-    crit = {k: kwargs[k] for k in ('match_radius', 'min_height', 'max_range', 'roi_margin')
-            if k in kwargs}
     for stamp in sorted(truth):
         det = detections.get(stamp)
         if det is None:
             missing.append(stamp)
             continue
-        rem = remembered.get(stamp) if remembered else None
-        match = (match_frame(det, truth[stamp], remembered=rem, **crit)
-                 if rem is not None else None)
-        score_frame(det, truth[stamp], score, match=match, **kwargs)
+        score_frame(det, truth[stamp], score,
+                    remembered=remembered.get(stamp) if remembered else None, **kwargs)
     return score, missing
 
 

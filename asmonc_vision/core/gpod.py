@@ -3703,8 +3703,8 @@ class GpodDetector:
         if foot[2] <= 1e-3:
             return True
         uf, vf = (float(w[0]) for w in cam.project_left(foot))
-        if not _below_view(cam, foot) and not (0 <= uf <= cam.width - 1
-                                               and 0 <= vf <= cam.height - 1):
+        below = vf > cam.height - 1          # `_below_view`: no evidence, not passed
+        if not below and not (0 <= uf <= cam.width - 1 and 0 <= vf):
             return True
         if roi is None:
             return False
