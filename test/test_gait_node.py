@@ -110,6 +110,27 @@ def test_walk_stream_gives_gait_state_and_predicted_motion(ros, qos_name):
                'a silence WARN')
 
 
+def test_a_node_waiting_for_its_first_sample_is_not_silent_until_the_grace_ends(ros):
+    """Started before the inclinometer (a replay or a driver comes up a moment later), the
+    node reports that it waits, not that the sensor is silent, for ``startup_grace``;
+    after that a sensor that never spoke is silent."""
+    ctx, add, spin_until = ros.ctx, ros.add, ros.spin_until
+    probe = add(Node('gait_probe3', context=ctx))
+    diags: list = []
+    probe.create_subscription(
+        DiagnosticArray, '/diagnostics',
+        lambda m: diags.extend(s for s in m.status if s.name == 'gait_filter_node'), 10)
+    node = add(GaitFilterNode(context=ctx, parameter_overrides=[
+        Parameter('timeout', value=0.2), Parameter('startup_grace', value=4.0)]))
+    spin_until(lambda: any('waiting' in s.message for s in diags), 'a waiting status',
+               deadline=3.0)
+    assert not any('silent' in s.message for s in diags)
+    assert all(s.level == b'\x00' for s in diags)
+    spin_until(lambda: any('silent' in s.message and s.level == b'\x01' for s in diags),
+               'a silence WARN after the grace')
+    assert node.counts['imu'] == 0
+
+
 def test_imu_without_orientation_is_ignored(ros):
     ctx, add, spin_until, spin_for = ros.ctx, ros.add, ros.spin_until, ros.spin_for
     probe = add(Node('gait_probe2', context=ctx))

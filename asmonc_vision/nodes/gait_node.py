@@ -20,7 +20,8 @@ Publishes:
         rotation of the rig over the horizon: pose of inclinometer_link at stamp +
         horizon (child_frame_id ``predicted_frame_id``) in inclinometer_link at stamp
         (header). Translation is not modelled (zero). A message for DGPR, not for /tf.
-    /diagnostics: OK while the inclinometer streams; WARN when it is silent (walking
+    /diagnostics: OK while the inclinometer streams (and for ``startup_grace`` s after
+        the start while waiting for its first sample); WARN when it is silent (walking
         false unless visual motion keeps the walk model going) or stamps go backwards.
 
 Stamps older than the last one are ignored (throttled warning); a jump back of more than
@@ -65,6 +66,10 @@ class GaitNodeConfig:
 
     timeout: float = param(1.0, 'no inclinometer sample for this long (steady clock): '
                            'diagnostics WARN and walking false, s', range=(0.05, 60.0))
+    startup_grace: float = param(5.0, 'before the first inclinometer sample, the sensor '
+                                 'counts as silent only this long after the node started '
+                                 '(a driver or a replay starts a moment after the filter), s',
+                                 range=(0.0, 300.0))
     use_egomotion: bool = param(True, 'fuse /egomotion rotations into the walk model')
     frame_id: str = param('inclinometer_link', 'frame of /gait/state and of the predicted '
                           "motion's header")
@@ -125,6 +130,7 @@ class GaitFilterNode(Node):
         self.tracker = GaitTracker(self.gait_config)
         self._last_imu_ns: int | None = None
         self._last_imu_steady: float | None = None
+        self._started_steady = self._now()
         self._last_ego_steady: float | None = None
         self._ego_prev_ns: int | None = None
         self._ego_intervals: deque = deque(maxlen=15)
@@ -246,8 +252,12 @@ class GaitFilterNode(Node):
         if silent:
             what = ('visual motion only' if ego_alive else 'walking false')
             self._diag.update(Diagnostics.WARN, f'inclinometer silent ({what})', **values)
-            self.get_logger().warning(f'/inclinometer/imu silent: {what}',
+            since = ('since the node started' if self._last_imu_steady is None
+                     else 'for more than %.1f s' % self.config.timeout)
+            self.get_logger().warning(f'/inclinometer/imu silent {since}: {what}',
                                       throttle_duration_sec=THROTTLE)
+        elif self._last_imu_steady is None:
+            self._diag.update(Diagnostics.OK, 'waiting for the inclinometer', **values)
         elif self.counts['out_of_order']:
             self._diag.update(Diagnostics.WARN, 'inclinometer stamps out of order',
                               **values)
@@ -257,8 +267,11 @@ class GaitFilterNode(Node):
 
     # ------------------------------------------------------------------ helpers
     def _imu_silent(self) -> bool:
-        return (self._last_imu_steady is None
-                or self._now() - self._last_imu_steady > self.config.timeout)
+        """No inclinometer sample for ``timeout`` s; before the first one, for
+        ``startup_grace`` s since the node started."""
+        if self._last_imu_steady is None:
+            return self._now() - self._started_steady > self.config.startup_grace
+        return self._now() - self._last_imu_steady > self.config.timeout
 
     def _reset(self) -> None:
         self.tracker = GaitTracker(self.gait_config)
