@@ -1586,14 +1586,15 @@ def test_stillness_and_temporal_kernels_equal_numpy(box_frame, monkeypatch):
     assert not np.array_equal(fast[-3], excess[2])          # averaged with the sums
 
 
-@pytest.mark.parametrize('missing', [(), (89, 90)])
+@pytest.mark.parametrize('missing', [(), (89, 90), (88, 89, 90, 91, 92)])
 def test_an_obstacle_walked_up_to_is_still_reported_once_its_foot_leaves_the_view(missing):
     """The paper's rig sees the ground from about 1.4 m, the alarm stops at 1.2 m: an
     84 cm bollard walked up to (simulator, true camera motion as the tracks' input) must
     go on being reported, coasted, at its true place once its foot has left the bottom
     of the image -- not dropped there as passed. With the motion of two pairs missing
     (a missed /egomotion) the tracks are carried by the motion before
-    (``track_motion_hold_frames``)."""
+    (``track_motion_hold_frames``); with five missing, the bollard is held where it was
+    last placed once the hold runs out, not forgotten."""
     from asmonc_vision.sim import StereoRenderer, make_scenario, simulate_frame
 
     sc = make_scenario('walk_obstacles', seed=3002)
@@ -1620,7 +1621,9 @@ def test_an_obstacle_walked_up_to_is_still_reported_once_its_foot_leaves_the_vie
                          [o for o in r.obstacles if o.height > 0][best].age_s
                          if best >= 0 else None))
     assert len(near) >= 3, near                         # 1.10, 0.98, 0.87, 0.81 m
-    # carried by a guessed motion for two pairs the place is less sure (measured 0.16 m)
-    tol = 0.25 if missing else 0.12
+    # carried by a guessed motion for two pairs the place is less sure (measured 0.16 m);
+    # held in place after that, it lags the walk by ~0.12 m a pair (measured 0.14, 0.28,
+    # 0.41, 0.42 m), but it is still reported
+    tol = 0.5 if len(missing) > 2 else 0.25 if missing else 0.12
     assert all(e <= tol for _, e, _ in near), near
     assert any(age is not None and age > 0 for _, _, age in near), near   # coasted

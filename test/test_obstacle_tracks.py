@@ -125,6 +125,43 @@ def test_an_obstacle_walked_up_to_is_remembered_below_the_view():
         ObstacleTracker(unseen_coast_s=-1.0)
 
 
+def test_an_unknown_motion_ends_the_tracks_but_holds_the_sure_ones_below_the_view():
+    """With no motion known, tracks end -- except a sure track the hold test keeps (an
+    obstacle below the view): it stays where it was, more uncertain, and update ends it
+    as usual after unseen_coast_s."""
+    near, ahead = [0.0, 1.2, 1.0], [0.5, 1.2, 3.0]
+    below = lambda payload, foot: foot[2] < 2.0      # noqa: E731  (the near one is)
+
+    def tracker(hits):
+        tr = ObstacleTracker(coast_s=0.3, min_hit_fraction=0.5, sure_hits=3,
+                             unseen_coast_s=0.5)
+        for k in range(hits):
+            step(tr, 0.1 * k, [near, ahead])
+        return tr
+
+    tr = tracker(3)
+    p0 = tr._P[0].copy()
+    cov = 0.15 ** 2 * np.eye(3)
+    tr.predict(0.3, None, cov, hold=below)
+    assert len(tr) == 1 and np.allclose(tr._x[0], near)         # the one in view ended
+    assert np.allclose(tr._P[0], p0 + cov + 0.05 ** 2 * 0.1 * np.eye(3))
+    alive = []
+    for k in range(3, 12):
+        if k > 3:
+            tr.predict(0.1 * k, None, cov, hold=below)
+        out = tr.update(np.zeros((0, 3)), np.zeros((0, 3, 3)), [], None, None,
+                        lambda payload, foot: True)
+        alive.append(len(out))
+    assert alive == [1, 1, 1, 1, 1, 0, 0, 0, 0]      # 0.5 s after its last detection
+    # not sure (2 hits): ends; no hold test: all end, as before
+    tr = tracker(2)
+    tr.predict(0.2, None, cov, hold=below)
+    assert len(tr) == 0
+    tr = tracker(3)
+    tr.predict(0.3, None)
+    assert len(tr) == 0
+
+
 def test_gating_a_far_detection_starts_a_new_track():
     tr = ObstacleTracker(min_hit_fraction=0.0)
     step(tr, 0.0, [[0.0, 1.2, 3.0]])

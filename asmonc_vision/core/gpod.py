@@ -127,6 +127,10 @@ _CORNER_SIGMAS = 2.0
 #: Edge strings within this many pixels of the left or right image border may be the
 #: view's edge rather than an obstacle's silhouette.
 _BORDER_PX = 3.0
+#: How far the wearer may walk per second while the camera motion is unknown, m/s: the
+#: uncertainty added to an obstacle remembered below the view that is held in place
+#: (`GpodDetector._track`).
+_UNKNOWN_WALK_MPS = 1.5
 #: A ground feature must lie this far (metres) inside a hypothesised footprint to rule
 #: it out (features on its sides are its own contact edges; feet and ground features are
 #: located to a few centimetres).
@@ -3558,23 +3562,34 @@ class GpodDetector:
         """The frame's reports: its detections with their feet filtered by their obstacle
         tracks, and the tracks coasted through this frame (`core.obstacle_tracks`). The
         tracks' motion input is ``motion`` if given, else the identity while the rig
-        stands still; after a motion not given all tracks end. Drop-offs are not
-        tracked. A coasted obstacle moved by a given motion has its image region
+        stands still; after a motion not given (and not held, `_motion_or_held`) the
+        tracks end, except the sure ones below the view, which stay in place. Drop-offs
+        are not tracked. A coasted obstacle moved by a given motion has its image region
         re-projected from its new foot and top. While the rig stands still, a track not
         detected is still seen when a detection's image region overlaps its own by half
         (the same obstacle placed at another point)."""
         n = metric.normal_up
+        prev_stamp = self._track_stamp
         motion = self._motion_or_held(motion, stamp_s, still)
+        moved = motion is not None
         if motion is not None:
             mcov = motion[2] if len(motion) > 2 else None
             self._tracker.predict(stamp_s, (motion[0], motion[1]), mcov)
+        elif still:
+            self._tracker.predict(stamp_s, (np.eye(3), np.zeros(3)))
         else:
-            self._tracker.predict(stamp_s, (np.eye(3), np.zeros(3)) if still else None)
+            # The rig moves and the motion is unknown: the tracks end, but an obstacle
+            # remembered below the view stays where it was last placed (it is not
+            # forgotten for want of a motion; nothing else could find it again), its
+            # place as uncertain as the walk since then.
+            dt = 0.0 if prev_stamp is None else max(stamp_s - prev_stamp, 0.0)
+            self._tracker.predict(stamp_s, None, (_UNKNOWN_WALK_MPS * dt) ** 2 * np.eye(3),
+                                  hold=lambda ob, foot: _below_view(cam, foot))
+            moved = True            # re-project the held tracks' regions from their feet
         obst = [o for o in detections if not o.is_drop]
         drops = [o for o in detections if o.is_drop]
         feet = np.array([o.position - o.height * n for o in obst]).reshape(-1, 3)
         cov = self._foot_covariance(feet, cam)
-        moved = motion is not None
 
         def is_free(ob: GpodObstacle, foot: np.ndarray) -> bool:
             roi = _moved_roi(ob, foot, n, cam, require_in_view=True) if moved else ob.roi

@@ -19,8 +19,10 @@ All tracks are one batch of 3-state filters (arrays of x and P), with
 
 where (R_c, t_c) is the motion ``T_prev_curr`` of the left camera (``X_prev = R_c X_curr +
 t_c``, as `/egomotion` gives it). With no motion known (``motion=None``) tracks cannot be
-carried into the new frame and are all ended; the detector passes the identity while the
-rig stands still.
+carried into the new frame and are ended -- all but the sure ones the caller's ``hold``
+test keeps (obstacles remembered below the view, which no frame could find again): those
+stay where they were, more uncertain; the detector passes the identity while the rig
+stands still.
 
 Association: the squared Mahalanobis distance d² = yᵀ S⁻¹ y of every (track, detection)
 pair; pairs within the gate (χ² with 3 degrees of freedom, ``gate_chi2``) are taken
@@ -152,23 +154,45 @@ class ObstacleTracker:
 
     def predict(self, stamp_s: float,
                 motion: tuple[np.ndarray, np.ndarray] | None,
-                motion_cov: np.ndarray | None = None) -> None:
+                motion_cov: np.ndarray | None = None,
+                hold: Callable[[object, np.ndarray], bool] | None = None) -> None:
         """Carry the tracks to the frame at ``stamp_s`` (seconds).
 
         Args:
             stamp_s: the new frame's time, s. A time going backwards ends all tracks.
             motion: (R (3, 3), t (3,)) the left camera's motion from the previous frame
                 to this one, ``X_prev = R X_curr + t`` (metres, left optical frames), or
-                None when unknown (all tracks end).
-            motion_cov: (3, 3) covariance of t, m² (default 0).
+                None when unknown: all tracks end, except the sure ones (``sure_hits``)
+                that ``hold`` keeps.
+            motion_cov: (3, 3) covariance of t, m² (default 0); with ``motion`` None,
+                the uncertainty added to the held tracks.
+            hold: ``hold(payload, foot) -> bool``, used when ``motion`` is None: True for
+                a track that must not be forgotten because the motion is unknown (an
+                obstacle walked up to, out of view below the image, where no frame can
+                find it again). A sure track held stays where it is (the identity
+                motion, ``P = P + Q + motion_cov``); ``update`` then ends it as usual
+                (``unseen_coast_s`` after its last detection, or ground in its place).
         """
         dt = 0.0 if self._stamp is None else stamp_s - self._stamp
         self._stamp = stamp_s
         if len(self) == 0:
             return
         if motion is None or dt < 0:
-            self.reset()
-            self._stamp = stamp_s
+            keep = np.zeros(len(self), bool)
+            if motion is None and dt >= 0 and hold is not None and self.sure_hits > 0:
+                keep = np.array([bool(self._hits[i] >= max(self.sure_hits, self.confirm_hits)
+                                      and hold(self._payload[i], self._x[i].copy()))
+                                 for i in range(len(self))], bool)
+            if not keep.any():
+                self.reset()
+                self._stamp = stamp_s
+                return
+            self._keep(keep)
+            # x = x ; P = P + Q (+ the unknown motion's uncertainty)
+            Q = (self.process_noise_m ** 2) * dt * np.eye(3)
+            if motion_cov is not None:
+                Q = Q + np.asarray(motion_cov, float).reshape(3, 3)
+            self._P = self._P + Q[None]
             return
         Rc = np.asarray(motion[0], float).reshape(3, 3)
         tc = np.asarray(motion[1], float).reshape(3)
