@@ -66,7 +66,7 @@ class GaitNodeConfig:
 
     timeout: float = param(1.0, 'no inclinometer sample for this long (steady clock): '
                            'diagnostics WARN and walking false, s', range=(0.05, 60.0))
-    startup_grace: float = param(5.0, 'before the first inclinometer sample, the sensor '
+    startup_grace: float = param(10.0, 'before the first inclinometer sample, the sensor '
                                  'counts as silent only this long after the node started '
                                  '(a driver or a replay starts a moment after the filter), s',
                                  range=(0.0, 300.0))
