@@ -109,6 +109,17 @@ class RosGraph:
                 return
         raise AssertionError(f'timed out waiting for {what}')
 
+    def diagnostics(self, probe, name: str) -> list:
+        """A list that fills with the DiagnosticStatus entries named ``name`` arriving on
+        /diagnostics (subscribed on the ``probe`` node)."""
+        from diagnostic_msgs.msg import DiagnosticArray
+
+        out: list = []
+        probe.create_subscription(
+            DiagnosticArray, '/diagnostics',
+            lambda m: out.extend(s for s in m.status if s.name == name), 10)
+        return out
+
     def spin_for(self, seconds: float) -> None:
         import time
 

@@ -10,7 +10,6 @@ import pytest
 
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from geometry_msgs.msg import TransformStamped  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
@@ -44,13 +43,10 @@ def test_walk_stream_gives_gait_state_and_predicted_motion(ros, qos_name):
     probe = add(Node('gait_probe', context=ctx))
     states: list[GaitState] = []
     motions: list[TransformStamped] = []
-    diags: list = []
+    diags = ros.diagnostics(probe, 'gait_filter_node')
     probe.create_subscription(GaitState, '/gait/state', states.append, RESULT_QOS)
     probe.create_subscription(TransformStamped, '/gait/predicted_motion', motions.append,
                               RESULT_QOS)
-    probe.create_subscription(
-        DiagnosticArray, '/diagnostics',
-        lambda m: diags.extend(s for s in m.status if s.name == 'gait_filter_node'), 10)
     qos = SENSOR_QOS if qos_name == 'best_effort' else RESULT_QOS
     imu_pub = probe.create_publisher(Imu, '/inclinometer/imu', qos)
     ego_pub = probe.create_publisher(TransformStamped, '/egomotion', SENSOR_QOS)
@@ -116,10 +112,7 @@ def test_a_node_waiting_for_its_first_sample_is_not_silent_until_the_grace_ends(
     after that a sensor that never spoke is silent."""
     ctx, add, spin_until = ros.ctx, ros.add, ros.spin_until
     probe = add(Node('gait_probe3', context=ctx))
-    diags: list = []
-    probe.create_subscription(
-        DiagnosticArray, '/diagnostics',
-        lambda m: diags.extend(s for s in m.status if s.name == 'gait_filter_node'), 10)
+    diags = ros.diagnostics(probe, 'gait_filter_node')
     node = add(GaitFilterNode(context=ctx, parameter_overrides=[
         Parameter('timeout', value=0.2), Parameter('startup_grace', value=4.0)]))
     spin_until(lambda: any('waiting' in s.message for s in diags), 'a waiting status',
