@@ -73,6 +73,19 @@ def stereo_sender(probe):
         pubs['/stereo/right/image_rect'].publish(right)
     return pubs, send
 
+
+def diagnostic_statuses(probe, name: str) -> list:
+    """A list that fills with the DiagnosticStatus entries named ``name`` arriving on
+    /diagnostics (subscribed on the ``probe`` node)."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    out: list = []
+    probe.create_subscription(
+        DiagnosticArray, '/diagnostics',
+        lambda m: out.extend(s for s in m.status if s.name == name), 10)
+    return out
+
+
 class RosGraph:
     """An rclpy Context on a domain of its own, a single-threaded executor, and the
     nodes added to it (destroyed at `close`). For node tests over real topics."""
@@ -110,15 +123,8 @@ class RosGraph:
         raise AssertionError(f'timed out waiting for {what}')
 
     def diagnostics(self, probe, name: str) -> list:
-        """A list that fills with the DiagnosticStatus entries named ``name`` arriving on
-        /diagnostics (subscribed on the ``probe`` node)."""
-        from diagnostic_msgs.msg import DiagnosticArray
-
-        out: list = []
-        probe.create_subscription(
-            DiagnosticArray, '/diagnostics',
-            lambda m: out.extend(s for s in m.status if s.name == name), 10)
-        return out
+        """`diagnostic_statuses` of ``probe`` named ``name``."""
+        return diagnostic_statuses(probe, name)
 
     def spin_for(self, seconds: float) -> None:
         import time

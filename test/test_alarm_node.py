@@ -14,7 +14,6 @@ from asmonc_vision.core.alarm import TEXT_CLEAR, TEXT_NO_DATA, TEXT_STARTING  # 
 from asmonc_vision.nodes.alarm_node import AlarmNode  # noqa: E402
 from asmonc_vision.nodes.common import ALARM_QOS, RESULT_QOS  # noqa: E402
 from asmonc_vision_msgs.msg import GroundPlane, Alarm, Obstacle, ObstacleArray  # noqa: E402
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 
 FRAME = 'stereo_left_optical_frame'
 #: a generous bound so a broken node fails the test instead of hanging it (not a speed test)
@@ -45,11 +44,8 @@ def test_alarms_follow_obstacles_fault_on_silence_and_latch(ros):
     ctx, add, spin_until = ros.ctx, ros.add, ros.spin_until
     probe = add(Node('alarm_probe', context=ctx))
     alarms: list[Alarm] = []
-    diags: list = []
+    diags = ros.diagnostics(probe, 'alarm_node')
     probe.create_subscription(Alarm, '/alarms', alarms.append, ALARM_QOS)
-    probe.create_subscription(
-        DiagnosticArray, '/diagnostics',
-        lambda m: diags.extend(s for s in m.status if s.name == 'alarm_node'), 10)
     pub = probe.create_publisher(ObstacleArray, '/obstacles', RESULT_QOS)
 
     node = add(AlarmNode(context=ctx, parameter_overrides=[

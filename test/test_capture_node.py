@@ -8,11 +8,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from conftest import diagnostic_statuses
 
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
 import rclpy  # noqa: E402
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
@@ -90,14 +90,6 @@ def _kitti_like_folder(root: Path, n: int = 3, right_size=(48, 64)) -> list:
     return lefts
 
 
-def _diag_probe(probe: Node, name: str) -> list:
-    seen: list = []
-    probe.create_subscription(
-        DiagnosticArray, '/diagnostics',
-        lambda m: seen.extend(s for s in m.status if s.name == name), 10)
-    return seen
-
-
 def test_folder_source_publishes_synchronised_rectified_pairs(ros, tmp_path):
     ctx, add, spin_until = ros
     lefts = _kitti_like_folder(tmp_path)
@@ -149,7 +141,7 @@ def test_folder_source_publishes_synchronised_rectified_pairs(ros, tmp_path):
 def test_missing_device_gives_an_error_diagnostic_not_a_crash(ros):
     ctx, add, spin_until = ros
     probe = add(Node('capture_probe', context=ctx))
-    diags = _diag_probe(probe, 'stereo_capture_node')
+    diags = diagnostic_statuses(probe, 'stereo_capture_node')
     node = add(StereoCaptureNode(context=ctx, parameter_overrides=[
         Parameter('source', value='devices'),
         Parameter('left_device', value='/nonexistent/left_camera.avi'),
@@ -168,7 +160,7 @@ def test_left_and_right_of_different_sizes_are_skipped(ros, tmp_path):
     ctx, add, spin_until = ros
     _kitti_like_folder(tmp_path, n=2, right_size=(40, 60))
     probe = add(Node('capture_probe', context=ctx))
-    diags = _diag_probe(probe, 'stereo_capture_node')
+    diags = diagnostic_statuses(probe, 'stereo_capture_node')
     node = add(StereoCaptureNode(context=ctx, parameter_overrides=[
         Parameter('source', value='folder'), Parameter('folder', value=str(tmp_path)),
         Parameter('loop', value=True), Parameter('fps', value=30.0)]))

@@ -11,7 +11,6 @@ import pytest
 
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from sensor_msgs.msg import Imu  # noqa: E402
@@ -60,11 +59,8 @@ def test_stream_with_bad_lines_silence_and_reconnect(ros):
         dev = Device(os.path.join(d, 'compass'))
         probe = add(Node('compass_probe', context=ctx))
         imus: list[Imu] = []
-        diags: list = []
+        diags = ros.diagnostics(probe, 'compass_node')
         probe.create_subscription(Imu, '/inclinometer/imu', imus.append, SENSOR_QOS)
-        probe.create_subscription(
-            DiagnosticArray, '/diagnostics',
-            lambda m: diags.extend(s for s in m.status if s.name == 'compass_node'), 10)
         node = add(CompassNode(context=ctx, parameter_overrides=[
             Parameter('port', value=dev.link), Parameter('timeout', value=0.4),
             Parameter('reconnect_period', value=0.2), Parameter('sigma_deg', value=0.4)]))
@@ -144,10 +140,7 @@ def test_stream_with_bad_lines_silence_and_reconnect(ros):
 def test_missing_port_is_an_error_not_a_crash(ros):
     ctx, add, spin_until = ros.ctx, ros.add, ros.spin_until
     probe = add(Node('compass_probe2', context=ctx))
-    diags: list = []
-    probe.create_subscription(
-        DiagnosticArray, '/diagnostics',
-        lambda m: diags.extend(s for s in m.status if s.name == 'compass_node'), 10)
+    diags = ros.diagnostics(probe, 'compass_node')
     add(CompassNode(context=ctx, parameter_overrides=[
         Parameter('port', value='/nonexistent/compass'),
         Parameter('reconnect_period', value=0.1)]))

@@ -3569,8 +3569,10 @@ class GpodDetector:
         detected is still seen when a detection's image region overlaps its own by half
         (the same obstacle placed at another point)."""
         n = metric.normal_up
-        prev_stamp = self._track_stamp
-        motion = self._motion_or_held(motion, stamp_s, still)
+        # the time since the previous pair, s (None for the first)
+        dt = None if self._track_stamp is None else stamp_s - self._track_stamp
+        self._track_stamp = stamp_s
+        motion = self._motion_or_held(motion, dt, still)
         moved = motion is not None
         if motion is not None:
             mcov = motion[2] if len(motion) > 2 else None
@@ -3582,8 +3584,8 @@ class GpodDetector:
             # remembered below the view stays where it was last placed (it is not
             # forgotten for want of a motion; nothing else could find it again), its
             # place as uncertain as the walk since then.
-            dt = 0.0 if prev_stamp is None else max(stamp_s - prev_stamp, 0.0)
-            self._tracker.predict(stamp_s, None, (_UNKNOWN_WALK_MPS * dt) ** 2 * np.eye(3),
+            walk = _UNKNOWN_WALK_MPS * max(dt or 0.0, 0.0)
+            self._tracker.predict(stamp_s, None, walk ** 2 * np.eye(3),
                                   hold=lambda ob, foot: _below_view(cam, foot))
             moved = True            # re-project the held tracks' regions from their feet
         obst = [o for o in detections if not o.is_drop]
@@ -3623,15 +3625,13 @@ class GpodDetector:
         out.sort(key=lambda o: o.range)
         return tuple(out)
 
-    def _motion_or_held(self, motion, stamp_s: float, still: bool):
-        """The tracks' motion input for the pair at ``stamp_s`` (s): ``motion`` when given
-        (and remembered); else, while the rig moves, the last given motion scaled to this
-        pair's time step (rotation vector and translation times dt / dt_last, at most
-        3x), with a translation covariance of (|t| / 2)² I, for at most
-        ``track_motion_hold_frames`` pairs in a row; else None (the identity while
-        standing still, the tracks end otherwise)."""
-        dt = None if self._track_stamp is None else stamp_s - self._track_stamp
-        self._track_stamp = stamp_s
+    def _motion_or_held(self, motion, dt: float | None, still: bool):
+        """The tracks' motion input for a pair ``dt`` s after the previous one (None for
+        the first): ``motion`` when given (and remembered); else, while the rig moves,
+        the last given motion scaled to this pair's time step (rotation vector and
+        translation times dt / dt_last, at most 3x), with a translation covariance of
+        (|t| / 2)² I, for at most ``track_motion_hold_frames`` pairs in a row; else None
+        (the identity while standing still, the tracks end otherwise)."""
         if motion is not None:
             self._last_motion = ((np.asarray(motion[0], float), np.asarray(motion[1], float),
                                   dt) if dt is not None and dt > 0 else None)
