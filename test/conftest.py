@@ -62,13 +62,16 @@ def read_messages(bag, types):
 
 def stereo_sender(probe):
     """Publishers of the stereo input topics on the ``probe`` node, and
-    ``send(left, right, left_info, right_info)`` publishing one pair (infos first)."""
+    ``send(left, right, left_info, right_info)`` publishing one pair (infos first; the
+    images alone when the infos are None)."""
     from asmonc_vision.nodes.common import IMAGE_QOS
     pubs = {t: probe.create_publisher(typ, t, IMAGE_QOS) for t, typ in stereo_types().items()}
 
-    def send(left, right, linfo, rinfo):
-        pubs['/stereo/left/camera_info'].publish(linfo)
-        pubs['/stereo/right/camera_info'].publish(rinfo)
+    def send(left, right, linfo=None, rinfo=None):
+        if linfo is not None:
+            pubs['/stereo/left/camera_info'].publish(linfo)
+        if rinfo is not None:
+            pubs['/stereo/right/camera_info'].publish(rinfo)
         pubs['/stereo/left/image_rect'].publish(left)
         pubs['/stereo/right/image_rect'].publish(right)
     return pubs, send

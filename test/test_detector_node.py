@@ -1,4 +1,7 @@
 """detector_node over real topics, in-process: frames from the committed static bag."""
+import contextlib
+import time
+
 import pytest
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -22,11 +25,17 @@ def load_frames(bag, indices):
 
 @pytest.fixture
 def graph(ros_context):
-    ctx = ros_context
     # (debug image scaled down to 160 px wide: the scaling path is exercised at 320x240)
-    det = DetectorNode(context=ctx, parameter_overrides=[
-        Parameter('publish_debug_image', value=True),
-        Parameter('debug_image_max_width', value=160)])
+    with detector_graph(ros_context, [Parameter('publish_debug_image', value=True),
+                                      Parameter('debug_image_max_width', value=160)]) as g:
+        yield g
+
+
+@contextlib.contextmanager
+def detector_graph(ctx, overrides):
+    """(detector, executor, send, received) with the detector's parameters
+    ``overrides``, torn down on leaving the ``with``."""
+    det = DetectorNode(context=ctx, parameter_overrides=overrides)
     probe = Node('probe', context=ctx)
     got = {'obstacles': [], 'plane': [], 'debug': []}
     probe.create_subscription(ObstacleArray, '/obstacles', got['obstacles'].append, RESULT_QOS)
@@ -38,10 +47,12 @@ def graph(ros_context):
     ex.add_node(probe)
     assert spin_until(ex, lambda: all(p.get_subscription_count() >= 1 for p in pubs.values())
                       and probe.count_publishers('/obstacles') >= 1)
-    yield det, ex, send, got
-    ex.shutdown()
-    det.destroy_node()
-    probe.destroy_node()
+    try:
+        yield det, ex, send, got
+    finally:
+        ex.shutdown()
+        det.destroy_node()
+        probe.destroy_node()
 
 
 def test_one_result_per_pair_and_obstacles_found(graph):
@@ -173,6 +184,42 @@ def test_bad_inputs_are_logged_skipped_and_the_node_keeps_going(graph, capfd):
     assert "unsupported image encoding '16UC1'" in err
     assert 'left image is 320x240 but right is 320x120' in err
     assert 'has no partner with the same stamp' in err
+
+
+def test_a_pair_waits_for_a_camera_info_that_comes_late(ros_context):
+    """On a loaded machine the camera_info subscription once matched 1-2 s after the
+    images': the first pair waits for it (info_wait 3 s) instead of being skipped."""
+    with detector_graph(ros_context, []) as (det, ex, send, got):
+        frames = load_frames(BAGS / 'static_obstacles', [0, 1])
+        # the images alone, then the camera_infos 1.5 s later
+        send(*frames[0][:2])
+        end = time.monotonic() + 1.5
+        while time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.01)
+        assert got['obstacles'] == [] and det.frames_bad == 0
+        send(*frames[1])              # its infos (and the next pair)
+        assert spin_until(ex, lambda: len(got['obstacles']) == 2, timeout=15)
+        assert det.frames_bad == 0
+
+
+def test_without_camera_info_pairs_are_skipped_at_once_after_the_first_wait(ros_context, capfd):
+    """No camera_info at all: the first pair waits info_wait, later ones are skipped at
+    once (not one per info_wait, which would overflow the queue), and the first
+    camera_info ends it."""
+    with detector_graph(ros_context, [Parameter('info_wait', value=2.0)]) as \
+            (det, ex, send, got):
+        frames = load_frames(BAGS / 'static_obstacles', [0, 1, 2, 3, 4, 5])
+        send(*frames[0][:2])
+        assert spin_until(ex, lambda: det.frames_bad == 1, timeout=10)
+        for f in frames[1:5]:
+            send(*f[:2])
+        # one info_wait for each would take 8 s
+        assert spin_until(ex, lambda: det.frames_bad == 5, timeout=3)
+        assert det.frames_dropped == 0 and got['obstacles'] == []
+        assert 'no camera_info on /stereo/{left,right}/camera_info; pair skipped' in \
+            capfd.readouterr().err
+        send(*frames[5])
+        assert spin_until(ex, lambda: len(got['obstacles']) == 1, timeout=15)
 
 
 def test_pairer_pairs_by_stamp_and_expires_orphans():

@@ -44,7 +44,8 @@ class StereoInputConfig:
         1.0, 'an image with no partner this long (s of stamp time) is dropped with a warning',
         range=(0.05, 10.0))
     info_wait: float = param(
-        1.0, 'how long a pair waits for its first camera_info before it is skipped, s',
+        3.0, 'how long a pair waits for the first camera_info before it is skipped, s (once '
+        'this wait has run out, later pairs are skipped at once until a camera_info comes)',
         range=(0.0, 10.0))
     input_timeout: float = param(
         2.0, 'no image pair for this long (s) is reported in /diagnostics', range=(0.1, 60.0))
@@ -142,6 +143,8 @@ class StereoInputNode(Node):
         self._stop = False
         self._camera: StereoCamera | None = None
         self._camera_key = None
+        #: set when a pair waited `info_wait` for a camera_info in vain (cleared by one)
+        self._info_missing = False
         self._last_stamp_ns: int | None = None
         self._last_pair_wall = time.monotonic()
         self._worker: threading.Thread | None = None
@@ -188,6 +191,7 @@ class StereoInputNode(Node):
     def _on_info(self, side: str, msg: CameraInfo) -> None:
         with self._lock:
             self._info[side] = msg
+            self._info_missing = False
 
     def _on_image(self, side: str, msg: Image) -> None:
         stamp = stamp_to_ns(msg.header.stamp)
@@ -240,15 +244,23 @@ class StereoInputNode(Node):
                 self.diag.update(Diagnostics.ERROR, f'internal error: {exc}')
 
     def _camera_for(self, pair: StereoPair) -> StereoCamera | None:
-        # The infos travel on their own topics and may arrive just after the images.
+        # The infos travel on their own topics and may arrive after the first images (on
+        # a loaded machine their subscription once matched 1-2 s after the images'): the
+        # first pair waits up to `info_wait` for them, the pairs behind it queue. Once
+        # that wait has run out, pairs are skipped at once (no pair-per-`info_wait` crawl
+        # that would overflow the queue) until a camera_info arrives.
         deadline = time.monotonic() + self._settings.info_wait
         while pair.left_info is None or pair.right_info is None:
             with self._lock:
                 pair.left_info = pair.left_info or self._info['left']
                 pair.right_info = pair.right_info or self._info['right']
+                missing = self._info_missing
             if pair.left_info is not None and pair.right_info is not None:
                 break
-            if time.monotonic() > deadline or self._stop:
+            if missing or time.monotonic() > deadline or self._stop:
+                with self._lock:
+                    self._info_missing = (self._info['left'] is None
+                                          or self._info['right'] is None)
                 self.get_logger().warn(
                     'no camera_info on /stereo/{left,right}/camera_info; pair skipped',
                     throttle_duration_sec=2.0)
