@@ -65,10 +65,28 @@ class PlayerConfig:
     publish_clock: bool = param(False, 'publish /clock from the bag time (for use_sim_time)')
     exit_when_done: bool = param(True, 'when the bag has been played (and not looping), '
                                        'shut down the node\'s context so the process exits')
+    pace_topic: str = param(
+        '', "pace the replay by a node's answers, one per image (e.g. /obstacles): an image "
+            'is held back (and the whole replay with it) while more than pace_lead of the '
+            "images published on pace_image_topic are unanswered; '' = bag timing only")
+    pace_type: str = param('', "message type of pace_topic, 'pkg/msg/Name'")
+    pace_image_topic: str = param(
+        '', "the image topic whose messages are answered on pace_topic ('' = the first "
+            'image topic played)')
+    pace_lead: int = param(3, 'images that may be published ahead of their answers on '
+                              'pace_topic', range=(1, 1000))
+    pace_timeout: float = param(
+        5.0, 'longest hold for pace_topic (s); then the unanswered images are given up, '
+             'with a warning, and the replay keeps the bag\'s rate until the next answer '
+             '(an answer settles every image sent before it: skipped pairs cost no wait)',
+        range=(0.1, 600.0))
 
     def __post_init__(self) -> None:
         check_fields(self)
         self.wait_targets(())
+        if self.pace_topic and not self.pace_type:
+            raise ValueError("PlayerConfig.pace_type: needed with pace_topic "
+                             f"'{self.pace_topic}' ('pkg/msg/Name')")
 
     def wait_targets(self, camera_topics) -> dict[str, int]:
         """{topic: subscribers needed} before the first message: ``wait_topics``, or

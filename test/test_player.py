@@ -215,6 +215,101 @@ def test_waits_for_image_and_camera_info_subscribers(tmp_path, ros_context):
     assert infos.data(h.LEFT_INFO) == sent[h.LEFT_INFO]
 
 
+class _Answerer:
+    """A node that receives the left images and answers each, on /answers, only when the
+    test says so (`answer(i)`: the i-th image received)."""
+
+    def __init__(self, ctx):
+        from rclpy.node import Node
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
+        from sensor_msgs.msg import Image
+
+        from asmonc_vision_msgs.msg import ObstacleArray
+
+        self.node = Node('answerer', context=ctx)
+        qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+        self.images = []
+        self.sub = self.node.create_subscription(Image, h.LEFT, self.images.append, qos)
+        self.pub = self.node.create_publisher(ObstacleArray, '/answers', qos)
+        self._cls = ObstacleArray
+
+    def answer(self, i: int) -> None:
+        self.pub.publish(self._cls(header=self.images[i].header))
+
+
+def _paced_player(ctx, bag, **settings):
+    settings = dict(dict(bag=str(bag), rate=5.0, pace_topic='/answers',
+                         pace_type='asmonc_vision_msgs/msg/ObstacleArray',
+                         pace_image_topic=h.LEFT, pace_lead=2, pace_timeout=30.0,
+                         topics=(h.LEFT,)), **settings)
+    return _player(ctx, **settings)
+
+
+def test_a_paced_replay_waits_for_the_answers_and_skipped_images_cost_no_wait(
+        tmp_path, ros_context):
+    """Paced by a node's answers (`asmonc run` paces by /obstacles): at most pace_lead
+    images go unanswered; an answer also settles the images sent before it (pairs the
+    node skipped), so they cost no wait; every image is played in the end."""
+    bag = h.write_bag(tmp_path / 'bag', h.sample_messages(11))
+    player = _paced_player(ros_context, bag)
+    node = _Answerer(ros_context)
+    spinner = h.Spinner(ros_context, player, node.node)
+    try:
+        assert player.wait_for_subscribers(1, 10.0, topics=[h.LEFT])
+        assert h.wait_for(lambda: node.sub.get_publisher_count() >= 1
+                          and player.pace_answers == 0
+                          and node.pub.get_subscription_count() >= 1)
+        player.start()
+        # 11 frames at rate 5 take 0.2 s: without answers, lead + 1 images go out and stop
+        assert h.wait_for(lambda: len(node.images) == 3)
+        time.sleep(0.6)
+        assert len(node.images) == 3 and player.published_counts[h.LEFT] == 3
+        node.answer(0)                          # one answered: one more goes
+        assert h.wait_for(lambda: len(node.images) == 4)
+        time.sleep(0.3)
+        assert len(node.images) == 4
+        node.answer(3)                          # settles 1 and 2 as well (skipped by it)
+        assert h.wait_for(lambda: len(node.images) == 7)
+        time.sleep(0.3)
+        assert len(node.images) == 7
+        for i in range(7, 11):                  # from here on every image is answered
+            node.answer(i - 1)
+            assert h.wait_for(lambda i=i: len(node.images) >= i + 1)
+        assert player.play_done.wait(10.0)
+    finally:
+        spinner.stop()
+    assert player.published_counts[h.LEFT] == 11 and player.pace_given_up == 0
+    assert player.pace_holds >= 3 and player.pace_held_s > 1.0
+
+
+def test_a_paced_replay_whose_node_never_answers_waits_once_then_plays_on(
+        tmp_path, ros_context, capfd):
+    """A node that answers nothing (it refuses every pair, or has died) costs one
+    pace_timeout, not one per image: the replay then keeps the bag's rate."""
+    bag = h.write_bag(tmp_path / 'bag', h.sample_messages(11))
+    player = _paced_player(ros_context, bag, pace_timeout=0.5)
+    collector = h.RawCollector(ros_context, {h.LEFT: 'sensor_msgs/msg/Image'})
+    spinner = h.Spinner(ros_context, player, collector.node)
+    try:
+        assert player.wait_for_subscribers(1, 10.0, topics=[h.LEFT])
+        assert collector.wait_matched()
+        start = time.monotonic()
+        player.start()
+        assert player.play_done.wait(10.0)
+        took = time.monotonic() - start
+        assert h.wait_for(lambda: collector.count() == 11, 5.0)
+    finally:
+        spinner.stop()
+    assert player.pace_holds == 1 and player.pace_given_up == 3
+    assert took < 5 * 0.5                       # one hold, not one per image
+    assert 'no answer on /answers within 0.5 s for 3 image(s)' in capfd.readouterr().err
+
+
+def test_pacing_needs_a_message_type():
+    with pytest.raises(ValueError, match='pace_type'):
+        PlayerConfig(bag='x', pace_topic='/obstacles')
+
+
 # --- the process ----------------------------------------------------------------------
 
 def _run_player(bag, timeout: float = 60.0, *params: str) -> subprocess.CompletedProcess:

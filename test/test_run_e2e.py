@@ -56,6 +56,8 @@ def test_static_bag_every_true_obstacle_is_reported(static_run):
     # the command's own summary agrees
     summary = json.loads((out / 'summary.json').read_text())
     assert summary['dropped_frames'] == 0
+    # paced by /obstacles (the default): nothing given up
+    assert summary['replay']['mode'] == 'paced' and summary['replay']['pairs_given_up'] == 0
     assert summary['ground_truth']['detected'] == score.detected
     assert 'WARNING' in summary['alarms'] or 'STOP' in summary['alarms']
     assert '=== summary ===' in res.stdout and 'DETECTED' in res.stdout
@@ -75,8 +77,11 @@ def test_static_bag_outputs_are_recorded(static_run):
 
 def test_clear_path_standing_still_gives_no_alarm(tmp_path):
     out = tmp_path / 'out'
-    res = asmonc_run(BAGS / 'clear_static', '--out', out, '--no-progress')
+    # strictly at the bag's rate, as a live camera (the default paces by the detector)
+    res = asmonc_run(BAGS / 'clear_static', '--out', out, '--no-progress', '--realtime')
     assert res.returncode == 0, res.stdout + res.stderr
+    assert json.loads((out / 'summary.json').read_text())['replay']['mode'] == 'realtime'
+    assert 'pacing' not in (out / 'logs' / 'player.log').read_text()
     alarms = [m for _, _, m in bagio.read_messages(out, ['/alarms'])]
     assert alarms, 'the alarm node said nothing at all'
     obstacle_alarms = [a.text for a in alarms if a.level in (1, 2, 3)]  # CAUTION..STOP

@@ -14,6 +14,7 @@ from __future__ import annotations
 import importlib.util
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -61,6 +62,8 @@ NODES = {
                      ('/gait/state',), ('/inclinometer/imu',)),
 }
 DEFAULT_BAG_NAME = 'static_obstacles'
+#: pairs the player may publish ahead of the detector's /obstacles (unless --realtime)
+PACE_LEAD = 3
 
 
 def default_bag() -> Path:
@@ -76,6 +79,11 @@ def add_arguments(p) -> None:
                    help='record every output topic to a rosbag2 MCAP bag in this new directory, '
                         'with summary.json and the nodes\' logs beside it')
     p.add_argument('--rate', type=float, default=1.0, help='replay speed factor (default 1)')
+    p.add_argument('--realtime', action='store_true',
+                   help='replay strictly at the bag\'s rate: a machine too slow for it drops '
+                        'pairs, as with a live camera (default: the replay waits while the '
+                        f'detector is more than {PACE_LEAD} pairs behind, so every pair is '
+                        'processed; the summary says how long it waited)')
     p.add_argument('--params-file', type=Path, action='append', default=[],
                    help='a ros__parameters YAML passed to the nodes (repeatable)')
     p.add_argument('--settle', type=float, default=5.0,
@@ -474,6 +482,12 @@ def run(args) -> int:
                       '-p', f'bag:={bag.resolve()}', '-p', f'rate:={float(args.rate)}',
                       '-p', f'wait_topics:={json.dumps(_wait_topics(nodes, topics))}',
                       '-p', 'exit_when_done:=true']
+        if 'detector' in nodes and not args.realtime:
+            # one /obstacles per pair: a slow machine slows the replay, drops nothing
+            player_cmd += ['-p', 'pace_topic:=/obstacles',
+                           '-p', 'pace_type:=asmonc_vision_msgs/msg/ObstacleArray',
+                           '-p', f'pace_image_topic:={left_topic}',
+                           '-p', f'pace_lead:={PACE_LEAD}']
         children['player'] = _Child('player', player_cmd, log_dir,
                                     lambda s: console.line(s, err=True), env,
                                     done_mark=_PLAYED_MARK)
@@ -555,6 +569,7 @@ def run(args) -> int:
 
     summary = summarise(monitor, truth, n_pairs, args, out_of_view)
     summary['player_exit_code'] = player_rc
+    summary['replay'] = _pacing(children.get('player'), args)
     summary['errors'] = failed
     print_summary(summary, console)
     if args.out is not None:
@@ -619,6 +634,27 @@ def _connected(node, spec: NodeSpec, recording: bool) -> bool:
                for t in spec.inputs)
 
 
+_PACED = re.compile(r'paced by (\S+): held back (\d+) time\(s\), ([0-9.]+) s in all; '
+                    r'(\d+) image\(s\) given up')
+
+
+def _pacing(player: '_Child | None', args) -> dict:
+    """How the replay was timed: 'paced' (held back while the detector was behind) or
+    'realtime', with the player's own count of holds (from its log)."""
+    out = {'mode': 'realtime' if args.realtime else 'paced', 'held_back_times': 0,
+           'held_back_s': 0.0, 'pairs_given_up': 0}
+    if player is None:
+        return out
+    try:
+        m = _PACED.findall(player.log_path.read_text())
+    except OSError:
+        m = []
+    if m:
+        _, n, sec, gone = m[-1]
+        out.update(held_back_times=int(n), held_back_s=float(sec), pairs_given_up=int(gone))
+    return out
+
+
 def _bag_time(stamp_ns: int, t0: int) -> str:
     """Seconds into the bag, or '(live)' for alarms stamped by a node's own clock
     (start-up, timeouts), which are not bag times."""
@@ -660,6 +696,12 @@ def print_summary(s: dict, console: _Console) -> None:
     if s['input_pairs']:
         p(f"frames: {s['processed_frames']} of {s['input_pairs']} processed, "
           f"{s['dropped_frames']} dropped")
+        rp = s.get('replay')
+        if rp and rp['mode'] == 'paced' and rp['held_back_times']:
+            p(f"replay held back {rp['held_back_times']} time(s), {rp['held_back_s']:.1f} s "
+              'in all, while the detector was behind'
+              + (f"; {rp['pairs_given_up']} pair(s) given no answer" if rp['pairs_given_up']
+                 else ''))
     if s['gait_states']:
         p(f"walk model: {s['gait_states']} /gait/state messages, walking in "
           f"{s['gait_walking_states']}")

@@ -7,7 +7,11 @@ topic of the bag with its recorded type and timing (receive timestamps scaled by
 ``sensor_msgs/Image`` on ``<topic>``.
 
 Publishing runs in a dedicated thread (`BagPlayerNode.start`), so the node needs no
-spinning to play; spinning only serves its parameter services. Before the end is
+spinning to play; spinning serves its parameter services and, when the replay is paced
+(``pace_topic``), the subscription that counts a node's answers: an image is then held
+back, with the whole replay, while more than ``pace_lead`` images are unanswered, so a
+machine slower than the bag's rate slows the replay instead of dropping pairs
+(``asmonc run`` paces by /obstacles). Before the end is
 reported, the player waits (at most ACK_TIMEOUT) until reliable subscribers have
 acknowledged the last messages, so exiting right after does not lose them. For the ``asmonc run``
 orchestrator the node offers `play_done` (an Event), `published_counts` and `error`.
@@ -18,8 +22,10 @@ can be read, then logs the truncation; `error` is set and `main` exits with stat
 """
 from __future__ import annotations
 
+import collections
 import contextlib
 import importlib
+import struct
 import threading
 import time
 from collections.abc import Iterable
@@ -29,7 +35,8 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from asmonc_vision.bagplay import (BagError, BagSource, PlayerConfig, PlayTopic,
-                                   ReplaySchedule, compressed_to_image_cdr, plan_topics)
+                                   ReplaySchedule, compressed_to_image_cdr, normalize_topic,
+                                   plan_topics)
 from asmonc_vision.nodes.common import config_overrides, declare_config, run_node
 
 __all__ = ['BagPlayerNode', 'BagError', 'PlayerConfig', 'message_class', 'main']
@@ -96,6 +103,19 @@ class BagPlayerNode(Node):
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._destroyed = False
+        #: pacing (``pace_topic``): answers received, images published on the paced
+        #: topic, images given up (no answer within ``pace_timeout``), how often and how
+        #: long (s) the replay was held back; the stamps of the unanswered images, and
+        #: whether pacing waits for the next answer after a timeout
+        self._pace_cv = threading.Condition()
+        self.pace_answers = 0
+        self.pace_sent = 0
+        self._pace_owed: collections.deque[int] = collections.deque()
+        self._pace_suspended = False
+        self.pace_given_up = 0
+        self.pace_holds = 0
+        self.pace_held_s = 0.0
+        self._pace_topic: str | None = None
         try:
             self.config: PlayerConfig = declare_config(self, PlayerConfig)
             self._setup()
@@ -156,6 +176,8 @@ class BagPlayerNode(Node):
                            f"{', '.join(sorted(info.topics)) or 'none'}; topics="
                            f'{list(cfg.topics)}, exclude_topics={list(cfg.exclude_topics)})')
         self._by_bag_topic = {p.bag_topic: p for p in self.plan}
+        if cfg.pace_topic:
+            self._setup_pacing()
         self._clock_pub = None
         if cfg.publish_clock:
             from rosgraph_msgs.msg import Clock
@@ -179,6 +201,75 @@ class BagPlayerNode(Node):
                      + (' (latched)' if p.latched else ''))
         if info.truncated:
             log.warning(info.truncated)
+
+    def _setup_pacing(self) -> None:
+        cfg = self.config
+        try:
+            cls = message_class(cfg.pace_type)
+        except ImportError as exc:
+            raise ValueError(f"pace_type '{cfg.pace_type}': {exc}") from None
+        images = self.image_topics
+        topic = normalize_topic(cfg.pace_image_topic) if cfg.pace_image_topic else (
+            images[0] if images else None)
+        if topic is None or topic not in images:
+            self.get_logger().warning(
+                f'pace_topic {cfg.pace_topic}: no image topic {topic or ""} played from this '
+                'bag; playing at the bag\'s rate')
+            return
+        self._pace_topic = topic
+        self.create_subscription(cls, cfg.pace_topic, self._on_pace_answer,
+                                 QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+        self.get_logger().info(f'pacing {topic} by {cfg.pace_topic}: at most {cfg.pace_lead} '
+                               'image(s) ahead of their answers')
+
+    def _on_pace_answer(self, msg) -> None:
+        # The node answers in the order it got the images: an answer for stamp s also
+        # settles every image sent before s (those will never be answered: pairs it
+        # skipped or dropped).
+        stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        with self._pace_cv:
+            self.pace_answers += 1
+            if stamp in self._pace_owed:
+                while self._pace_owed.popleft() != stamp:
+                    pass
+            self._pace_suspended = False
+            self._pace_cv.notify_all()
+
+    def _pace(self, sched: ReplaySchedule) -> None:
+        """Hold the replay while more than ``pace_lead`` images of the paced topic are
+        unanswered, at most ``pace_timeout``; then give them up and stop pacing until the
+        next answer (a node that answers nothing costs one timeout, not one per image).
+        The schedule is shifted by the hold, so the bag's timing resumes where it stopped."""
+        cfg = self.config
+        start = time.monotonic()
+        deadline = start + cfg.pace_timeout
+        with self._pace_cv:
+            while (len(self._pace_owed) > cfg.pace_lead and not self._pace_suspended
+                   and not self._stop.is_set()):
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    self.pace_given_up += len(self._pace_owed)
+                    self.get_logger().warning(
+                        f'no answer on {cfg.pace_topic} within {cfg.pace_timeout:g} s for '
+                        f'{len(self._pace_owed)} image(s) of {self._pace_topic}; playing on '
+                        'at the bag\'s rate until the next answer', throttle_duration_sec=5.0)
+                    self._pace_owed.clear()
+                    self._pace_suspended = True
+                    break
+                self._pace_cv.wait(min(left, 0.1))
+        held = time.monotonic() - start
+        if held > 1e-3:
+            self.pace_holds += 1
+            self.pace_held_s += held
+            sched.wall_start += held
+
+    def _paced_sent(self, data: bytes) -> None:
+        """Note an image of the paced topic as sent (its header stamp, read from the CDR)."""
+        end = '<' if len(data) > 1 and data[1] == 1 else '>'   # CDR_LE or CDR_BE
+        sec, nsec = struct.unpack_from(end + 'iI', data, 4)
+        with self._pace_cv:
+            self.pace_sent += 1
+            self._pace_owed.append(sec * 1_000_000_000 + nsec)
 
     # --- playing ------------------------------------------------------------------------
 
@@ -274,6 +365,10 @@ class BagPlayerNode(Node):
                          + (f' in {self.passes} pass(es)' if cfg.loop else '')
                          + (' (stopped)' if stopped_early else '') + ': '
                          + ', '.join(f'{t} {n}' for t, n in self.published_counts.items()))
+                if self._pace_topic is not None:
+                    log.info(f'paced by {cfg.pace_topic}: held back {self.pace_holds} time(s), '
+                             f'{self.pace_held_s:.2f} s in all; {self.pace_given_up} image(s) '
+                             'given up')
                 if self.error:
                     log.error(f'bag not played to its end: {self.error}')
             except Exception:  # noqa: BLE001 - the logger may be gone at shutdown
@@ -312,8 +407,15 @@ class BagPlayerNode(Node):
                 data = self._decode(p, msg.data) if p.decompress else msg.data
                 if not self._wait_until(sched, msg.timestamp):
                     return
+                paced = p.out_topic == self._pace_topic and data is not None
+                if paced:
+                    self._pace(sched)
+                    if self._stop.is_set():
+                        return
                 if data is not None:
                     self._publish(p, data, msg.timestamp)
+                if paced:
+                    self._paced_sent(data)
         except BagError as exc:  # a cut or damage: logged once when playing ends
             if self.error is None:
                 self.error = str(exc)
