@@ -498,6 +498,21 @@ def run(args) -> int:
                              f'{LEVEL_NAMES.get(a["level"], a["level"]):8s} {a["text"]}')
 
         stopped: set[str] = set()
+        gait_done_by: list[float] = []
+
+        def stop_gait_when_played() -> None:
+            # Once the player has published the whole bag, the inclinometer goes quiet
+            # for good: stop the gait filter when its last states are out (at most 0.5 s
+            # later), before its timeout reports the end of the replay as a silent sensor.
+            if 'gait' not in children or 'gait' in stopped:
+                return
+            if not (children['player'].done.is_set() or not children['player'].alive()):
+                return
+            if not gait_done_by:
+                gait_done_by.append(time.monotonic() + 0.5)
+            if monitor.gait_states >= n_imu or time.monotonic() >= gait_done_by[0]:
+                children['gait'].stop()
+                stopped.add('gait')
 
         def check_nodes() -> None:
             for name in nodes:
@@ -514,6 +529,7 @@ def run(args) -> int:
             show_alarms()
             console.bar(monitor.frames)
             check_nodes()
+            stop_gait_when_played()
             time.sleep(0.1)
             now = time.monotonic()
             if monitor.frames != last:
@@ -544,6 +560,10 @@ def run(args) -> int:
         if 'alarm' in children:
             children['alarm'].stop()
         show_alarms()
+        end = time.monotonic() + 30.0
+        while 'gait' in children and 'gait' not in stopped and time.monotonic() < end:
+            stop_gait_when_played()
+            time.sleep(0.05)
         try:
             player_rc = children['player'].proc.wait(timeout=30)
         except subprocess.TimeoutExpired:
