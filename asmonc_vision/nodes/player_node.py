@@ -266,7 +266,8 @@ class BagPlayerNode(Node):
             sched.wall_start += held
 
     def _paced_sent(self, data: bytes) -> None:
-        """Note an image of the paced topic as sent (its header stamp, read from the CDR)."""
+        """Note an image of the paced topic as sent, just before it is (its header stamp,
+        read from the CDR)."""
         end = '<' if len(data) > 1 and data[1] == 1 else '>'   # CDR_LE or CDR_BE
         sec, nsec = struct.unpack_from(end + 'iI', data, 4)
         with self._pace_cv:
@@ -409,15 +410,13 @@ class BagPlayerNode(Node):
                 data = self._decode(p, msg.data) if p.decompress else msg.data
                 if not self._wait_until(sched, msg.timestamp):
                     return
-                paced = p.out_topic == self._pace_topic and data is not None
-                if paced:
+                if p.out_topic == self._pace_topic and data is not None:
                     self._pace(sched)
                     if self._stop.is_set():
                         return
+                    self._paced_sent(data)    # before publishing: its answer may be quick
                 if data is not None:
                     self._publish(p, data, msg.timestamp)
-                if paced:
-                    self._paced_sent(data)
         except BagError as exc:  # a cut or damage: logged once when playing ends
             if self.error is None:
                 self.error = str(exc)
