@@ -1241,6 +1241,18 @@ def _without(monkeypatch, module, names):
         monkeypatch.setattr(module, name, None)
 
 
+def _compiled_equals_numpy(monkeypatch, module, names, run):
+    """``run()`` (a sequence of arrays) with the kernels ``names`` of ``module``, then
+    without them (their numpy paths): equal element by element. Returns both runs."""
+    fast = run()
+    _without(monkeypatch, module, names)
+    slow = run()
+    assert len(fast) == len(slow)
+    for x, y in zip(fast, slow):
+        np.testing.assert_array_equal(x, y)
+    return fast, slow
+
+
 @pytest.fixture(scope='module')
 def box_frame():
     """A detector after a frame with two boxes (its context: matches, runs, ground)."""
@@ -1345,13 +1357,10 @@ def test_soft_nearest_groups_compiled_equals_numpy(monkeypatch):
     ground = np.stack([gx.ravel(), gy.ravel()], axis=1)
     want = np.ones(sizes.size, bool)
     want[::7] = False
-    fast = [gpod._soft_nearest_groups(xy, sr, group, sizes.size, want, g)
-            for g in (None, ground, lambda: ground)]
-    _without(monkeypatch, gpod, ('_nb_soft_args',))
-    slow = [gpod._soft_nearest_groups(xy, sr, group, sizes.size, want, g)
-            for g in (None, ground, lambda: ground)]
-    for x, y in zip(fast, slow):
-        np.testing.assert_array_equal(x, y)
+    fast, _ = _compiled_equals_numpy(
+        monkeypatch, gpod, ('_nb_soft_args',),
+        lambda: [gpod._soft_nearest_groups(xy, sr, group, sizes.size, want, g)
+                 for g in (None, ground, lambda: ground)])
     assert np.isnan(fast[1][~want]).all() and np.isfinite(fast[1][want]).all()
     # the visible ground separated some feet from their group's nearest one
     assert (np.abs(fast[0] - fast[1]) > 1e-9).any()
@@ -1380,12 +1389,8 @@ def test_nearest_points_compiled_equals_numpy(box_frame, monkeypatch):
                 gpod.hidden_corners(xy[:30], xy[30:60], sr[:30], ctx.ground_xy,
                                     ctx.contact_edge_scores)]
 
-    fast = run()
-    _without(monkeypatch, gpod, ('_nb_extremes', '_nb_soft_args', '_nb_arcs',
-                                 '_nb_contact_bounds'))
-    slow = run()
-    for x, y in zip(fast, slow):
-        np.testing.assert_array_equal(x, y)
+    fast, _ = _compiled_equals_numpy(monkeypatch, gpod, ('_nb_extremes', '_nb_soft_args',
+                                                         '_nb_arcs', '_nb_contact_bounds'), run)
     assert np.isnan(fast[0][n_g:]).all() and np.isfinite(fast[0][:n_g]).all()
     assert np.isfinite(fast[2][:, 0]).sum() >= 2
 
@@ -1409,11 +1414,8 @@ def test_silhouette_owners_compiled_equals_numpy(monkeypatch):
         top = rng.uniform(0.02, 0.6, w_n)
         ground = rng.uniform([2.5, -1.5], [5.5, 1.5], (int(rng.integers(0, 300)), 2))
         cases.append((xw, top, xy, g_lab, height, 0.7, ground))
-    fast = [gpod.silhouette_owners(*c) for c in cases]
-    _without(monkeypatch, gpod, ('_nb_owners',))
-    slow = [gpod.silhouette_owners(*c) for c in cases]
-    for x, y in zip(fast, slow):
-        np.testing.assert_array_equal(x, y)
+    fast, _ = _compiled_equals_numpy(monkeypatch, gpod, ('_nb_owners',),
+                                     lambda: [gpod.silhouette_owners(*c) for c in cases])
     flat = np.concatenate(fast)
     assert (flat >= 0).sum() > 10 and (flat < 0).sum() > 10
 
@@ -1432,13 +1434,10 @@ def test_group_quantile_and_thinning_compiled_equal_numpy(monkeypatch):
         data.append((g, x, float(rng.choice([0.1, 0.5, 0.9, 0.25])), n_g))
     pts = [rng.uniform(0.0, 3.0, (int(rng.integers(1, 400)), 2)) for _ in range(20)]
     grp = [rng.integers(0, 60, p.shape[0]) * 3 for p in pts]
-    fast = ([gpod._group_quantile(*d) for d in data]
-            + [cluster_points_2d(p, g, 0.25) for p, g in zip(pts, grp)])
-    _without(monkeypatch, gpod, ('_nb_group_quantile', '_nb_thin'))
-    slow = ([gpod._group_quantile(*d) for d in data]
-            + [cluster_points_2d(p, g, 0.25) for p, g in zip(pts, grp)])
-    for x, y in zip(fast, slow):
-        np.testing.assert_array_equal(x, y)
+    _compiled_equals_numpy(monkeypatch, gpod, ('_nb_group_quantile', '_nb_thin'),
+                           lambda: ([gpod._group_quantile(*d) for d in data]
+                                    + [cluster_points_2d(p, g, 0.25)
+                                       for p, g in zip(pts, grp)]))
 
 
 def test_run_and_string_kernels_equal_numpy(box_frame, monkeypatch):
@@ -1476,12 +1475,9 @@ def test_run_and_string_kernels_equal_numpy(box_frame, monkeypatch):
                 + [gpod._ground_candidates(cand, el, er, det._abc, thr)
                    for thr in (0.3, 0.8)])
 
-    fast = rest()
-    _without(monkeypatch, gpod, ('_nb_runs', '_nb_occluded_all', '_nb_hanging_all',
-                                 '_nb_on_ground', '_nb_occluded', '_nb_hanging'))
-    slow = rest()
-    for x_, y in zip(fast, slow):
-        np.testing.assert_array_equal(x_, y)
+    _, slow = _compiled_equals_numpy(monkeypatch, gpod,
+                                     ('_nb_runs', '_nb_occluded_all', '_nb_hanging_all',
+                                      '_nb_on_ground', '_nb_occluded', '_nb_hanging'), rest)
     assert all(y.any() and not y.all() for y in slow)
     np.testing.assert_array_equal(slow[2], slow[0][perm])
     # (a match's neighbours are its string's matches in row order, whatever their order)
@@ -1576,11 +1572,7 @@ def test_stillness_and_temporal_kernels_equal_numpy(box_frame, monkeypatch):
             sums.extend(d._acc)
         return still + sums
 
-    fast = run()
-    _without(monkeypatch, gpod, ('_nb_still', '_nb_temporal'))
-    slow = run()
-    for x, y in zip(fast, slow):
-        np.testing.assert_array_equal(x, y)
+    fast, _ = _compiled_equals_numpy(monkeypatch, gpod, ('_nb_still', '_nb_temporal'), run)
     decisions = fast[0:10:2]
     assert decisions[0] and decisions[1] and decisions[2] and not decisions[3]
     assert not np.array_equal(fast[-3], excess[2])          # averaged with the sums

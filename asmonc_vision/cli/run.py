@@ -14,7 +14,6 @@ from __future__ import annotations
 import importlib.util
 import json
 import os
-import re
 import shutil
 import signal
 import subprocess
@@ -365,6 +364,8 @@ def run(args) -> int:
     inputs |= {'imu'} if n_imu else set()
     nodes = {name: spec for name, spec in NODES.items()
              if spec.needs in inputs and importlib.util.find_spec(spec.module) is not None}
+    # the replay is paced by the detector's /obstacles unless --realtime
+    paced = 'detector' in nodes and not args.realtime
     if not inputs:
         console_err(f"asmonc run: bag '{bag}' has no {left_topic} messages and no {imu_topic} "
                     f"messages: nothing to do. Topics: {', '.join(sorted(topics)) or 'none'}")
@@ -482,7 +483,7 @@ def run(args) -> int:
                       '-p', f'bag:={bag.resolve()}', '-p', f'rate:={float(args.rate)}',
                       '-p', f'wait_topics:={json.dumps(_wait_topics(nodes, topics))}',
                       '-p', 'exit_when_done:=true']
-        if 'detector' in nodes and not args.realtime:
+        if paced:
             # one /obstacles per pair: a slow machine slows the replay, drops nothing
             player_cmd += ['-p', 'pace_topic:=/obstacles',
                            '-p', 'pace_type:=asmonc_vision_msgs/msg/ObstacleArray',
@@ -498,19 +499,20 @@ def run(args) -> int:
                              f'{LEVEL_NAMES.get(a["level"], a["level"]):8s} {a["text"]}')
 
         stopped: set[str] = set()
-        gait_done_by: list[float] = []
+        gait_deadline: float | None = None
 
         def stop_gait_when_played() -> None:
             # Once the player has published the whole bag, the inclinometer goes quiet
             # for good: stop the gait filter when its last states are out (at most 0.5 s
             # later), before its timeout reports the end of the replay as a silent sensor.
+            nonlocal gait_deadline
             if 'gait' not in children or 'gait' in stopped:
                 return
             if not (children['player'].done.is_set() or not children['player'].alive()):
                 return
-            if not gait_done_by:
-                gait_done_by.append(time.monotonic() + 0.5)
-            if monitor.gait_states >= n_imu or time.monotonic() >= gait_done_by[0]:
+            if gait_deadline is None:
+                gait_deadline = time.monotonic() + 0.5
+            if monitor.gait_states >= n_imu or time.monotonic() >= gait_deadline:
                 children['gait'].stop()
                 stopped.add('gait')
 
@@ -589,7 +591,7 @@ def run(args) -> int:
 
     summary = summarise(monitor, truth, n_pairs, args, out_of_view)
     summary['player_exit_code'] = player_rc
-    summary['replay'] = _pacing(children.get('player'), args)
+    summary['replay'] = _pacing(children.get('player'), paced)
     summary['errors'] = failed
     print_summary(summary, console)
     if args.out is not None:
@@ -654,24 +656,19 @@ def _connected(node, spec: NodeSpec, recording: bool) -> bool:
                for t in spec.inputs)
 
 
-_PACED = re.compile(r'paced by (\S+): held back (\d+) time\(s\), ([0-9.]+) s in all; '
-                    r'(\d+) image\(s\) given up')
-
-
-def _pacing(player: '_Child | None', args) -> dict:
+def _pacing(player: '_Child | None', paced: bool) -> dict:
     """How the replay was timed: 'paced' (held back while the detector was behind) or
     'realtime', with the player's own count of holds (from its log)."""
-    out = {'mode': 'realtime' if args.realtime else 'paced', 'held_back_times': 0,
+    from asmonc_vision.nodes.player_node import read_paced_line
+
+    out = {'mode': 'paced' if paced else 'realtime', 'held_back_times': 0,
            'held_back_s': 0.0, 'pairs_given_up': 0}
-    if player is None:
-        return out
     try:
-        m = _PACED.findall(player.log_path.read_text())
+        found = read_paced_line(player.log_path.read_text()) if player is not None else None
     except OSError:
-        m = []
-    if m:
-        _, n, sec, gone = m[-1]
-        out.update(held_back_times=int(n), held_back_s=float(sec), pairs_given_up=int(gone))
+        found = None
+    if found:
+        out.update(held_back_times=found[0], held_back_s=found[1], pairs_given_up=found[2])
     return out
 
 
@@ -697,8 +694,7 @@ def summarise(monitor: _Monitor, truth: dict, n_pairs: int, args,
            'obstacle_reports': int(sum(len(d) for d in detections.values())),
            'gait_states': monitor.gait_states, 'gait_walking_states': monitor.gait_walking}
     if truth:
-        score, missing = score_sequence(detections, truth,
-                                        out_of_view,
+        score, missing = score_sequence(detections, truth, remembered=out_of_view,
                                         match_radius=args.match_radius,
                                         min_height=args.min_height, max_range=args.max_range)
         out['ground_truth'] = score.as_dict()

@@ -152,6 +152,11 @@ class ObstacleTracker:
         self._last_seen = self._last_seen[keep]
         self._payload = [p for p, k in zip(self._payload, keep) if k]
 
+    def _sure(self, i: int) -> bool:
+        """Track i has been detected in at least ``sure_hits`` (> 0) frames, and is
+        confirmed."""
+        return bool(0 < self.sure_hits <= self._hits[i] and self._hits[i] >= self.confirm_hits)
+
     def predict(self, stamp_s: float,
                 motion: tuple[np.ndarray, np.ndarray] | None,
                 motion_cov: np.ndarray | None = None,
@@ -179,9 +184,9 @@ class ObstacleTracker:
             return
         if motion is None or dt < 0:
             keep = np.zeros(len(self), bool)
-            if motion is None and dt >= 0 and hold is not None and self.sure_hits > 0:
-                keep = np.array([bool(self._hits[i] >= max(self.sure_hits, self.confirm_hits)
-                                      and hold(self._payload[i], self._x[i].copy()))
+            if motion is None and dt >= 0 and hold is not None:
+                keep = np.array([self._sure(i) and bool(hold(self._payload[i],
+                                                             self._x[i].copy()))
                                  for i in range(len(self))], bool)
             if not keep.any():
                 self.reset()
@@ -287,12 +292,11 @@ class ObstacleTracker:
                 self._hits[i] += 1
                 self._last_seen[i] = stamp
                 continue
-            sure = 0 < self.sure_hits <= self._hits[i]
+            sure = self._sure(i)
             age = stamp - self._last_seen[i]
             if unseen is not None and unseen(self._payload[i], self._x[i].copy()):
                 # Out of view: no evidence either way. Only a sure track is remembered.
-                alive = (sure and self._hits[i] >= self.confirm_hits
-                         and age <= self.unseen_coast_s + 1e-9)
+                alive = sure and age <= self.unseen_coast_s + 1e-9
             else:
                 alive = (self._hits[i] >= self.confirm_hits
                          and (sure or self._hits[i] >= self.min_hit_fraction * self._frames[i])

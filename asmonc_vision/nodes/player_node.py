@@ -25,6 +25,7 @@ from __future__ import annotations
 import collections
 import contextlib
 import importlib
+import re
 import struct
 import threading
 import time
@@ -51,6 +52,21 @@ CLOCK_HZ = 25.0
 #: (a reliable writer's periodic heartbeat, which asks for them, comes every 3 s in Fast
 #: DDS: with 2 s, half the walking replays warned that the last camera_info was unacked)
 ACK_TIMEOUT = 4.0
+#: the log line of a paced replay's end (`read_paced_line` reads it back for `asmonc run`)
+PACED_LINE = ('paced by {topic}: held back {holds} time(s), {held_s:.2f} s in all; '
+              '{given_up} image(s) given up')
+_PACED_RE = re.compile(r'paced by \S+: held back (\d+) time\(s\), ([0-9.]+) s in all; '
+                       r'(\d+) image\(s\) given up')
+
+
+def read_paced_line(log: str) -> tuple[int, float, int] | None:
+    """(times held back, seconds held back, images given up) from the last `PACED_LINE`
+    in a player's log text; None if it has none."""
+    found = _PACED_RE.findall(log)
+    if not found:
+        return None
+    holds, held_s, given_up = found[-1]
+    return int(holds), float(held_s), int(given_up)
 
 
 def message_class(msgtype: str):
@@ -105,13 +121,10 @@ class BagPlayerNode(Node):
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._destroyed = False
-        #: pacing (``pace_topic``): answers received, images published on the paced
-        #: topic, images given up (no answer within ``pace_timeout``), how often and how
-        #: long (s) the replay was held back; the stamps of the unanswered images, and
-        #: whether pacing waits for the next answer after a timeout
+        #: pacing (``pace_topic``): the stamps of the unanswered images, whether pacing
+        #: waits for the next answer after a timeout, images given up (no answer within
+        #: ``pace_timeout``), and how often and how long (s) the replay was held back
         self._pace_cv = threading.Condition()
-        self.pace_answers = 0
-        self.pace_sent = 0
         self._pace_owed: collections.deque[int] = collections.deque()
         self._pace_suspended = False
         self.pace_given_up = 0
@@ -230,7 +243,6 @@ class BagPlayerNode(Node):
         # skipped or dropped).
         stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
         with self._pace_cv:
-            self.pace_answers += 1
             if stamp in self._pace_owed:
                 while self._pace_owed.popleft() != stamp:
                     pass
@@ -271,7 +283,6 @@ class BagPlayerNode(Node):
         end = '<' if len(data) > 1 and data[1] == 1 else '>'   # CDR_LE or CDR_BE
         sec, nsec = struct.unpack_from(end + 'iI', data, 4)
         with self._pace_cv:
-            self.pace_sent += 1
             self._pace_owed.append(sec * 1_000_000_000 + nsec)
 
     # --- playing ------------------------------------------------------------------------
@@ -369,9 +380,9 @@ class BagPlayerNode(Node):
                          + (' (stopped)' if stopped_early else '') + ': '
                          + ', '.join(f'{t} {n}' for t, n in self.published_counts.items()))
                 if self._pace_topic is not None:
-                    log.info(f'paced by {cfg.pace_topic}: held back {self.pace_holds} time(s), '
-                             f'{self.pace_held_s:.2f} s in all; {self.pace_given_up} image(s) '
-                             'given up')
+                    log.info(PACED_LINE.format(topic=cfg.pace_topic, holds=self.pace_holds,
+                                               held_s=self.pace_held_s,
+                                               given_up=self.pace_given_up))
                 if self.error:
                     log.error(f'bag not played to its end: {self.error}')
             except Exception:  # noqa: BLE001 - the logger may be gone at shutdown
