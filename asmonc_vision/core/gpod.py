@@ -70,9 +70,10 @@ import dataclasses
 import math
 import time
 from collections import deque
-from typing import Callable
+from typing import Callable, NamedTuple
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from .camera import MetricPlane, StereoCamera, ground_range_bearing, plane_disparity
@@ -417,6 +418,17 @@ class GpodConfig(PlausiblePlaneConfig):
         'apart than this (a bollard beside a box) is also reported part by part, each part '
         'at its own nearest point when that is farther than this from the whole\'s; metres, '
         'at most cluster_radius_m (0 = off)', range=(0.0, 10.0))
+    coarse_min_width: int = param(
+        480, 'Images at least this wide (pixels) are searched a second time binned 2 x 2 '
+        '(half the size: a faint texture, such as a plain wall, gives twice the gradient '
+        'per pixel at half the noise), and the binned pass\'s obstacles that no full-size '
+        'obstacle explains (no foot within part_radius_m) and the full-size matches do not '
+        'contradict join the frame\'s; 0 = off',
+        range=(0, 100000))
+    coarse_min_height_m: float = param(
+        0.3, 'The binned pass adds only obstacles at least this high (drop-offs at least '
+        'this deep), metres: its disparity is half as fine, and low obstacles are the '
+        'full-size pass\'s', range=(0.0, 100.0))
     disparity_sigma_px: float = param(
         1.0, 'Standard deviation of the disparity excess of ground features, pixels (the '
         "paper's sigma = 1), for the confidence", range=(0.01, 20.0))
@@ -2954,6 +2966,96 @@ def _separated(w: np.ndarray, f: np.ndarray, g_all: np.ndarray, margin: float) -
     return bool(_ground_inside(g, f[ii], n, f[jj], margin).any())
 
 
+class _Pass(NamedTuple):
+    """One detector pass over a pair (`GpodDetector._frame_pass`)."""
+
+    status: str
+    updated: bool
+    metric: MetricPlane | None
+    features: GpodFeatures
+    detections: tuple[GpodObstacle, ...]
+    threshold: float
+    el: EdgeMap
+    er: EdgeMap
+    still: bool
+    timings: dict[str, float]
+
+
+def bin_pair(left: np.ndarray, right: np.ndarray, cam: StereoCamera
+             ) -> tuple[np.ndarray, np.ndarray, StereoCamera]:
+    """A rectified pair binned 2 x 2, and its camera.
+
+    Each binned pixel is the mean of a 2 x 2 block (an odd last row or column is dropped),
+    so a faint texture's gradient per pixel doubles while the pixel noise halves. The
+    binned pixel (i, j) is centred on the full-size point (2 i + 0.5, 2 j + 0.5): f
+    halves and the principal point moves to ((cx - 0.5) / 2, (cy - 0.5) / 2), so points
+    triangulated in the binned pair lie in the same left optical frame, metres.
+
+    Args:
+        left, right: (H, W) uint8 rectified images, H, W >= 2.
+        cam: their camera.
+    Returns:
+        (left, right) (H // 2, W // 2) uint8, and the binned camera.
+    """
+    h, w = cam.height // 2, cam.width // 2
+    if h < 1 or w < 1:
+        raise ValueError(f'cannot bin a {cam.width}x{cam.height} pair 2 x 2')
+    out = tuple(cv2.resize(np.ascontiguousarray(img[:2 * h, :2 * w]), (w, h),
+                           interpolation=cv2.INTER_AREA) for img in (left, right))
+    cam_b = dataclasses.replace(cam, f=cam.f / 2.0, cx=(cam.cx - 0.5) / 2.0,
+                                cy=(cam.cy - 0.5) / 2.0, width=w, height=h)
+    return out[0], out[1], cam_b
+
+
+#: The binned pass: a full-size matched pixel within this of twice a binned pixel's
+#: disparity agrees with it, pixels (`_coarse_consistent`).
+_COARSE_AGREE_PX = 2.0
+
+
+def _disparity_image(f: GpodFeatures, cam: StereoCamera) -> np.ndarray:
+    """(H, W) float32 disparity of the matched left edge pixels at their rounded column,
+    NaN elsewhere, pixels."""
+    out = np.full((cam.height, cam.width), np.nan, np.float32)
+    col = np.clip(np.rint(f.u_left).astype(np.int64), 0, cam.width - 1)
+    out[f.v.astype(np.int64), col] = f.d
+    return out
+
+
+def _coarse_consistent(ob: GpodObstacle, coarse: GpodFeatures, fine_d: np.ndarray) -> bool:
+    """Whether the full-size matches do not contradict a binned-pass obstacle.
+
+    Each of the obstacle's binned pixels (u, v, d) (those beyond the threshold on its
+    edge strings) is looked up in the full-size pair at rows 2v, 2v + 1 and columns
+    within 2 of 2u + 0.5. It agrees when there are full-size matches there and all have
+    a disparity within ``_COARSE_AGREE_PX`` of 2d; it is contradicted when one does not
+    (the full-size pass, with finer neighbours to tell them apart, matched the edge
+    elsewhere, or the place is ambiguous: a door's edge matched both to itself and to a
+    pole a period off). A faint surface leaves most of its pixels unmatched at full
+    size: neither.
+
+    Args:
+        ob: a detection of the binned pass; coarse: that pass's features.
+        fine_d: (H, W) the full-size pass's `_disparity_image`.
+    Returns:
+        False when more of its pixels are contradicted than agree.
+    """
+    sel = np.isin(coarse.string_id, ob.string_ids) & (coarse.is_obstacle | coarse.is_drop)
+    if not sel.any():
+        return True
+    h, w = fine_d.shape
+    u = np.rint(2.0 * coarse.u_left[sel] + 0.5).astype(np.int64)
+    v = 2 * coarse.v[sel].astype(np.int64)
+    d = 2.0 * coarse.d[sel].astype(np.float64)
+    rows = np.clip(v[:, None] + np.array([0, 1])[None, :], 0, h - 1)[:, :, None]   # (k, 2, 1)
+    cols = np.clip(u[:, None] + np.arange(-2, 3)[None, :], 0, w - 1)[:, None, :]   # (k, 1, 5)
+    vals = fine_d[rows, cols].reshape(len(d), -1)                                 # (k, 10)
+    seen = np.isfinite(vals)
+    with np.errstate(invalid='ignore'):
+        bad = (seen & ~(np.abs(vals - d[:, None]) <= _COARSE_AGREE_PX)).any(axis=1)
+    agree = seen.any(axis=1) & ~bad
+    return int(bad.sum()) <= int(agree.sum())
+
+
 class GpodDetector:
     """The GPOD obstacle detector with ground-plane calibration and per-frame refit.
 
@@ -3009,6 +3111,9 @@ class GpodDetector:
         self._last_motion: tuple | None = None
         self._motion_held = 0
         self._track_stamp: float | None = None
+        #: the detector of the binned pass (`_with_coarse`), made on its first pair
+        self._coarse: GpodDetector | None = None
+        self._last_features: GpodFeatures | None = None
 
     @property
     def calibrated_plane(self) -> PlaneFit | None:
@@ -3247,10 +3352,51 @@ class GpodDetector:
         """
         t_start = time.perf_counter()
         self._check_images(left, right, cam)
-        self._left = left
         if self._cam is not None and cam != self._cam:
             self.reset()
         self._cam = cam
+        c = self.config
+        p = self._frame_pass(left, right, cam)
+        self._last_features = p.features
+        status, metric, timings = p.status, p.metric, p.timings
+        detections = p.detections
+        if self._coarse_wanted(cam):
+            t0 = time.perf_counter()
+            detections = self._with_coarse(detections, left, right, cam, metric)
+            timings['coarse'] = (time.perf_counter() - t0) * 1e3
+        t3 = time.perf_counter()
+        obstacles: tuple[GpodObstacle, ...] = ()
+        if status == 'tracking':
+            stamp_s = (self._frame * c.track_frame_period_s if stamp_ns is None
+                       else stamp_ns * 1e-9)
+            if callable(motion):
+                motion = motion()
+            obstacles = self._track(detections, stamp_s, p.still, cam, metric, motion)
+        else:
+            self._tracker.reset()
+            self._last_motion = None
+        t4 = time.perf_counter()
+        timings['obstacles'] = timings.get('obstacles', 0.0) + (t4 - t3) * 1e3
+        timings['total'] = (t4 - t_start) * 1e3
+        have_plane = status == 'tracking'
+        fit = self._last_fit
+        return GpodResult(
+            status=status, frame_index=self._frame,
+            plane_abc=self._abc.copy() if have_plane else None,
+            plane_cov=self._cov.copy() if have_plane else None,
+            plane_num_features=fit.num_features if (fit is not None and have_plane) else 0,
+            plane_residual_rms=(fit.residual_rms if (fit is not None and have_plane)
+                                else float('nan')),
+            plane_updated=p.updated and have_plane, metric_plane=metric if have_plane else None,
+            obstacles=obstacles, features=p.features, threshold_px=p.threshold,
+            num_edges=(len(p.el), len(p.er)), timings_ms=timings, sigma_px=self._sigma,
+            still=p.still, detections=detections)
+
+    def _frame_pass(self, left: np.ndarray, right: np.ndarray, cam: StereoCamera
+                    ) -> '_Pass':
+        """One pair's edges, matches, plane and detections (no tracking): the images
+        already checked against ``cam``, the camera already this detector's."""
+        self._left = left
         self._frame += 1
         c = self.config
         timings: dict[str, float] = {}
@@ -3284,7 +3430,6 @@ class GpodDetector:
         timings['plane'] = (t3 - t2) * 1e3
 
         metric = None
-        obstacles: tuple[GpodObstacle, ...] = ()
         detections: tuple[GpodObstacle, ...] = ()
         if status == 'tracking':
             metric = plane_is_plausible(cam, self._abc, min_height_m=0.0,
@@ -3293,35 +3438,79 @@ class GpodDetector:
         if status == 'tracking' and metric is not None:
             features, detections = self._detect(m, u, v, d, cam, metric, d_min, d_max, el,
                                                 er, cand, still)
-            stamp_s = (self._frame * c.track_frame_period_s if stamp_ns is None
-                       else stamp_ns * 1e-9)
-            if callable(motion):
-                motion = motion()
-            obstacles = self._track(detections, stamp_s, still, cam, metric, motion)
         else:
-            self._tracker.reset()
-            self._last_motion = None
             if status == 'tracking':          # smoothing made an implausible plane
                 status = 'lost'
             self._acc = None
             features = _features(m, np.full(len(m), np.nan, np.float32))
-        t4 = time.perf_counter()
-        timings['obstacles'] = (t4 - t3) * 1e3
-        timings['total'] = (t4 - t_start) * 1e3
+        timings['obstacles'] = (time.perf_counter() - t3) * 1e3
+        return _Pass(status, bool(updated), metric, features, detections, threshold, el, er,
+                     still, timings)
 
-        have_plane = status == 'tracking'
-        fit = self._last_fit
-        return GpodResult(
-            status=status, frame_index=self._frame,
-            plane_abc=self._abc.copy() if have_plane else None,
-            plane_cov=self._cov.copy() if have_plane else None,
-            plane_num_features=fit.num_features if (fit is not None and have_plane) else 0,
-            plane_residual_rms=(fit.residual_rms if (fit is not None and have_plane)
-                                else float('nan')),
-            plane_updated=bool(updated and have_plane), metric_plane=metric if have_plane else None,
-            obstacles=obstacles, features=features, threshold_px=threshold,
-            num_edges=(len(el), len(er)), timings_ms=timings, sigma_px=self._sigma,
-            still=still, detections=detections)
+    # ------------------------------------------------------------ binned pass
+    def _coarse_wanted(self, cam: StereoCamera) -> bool:
+        """Whether this camera's images are also searched binned 2 x 2
+        (``coarse_min_width``)."""
+        w = self.config.coarse_min_width
+        return w > 0 and cam.width >= w and cam.height >= 2
+
+    def _with_coarse(self, detections: tuple[GpodObstacle, ...], left: np.ndarray,
+                     right: np.ndarray, cam: StereoCamera, metric: MetricPlane | None
+                     ) -> tuple[GpodObstacle, ...]:
+        """The frame's detections joined by those of the binned pass that no full-size
+        detection explains.
+
+        The binned pass is a second detector (its own plane, threshold and noise
+        estimates, no tracks) on the pair binned 2 x 2 (`bin_pair`). Its obstacles at least
+        ``coarse_min_height_m`` high (drop-offs as deep) whose foot lies farther than
+        ``part_radius_m`` from every full-size detection's foot join, their image regions
+        scaled to the full image. It runs on every pair, so that its plane calibrates
+        along with this one's; while this detector has no plane its detections are not
+        used.
+
+        Args:
+            detections: the full-size detections of the pair.
+            left, right: (H, W) uint8 full-size rectified images.
+            cam: the full-size camera; metric: this frame's plane (None: none).
+        Returns:
+            the detections, the binned pass's added, nearest first.
+        """
+        c = self.config
+        if self._coarse is None:
+            self._coarse = GpodDetector(dataclasses.replace(c, coarse_min_width=0))
+        lb, rb, cam_b = bin_pair(left, right, cam)
+        coarse = self._coarse
+        coarse._check_images(lb, rb, cam_b)
+        if coarse._cam is not None and cam_b != coarse._cam:
+            coarse.reset()
+        coarse._cam = cam_b
+        p = coarse._frame_pass(lb, rb, cam_b)
+        if metric is None or not p.detections:
+            return detections
+        n = metric.normal_up
+        feet = np.array([o.position - o.height * n for o in detections]).reshape(-1, 3)
+        fine_d = None
+        added = []
+        for ob in p.detections:
+            if abs(ob.height) < c.coarse_min_height_m:
+                continue
+            if fine_d is None:
+                fine_d = _disparity_image(self._last_features, cam)
+            if not _coarse_consistent(ob, p.features, fine_d):
+                continue
+            foot = ob.position - ob.height * n
+            if len(feet):
+                gap = feet - foot
+                gap -= np.outer(gap @ n, n)            # along the ground
+                if float(np.min(np.linalg.norm(gap, axis=1))) <= c.part_radius_m:
+                    continue
+            x, y, w, h = ob.roi
+            x0, y0 = 2 * x, 2 * y
+            roi = (x0, y0, min(2 * w, cam.width - x0), min(2 * h, cam.height - y0))
+            added.append(dataclasses.replace(ob, roi=roi, string_ids=np.zeros(0, np.int32)))
+        if not added:
+            return detections
+        return tuple(sorted(detections + tuple(added), key=lambda o: o.range))
 
     @property
     def image_noise_sigma(self) -> float:
