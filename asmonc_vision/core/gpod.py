@@ -642,7 +642,8 @@ class GpodResult:
             pixel has its own, see ``features.threshold``).
         num_edges: (left, right) numbers of edge pixels.
         timings_ms: stage -> milliseconds ('edges', 'matching', 'plane', 'obstacles',
-            'total').
+            'total'; on images at least ``coarse_min_width`` wide, 'coarse': the binned
+            pass).
         sigma_px: robust (MAD) spread of the disparity residuals of the initial ground
             plane fit, pixels (NaN before it).
         still: True when the rig stood still since the previous frame (the excess is
@@ -3113,7 +3114,6 @@ class GpodDetector:
         self._track_stamp: float | None = None
         #: the detector of the binned pass (`_with_coarse`), made on its first pair
         self._coarse: GpodDetector | None = None
-        self._last_features: GpodFeatures | None = None
 
     @property
     def calibrated_plane(self) -> PlaneFit | None:
@@ -3357,12 +3357,11 @@ class GpodDetector:
         self._cam = cam
         c = self.config
         p = self._frame_pass(left, right, cam)
-        self._last_features = p.features
         status, metric, timings = p.status, p.metric, p.timings
         detections = p.detections
         if self._coarse_wanted(cam):
             t0 = time.perf_counter()
-            detections = self._with_coarse(detections, left, right, cam, metric)
+            detections = self._with_coarse(detections, p.features, left, right, cam, metric)
             timings['coarse'] = (time.perf_counter() - t0) * 1e3
         t3 = time.perf_counter()
         obstacles: tuple[GpodObstacle, ...] = ()
@@ -3454,9 +3453,9 @@ class GpodDetector:
         w = self.config.coarse_min_width
         return w > 0 and cam.width >= w and cam.height >= 2
 
-    def _with_coarse(self, detections: tuple[GpodObstacle, ...], left: np.ndarray,
-                     right: np.ndarray, cam: StereoCamera, metric: MetricPlane | None
-                     ) -> tuple[GpodObstacle, ...]:
+    def _with_coarse(self, detections: tuple[GpodObstacle, ...], features: GpodFeatures,
+                     left: np.ndarray, right: np.ndarray, cam: StereoCamera,
+                     metric: MetricPlane | None) -> tuple[GpodObstacle, ...]:
         """The frame's detections joined by those of the binned pass that no full-size
         detection explains.
 
@@ -3469,7 +3468,8 @@ class GpodDetector:
         used.
 
         Args:
-            detections: the full-size detections of the pair.
+            detections, features: the full-size detections and matched features of the
+                pair.
             left, right: (H, W) uint8 full-size rectified images.
             cam: the full-size camera; metric: this frame's plane (None: none).
         Returns:
@@ -3495,7 +3495,7 @@ class GpodDetector:
             if abs(ob.height) < c.coarse_min_height_m:
                 continue
             if fine_d is None:
-                fine_d = _disparity_image(self._last_features, cam)
+                fine_d = _disparity_image(features, cam)
             if not _coarse_consistent(ob, p.features, fine_d):
                 continue
             foot = ob.position - ob.height * n
