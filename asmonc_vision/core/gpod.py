@@ -1617,8 +1617,6 @@ class _FrameContext:
         would; the gradient is computed once on the union of the patches (a sample lies
         at least two pixels inside its patch, or on the image border: the same values).
         """
-        import cv2
-
         t_n, m = ok.shape
         img_h, img_w = self._left.shape
         if _nb_contact is not None and _nb_contact_bounds is not None:
@@ -3351,10 +3349,7 @@ class GpodDetector:
             ValueError: images that are not 2-D uint8 arrays of the camera's size.
         """
         t_start = time.perf_counter()
-        self._check_images(left, right, cam)
-        if self._cam is not None and cam != self._cam:
-            self.reset()
-        self._cam = cam
+        self._begin(left, right, cam)
         c = self.config
         p = self._frame_pass(left, right, cam)
         status, metric, timings = p.status, p.metric, p.timings
@@ -3390,6 +3385,14 @@ class GpodDetector:
             obstacles=obstacles, features=p.features, threshold_px=p.threshold,
             num_edges=(len(p.el), len(p.er)), timings_ms=timings, sigma_px=self._sigma,
             still=p.still, detections=detections)
+
+    def _begin(self, left: np.ndarray, right: np.ndarray, cam: StereoCamera) -> None:
+        """Check a pair against its camera (ValueError, `_check_images`); a camera
+        different from the previous pair's resets the detector."""
+        self._check_images(left, right, cam)
+        if self._cam is not None and cam != self._cam:
+            self.reset()
+        self._cam = cam
 
     def _frame_pass(self, left: np.ndarray, right: np.ndarray, cam: StereoCamera
                     ) -> '_Pass':
@@ -3479,12 +3482,8 @@ class GpodDetector:
         if self._coarse is None:
             self._coarse = GpodDetector(dataclasses.replace(c, coarse_min_width=0))
         lb, rb, cam_b = bin_pair(left, right, cam)
-        coarse = self._coarse
-        coarse._check_images(lb, rb, cam_b)
-        if coarse._cam is not None and cam_b != coarse._cam:
-            coarse.reset()
-        coarse._cam = cam_b
-        p = coarse._frame_pass(lb, rb, cam_b)
+        self._coarse._begin(lb, rb, cam_b)
+        p = self._coarse._frame_pass(lb, rb, cam_b)
         if metric is None or not p.detections:
             return detections
         n = metric.normal_up
@@ -3836,8 +3835,6 @@ class GpodDetector:
         k = dt / dt0
         if k > 3.0:
             return None
-        import cv2
-
         self._motion_held += 1
         rvec, _ = cv2.Rodrigues(R0)
         R, _ = cv2.Rodrigues(rvec * k)
