@@ -81,6 +81,7 @@ from .config import param
 from .edges import EdgeMap, detect_vertical_edges, gradient_noise_gain, image_noise_sigma
 from .edges import warm_up as edges_warm_up
 from .obstacle_tracks import ObstacleTracker
+from .unseen_ground import UnseenGroundMonitor
 from .ground_plane import PlaneFit, PlausiblePlaneConfig, fit_ground_plane, plane_is_plausible
 from .ground_plane import _median
 from .jit import jit as _jit
@@ -429,6 +430,24 @@ class GpodConfig(PlausiblePlaneConfig):
         0.3, 'The binned pass adds only obstacles at least this high (drop-offs at least '
         'this deep), metres: its disparity is half as fine, and low obstacles are the '
         'full-size pass\'s', range=(0.0, 100.0))
+    unseen_max_ratio: float = param(
+        0.15, 'Unseen ground (a wall with no edges, `core.unseen_ground`): the walking '
+        'corridor\'s ground from some range out to its far end, where at most this fraction '
+        'of the matched edge pixels the same cells showed in earlier frames are seen, is '
+        'hidden by something, reported as an obstacle at its near edge; 0 = off',
+        range=(0.0, 0.95))
+    unseen_min_expected: float = param(
+        30.0, 'Unseen ground: least number of edge pixels the hidden band must have been '
+        'expected to show (fewer: too little evidence either way)', range=(1.0, 1.0e6))
+    unseen_frames: int = param(
+        2, 'Unseen ground: pairs in a row a band must be found hidden before it is reported',
+        range=(1, 1000))
+    unseen_range_m: float = param(
+        5.0, 'Unseen ground: far end of the watched corridor, metres along the ground',
+        range=(0.5, 100.0))
+    unseen_half_width_m: float = param(
+        0.5, 'Unseen ground: half width of the watched corridor, metres',
+        range=(0.05, 10.0))
     disparity_sigma_px: float = param(
         1.0, 'Standard deviation of the disparity excess of ground features, pixels (the '
         "paper's sigma = 1), for the confidence", range=(0.01, 20.0))
@@ -3112,6 +3131,11 @@ class GpodDetector:
         self._track_stamp: float | None = None
         #: the detector of the binned pass (`_with_coarse`), made on its first pair
         self._coarse: GpodDetector | None = None
+        #: the corridor's ground edge pixels expected, and its bands gone unseen
+        self._unseen = (UnseenGroundMonitor(c.unseen_max_ratio, c.unseen_min_expected,
+                                            c.unseen_frames, c.unseen_range_m,
+                                            c.unseen_half_width_m)
+                        if c.unseen_max_ratio > 0 else None)
 
     @property
     def calibrated_plane(self) -> PlaneFit | None:
@@ -3366,9 +3390,16 @@ class GpodDetector:
             if callable(motion):
                 motion = motion()
             obstacles = self._track(detections, stamp_s, p.still, cam, metric, motion)
+            unseen = self._unseen_ground(p.features, p.threshold, cam, metric,
+                                         detections + obstacles)
+            if unseen:
+                detections = tuple(sorted(detections + unseen, key=lambda o: o.range))
+                obstacles = tuple(sorted(obstacles + unseen, key=lambda o: o.range))
         else:
             self._tracker.reset()
             self._last_motion = None
+            if self._unseen is not None:
+                self._unseen.reset()
         t4 = time.perf_counter()
         timings['obstacles'] = timings.get('obstacles', 0.0) + (t4 - t3) * 1e3
         timings['total'] = (t4 - t_start) * 1e3
@@ -3448,6 +3479,42 @@ class GpodDetector:
         timings['obstacles'] = (time.perf_counter() - t3) * 1e3
         return _Pass(status, bool(updated), metric, features, detections, threshold, el, er,
                      still, timings)
+
+    def _unseen_ground(self, features: GpodFeatures, threshold: float, cam: StereoCamera,
+                       metric: MetricPlane, known: tuple[GpodObstacle, ...]
+                       ) -> tuple[GpodObstacle, ...]:
+        """The frame's bands of unseen corridor ground (`core.unseen_ground`) that no
+        obstacle or drop-off in ``known`` explains, as untracked obstacles (``track_id``
+        0; ``disparity_excess`` 0: nothing was measured on them; ``num_edge_pixels`` 0;
+        ``confidence`` 1 - seen / expected). Empty when ``unseen_max_ratio`` is 0."""
+        if self._unseen is None:
+            return ()
+        if known:
+            n = metric.normal_up
+            feet = np.array([o.position - o.height * n for o in known])
+            origin, fwd, lft = self._unseen._axes(metric)
+            g = feet - origin
+            explained = np.stack([g @ fwd, g @ lft], axis=1)
+        else:
+            explained = None
+        thr = features.threshold if features.threshold is not None else threshold
+        reports = self._unseen.update(cam, metric, features.u_left, features.v,
+                                      features.excess, thr, explained, left=self._left)
+        out = []
+        for r in reports:
+            u, v = cam.project_left(np.stack([r.position, r.position - r.height
+                                              * metric.normal_up]))
+            x0 = int(np.clip(np.floor(min(u)), 0, cam.width - 1))
+            y0 = int(np.clip(np.floor(min(v)), 0, cam.height - 1))
+            x1 = int(np.clip(np.ceil(max(u)), x0 + 1, cam.width))
+            y1 = int(np.clip(np.ceil(max(v)), y0 + 1, cam.height))
+            out.append(GpodObstacle(
+                position=r.position, height=r.height, range=r.range, bearing=r.bearing,
+                width=r.width, disparity_excess=0.0,
+                confidence=float(np.clip(1.0 - r.seen / r.expected, 0.0, 1.0)),
+                roi=(x0, y0, x1 - x0, y1 - y0), num_edge_pixels=0,
+                string_ids=np.zeros(0, np.int32)))
+        return tuple(out)
 
     # ------------------------------------------------------------ binned pass
     def _coarse_wanted(self, cam: StereoCamera) -> bool:

@@ -1,0 +1,225 @@
+"""Unseen ground (core.unseen_ground): the corridor's ground hidden by something with no
+edges, such as a plain painted wall.
+
+The monitor's rules are tested on synthetic ground pixels (a paper rig, camera 1.25 m
+high pitched 20 degrees down), and the whole detector on a simulated plain wall (no
+texture at all on its faces) that appears in front of a rig standing still.
+"""
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from asmonc_vision.core.camera import MetricPlane, StereoCamera
+from asmonc_vision.core.gpod import GpodConfig, GpodDetector
+from asmonc_vision.core.unseen_ground import UnseenGroundMonitor, _texture_energy
+
+CAM = StereoCamera(f=300.0, cx=159.5, cy=119.5, baseline=0.35, width=320, height=240)
+PITCH = math.radians(20.0)
+PLANE = MetricPlane(normal_up=np.array([0.0, -math.cos(PITCH), -math.sin(PITCH)]),
+                    height=1.25)
+
+
+def _ground_points(rng, n, r_max=6.0):
+    """(n, 2) random ground points (range, lateral), metres, and their left-image pixels
+    (u, v), keeping those in the image."""
+    xy = np.column_stack([rng.uniform(1.0, r_max, n), rng.uniform(-1.5, 1.5, n)])
+    n_up = PLANE.normal_up
+    fwd = np.array([0.0, 0.0, 1.0]) - n_up[2] * n_up
+    fwd /= np.linalg.norm(fwd)
+    lft = np.cross(n_up, fwd)
+    p = -PLANE.height * n_up + xy[:, :1] * fwd + xy[:, 1:] * lft
+    u, v = CAM.project_left(p)
+    ok = (u >= 0) & (u <= CAM.width - 1) & (v >= 0) & (v <= CAM.height - 1)
+    return xy[ok], u[ok], v[ok]
+
+
+def _monitor(frames=2):
+    return UnseenGroundMonitor(max_ratio=0.15, min_expected=30.0, frames=frames,
+                               max_range=5.0, half_width=0.5)
+
+
+def _learn(mon, rng, n_frames=12, density=4000):
+    for _ in range(n_frames):
+        _, u, v = _ground_points(rng, density)
+        assert mon.update(CAM, PLANE, u, v, np.zeros(len(u)), 0.8) == ()
+
+
+def test_ground_pixels_map_to_the_ground_coordinates_they_came_from():
+    rng = np.random.default_rng(1)
+    xy, u, v = _ground_points(rng, 500)
+    np.testing.assert_allclose(_monitor().pixel_ground(CAM, PLANE, u, v), xy, atol=1e-9)
+    # above the horizon there is no ground
+    assert np.isnan(_monitor().pixel_ground(CAM, PLANE, np.array([160.0]),
+                                            np.array([0.0]))).all()
+
+
+def test_ground_hidden_beyond_three_metres_is_reported_there_after_two_frames():
+    rng = np.random.default_rng(2)
+    mon = _monitor(frames=2)
+    _learn(mon, rng)
+    first = None
+    for k in range(3):
+        xy, u, v = _ground_points(rng, 4000)
+        keep = xy[:, 0] < 3.0                       # a plain wall at 3 m hides the rest
+        reports = mon.update(CAM, PLANE, u[keep], v[keep], np.zeros(keep.sum()), 0.8)
+        if k == 0:
+            first = reports
+    assert first == ()                              # one frame is not enough
+    assert len(reports) == 1
+    for r in reports:
+        ahead = r.range * math.cos(r.bearing)
+        assert 2.85 <= ahead <= 3.0, r
+        assert r.seen <= 0.15 * r.expected and r.expected >= 30.0
+        # it hides at least the ray to the band's far end
+        assert r.height == pytest.approx(1.25 * (1 - ahead / r.far_range), rel=1e-6)
+        assert PLANE.signed_height(r.position)[0] == pytest.approx(r.height, abs=1e-9)
+
+
+def test_ground_as_usual_is_never_reported():
+    rng = np.random.default_rng(3)
+    mon = _monitor(frames=1)
+    _learn(mon, rng)
+    for _ in range(100):
+        # the ground's edge pixels come and go: a third to twice as many as usual
+        _, u, v = _ground_points(rng, int(rng.uniform(1300, 8000)))
+        assert mon.update(CAM, PLANE, u, v, np.zeros(len(u)), 0.8) == ()
+
+
+def test_ground_hidden_on_one_side_only_is_not_reported():
+    """Across the corridor the band must be hidden as a whole: tile joints that run
+    along the walk leave narrower strips with no vertical edge at all."""
+    rng = np.random.default_rng(4)
+    mon = _monitor(frames=1)
+    _learn(mon, rng)
+    xy, u, v = _ground_points(rng, 4000)
+    keep = ~((xy[:, 0] >= 2.5) & (xy[:, 1] > 0.0))  # hidden only on the left half
+    assert mon.update(CAM, PLANE, u[keep], v[keep], np.zeros(keep.sum()), 0.8) == ()
+
+
+def test_a_patch_of_plain_ground_with_ground_seen_beyond_it_is_not_reported():
+    rng = np.random.default_rng(8)
+    mon = _monitor(frames=1)
+    _learn(mon, rng)
+    xy, u, v = _ground_points(rng, 4000)
+    keep = ~((xy[:, 0] >= 2.5) & (xy[:, 0] < 4.5))  # edges again from 4.5 m on
+    assert mon.update(CAM, PLANE, u[keep], v[keep], np.zeros(keep.sum()), 0.8) == ()
+
+
+def test_a_poor_view_everywhere_is_not_ground_hidden_from_some_range_on():
+    rng = np.random.default_rng(9)
+    mon = _monitor(frames=1)
+    _learn(mon, rng)
+    for _ in range(3):                              # motion blur: a tenth of the pixels
+        xy, u, v = _ground_points(rng, 400)
+        keep = xy[:, 0] < 3.0
+        assert mon.update(CAM, PLANE, u[keep], v[keep], np.zeros(keep.sum()), 0.8) == ()
+
+
+def test_a_drop_off_and_a_detected_obstacle_explain_the_missing_ground():
+    rng = np.random.default_rng(5)
+    mon = _monitor(frames=1)
+    _learn(mon, rng)
+    xy, u, v = _ground_points(rng, 4000)
+    beyond = xy[:, 0] >= 3.0
+    # the ground beyond 3 m is seen, 2 px of disparity below the plane: a step down
+    excess = np.where(beyond, -2.0, 0.0)
+    assert mon.update(CAM, PLANE, u, v, excess, 0.8) == ()
+    # the same pixels on the plane would have been ground
+    assert mon.update(CAM, PLANE, u, v, np.zeros(len(u)), 0.8) == ()
+    # hidden, but an obstacle already stands at 2.9 m in the corridor
+    keep = ~beyond
+    assert mon.update(CAM, PLANE, u[keep], v[keep], np.zeros(keep.sum()), 0.8,
+                      explained=np.array([[2.9, 0.3]])) == ()
+    # the same again without the obstacle, or with one beside the corridor
+    reports = mon.update(CAM, PLANE, u[keep], v[keep], np.zeros(keep.sum()), 0.8,
+                         explained=np.array([[2.9, 1.2]]))
+    assert len(reports) == 1
+
+
+def test_a_hidden_band_is_not_learnt_as_ground_that_shows_nothing():
+    rng = np.random.default_rng(6)
+    mon = _monitor(frames=1)
+    _learn(mon, rng)
+    for k in range(40):
+        xy, u, v = _ground_points(rng, 4000)
+        keep = xy[:, 0] < 3.0
+        reports = mon.update(CAM, PLANE, u[keep], v[keep], np.zeros(keep.sum()), 0.8)
+        assert len(reports) == 1, k                 # a wall stood in front of stays
+
+
+def test_the_near_edge_moves_to_where_the_ground_texture_ends():
+    """A tile's plain inside shows no edge pixels short of the wall: the band's near edge
+    moves on to where the image's fine texture stops."""
+    rng = np.random.default_rng(7)
+    mon = _monitor()
+    foot = 3.0
+    # the image row of the foot at the strip's middle
+    n_up = PLANE.normal_up
+    fwd = np.array([0.0, 0.0, 1.0]) - n_up[2] * n_up
+    fwd /= np.linalg.norm(fwd)
+    _, v_foot = CAM.project_left((-PLANE.height * n_up + foot * fwd)[None, :])
+    img = np.full((CAM.height, CAM.width), 120, np.uint8)
+    rows = np.arange(CAM.height)[:, None] > v_foot[0]
+    img = np.where(rows, rng.integers(90, 150, img.shape), img).astype(np.uint8)
+    energy = _texture_energy(img)
+    r = mon._foot_by_texture(energy, CAM, PLANE, 0, 2.6, 5.0)
+    assert abs(r - foot) <= 0.06, r
+    # no contrast between the two: the last ground edge pixel stands
+    flat = np.full_like(img, 120)
+    assert mon._foot_by_texture(_texture_energy(flat), CAM, PLANE, 0, 2.6, 5.0) == 2.6
+
+
+@pytest.mark.parametrize('kw, match', [
+    (dict(max_ratio=1.0), 'max_ratio'), (dict(min_expected=0.0), 'min_expected'),
+    (dict(frames=0), 'frames'), (dict(max_range=0.2), 'max_range'),
+    (dict(half_width=0.0), 'half_width')])
+def test_bad_settings_are_refused(kw, match):
+    args = dict(max_ratio=0.15, min_expected=30.0, frames=2, max_range=5.0, half_width=0.5)
+    args.update(kw)
+    with pytest.raises(ValueError, match=match):
+        UnseenGroundMonitor(**args)
+    with pytest.raises(ValueError, match='unseen_max_ratio'):
+        GpodConfig(unseen_max_ratio=0.99)
+
+
+def test_a_plain_wall_that_appears_ahead_is_reported_at_its_foot():
+    """The simulator's wall with no texture on its faces (uniform grey) appears 2.4 m
+    ahead of the paper's rig standing still: no vertical edge on it, so GPOD alone does not
+    find it, and the ground it hides does."""
+    from asmonc_vision.sim import RigSettings, StereoRenderer, simulate_frame
+    from asmonc_vision.sim.motion import Leg, Trajectory
+    from asmonc_vision.sim.scenarios import Scenario, random_pavement
+    from asmonc_vision.sim.world import Box, Ground, World, wall
+
+    class PlainWall(Box):
+        def _stripes(self, noise, h, foot_s, foot_z):
+            return np.zeros(len(h.px), np.float32)
+
+    seed = 3
+    rig = RigSettings()
+    rng = np.random.default_rng(seed)
+    w = wall(2.4, -6.0, 2.4, 6.0, appear=0.8)
+    w = PlainWall(**{f.name: getattr(w, f.name) for f in dataclasses.fields(w)})
+    world = World(Ground(pavement=random_pavement(rng)), [w], seed=seed)
+    traj = Trajectory([Leg(2.0, 0.0)], rig, world, rng=np.random.default_rng(seed + 1))
+    scene = Scenario('plain_wall', 'a plain wall appears', seed, 2.0, rig, world, traj)
+    ren = StereoRenderer(rig)
+    cam = rig.camera()
+    frames = [simulate_frame(scene, k, ren) for k in range(20)]
+    found = {}
+    for ratio in (0.15, 0.0):
+        det = GpodDetector(GpodConfig(unseen_max_ratio=ratio))
+        hits = 0
+        for f in frames:
+            r = det.process(f.left, f.right, cam, stamp_ns=int(f.time * 1e9))
+            if f.time < 1.0:                        # appears at 0.8 s; two frames to report
+                continue
+            truth = min(o.range for o in f.obstacles)
+            ahead = [o for o in r.obstacles if abs(o.range * math.sin(o.bearing)) <= 0.5
+                     and o.confidence >= 0.3 and abs(o.height) >= 0.05]
+            hits += any(abs(o.range - truth) <= 0.3 for o in ahead)
+        found[ratio] = hits
+    assert found[0.15] >= 9, found                  # of 10 frames (measured 10)
+    assert found[0.0] <= 1, found                   # the scene needs the cue (measured 0)
