@@ -46,6 +46,14 @@ def _learn(mon, rng, n_frames=12, density=4000):
         assert mon.update(CAM, PLANE, u, v, np.zeros(len(u)), 0.8) == ()
 
 
+def _learnt(seed, frames=1):
+    """(rng, monitor) after 12 frames of ordinary ground."""
+    rng = np.random.default_rng(seed)
+    mon = _monitor(frames=frames)
+    _learn(mon, rng)
+    return rng, mon
+
+
 def test_ground_pixels_map_to_the_ground_coordinates_they_came_from():
     rng = np.random.default_rng(1)
     xy, u, v = _ground_points(rng, 500)
@@ -56,9 +64,7 @@ def test_ground_pixels_map_to_the_ground_coordinates_they_came_from():
 
 
 def test_ground_hidden_beyond_three_metres_is_reported_there_after_two_frames():
-    rng = np.random.default_rng(2)
-    mon = _monitor(frames=2)
-    _learn(mon, rng)
+    rng, mon = _learnt(2, frames=2)
     first = None
     for k in range(3):
         xy, u, v = _ground_points(rng, 4000)
@@ -78,9 +84,7 @@ def test_ground_hidden_beyond_three_metres_is_reported_there_after_two_frames():
 
 
 def test_ground_as_usual_is_never_reported():
-    rng = np.random.default_rng(3)
-    mon = _monitor(frames=1)
-    _learn(mon, rng)
+    rng, mon = _learnt(3, frames=1)
     for _ in range(100):
         # the ground's edge pixels come and go: a third to twice as many as usual
         _, u, v = _ground_points(rng, int(rng.uniform(1300, 8000)))
@@ -90,27 +94,21 @@ def test_ground_as_usual_is_never_reported():
 def test_ground_hidden_on_one_side_only_is_not_reported():
     """Across the corridor the band must be hidden as a whole: tile joints that run
     along the walk leave narrower strips with no vertical edge at all."""
-    rng = np.random.default_rng(4)
-    mon = _monitor(frames=1)
-    _learn(mon, rng)
+    rng, mon = _learnt(4, frames=1)
     xy, u, v = _ground_points(rng, 4000)
     keep = ~((xy[:, 0] >= 2.5) & (xy[:, 1] > 0.0))  # hidden only on the left half
     assert mon.update(CAM, PLANE, u[keep], v[keep], np.zeros(keep.sum()), 0.8) == ()
 
 
 def test_a_patch_of_plain_ground_with_ground_seen_beyond_it_is_not_reported():
-    rng = np.random.default_rng(8)
-    mon = _monitor(frames=1)
-    _learn(mon, rng)
+    rng, mon = _learnt(8, frames=1)
     xy, u, v = _ground_points(rng, 4000)
     keep = ~((xy[:, 0] >= 2.5) & (xy[:, 0] < 4.5))  # edges again from 4.5 m on
     assert mon.update(CAM, PLANE, u[keep], v[keep], np.zeros(keep.sum()), 0.8) == ()
 
 
 def test_a_poor_view_everywhere_is_not_ground_hidden_from_some_range_on():
-    rng = np.random.default_rng(9)
-    mon = _monitor(frames=1)
-    _learn(mon, rng)
+    rng, mon = _learnt(9, frames=1)
     for _ in range(3):                              # motion blur: a tenth of the pixels
         xy, u, v = _ground_points(rng, 400)
         keep = xy[:, 0] < 3.0
@@ -118,9 +116,7 @@ def test_a_poor_view_everywhere_is_not_ground_hidden_from_some_range_on():
 
 
 def test_a_drop_off_and_a_detected_obstacle_explain_the_missing_ground():
-    rng = np.random.default_rng(5)
-    mon = _monitor(frames=1)
-    _learn(mon, rng)
+    rng, mon = _learnt(5, frames=1)
     xy, u, v = _ground_points(rng, 4000)
     beyond = xy[:, 0] >= 3.0
     # the ground beyond 3 m is seen, 2 px of disparity below the plane: a step down
@@ -139,9 +135,7 @@ def test_a_drop_off_and_a_detected_obstacle_explain_the_missing_ground():
 
 
 def test_a_hidden_band_is_not_learnt_as_ground_that_shows_nothing():
-    rng = np.random.default_rng(6)
-    mon = _monitor(frames=1)
-    _learn(mon, rng)
+    rng, mon = _learnt(6, frames=1)
     for k in range(40):
         xy, u, v = _ground_points(rng, 4000)
         keep = xy[:, 0] < 3.0
