@@ -170,6 +170,20 @@ def plane_disparity(abc, u, v) -> np.ndarray:
     return a * np.asarray(u, float) + b * np.asarray(v, float) + c
 
 
+def ground_axes(plane: MetricPlane) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The ground's own axes in the left optical frame.
+
+    Returns:
+        (origin, fwd, left), (3,) float64 each: the point of the plane below the left
+        camera (metres), the walking direction (the optical axis projected onto the
+        plane) and the direction to the left (REP 103), unit vectors.
+    """
+    n = np.asarray(plane.normal_up, float)
+    fwd = np.array([0.0, 0.0, 1.0]) - n[2] * n
+    fwd /= np.linalg.norm(fwd)
+    return -plane.height * n, fwd, np.cross(n, fwd)
+
+
 def ground_range_bearing(plane: MetricPlane, points_left) -> tuple[np.ndarray, np.ndarray]:
     """Range and bearing of points along the ground, as the wearer would be told them.
 
@@ -187,11 +201,8 @@ def ground_range_bearing(plane: MetricPlane, points_left) -> tuple[np.ndarray, n
     p = np.asarray(points_left, float).reshape(-1, 3)
     n = np.asarray(plane.normal_up, float)
     foot = p - (p @ n + plane.height)[:, None] * n[None, :]
-    origin_foot = -plane.height * n
+    origin_foot, fwd, left = ground_axes(plane)
     g = foot - origin_foot[None, :]
-    fwd = np.array([0.0, 0.0, 1.0]) - n[2] * n
-    fwd /= np.linalg.norm(fwd)
-    left = np.cross(n, fwd)
     rng_ = np.linalg.norm(g, axis=1)
     bearing = np.arctan2(g @ left, g @ fwd)
     return rng_, bearing

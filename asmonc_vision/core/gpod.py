@@ -76,7 +76,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .camera import MetricPlane, StereoCamera, ground_range_bearing, plane_disparity
+from .camera import MetricPlane, StereoCamera, ground_axes, ground_range_bearing, plane_disparity
 from .config import param
 from .edges import EdgeMap, detect_vertical_edges, gradient_noise_gain, image_noise_sigma
 from .edges import warm_up as edges_warm_up
@@ -3483,38 +3483,36 @@ class GpodDetector:
     def _unseen_ground(self, features: GpodFeatures, threshold: float, cam: StereoCamera,
                        metric: MetricPlane, known: tuple[GpodObstacle, ...]
                        ) -> tuple[GpodObstacle, ...]:
-        """The frame's bands of unseen corridor ground (`core.unseen_ground`) that no
-        obstacle or drop-off in ``known`` explains, as untracked obstacles (``track_id``
-        0; ``disparity_excess`` 0: nothing was measured on them; ``num_edge_pixels`` 0;
-        ``confidence`` 1 - seen / expected). Empty when ``unseen_max_ratio`` is 0."""
+        """The frame's band of unseen corridor ground (`core.unseen_ground`), unless an
+        obstacle or drop-off in ``known`` explains it, as an untracked obstacle straight
+        ahead (``track_id`` 0; ``disparity_excess`` 0: nothing was measured on it;
+        ``num_edge_pixels`` 0; ``confidence`` 1 - seen / expected). Empty when there is
+        none or ``unseen_max_ratio`` is 0."""
         if self._unseen is None:
             return ()
+        explained = None
         if known:
             n = metric.normal_up
             feet = np.array([o.position - o.height * n for o in known])
-            origin, fwd, lft = self._unseen._axes(metric)
-            g = feet - origin
-            explained = np.stack([g @ fwd, g @ lft], axis=1)
-        else:
-            explained = None
+            origin, fwd, lft = ground_axes(metric)
+            explained = np.stack([(feet - origin) @ fwd, (feet - origin) @ lft], axis=1)
         thr = features.threshold if features.threshold is not None else threshold
-        reports = self._unseen.update(cam, metric, features.u_left, features.v,
-                                      features.excess, thr, explained, left=self._left)
-        out = []
-        for r in reports:
-            u, v = cam.project_left(np.stack([r.position, r.position - r.height
-                                              * metric.normal_up]))
-            x0 = int(np.clip(np.floor(min(u)), 0, cam.width - 1))
-            y0 = int(np.clip(np.floor(min(v)), 0, cam.height - 1))
-            x1 = int(np.clip(np.ceil(max(u)), x0 + 1, cam.width))
-            y1 = int(np.clip(np.ceil(max(v)), y0 + 1, cam.height))
-            out.append(GpodObstacle(
-                position=r.position, height=r.height, range=r.range, bearing=r.bearing,
-                width=r.width, disparity_excess=0.0,
-                confidence=float(np.clip(1.0 - r.seen / r.expected, 0.0, 1.0)),
-                roi=(x0, y0, x1 - x0, y1 - y0), num_edge_pixels=0,
-                string_ids=np.zeros(0, np.int32)))
-        return tuple(out)
+        r = self._unseen.update(cam, metric, features.u_left, features.v, features.excess,
+                                thr, explained, left=self._left)
+        if r is None:
+            return ()
+        u, v = cam.project_left(np.stack([r.position, r.position - r.height
+                                          * metric.normal_up]))
+        x0 = int(np.clip(np.floor(min(u)), 0, cam.width - 1))
+        y0 = int(np.clip(np.floor(min(v)), 0, cam.height - 1))
+        x1 = int(np.clip(np.ceil(max(u)), x0 + 1, cam.width))
+        y1 = int(np.clip(np.ceil(max(v)), y0 + 1, cam.height))
+        return (GpodObstacle(
+            position=r.position, height=r.height, range=r.range, bearing=0.0,
+            width=r.width, disparity_excess=0.0,
+            confidence=float(np.clip(1.0 - r.seen / r.expected, 0.0, 1.0)),
+            roi=(x0, y0, x1 - x0, y1 - y0), num_edge_pixels=0,
+            string_ids=np.zeros(0, np.int32)),)
 
     # ------------------------------------------------------------ binned pass
     def _coarse_wanted(self, cam: StereoCamera) -> bool:
