@@ -146,6 +146,96 @@ def test_the_alarm_timeout_comes_from_the_params_files(tmp_path):
     assert _alarm_timeout([a, bad, tmp_path / 'missing.yaml']) == 2.5
 
 
+def test_the_gait_timeout_comes_from_the_params_files(tmp_path):
+    from asmonc_vision.cli.run import _gait_timeout
+    from asmonc_vision.nodes.gait_node import GaitNodeConfig
+    assert _gait_timeout([]) == GaitNodeConfig().timeout
+    a = tmp_path / 'a.yaml'
+    a.write_text('gait_filter_node:\n  ros__parameters:\n    timeout: 3.0\n'
+                 'alarm_node:\n  ros__parameters:\n    timeout: 9.0\n')
+    assert _gait_timeout([a]) == 3.0
+
+
+class _FakeChild:
+    def __init__(self, alive=True):
+        import threading
+        self.done = threading.Event()
+        self._alive = alive
+        self.stop_calls = []
+
+    def alive(self):
+        return self._alive
+
+    def stop(self):
+        import time
+        self.stop_calls.append(time.monotonic())
+        self._alive = False
+
+
+class _FakeMonitor:
+    def __init__(self):
+        import threading
+        self.lock = threading.Lock()
+        self.gait_states = 0
+        self.last_gait_at = None
+
+    def state(self):
+        import time
+        with self.lock:
+            self.gait_states += 1
+            self.last_gait_at = time.monotonic()
+
+
+def test_the_gait_node_is_stopped_after_its_last_state_not_before():
+    """The end of a replay: the gait node is stopped once the player is done and no
+    state has come for `quiet` s (or every reading has its state), whatever else the
+    harness is doing (its own thread)."""
+    import time
+
+    from asmonc_vision.cli.run import _GaitStopper
+    gait, player, monitor = _FakeChild(), _FakeChild(), _FakeMonitor()
+    stopper = _GaitStopper(gait, player, monitor, n_imu=100, quiet=0.2)
+    stopper.start()
+    time.sleep(0.4)
+    assert not gait.stop_calls                      # the bag is still being played
+    player.done.set()
+    # states still coming in (a node catching up): not stopped while they come
+    t_end = time.monotonic() + 0.6
+    while time.monotonic() < t_end:
+        monitor.state()
+        time.sleep(0.05)
+    last = monitor.last_gait_at
+    assert not gait.stop_calls and not stopper.stopping.is_set()
+    stopper.join(timeout=2.0)
+    assert len(gait.stop_calls) == 1 and stopper.stopping.is_set()
+    assert 0.2 <= gait.stop_calls[0] - last < 0.5
+
+    # every reading has its state: stopped at once, without waiting for the quiet time
+    gait, player, monitor = _FakeChild(), _FakeChild(), _FakeMonitor()
+    stopper = _GaitStopper(gait, player, monitor, n_imu=3, quiet=5.0)
+    stopper.start()
+    for _ in range(3):
+        monitor.state()
+    player.done.set()
+    t0 = time.monotonic()
+    stopper.join(timeout=2.0)
+    assert len(gait.stop_calls) == 1 and gait.stop_calls[0] - t0 < 0.5
+
+    # a player that dies without saying it is done counts as done; cancel() ends the
+    # thread without stopping anything
+    gait, player, monitor = _FakeChild(), _FakeChild(alive=False), _FakeMonitor()
+    stopper = _GaitStopper(gait, player, monitor, n_imu=3, quiet=0.1)
+    stopper.start()
+    stopper.join(timeout=2.0)
+    assert len(gait.stop_calls) == 1
+    gait, player = _FakeChild(), _FakeChild()
+    stopper = _GaitStopper(gait, player, _FakeMonitor(), n_imu=3, quiet=0.1)
+    stopper.start()
+    stopper.cancel()
+    stopper.join(timeout=2.0)
+    assert not stopper.is_alive() and not gait.stop_calls
+
+
 def test_missing_bag_is_a_clear_error(tmp_path):
     res = asmonc_run(tmp_path / 'no_such_bag')
     assert res.returncode == 2

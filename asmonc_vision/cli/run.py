@@ -118,6 +118,8 @@ class _Monitor:
         self.node.create_subscription(Alarm, '/alarms', self._on_alarm, ALARM_QOS)
         self.gait_states = 0
         self.gait_walking = 0
+        #: time.monotonic() of the newest /gait/state (None before the first)
+        self.last_gait_at: float | None = None
         self.node.create_subscription(GaitState, '/gait/state', self._on_gait, RESULT_QOS)
         # The left camera_info the player sends with each image: how far the replay is
         # (its own subscription, which the player waits for: `_wait_topics`).
@@ -134,6 +136,7 @@ class _Monitor:
     def _on_gait(self, msg) -> None:
         with self.lock:
             self.gait_states += 1
+            self.last_gait_at = time.monotonic()
             self.gait_walking += int(bool(msg.walking))
 
     def _on_obstacles(self, msg) -> None:
@@ -449,6 +452,7 @@ def run(args) -> int:
     if damage:
         failed.append(f'bag not read to its end: {damage}')
     player_rc = None
+    gait_stopper: _GaitStopper | None = None
     try:
         def start(names: list[str]) -> None:
             for name in names:
@@ -499,24 +503,14 @@ def run(args) -> int:
                              f'{LEVEL_NAMES.get(a["level"], a["level"]):8s} {a["text"]}')
 
         stopped: set[str] = set()
-        gait_deadline: float | None = None
-
-        def stop_gait_when_played() -> None:
-            # Once the player has published the whole bag, the inclinometer goes quiet
-            # for good: stop the gait filter when its last states are out (at most 0.5 s
-            # later), before its timeout reports the end of the replay as a silent sensor.
-            nonlocal gait_deadline
-            if 'gait' not in children or 'gait' in stopped:
-                return
-            if not (children['player'].done.is_set() or not children['player'].alive()):
-                return
-            if gait_deadline is None:
-                gait_deadline = time.monotonic() + 0.5
-            if monitor.gait_states >= n_imu or time.monotonic() >= gait_deadline:
-                children['gait'].stop()
-                stopped.add('gait')
+        if 'gait' in children:
+            gait_stopper = _GaitStopper(children['gait'], children['player'], monitor, n_imu,
+                                        quiet=min(0.25, 0.25 * _gait_timeout(args.params_file)))
+            gait_stopper.start()
 
         def check_nodes() -> None:
+            if gait_stopper is not None and gait_stopper.stopping.is_set():
+                stopped.add('gait')
             for name in nodes:
                 if name not in stopped and not children[name].alive():
                     raise RuntimeError(f'{name} node died; see {children[name].log_path}')
@@ -531,7 +525,6 @@ def run(args) -> int:
             show_alarms()
             console.bar(monitor.frames)
             check_nodes()
-            stop_gait_when_played()
             time.sleep(0.1)
             now = time.monotonic()
             if monitor.frames != last:
@@ -562,10 +555,8 @@ def run(args) -> int:
         if 'alarm' in children:
             children['alarm'].stop()
         show_alarms()
-        end = time.monotonic() + 30.0
-        while 'gait' in children and 'gait' not in stopped and time.monotonic() < end:
-            stop_gait_when_played()
-            time.sleep(0.05)
+        if gait_stopper is not None:
+            gait_stopper.join(timeout=30.0)
         try:
             player_rc = children['player'].proc.wait(timeout=30)
         except subprocess.TimeoutExpired:
@@ -576,6 +567,9 @@ def run(args) -> int:
         failed.append('interrupted')
     finally:
         console.done()
+        if gait_stopper is not None:
+            gait_stopper.cancel()
+            gait_stopper.join(timeout=10.0)
         # Player, then alarm, then detector: the alarm must not outlive the detector
         # and announce the end of the replay as a fault.
         for name in ['player', 'alarm', *children]:
@@ -605,14 +599,13 @@ def run(args) -> int:
     return 0
 
 
-def _alarm_timeout(params_files: list[Path]) -> float:
-    """The alarm node's ``timeout`` (s, FAULT after this long without /obstacles): the
-    last of ``params_files`` that sets it for ``alarm_node`` (or ``/**``), else the
-    default (`AlarmConfig`). Unreadable files are left to the nodes to report."""
+def _node_timeout(params_files: list[Path], node: str, default: float) -> float:
+    """A node's ``timeout`` parameter (s): the last of ``params_files`` that sets it for
+    ``node`` (or ``/**``), else ``default``. Unreadable files are left to the nodes to
+    report."""
     import yaml
 
-    from asmonc_vision.core.alarm import AlarmConfig
-    timeout = AlarmConfig().timeout
+    timeout = default
     for pf in params_files:
         try:
             data = yaml.safe_load(Path(pf).read_text())
@@ -620,13 +613,63 @@ def _alarm_timeout(params_files: list[Path]) -> float:
             continue
         if not isinstance(data, dict):
             continue
-        for key in ('/**', 'alarm_node', '/alarm_node'):
+        for key in ('/**', node, '/' + node):
             params = data.get(key)
             params = params.get('ros__parameters') if isinstance(params, dict) else None
             value = params.get('timeout') if isinstance(params, dict) else None
             if isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0:
                 timeout = float(value)
     return timeout
+
+
+def _alarm_timeout(params_files: list[Path]) -> float:
+    """The alarm node's ``timeout`` (s, FAULT after this long without /obstacles)."""
+    from asmonc_vision.core.alarm import AlarmConfig
+    return _node_timeout(params_files, 'alarm_node', AlarmConfig().timeout)
+
+
+def _gait_timeout(params_files: list[Path]) -> float:
+    """The gait node's ``timeout`` (s, the inclinometer counts as silent after it)."""
+    from asmonc_vision.nodes.gait_node import GaitNodeConfig
+    return _node_timeout(params_files, 'gait_filter_node', GaitNodeConfig().timeout)
+
+
+class _GaitStopper(threading.Thread):
+    """Stops the gait node once the bag has been played and its last states are out.
+
+    After the whole bag is played the inclinometer goes quiet for good, and the gait
+    node would report the end of the replay as a silent sensor ``timeout`` s after its
+    last sample. Its last /gait/state follows that sample at once, so the node is stopped
+    ``quiet`` s after the newest state (or the end of the replay, if later) -- however late
+    the player's end is seen -- or as soon as every inclinometer reading has its state.
+    Runs on its own thread, so that stopping other nodes cannot delay it."""
+
+    def __init__(self, child: '_Child', player: '_Child', monitor: '_Monitor', n_imu: int,
+                 quiet: float):
+        super().__init__(daemon=True, name='gait-stopper')
+        self.child, self.player, self.monitor = child, player, monitor
+        self.n_imu, self.quiet = n_imu, quiet
+        #: set just before the node is stopped (its end is then not a failure)
+        self.stopping = threading.Event()
+        self._cancel = threading.Event()
+
+    def run(self) -> None:
+        played_at = None
+        while not self._cancel.wait(0.02):
+            now = time.monotonic()
+            if played_at is None:
+                if not (self.player.done.is_set() or not self.player.alive()):
+                    continue
+                played_at = now
+            with self.monitor.lock:
+                states, last = self.monitor.gait_states, self.monitor.last_gait_at
+            if states >= self.n_imu or now - max(played_at, last or played_at) >= self.quiet:
+                self.stopping.set()
+                self.child.stop()
+                return
+
+    def cancel(self) -> None:
+        self._cancel.set()
 
 
 def _wait_topics(nodes: dict[str, NodeSpec], topics: dict) -> list[str]:
