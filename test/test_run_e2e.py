@@ -312,6 +312,35 @@ def test_inclinometer_only_bag_runs_the_walk_model_alone(tmp_path):
     assert any(s.walking for s in states)
 
 
+def test_a_plain_wall_is_announced_through_the_graph(tmp_path):
+    """Camera to alarm, a wall with no texture across the path (simulated, seed 0): it has
+    no vertical edges, so only the ground it hides (the unseen-ground cue) shows it. The
+    graph must report it at its foot while the walker approaches, and the alarm node must
+    warn of an obstacle ahead while it is still more than 3 m away."""
+    from asmonc_vision.cli.run import read_truth
+    from asmonc_vision.sim.bagwriter import write_bag
+    from asmonc_vision.sim.scenarios import make_scenario
+    bag = tmp_path / 'plain_wall'
+    write_bag(make_scenario('plain_wall', seed=0), bag)
+    res = asmonc_run(bag, '--out', tmp_path / 'out', '--no-progress')
+    assert res.returncode == 0, res.stdout + res.stderr
+    truth = read_truth(bag)
+    out = frames(tmp_path / 'out', '/obstacles')
+    window = [st for st, t in truth.items() if len(t.range) and 1.6 <= t.range.min() <= 4.2]
+    assert len(window) >= 20
+    hits = 0
+    for st in window:
+        det, wall_range = out[st], truth[st].range.min()
+        ahead = np.abs(det.range * np.sin(det.bearing)) <= 0.5
+        hits += bool(np.any(ahead & (np.abs(det.range - wall_range) <= 0.3)))
+    assert hits >= 0.8 * len(window), (hits, len(window))
+    alarms = [(bagio.header_stamp_ns(m), m.level, m.text)
+              for _, _, m in bagio.read_messages(tmp_path / 'out', ['/alarms'])]
+    far = {st for st, t in truth.items() if len(t.range) and t.range.min() > 3.0}
+    assert any(st in far and 1 <= level <= 3 and 'obstacle' in text
+               for st, level, text in alarms), alarms
+
+
 def test_recorded_egomotion_scores_against_the_true_camera_pose(static_run):
     from asmonc_vision.cli.motion import score_recorded_egomotion
     _, out = static_run

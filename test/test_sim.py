@@ -481,6 +481,32 @@ def test_same_seed_same_images():
     assert 1.02 < (a.right.mean() - 4.0) / a.left.mean() < 1.08
 
 
+def test_a_plain_face_shows_no_edges_but_its_outline():
+    """``texture=0``: a face of one grey (a plain painted wall); 1 is the usual texture."""
+    from asmonc_vision.sim.world import wall
+    sc = make_scenario('plain_wall', seed=0)
+    f = simulate_frame(sc, sc.n_frames - 1)          # stopped ~1.5 m before the wall
+    obs = [o for o in f.obstacles if o.kind == 'wall']
+    assert len(obs) == 1 and 1.0 < obs[0].range < 2.0
+
+    def texture(img):
+        # the wall covers the top rows: the spread of their column means (vertical
+        # structure; the camera's pixel noise averages out), less a linear shading
+        c = img.astype(float)[5:40, 10:-10].mean(axis=0)
+        x = np.arange(len(c))
+        return float(np.std(c - np.polyval(np.polyfit(x, c, 1), x)))
+
+    (w,) = sc.world.obstacles
+    assert w.texture == 0.0
+    textured = dataclasses.replace(
+        sc, world=World(sc.world.ground, [dataclasses.replace(w, texture=1.0, id=0)],
+                        seed=sc.seed))
+    plain, usual = texture(f.left), texture(simulate_frame(textured, sc.n_frames - 1).left)
+    assert plain < 2.0 and usual > 3.0 * plain, (plain, usual)
+    with pytest.raises(ValueError, match='texture'):
+        wall(0.0, -1.0, 0.0, 1.0, texture=1.5)
+
+
 @pytest.mark.parametrize('name', sorted(SCENARIOS))
 def test_every_scenario_builds_and_renders(name):
     rig = RigSettings(width=160, height=120, focal=150.0)

@@ -8,7 +8,7 @@ relative to the walking path for the requested duration, so a longer duration gi
 longer course, not an empty one.
 
 Scenarios (see ``SCENARIOS``): static_obstacles, clear_static, walk_obstacles,
-clear_walk, walk_stop_turn, slope, step_down.
+clear_walk, walk_stop_turn, slope, step_down, plain_wall.
 """
 from __future__ import annotations
 
@@ -403,6 +403,25 @@ def step_down(seed: int = 0, duration: float = 8.0,
                     rig, world, traj)
 
 
+def plain_wall(seed: int = 0, duration: float = 8.0,
+               rig: RigSettings | None = None) -> Scenario:
+    """Walking towards a plain painted wall across the path (no texture on its face, so
+    no vertical edges in front), stopping ~1.5 m before it."""
+    rig = _rig(rig)
+    rng, walker = _rngs('plain_wall', seed)
+    ground = Ground(pavement=random_pavement(rng))
+    v = float(rng.uniform(1.0, 1.3))
+    legs = [Leg(max(duration - 2.5, 0.5), v), Leg(2.5, 0.0, ramp=1.2)]
+    probe = Trajectory(legs, rig, None, start_speed=v, rng=0)
+    wx = _distance(probe, duration) + float(rng.uniform(1.3, 1.8))
+    albedo = _obstacle_albedo(rng, ground.pavement.brightness)
+    obstacles = [wall(wx, -8.0, wx, 8.0, albedo=albedo, texture=0.0, name='plain wall')]
+    world = World(ground, obstacles, seed=seed)
+    traj = Trajectory(legs, rig, world, start_speed=v, rng=walker)
+    return Scenario('plain_wall', plain_wall.__doc__.split('\n')[0].strip(), seed, duration,
+                    rig, world, traj)
+
+
 #: Scenario name -> function(seed, duration, rig) -> Scenario.
 SCENARIOS: dict[str, Callable[..., Scenario]] = {
     'static_obstacles': static_obstacles,
@@ -412,12 +431,13 @@ SCENARIOS: dict[str, Callable[..., Scenario]] = {
     'walk_stop_turn': walk_stop_turn,
     'slope': slope,
     'step_down': step_down,
+    'plain_wall': plain_wall,
 }
 
 #: Default durations (s) of the scenarios.
 DEFAULT_DURATIONS = {'static_obstacles': 8.0, 'clear_static': 5.0, 'walk_obstacles': 10.0,
                      'clear_walk': 8.0, 'walk_stop_turn': 12.0, 'slope': 6.0,
-                     'step_down': 8.0}
+                     'step_down': 8.0, 'plain_wall': 8.0}
 
 
 def make_scenario(name: str, seed: int = 0, duration: float | None = None,

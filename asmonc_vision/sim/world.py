@@ -211,6 +211,8 @@ class Obstacle:
         albedo: mean albedo of its faces, grey levels.
         appear, vanish: seconds; the obstacle exists for appear <= t < vanish.
         id: ground-truth id (>= 1); assigned by ``World``.
+        texture: strength of the side faces' texture, relative (1: the usual; 0: a plain
+            painted face, which shows no edges but its outline).
     """
 
     kind: str = 'box'
@@ -219,6 +221,11 @@ class Obstacle:
     appear: float = -math.inf
     vanish: float = math.inf
     id: int = 0
+    texture: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.texture <= 1.0:
+            raise ValueError(f'texture = {self.texture} must be in [0, 1]')
 
     def active(self, t: float) -> bool:
         """Whether the obstacle exists at time t (s)."""
@@ -240,7 +247,8 @@ class Obstacle:
                       first_octave=k)
         d = noise.fbm(x + y, h.pz.astype(_F), (0.05,), (1.0,), foot_s, foot_z,
                       first_octave=k + 3)
-        return _F(0.35) * v + _F(0.06) * d
+        rel = _F(0.35) * v + _F(0.06) * d
+        return rel if self.texture == 1.0 else _F(self.texture) * rel
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -460,6 +468,7 @@ class Terrace(Obstacle):
     kind: str = 'kerb'
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         if len(self.polygon) < 3 or self.rise == 0:
             raise ValueError('Terrace needs >= 3 polygon vertices and a non-zero rise')
         p = np.asarray(self.polygon, float)
