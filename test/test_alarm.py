@@ -239,6 +239,28 @@ def test_ground_lost_briefly_does_not_let_the_alarm_step_down():
     assert logic.current.level == L.STOP
 
 
+def test_a_repeat_without_a_target_gives_the_newest_range_seen():
+    """Walking up to a wall: WARNING announced at 2.5 m, the wall then seen nearer at the
+    same level (no new announcement), then the ground is LOST (the wall fills the view):
+    the repeat must give the newest range measured, not the one announced."""
+    logic = started(hold_time=1.0, timeout=3.0, repeat_period=2.0)
+    d = logic.update(0.1, [ob(2.4, id=0)])
+    assert d.level == L.WARNING and d.text == 'obstacle, 2.5 metres, ahead'
+    for k, r in enumerate((2.2, 1.9, 1.6, 1.45)):
+        assert logic.update(0.2 + 0.1 * k, [ob(r, id=0)]) is None
+    logic.ground_status(0.6, GroundStatus.LOST)
+    assert logic.update(0.7, []) is None
+    d = logic.update(2.15, [])            # LOST for less than the timeout: held
+    assert d is not None and d.repeat and d.level == L.WARNING
+    assert d.text == 'obstacle, 1.5 metres, ahead' and d.range == pytest.approx(1.45)
+    # after a fault or "all clear" the old target is forgotten
+    logic = started(hold_time=0.5, repeat_period=2.0)
+    logic.update(0.1, [ob(2.0)])
+    assert logic.update(0.2, []) is None
+    assert logic.update(0.8, []).text == TEXT_CLEAR
+    assert logic._last_target is None
+
+
 # --- faults --------------------------------------------------------------------------------
 
 def test_timeout_gives_fault_and_data_recovers():

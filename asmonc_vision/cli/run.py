@@ -474,11 +474,13 @@ def run(args) -> int:
                 time.sleep(0.1)
             raise RuntimeError('the nodes did not connect within 60 s')
 
-        # The alarm node last: its start-up grace (FAULT "not started" after it) runs
-        # from its own start, and the detector may take seconds to be ready (compiling
+        # The alarm and gait nodes last: their start-up graces (the alarm's FAULT "not
+        # started", the gait node's "inclinometer silent since the node started") run
+        # from their own start, and the detector may take seconds to be ready (compiling
         # its kernels on a first run).
-        start([n for n in nodes if n != 'alarm'])
-        start([n for n in nodes if n == 'alarm'])
+        late = ('alarm', 'gait')
+        start([n for n in nodes if n not in late])
+        start([n for n in nodes if n in late])
 
         # The player itself must also see every reader of the bag's inputs (images and
         # their camera_info, the inclinometer) before the first message: a message sent

@@ -20,7 +20,10 @@ number of plain-speech announcements for a blind pedestrian:
   list then is not evidence that the path is clear.
 * **Announcements** (``Decision``) are made when the level changes, when the target
   changes (a different non-zero track id, at most once per ``hold_time``), and every
-  ``repeat_period`` seconds while the level is not CLEAR.
+  ``repeat_period`` seconds while the level is not CLEAR. A repeat describes the target
+  as last seen: the current one, or, when a frame shows none (the ground LOST as the
+  wearer walks up to a wall, or a held level), the last one seen since the level was
+  announced -- never an older range than the newest measured.
 * **Faults**: no obstacle list for longer than ``timeout`` seconds (measured on the
   caller's clock, the time messages *arrive*), or the ground plane LOST for longer than
   ``timeout``, or INITIALISING for longer than ``startup_grace``, gives FAULT, repeated
@@ -253,6 +256,8 @@ class AlarmLogic:
         self._below_since: float | None = None
         self._current = Decision(AlarmLevel.FAULT, TEXT_STARTING, t=float(t0))
         self._last_announce_t = float(t0)
+        #: the newest target seen while the current (obstacle) level holds
+        self._last_target: ObstacleInfo | None = None
 
     # -- accessors
     @property
@@ -332,6 +337,8 @@ class AlarmLogic:
 
         tgt = self.target(obstacles)
         cur = self._current
+        if tgt is not None:
+            self._last_target = tgt
         if cur.level == AlarmLevel.FAULT:
             # Data are back: announce the real level at once, without memory.
             level = self.level_for(tgt.range if tgt else None)
@@ -433,6 +440,8 @@ class AlarmLogic:
         if cur.level == AlarmLevel.CLEAR or t - self._last_announce_t < self._cfg.repeat_period:
             return None
         if tgt is None:
+            tgt = self._last_target          # the newest seen: nearer than when announced
+        if tgt is None:
             return self._announce(dataclasses.replace(cur, t=t, repeat=True))
         return self._announce(self._decide(t, cur.level, tgt, repeat=True))
 
@@ -441,4 +450,6 @@ class AlarmLogic:
         self._last_announce_t = d.t
         if d.level != AlarmLevel.FAULT:
             self._fault = None
+        if d.level in (AlarmLevel.CLEAR, AlarmLevel.FAULT):
+            self._last_target = None
         return d
