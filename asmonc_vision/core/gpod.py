@@ -76,7 +76,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .camera import MetricPlane, StereoCamera, ground_axes, ground_range_bearing, plane_disparity
+from .camera import MetricPlane, StereoCamera, ground_range_bearing, plane_disparity
 from .config import param
 from .edges import EdgeMap, detect_vertical_edges, gradient_noise_gain, image_noise_sigma
 from .edges import warm_up as edges_warm_up
@@ -3490,12 +3490,9 @@ class GpodDetector:
         none or ``unseen_max_ratio`` is 0."""
         if self._unseen is None:
             return ()
-        explained = None
-        if known:
-            n = metric.normal_up
-            feet = np.array([o.position - o.height * n for o in known])
-            origin, fwd, lft = ground_axes(metric)
-            explained = np.stack([(feet - origin) @ fwd, (feet - origin) @ lft], axis=1)
+        # the known feet on the ground: (forward, left) from their range and bearing
+        explained = (np.array([[o.range * math.cos(o.bearing), o.range * math.sin(o.bearing)]
+                               for o in known]) if known else None)
         thr = features.threshold if features.threshold is not None else threshold
         r = self._unseen.update(cam, metric, features.u_left, features.v, features.excess,
                                 thr, explained, left=self._left)

@@ -39,6 +39,7 @@ from asmonc_vision.bagplay import (BagError, BagSource, PlayerConfig, PlayTopic,
                                    ReplaySchedule, compressed_to_image_cdr, normalize_topic,
                                    plan_topics)
 from asmonc_vision.nodes.common import config_overrides, declare_config, run_node
+from asmonc_vision.nodes.conversions import stamp_to_ns
 
 __all__ = ['BagPlayerNode', 'BagError', 'PlayerConfig', 'message_class', 'main']
 
@@ -241,7 +242,7 @@ class BagPlayerNode(Node):
         # The node answers in the order it got the images: an answer for stamp s also
         # settles every image sent before s (those will never be answered: pairs it
         # skipped or dropped).
-        stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        stamp = stamp_to_ns(msg.header.stamp)
         with self._pace_cv:
             if stamp in self._pace_owed:
                 while self._pace_owed.popleft() != stamp:

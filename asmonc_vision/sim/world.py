@@ -247,8 +247,7 @@ class Obstacle:
                       first_octave=k)
         d = noise.fbm(x + y, h.pz.astype(_F), (0.05,), (1.0,), foot_s, foot_z,
                       first_octave=k + 3)
-        rel = _F(0.35) * v + _F(0.06) * d
-        return rel if self.texture == 1.0 else _F(self.texture) * rel
+        return _F(self.texture) * (_F(0.35) * v + _F(0.06) * d)   # x 1.0 is exact
 
 
 @dataclass(frozen=True, kw_only=True)
