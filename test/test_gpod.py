@@ -217,6 +217,37 @@ def test_track_confidence_accumulates_the_latest_detections(scenes):
         GpodConfig(track_confidence_frames=0)
 
 
+def test_a_detection_of_weak_edges_has_the_confidence_of_its_weighted_pixels():
+    """The confidence's pixel count weighs each pixel as the edge-string rule does: a
+    weak edge (strength below obstacle_min_strength) counts (strength / it)^2 of a
+    pixel. A few weak mismatched pixels (a tile's faint texture) then stay below the
+    alarm's min_confidence until they are seen again; strong edges count fully."""
+    cfg = GpodConfig()
+    small = (0.3, 0.36, 3.0, 3.06, 0.06)                 # a 6 cm cube, 3 m ahead
+    free, box = render_pair(seed=2), render_pair(boxes=[small], seed=2)
+
+    def faded(pair, k):
+        return [np.clip(120.0 + (x.astype(float) - 120.0) * k, 0, 255).astype(np.uint8)
+                for x in pair]
+
+    weakened = 0
+    for k in (1.0, 0.35):                                # full contrast, faded to 35 %
+        det, _ = _calibrated(faded(free, k))
+        r = det.process(*faded(box, k), CAM)
+        assert r.status == 'tracking' and r.detections
+        f = r.features
+        for o in r.detections:
+            px = f.is_obstacle & np.isin(f.string_id, o.string_ids)
+            assert px.sum() == o.num_edge_pixels
+            w = np.minimum(f.strength[px] / cfg.obstacle_min_strength, 1.0) ** 2
+            full = min(1.0, o.num_edge_pixels / cfg.confidence_full_pixels)
+            assert o.confidence <= min(1.0, w.sum() / cfg.confidence_full_pixels) + 1e-9
+            if k == 1.0:
+                assert o.confidence == pytest.approx(full, abs=0.02)
+            weakened += o.confidence < full - 0.02
+    assert weakened > 0                                  # the faded cube's edges are weak
+
+
 @pytest.mark.parametrize('mode', ['refit', 'fixed'])
 def test_finds_the_box(scenes, mode):
     det, _ = _calibrated(scenes['free'], GpodConfig(plane_update=mode))

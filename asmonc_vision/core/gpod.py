@@ -454,7 +454,8 @@ class GpodConfig(PlausiblePlaneConfig):
     confidence_full_pixels: int = param(
         20, 'Obstacle pixels at which the confidence is no longer reduced for small '
         'evidence (confidence = P(any pixel truly beyond the threshold) * '
-        'min(1, pixels / this))', range=(1, 100000))
+        'min(1, pixels / this), a weak edge pixel counted as in obstacle_min_strength)',
+        range=(1, 100000))
     track_confidence_frames: int = param(
         3, 'Obstacle tracks: a tracked obstacle\'s confidence combines its detections in up '
         'to this many of its latest frames, 1 - prod(1 - confidence) (evidence accumulated '
@@ -546,7 +547,9 @@ class GpodObstacle:
         disparity_excess: pixels, measured minus plane disparity, largest in magnitude
             over the obstacle's pixels (negative for a drop-off).
         confidence: 0..1. A detection's: P(any of its pixels truly beyond the threshold)
-            * min(1, pixels / ``confidence_full_pixels``). A reported (tracked) obstacle's:
+            * min(1, pixels / ``confidence_full_pixels``), a pixel weaker than
+            ``obstacle_min_strength`` counted as (strength / that)^2 of one (as the
+            edge-string rule counts it). A reported (tracked) obstacle's:
             1 - prod(1 - c) over the detection confidences c of its track's latest
             ``track_confidence_frames`` detections.
         roi: (x, y, w, h) ints, region in the left image (from the top of the obstacle
@@ -3107,6 +3110,8 @@ class GpodDetector:
         self._prev_edges: np.ndarray | None = None
         self._acc: tuple[np.ndarray, np.ndarray] | None = None
         self._frame_thr = np.zeros(0)
+        #: each matched pixel's evidence weight this frame (obstacle_min_strength)
+        self._pixel_weight = np.zeros(0)
         #: the left image's pixel noise, grey levels (NaN until estimated)
         self._image_noise = float('nan')
         #: obstacle_min_strength in force (raised on a noisy camera)
@@ -3766,6 +3771,7 @@ class GpodDetector:
         features = _features(m, excess.astype(np.float32), obst, drop, sclass,
                              ex_mean.astype(np.float32), thr.astype(np.float32))
         self._frame_thr = thr
+        self._pixel_weight = weight
         # Ground features: reliably matched edge pixels on the plane (free space).
         ground = (np.abs(ex_mean) <= thr) & usable & ~obst_string[sid]
         self._ctx = _FrameContext(cam=cam, metric=metric, abc=self._abc.copy(), u=u, v=v,
@@ -4218,7 +4224,10 @@ class GpodDetector:
         z = (np.abs(ex) - self._frame_thr[idx]) / c.disparity_sigma_px
         p_i = np.clip(_normal_cdf(z), 0.0, 1.0 - 1e-12)
         p_any = 1.0 - np.exp(np.bincount(label, weights=np.log1p(-p_i), minlength=n_c))
-        conf = np.clip(p_any * np.minimum(1.0, count / c.confidence_full_pixels), 0.0, 1.0)
+        # Small evidence lowers the confidence: the pixels counted as the edge-string rule
+        # counts them, a weak edge as (strength / obstacle_min_strength)^2 of a pixel.
+        n_ev = np.bincount(label, weights=self._pixel_weight[idx], minlength=n_c)
+        conf = np.clip(p_any * np.minimum(1.0, n_ev / c.confidence_full_pixels), 0.0, 1.0)
         out = []
         for k in range(n_c):
             if count[k] < min_pixels:
