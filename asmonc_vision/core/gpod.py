@@ -3110,8 +3110,6 @@ class GpodDetector:
         self._prev_edges: np.ndarray | None = None
         self._acc: tuple[np.ndarray, np.ndarray] | None = None
         self._frame_thr = np.zeros(0)
-        #: each matched pixel's evidence weight this frame (obstacle_min_strength)
-        self._pixel_weight = np.zeros(0)
         #: the left image's pixel noise, grey levels (NaN until estimated)
         self._image_noise = float('nan')
         #: obstacle_min_strength in force (raised on a noisy camera)
@@ -3595,6 +3593,12 @@ class GpodDetector:
         self._min_strength = max(c.obstacle_min_strength, c.obstacle_min_edge_snr
                                  * gradient_noise_gain(c.edge_blur_sigma) * self._image_noise)
 
+    def _evidence_weight(self, strength: np.ndarray) -> np.ndarray:
+        """How much of a pixel each matched edge pixel counts as evidence: weak edges are
+        often mismatched, so a pixel weaker than obstacle_min_strength (or
+        obstacle_min_edge_snr times the gradient noise) counts (strength / that)^2."""
+        return np.minimum(strength / max(self._min_strength, 1e-6), 1.0) ** 2
+
     def _stillness(self, el: EdgeMap) -> bool:
         """Whether the rig stood still since the previous frame: most left edge pixels
         are where an edge pixel was (same row, within one column). Remembers the edges."""
@@ -3719,10 +3723,7 @@ class GpodDetector:
                     & (h >= -c.max_drop_depth_m) & usable)
         sid = m.string_id
         n_s = max(el.num_strings, int(sid.max()) + 1 if sid.size else 0)
-        # Weak edges are often mismatched: a pixel weaker than obstacle_min_strength (or
-        # obstacle_min_edge_snr times the gradient noise) counts as the fraction
-        # (strength / that)^2 of a pixel.
-        weight = np.minimum(m.strength / max(self._min_strength, 1e-6), 1.0) ** 2
+        weight = self._evidence_weight(m.strength)
         if obst.any():
             # The edge-string rule holds for each piece of a string between stretches of
             # it on the ground (`string_pieces`): a noisy pixel far below a post, on the
@@ -3771,7 +3772,6 @@ class GpodDetector:
         features = _features(m, excess.astype(np.float32), obst, drop, sclass,
                              ex_mean.astype(np.float32), thr.astype(np.float32))
         self._frame_thr = thr
-        self._pixel_weight = weight
         # Ground features: reliably matched edge pixels on the plane (free space).
         ground = (np.abs(ex_mean) <= thr) & usable & ~obst_string[sid]
         self._ctx = _FrameContext(cam=cam, metric=metric, abc=self._abc.copy(), u=u, v=v,
@@ -4226,7 +4226,8 @@ class GpodDetector:
         p_any = 1.0 - np.exp(np.bincount(label, weights=np.log1p(-p_i), minlength=n_c))
         # Small evidence lowers the confidence: the pixels counted as the edge-string rule
         # counts them, a weak edge as (strength / obstacle_min_strength)^2 of a pixel.
-        n_ev = np.bincount(label, weights=self._pixel_weight[idx], minlength=n_c)
+        n_ev = np.bincount(label, weights=self._evidence_weight(m.strength[idx]),
+                           minlength=n_c)
         conf = np.clip(p_any * np.minimum(1.0, n_ev / c.confidence_full_pixels), 0.0, 1.0)
         out = []
         for k in range(n_c):
