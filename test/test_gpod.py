@@ -1177,6 +1177,76 @@ def test_hanging_runs():
     assert not hanging_runs(edges, good, run_links(edges, good, 1.0), h, 0.5, 1.0, 0.1).any()
 
 
+def test_continuation_alternatives():
+    """A run of an edge string matched a period off, well above the plane, with the
+    string going on below it on lower ground (beyond a kerb down) and a candidate of its
+    own on that ground, is found. It is not when the string goes on below at the run's
+    own depth (a real edge broken by a mismatch), when the lower ground is not seen by
+    enough matches, or when the run had no candidate on it."""
+    from asmonc_vision.core.edges import EdgeMap
+    from asmonc_vision.core.gpod import continuation_alternatives, run_links
+    from asmonc_vision.core.matching import Candidates, Matches
+    n = 30
+    v = np.arange(n, dtype=np.int32)
+    prev = np.r_[-1, np.arange(n - 1)].astype(np.int32)
+    z = np.zeros(n, np.float32)
+    edges = EdgeMap(v=v, u_int=np.full(n, 50, np.int32), u=z + 50, strength=z + 20,
+                    polarity=np.ones(n, np.int8), orientation=z,
+                    string_id=np.zeros(n, np.int32), string_prev=prev,
+                    string_length=np.array([n], np.int32), shape=(40, 100), threshold=4.0)
+    pd = 20.0 + 0.25 * v                                 # the plane's disparity, b = 0.25
+    low = 0.9 * pd                                       # a lower ground (ratio 0.9)
+    run = (v >= 10) & (v < 20)
+
+    def case(d, alternatives):
+        d = np.asarray(d, np.float32)
+        i = np.arange(n, dtype=np.int32)
+        m = Matches(u_left=z + 50, u_right=z + 50 - d, v=v, d=d, strength=z + 20,
+                    string_id=np.zeros(n, np.int32), left_index=i, right_index=i,
+                    support=z + 1)
+        cl = np.r_[i, i[run]] if alternatives else i
+        cd = np.r_[d, low[run]] if alternatives else d.astype(np.float64)
+        o = np.argsort(cl, kind='stable')
+        cand = Candidates(left=cl[o].astype(np.intp), right=cl[o].astype(np.intp),
+                          d=np.asarray(cd, np.float64)[o])
+        lower = np.abs(d - low) < 0.01
+        select = d - pd > 3.0
+        return lambda support: continuation_alternatives(
+            edges, m, run_links(edges, m, 1.0), cand, select, lower, pd, 1.0, 0.25,
+            support)
+
+    off = np.where(run, pd + 20.0, low)                  # rows 10-19 a period off
+    got = case(off, True)
+    np.testing.assert_array_equal(np.flatnonzero(got(15)), np.flatnonzero(run))
+    assert not got(25).any()                             # 20 lower matches: too few
+    assert not case(off, False)(15).any()                # no candidate on the lower ground
+    # A box's edge at d = 40 (rows 10-19 and 22-29) broken by two rows matched on the
+    # lower ground: the string goes on at its depth below, so the run is held up.
+    box = np.where(run | (v >= 22), 40.0, low)
+    assert not case(box, True)(10)[run].any()
+
+
+def test_the_paving_beyond_a_kerb_down_is_no_obstacle():
+    """Standing 2.45 m before a 15 cm kerb down at 640 x 480 (simulator, step_down seed
+    8022): the paving joints beyond the kerb, on the lower ground, were matched one joint
+    spacing off in stretches of 10 rows, 43-54 px above the plane, as an obstacle 0.9 m
+    away (10 of these 14 frames; a STOP alarm in the node graph). The kerb is reported as
+    a drop, and nothing stands between it and the wearer."""
+    from asmonc_vision.sim import RigSettings, StereoRenderer, simulate_frame
+    from asmonc_vision.sim.scenarios import step_down
+
+    sc = step_down(seed=8022, rig=RigSettings(width=640, height=480, focal=600.0))
+    rend, cam = StereoRenderer(sc.rig), sc.rig.camera()
+    det, drops, near = GpodDetector(), 0, []
+    for k in range(66, sc.n_frames):                     # standing still
+        r = det.process(*(lambda f: (f.left, f.right))(simulate_frame(sc, k, rend)), cam)
+        drops += any(o.is_drop and abs(o.range - 2.45) < 0.3 for o in r.detections)
+        near += [(k, round(o.range, 2)) for o in r.detections
+                 if not o.is_drop and o.range < 2.2]
+    assert drops >= 12, drops
+    assert not near, near
+
+
 def test_same_object_only_for_a_nearer_or_close_placement():
     """While standing, a detection keeps an overlapping track seen as the same obstacle
     placed elsewhere (its far corner; boxes reported together at the nearest) -- but not

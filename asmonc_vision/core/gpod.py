@@ -98,6 +98,12 @@ _TRUE = np.ones(1, bool)
 #: period off; genuine small obstacles are never this far above the plane.
 _AMBIGUOUS_EXCESS_PX = 3.0
 
+#: A run hanging over lower ground (`continuation_alternatives`) is checked only when that
+#: ground is seen: at least this fraction of the frame's matches lie on it (beyond a kerb
+#: down, 15-70 %; scattered mismatches of obstacle texture that look like a lower ground,
+#: at most 1.4 % on the simulator's walks).
+_LOWER_GROUND_FRACTION = 0.05
+
 #: A drop-off's reported foot is at its nearest range, in the median direction of the
 #: nearest feet of its edge strings (one per string) that lie within this distance
 #: (metres) or this fraction of the nearest range, whichever is larger, of it.
@@ -1425,6 +1431,131 @@ def hanging_runs(edges: EdgeMap, m: Matches, prev: np.ndarray, h: np.ndarray,
             new[cur] = True
             cur = prev[cur]
             cur = cur[cur >= 0]
+        if np.array_equal(new, out):
+            break
+        out = new
+    return out
+
+
+def continuation_alternatives(edges: EdgeMap, m: Matches, prev: np.ndarray,
+                              cand: Candidates, select: np.ndarray, lower: np.ndarray,
+                              plane_d: np.ndarray, tolerance_px: float, slope: float,
+                              min_support: int, max_gap: int = 32) -> np.ndarray:
+    """Matches of ``select`` whose own edge string goes on below their matched run on
+    lower ground (a match of ``lower``), and whose left edge also had a candidate match on
+    that lower ground.
+
+    An obstacle stands on the ground: below the foot of its edge the image shows nearer
+    ground, never a lower ground farther away on the same edge line. A run of a string
+    seen in front of its own continuation on the lower ground beyond a drop, that could
+    equally have been matched on that lower ground, is a stretch of a repetitive pattern
+    matched one period off: the paving joints beyond a kerb down, matched one joint
+    spacing off for 10 rows, 43-54 px above the plane (an obstacle "0.9 m" away). The
+    ambiguity test's ground-plane alternative cannot see it: the true depth is below the
+    plane.
+
+    Args:
+        edges: the left EdgeMap the matches index; m: the matches; cand: the frame's
+            candidate matches (of the same left EdgeMap).
+        prev: :func:`run_links` of the matches.
+        select: (K,) bool: the matches tested (the rest are False).
+        lower: (K,) bool: matches on lower ground (below the plane by more than the
+            threshold, within the deepest drop looked for).
+        plane_d: (K,) float: the plane's disparity at each match, pixels.
+        tolerance_px: largest disparity step within a run, pixels.
+        slope: |b| of the plane, pixels of disparity per row.
+        min_support: the lower ground must be seen: at least this many ``lower``
+            matches lie on it (within ``tolerance_px``). Beyond a kerb down they are
+            15-70 % of a frame's matches; scattered mismatches of obstacles' textures
+            that look like a ground 0.7-1.2 m down, at most 1.4 % (`_LOWER_GROUND_FRACTION`).
+        max_gap: rows searched below a run's bottom.
+    Returns:
+        (K,) bool. The run must hang: no matched pixel of its string within ``max_gap``
+        rows below its bottom is at its depth (within ``tolerance_px + slope * r``, r
+        rows down; an edge of a real obstacle broken by a mismatch goes on below at its
+        own depth). The continuation is the string's first ``lower`` match there. The
+        lower ground is taken parallel to the plane (its disparity a fixed fraction,
+        the continuation's d / plane_d, of the plane's), and a match of the run has the
+        alternative when one of its candidates lies within ``tolerance_px`` of that
+        ground's disparity at it.
+    """
+    k = len(m)
+    out = np.zeros(k, bool)
+    sel = np.flatnonzero(select)
+    if sel.size == 0 or len(cand) == 0 or np.count_nonzero(lower) < min_support:
+        return out
+    # The bottom of each match's run (pointer doubling down the runs).
+    nxt = np.full(k, -1, np.int64)
+    has = prev >= 0
+    nxt[prev[has]] = np.flatnonzero(has)
+    jump = np.where(nxt >= 0, nxt, np.arange(k))
+    while True:
+        j2 = jump[jump]
+        if np.array_equal(j2, jump):
+            break
+        jump = j2
+    bottoms, b_of = np.unique(jump[sel], return_inverse=True)
+    feat_of_edge = np.full(len(edges), -1, np.int64)
+    feat_of_edge[m.left_index] = np.arange(k)
+    below = np.full(len(edges), -1, np.int64)
+    has_e = edges.string_prev >= 0
+    below[edges.string_prev[has_e]] = np.flatnonzero(has_e)
+    # The matched pixels of each bottom's string in the max_gap rows below it.
+    nb = bottoms.size
+    under = np.full((max_gap, nb), -1, np.int64)
+    e = m.left_index[bottoms].astype(np.int64)
+    for r in range(max_gap):
+        e = np.where(e >= 0, below[np.maximum(e, 0)], -1)
+        if not (e >= 0).any():
+            under = under[:r]
+            break
+        under[r] = np.where(e >= 0, feat_of_edge[np.maximum(e, 0)], -1)
+    if under.shape[0] == 0:
+        return out
+    d = m.d.astype(np.float64)
+    pd = np.asarray(plane_d, np.float64)
+    d0 = d[bottoms]
+    # The continuation: the first lower match below. (It is farther than the bottom
+    # wherever the run hangs: a lower match nearer than the bottom is within the slope
+    # allowance of its depth, below, and holds the run up.)
+    is_low = (under >= 0) & lower[np.maximum(under, 0)]
+    found = under[np.argmax(is_low, axis=0), np.arange(nb)]
+    ok = is_low.any(axis=0)
+    ok[ok] = pd[found[ok]] > 0
+    if ok.any():
+        # The lower ground must itself be seen: min_support lower matches on it.
+        lo = np.flatnonzero(lower)
+        q = np.flatnonzero(ok)
+        rat = d[found[q]] / pd[found[q]]
+        n_on = (np.abs(d[lo][None, :] - rat[:, None] * pd[lo][None, :])
+                <= tolerance_px).sum(axis=1)
+        ok[q] = n_on >= min_support
+    if not ok.any():
+        return out
+    # Which matches of such runs had a candidate on that lower ground (taken parallel to
+    # the plane: its disparity the continuation's fraction d / plane_d of the plane's).
+    mine = sel[ok[b_of]]
+    ratio = d[found[b_of[ok[b_of]]]] / pd[found[b_of[ok[b_of]]]]
+    n_edges = len(edges)
+    t_d = np.full(n_edges, np.nan)
+    le = m.left_index[mine]
+    t_d[le] = ratio * pd[mine]
+    cl = cand.left
+    with np.errstate(invalid='ignore'):
+        alt = np.abs(cand.d - t_d[cl]) <= tolerance_px
+    hit_edge = np.zeros(n_edges, bool)
+    hit_edge[cl[alt]] = True
+    has_alt = np.zeros(k, bool)
+    has_alt[mine] = hit_edge[le]
+    # The run must hang: no pixel below at its depth, other than such pixels themselves
+    # (two stretches matched the same period off, one above the other).
+    rows = np.arange(1, under.shape[0] + 1, dtype=np.float64)[:, None]
+    near = (under >= 0) & (np.abs(d[np.maximum(under, 0)] - d0[None, :])
+                           <= tolerance_px + slope * rows)
+    for _ in range(_HANGING_PASSES):
+        held = (near & ~out[np.maximum(under, 0)]).any(axis=0)
+        new = np.zeros(k, bool)
+        new[sel] = has_alt[sel] & ~held[b_of]
         if np.array_equal(new, out):
             break
         out = new
@@ -3721,6 +3852,23 @@ class GpodDetector:
             pd_far = cam.fb / c.max_range_m
             drop = ((ex_mean < -thr) & (pd >= pd_far) & (pd <= d_max)
                     & (h >= -c.max_drop_depth_m) & usable)
+            high = obst & (excess > _AMBIGUOUS_EXCESS_PX)
+            lower = ((ex_mean < -thr) & (h >= -c.max_drop_depth_m)
+                     & (run >= c.min_matched_run))
+            if high.any() and lower.any():
+                # Every stretch of these strings well above the plane is tested (one
+                # matched the same period off may hold up another).
+                in_s = np.zeros(int(m.string_id.max()) + 1, bool)
+                in_s[m.string_id[high]] = True
+                high = (excess > _AMBIGUOUS_EXCESS_PX) & in_s[m.string_id]
+                # A run, at any height, that hangs over its own string's continuation on
+                # the lower ground beyond a drop and could have been matched there: the
+                # paving beyond a kerb down matched one period off.
+                support = max(c.min_drop_cluster_pixels,
+                              math.ceil(_LOWER_GROUND_FRACTION * len(m)))
+                obst &= ~continuation_alternatives(el, m, prev, cand, high, lower, pd,
+                                                   c.string_disparity_tolerance_px, slope,
+                                                   support)
         sid = m.string_id
         n_s = max(el.num_strings, int(sid.max()) + 1 if sid.size else 0)
         weight = self._evidence_weight(m.strength)
