@@ -1179,8 +1179,8 @@ def test_hanging_runs():
 
 def test_continuation_alternatives():
     """A run of an edge string matched a period off, well above the plane, with the
-    string going on below it on lower ground (beyond a kerb down) and a candidate of its
-    own on that ground, is found. It is not when the string goes on below at the run's
+    string going on below it on lower ground (beyond a kerb down; or above it, where the
+    run ends the string) and a candidate of its own on that ground, is found. It is not when the string goes on below at the run's
     own depth (a real edge broken by a mismatch), when the lower ground is not seen by
     enough matches, or when the run had no candidate on it."""
     from asmonc_vision.core.edges import EdgeMap
@@ -1224,6 +1224,14 @@ def test_continuation_alternatives():
     # lower ground: the string goes on at its depth below, so the run is held up.
     box = np.where(run | (v >= 22), 40.0, low)
     assert not case(box, True)(10)[run].any()
+    # The stretch a period off ends its string (at the kerb's brink): the lower ground
+    # above it is its continuation.
+    end = np.where(v >= 10, pd + 20.0, low)
+    end_run = v >= 10
+    run[:] = end_run                                     # its candidates
+    np.testing.assert_array_equal(np.flatnonzero(case(end, True)(10)),
+                                  np.flatnonzero(end_run))
+    assert not case(end, True)(11).any()                 # 10 lower matches: too few
 
 
 def test_the_paving_beyond_a_kerb_down_is_no_obstacle():

@@ -1441,8 +1441,9 @@ def continuation_alternatives(edges: EdgeMap, m: Matches, prev: np.ndarray,
                               cand: Candidates, select: np.ndarray, lower: np.ndarray,
                               plane_d: np.ndarray, tolerance_px: float, slope: float,
                               min_support: int, max_gap: int = 32) -> np.ndarray:
-    """Matches of ``select`` whose own edge string goes on below their matched run on
-    lower ground (a match of ``lower``), and whose left edge also had a candidate match on
+    """Matches of ``select`` in runs that hang over nothing at their depth, whose own
+    edge string goes on on lower ground (a match of ``lower``: below the run, or above it
+    where the run ends the string), and whose left edge also had a candidate match on
     that lower ground.
 
     An obstacle stands on the ground: below the foot of its edge the image shows nearer
@@ -1473,8 +1474,10 @@ def continuation_alternatives(edges: EdgeMap, m: Matches, prev: np.ndarray,
         (K,) bool. The run must hang: no matched pixel of its string within ``max_gap``
         rows below its bottom is at its depth (within ``tolerance_px + slope * r``, r
         rows down; an edge of a real obstacle broken by a mismatch goes on below at its
-        own depth). The continuation is the string's first ``lower`` match there. The
-        lower ground is taken parallel to the plane (its disparity a fixed fraction,
+        own depth). The continuation is the string's first ``lower`` match there, or,
+        where it has none there, its nearest ``lower`` match within ``max_gap`` rows
+        above the run (a run that ends its string at a kerb's brink). The lower ground
+        is taken parallel to the plane (its disparity a fixed fraction,
         the continuation's d / plane_d, of the plane's), and a match of the run has the
         alternative when one of its candidates lies within ``tolerance_px`` of that
         ground's disparity at it.
@@ -1510,17 +1513,36 @@ def continuation_alternatives(edges: EdgeMap, m: Matches, prev: np.ndarray,
             under = under[:r]
             break
         under[r] = np.where(e >= 0, feat_of_edge[np.maximum(e, 0)], -1)
-    if under.shape[0] == 0:
-        return out
     d = m.d.astype(np.float64)
     pd = np.asarray(plane_d, np.float64)
     d0 = d[bottoms]
     # The continuation: the first lower match below. (It is farther than the bottom
     # wherever the run hangs: a lower match nearer than the bottom is within the slope
-    # allowance of its depth, below, and holds the run up.)
+    # allowance of its depth, below, and holds the run up.) Where the string has none
+    # below (the run ends it, at a kerb's brink), the nearest lower match above the run.
     is_low = (under >= 0) & lower[np.maximum(under, 0)]
-    found = under[np.argmax(is_low, axis=0), np.arange(nb)]
     ok = is_low.any(axis=0)
+    found = np.full(nb, -1, np.int64)
+    if ok.any():
+        found[ok] = under[np.argmax(is_low[:, ok], axis=0), np.flatnonzero(ok)]
+    if not ok.all():
+        top = np.where(prev >= 0, prev, np.arange(k))   # each run's top (doubling up)
+        while True:
+            t2 = top[top]
+            if np.array_equal(t2, top):
+                break
+            top = t2
+        miss = np.flatnonzero(~ok)
+        e = m.left_index[top[bottoms[miss]]].astype(np.int64)
+        for _ in range(max_gap):
+            live = (found[miss] < 0) & (e >= 0)
+            if not live.any():
+                break
+            e = np.where(live, edges.string_prev[np.maximum(e, 0)], -1)
+            f = np.where(e >= 0, feat_of_edge[np.maximum(e, 0)], -1)
+            hit = (f >= 0) & lower[np.maximum(f, 0)]
+            found[miss[hit]] = f[hit]
+        ok = found >= 0
     ok[ok] = pd[found[ok]] > 0
     if ok.any():
         # The lower ground must itself be seen: min_support lower matches on it.
