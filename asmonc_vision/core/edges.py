@@ -306,6 +306,22 @@ def _empty(h: int, w: int, thr: float) -> EdgeMap:
                    threshold=thr, curvature=f)
 
 
+def chain_roots(parent: np.ndarray) -> np.ndarray:
+    """The root of every element of a forest of chains, by pointer jumping.
+
+    Args:
+        parent: (N,) int index of each element's parent, -1 at a root.
+    Returns:
+        (N,) int64 index of the root each element's chain ends at.
+    """
+    root = np.where(parent >= 0, parent, np.arange(parent.shape[0]))
+    while True:
+        nxt = root[root]
+        if np.array_equal(nxt, root):
+            return root
+        root = nxt
+
+
 def _link_strings(v: np.ndarray, u: np.ndarray, u_sub: np.ndarray, pol: np.ndarray,
                   h: int, w: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Chain edges into strings (same polarity, consecutive rows, |du| <= 1).
@@ -352,13 +368,7 @@ def _link_strings(v: np.ndarray, u: np.ndarray, u_sub: np.ndarray, pol: np.ndarr
     lose_l = via_l & (straight[pl] | (cost_r[pl] < cost_l[pl]))
     lose_r = via_r & (straight[pr] | (cost_l[pr] <= cost_r[pr]))
     parent[lose_l | lose_r] = -1
-    # Root of every chain by pointer jumping.
-    root = np.where(parent >= 0, parent, np.arange(n))
-    while True:
-        nxt = root[root]
-        if np.array_equal(nxt, root):
-            break
-        root = nxt
+    root = chain_roots(parent)
     is_root = root == np.arange(n)
     new_id = np.cumsum(is_root, dtype=np.int32) - 1
     sid = new_id[root]

@@ -78,7 +78,8 @@ import numpy as np
 
 from .camera import MetricPlane, StereoCamera, ground_range_bearing, plane_disparity
 from .config import param
-from .edges import EdgeMap, detect_vertical_edges, gradient_noise_gain, image_noise_sigma
+from .edges import (EdgeMap, chain_roots, detect_vertical_edges, gradient_noise_gain,
+                    image_noise_sigma)
 from .edges import warm_up as edges_warm_up
 from .obstacle_tracks import ObstacleTracker
 from .unseen_ground import UnseenGroundMonitor
@@ -1301,12 +1302,7 @@ def matched_run_length(edges: EdgeMap, m: Matches, tolerance_px: float,
         return np.zeros(0, np.int64)
     if prev is None:
         prev = run_links(edges, m, tolerance_px)
-    root = np.where(prev >= 0, prev, np.arange(k))
-    while True:
-        nxt = root[root]
-        if np.array_equal(nxt, root):
-            break
-        root = nxt
+    root = chain_roots(prev)
     return np.bincount(root, minlength=k)[root]
 
 
@@ -1487,16 +1483,11 @@ def continuation_alternatives(edges: EdgeMap, m: Matches, prev: np.ndarray,
     sel = np.flatnonzero(select)
     if sel.size == 0 or len(cand) == 0 or np.count_nonzero(lower) < min_support:
         return out
-    # The bottom of each match's run (pointer doubling down the runs).
+    # The bottom of each match's run.
     nxt = np.full(k, -1, np.int64)
     has = prev >= 0
     nxt[prev[has]] = np.flatnonzero(has)
-    jump = np.where(nxt >= 0, nxt, np.arange(k))
-    while True:
-        j2 = jump[jump]
-        if np.array_equal(j2, jump):
-            break
-        jump = j2
+    jump = chain_roots(nxt)
     bottoms, b_of = np.unique(jump[sel], return_inverse=True)
     feat_of_edge = np.full(len(edges), -1, np.int64)
     feat_of_edge[m.left_index] = np.arange(k)
@@ -1526,12 +1517,7 @@ def continuation_alternatives(edges: EdgeMap, m: Matches, prev: np.ndarray,
     if ok.any():
         found[ok] = under[np.argmax(is_low[:, ok], axis=0), np.flatnonzero(ok)]
     if not ok.all():
-        top = np.where(prev >= 0, prev, np.arange(k))   # each run's top (doubling up)
-        while True:
-            t2 = top[top]
-            if np.array_equal(t2, top):
-                break
-            top = t2
+        top = chain_roots(prev)                 # each run's top
         miss = np.flatnonzero(~ok)
         e = m.left_index[top[bottoms[miss]]].astype(np.int64)
         for _ in range(max_gap):
