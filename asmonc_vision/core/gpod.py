@@ -1530,24 +1530,24 @@ def continuation_alternatives(edges: EdgeMap, m: Matches, prev: np.ndarray,
             found[miss[hit]] = f[hit]
         ok = found >= 0
     ok[ok] = pd[found[ok]] > 0
-    if ok.any():
-        # The lower ground must itself be seen: min_support lower matches on it.
-        lo = np.flatnonzero(lower)
-        q = np.flatnonzero(ok)
-        rat = d[found[q]] / pd[found[q]]
-        n_on = (np.abs(d[lo][None, :] - rat[:, None] * pd[lo][None, :])
-                <= tolerance_px).sum(axis=1)
-        ok[q] = n_on >= min_support
+    # The lower ground, taken parallel to the plane: its disparity the continuation's
+    # fraction d / plane_d of the plane's. It must itself be seen: min_support lower
+    # matches on it.
+    ratio = np.full(nb, np.nan)
+    q = np.flatnonzero(ok)
+    ratio[q] = d[found[q]] / pd[found[q]]
+    lo = np.flatnonzero(lower)
+    n_on = (np.abs(d[lo][None, :] - ratio[q, None] * pd[lo][None, :])
+            <= tolerance_px).sum(axis=1)
+    ok[q] = n_on >= min_support
     if not ok.any():
         return out
-    # Which matches of such runs had a candidate on that lower ground (taken parallel to
-    # the plane: its disparity the continuation's fraction d / plane_d of the plane's).
+    # Which matches of such runs had a candidate on that lower ground.
     mine = sel[ok[b_of]]
-    ratio = d[found[b_of[ok[b_of]]]] / pd[found[b_of[ok[b_of]]]]
     n_edges = len(edges)
     t_d = np.full(n_edges, np.nan)
     le = m.left_index[mine]
-    t_d[le] = ratio * pd[mine]
+    t_d[le] = ratio[b_of[ok[b_of]]] * pd[mine]
     cl = cand.left
     with np.errstate(invalid='ignore'):
         alt = np.abs(cand.d - t_d[cl]) <= tolerance_px
@@ -3851,32 +3851,30 @@ class GpodDetector:
         reliable = run >= need
         usable = reliable & in_range
         obst = (ex_mean > thr) & (h <= c.max_obstacle_height_m) & usable
+        below = (ex_mean < -thr) & (h >= -c.max_drop_depth_m)
         if obst.any():
             obst &= ~hanging_runs(el, m, prev, h, c.max_floating_height_m,
                                   c.string_disparity_tolerance_px, slope, obst)
+            high = obst & (excess > _AMBIGUOUS_EXCESS_PX)
+            if high.any():
+                # A run, at any height, that hangs over its own string's continuation on
+                # the lower ground beyond a drop and could have been matched there: the
+                # paving beyond a kerb down matched one period off. Every stretch of
+                # these strings well above the plane is tested (one matched the same
+                # period off may hold up another).
+                in_s = np.zeros(int(m.string_id.max()) + 1, bool)
+                in_s[m.string_id[high]] = True
+                high = (excess > _AMBIGUOUS_EXCESS_PX) & in_s[m.string_id]
+                support = max(c.min_drop_cluster_pixels,
+                              math.ceil(_LOWER_GROUND_FRACTION * len(m)))
+                obst &= ~continuation_alternatives(
+                    el, m, prev, cand, high, below & (run >= c.min_matched_run), pd,
+                    c.string_disparity_tolerance_px, slope, support)
         drop = np.zeros_like(obst)
         if c.detect_drops:
             # Below the plane where the plane itself is within the detection range.
             pd_far = cam.fb / c.max_range_m
-            drop = ((ex_mean < -thr) & (pd >= pd_far) & (pd <= d_max)
-                    & (h >= -c.max_drop_depth_m) & usable)
-            high = obst & (excess > _AMBIGUOUS_EXCESS_PX)
-            lower = ((ex_mean < -thr) & (h >= -c.max_drop_depth_m)
-                     & (run >= c.min_matched_run))
-            if high.any() and lower.any():
-                # Every stretch of these strings well above the plane is tested (one
-                # matched the same period off may hold up another).
-                in_s = np.zeros(int(m.string_id.max()) + 1, bool)
-                in_s[m.string_id[high]] = True
-                high = (excess > _AMBIGUOUS_EXCESS_PX) & in_s[m.string_id]
-                # A run, at any height, that hangs over its own string's continuation on
-                # the lower ground beyond a drop and could have been matched there: the
-                # paving beyond a kerb down matched one period off.
-                support = max(c.min_drop_cluster_pixels,
-                              math.ceil(_LOWER_GROUND_FRACTION * len(m)))
-                obst &= ~continuation_alternatives(el, m, prev, cand, high, lower, pd,
-                                                   c.string_disparity_tolerance_px, slope,
-                                                   support)
+            drop = below & (pd >= pd_far) & (pd <= d_max) & usable
         sid = m.string_id
         n_s = max(el.num_strings, int(sid.max()) + 1 if sid.size else 0)
         weight = self._evidence_weight(m.strength)
