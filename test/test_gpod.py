@@ -1177,6 +1177,44 @@ def test_hanging_runs():
     assert not hanging_runs(edges, good, run_links(edges, good, 1.0), h, 0.5, 1.0, 0.1).any()
 
 
+@pytest.mark.parametrize('compiled', [True, False])
+def test_hanging_runs_follow_a_long_chain_of_mismatched_stretches(monkeypatch, compiled):
+    """An edge that alternates all the way down between its own depth and one a period
+    off (a dark door's edge against the sky, matched to a post's edge 88 px away in
+    every other stretch: wo8042 at 640x480, whose binned pass made a 1.4 m obstacle 1 m
+    away of it, and a false STOP) hangs as a whole: each stretch is held up only by the
+    one below it, and the lowest one by nothing. Four passes (the old limit) left the
+    upper four standing."""
+    from asmonc_vision.core import gpod
+    from asmonc_vision.core.edges import EdgeMap
+    from asmonc_vision.core.gpod import hanging_runs, run_links
+    from asmonc_vision.core.matching import Matches
+    if not compiled:
+        monkeypatch.setattr(gpod, '_nb_hanging_all', None)
+        monkeypatch.setattr(gpod, '_nb_hanging', None)
+    elif gpod._nb_hanging_all is None:
+        pytest.skip('numba not installed')
+    stretches = 8
+    d = [13.0] * 3 + ([56.0] * 2 + [13.0] * 2) * stretches + [13.0] * 6
+    n = len(d)
+    v = np.arange(n, dtype=np.int32)
+    prev = np.r_[-1, np.arange(n - 1)].astype(np.int32)
+    z = np.zeros(n, np.float32)
+    edges = EdgeMap(v=v, u_int=np.full(n, 50, np.int32), u=z + 50, strength=z + 20,
+                    polarity=np.ones(n, np.int8), orientation=z,
+                    string_id=np.zeros(n, np.int32), string_prev=prev,
+                    string_length=np.array([n], np.int32), shape=(80, 100), threshold=4.0)
+    i = np.arange(n, dtype=np.int32)
+    d = np.asarray(d, np.float32)
+    m = Matches(u_left=z + 50, u_right=z + 50 - d, v=v, d=d, strength=z + 20,
+                string_id=np.zeros(n, np.int32), left_index=i, right_index=i,
+                support=z + 1)
+    far = d < 20
+    h = np.where(far, np.linspace(1.5, 0.0, n), 1.2)      # the mismatches hang 1.2 m up
+    got = hanging_runs(edges, m, run_links(edges, m, 1.0), h, 0.5, 1.0, 0.1)
+    np.testing.assert_array_equal(got, ~far)
+
+
 def test_continuation_alternatives():
     """A run of an edge string matched a period off, well above the plane, with the
     string going on below it on lower ground (beyond a kerb down; or above it, where the

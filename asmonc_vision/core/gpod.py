@@ -1404,8 +1404,10 @@ def hanging_runs(edges: EdgeMap, m: Matches, prev: np.ndarray, h: np.ndarray,
                            float(tolerance_px), float(slope))
     d0 = m.d[bottom].astype(np.float64)
     # A run held up only by a run that hangs itself hangs too (two stretches matched
-    # the same period off, one above the other): repeat until nothing changes.
-    for _ in range(_HANGING_PASSES):
+    # the same period off, one above the other, or a chain of them down an edge that
+    # alternates between two matches): repeat until nothing changes. Each pass can only
+    # add runs, so at most one pass per run bottom (and one to see no change).
+    for _ in range(bottom.size + 1):
         e = m.left_index[bottom].astype(np.int64)
         seen = np.zeros(bottom.size, bool)      # a matched pixel below
         held = np.zeros(bottom.size, bool)      # ... at the run's depth, not hanging
@@ -1560,7 +1562,7 @@ def continuation_alternatives(edges: EdgeMap, m: Matches, prev: np.ndarray,
     rows = np.arange(1, under.shape[0] + 1, dtype=np.float64)[:, None]
     near = (under >= 0) & (np.abs(d[np.maximum(under, 0)] - d0[None, :])
                            <= tolerance_px + slope * rows)
-    for _ in range(_HANGING_PASSES):
+    for _ in range(under.shape[1] + 1):     # until nothing changes (runs only join)
         held = (near & ~out[np.maximum(under, 0)]).any(axis=0)
         new = np.zeros(k, bool)
         new[sel] = has_alt[sel] & ~held[b_of]
@@ -1570,18 +1572,13 @@ def continuation_alternatives(edges: EdgeMap, m: Matches, prev: np.ndarray,
     return out
 
 
-#: Passes of `hanging_runs` (a run held up only by a hanging run hangs: each pass
-#: follows one more such link).
-_HANGING_PASSES = 4
-
-
 def _hanging_kernel(bottom, left_index, d, below, feat_of_edge, prev, k, max_gap, tol,
                     slope):
     """:func:`hanging_runs` after its candidate run bottoms, as loops (for numba): the
     same walk, tests and passes."""
     out = np.zeros(k, np.bool_)
     new = np.zeros(k, np.bool_)
-    for _ in range(_HANGING_PASSES):
+    for _ in range(bottom.shape[0] + 1):
         new[:] = False
         for i in range(bottom.shape[0]):
             b = bottom[i]
