@@ -11,9 +11,10 @@ Per stereo pair:
    the paper's GPOD) or refitted every frame (``'refit'``, so that a walking wearer
    keeps a plane): a coarse robust fit on the nearer half of the features within
    ``refit_gate_px`` of the predicted plane, then a fine fit on the features within
-   ``refit_gate_m`` of the coarse plane (standing still, or when that took another
-   surface: of the current plane), accepted if it moved the plane plausibly little
-   and smoothed by a constant-plane Kalman filter. This is a step towards the paper's
+   ``refit_gate_m`` of the coarse plane (when that took another surface: of the
+   current plane; standing still: of the plane the rig had when it stopped), accepted
+   if it moved the plane plausibly little and smoothed by a constant-plane Kalman
+   filter. This is a step towards the paper's
    dynamic recalibration, which will add a motion model to the prediction. The RANSAC
    fits weigh features by disparity cubed: of two surfaces, the near one -- the ground
    the wearer stands on -- wins.
@@ -3237,6 +3238,8 @@ class GpodDetector:
         self._cov: np.ndarray | None = None
         self._last_fit: PlaneFit | None = None
         self._coast = 0
+        #: the plane (a, b, c) when the rig last came to stand still (None: moving)
+        self._still_abc: np.ndarray | None = None
         #: residual spread of the initial fit: global, and per edge strength (bin
         #: strengths, bin sigmas), pixels
         self._sigma = float('nan')
@@ -3431,6 +3434,10 @@ class GpodDetector:
             # nothing stands on it: lost, as in 'refit' mode.
             return ('tracking', False) if enough else ('lost', False)
         fit = None
+        if not still:
+            self._still_abc = None
+        elif self._still_abc is None:
+            self._still_abc = self._abc.copy()     # the plane when the rig stopped
         current = plane_is_plausible(cam, self._abc, min_height_m=0.0,
                                      max_height_m=float('inf'), max_tilt_deg=90.0)
         if enough and current is not None and not still:
@@ -3456,7 +3463,18 @@ class GpodDetector:
             # surface while walking: the ground beyond a step down can fill more of the
             # view than the ground the wearer stands on, even in the nearer half (and a
             # mixture of the two tilts the plane).
-            height = current.signed_height(cam.triangulate(u, v, d))
+            # Standing, the gate stays where the plane was when the rig stopped: the
+            # ground has not moved since. Gated around the current plane instead, the
+            # ground beyond a kerb down leaked in at 4-10 m (where 15 cm is 1-2 px of
+            # disparity, about the gate's 10 cm), each refit tilted the plane towards it
+            # and the tilted plane let more of it in: 0.1 -> 3.8 degrees and 12 cm in
+            # 0.5 s, and the pavement between the wearer and the kerb stood 20 cm up.
+            ref = current
+            if still and self._still_abc is not None:
+                ref = plane_is_plausible(cam, self._still_abc, min_height_m=0.0,
+                                         max_height_m=float('inf'),
+                                         max_tilt_deg=90.0) or current
+            height = ref.signed_height(cam.triangulate(u, v, d))
             gate = np.abs(height) <= c.refit_gate_m
             fit = self._fit(u[gate], v[gate], d[gate], cam)
             if fit is not None and not self._close_to_current(fit, cam, current):
