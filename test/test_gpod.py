@@ -1140,21 +1140,29 @@ def test_moved_roi_keeps_its_place_beside_the_foot():
     assert abs((x3 - u_f) - 2 * (140 - (CAM.cx + CAM.f * foot[0] / foot[2]))) <= 2
 
 
+def _one_string(n: int, shape: tuple[int, int] = (40, 100)):
+    """A left EdgeMap of one vertical edge string of n pixels in column 50, rows 0..n-1
+    (each pixel's string predecessor the one above it)."""
+    from asmonc_vision.core.edges import EdgeMap
+    v = np.arange(n, dtype=np.int32)
+    z = np.zeros(n, np.float32)
+    return EdgeMap(v=v, u_int=np.full(n, 50, np.int32), u=z + 50, strength=z + 20,
+                   polarity=np.ones(n, np.int8), orientation=z,
+                   string_id=np.zeros(n, np.int32),
+                   string_prev=np.r_[-1, np.arange(n - 1)].astype(np.int32),
+                   string_length=np.array([n], np.int32), shape=shape, threshold=4.0)
+
+
 def test_hanging_runs():
     """A run of an edge string matched a period off (hanging in the air over the depth
     at which the string goes on below it) is found; a real edge broken by a gap, the
     same depth below, is not."""
-    from asmonc_vision.core.edges import EdgeMap
     from asmonc_vision.core.gpod import hanging_runs, run_links
     from asmonc_vision.core.matching import Matches
     n = 12
     v = np.arange(n, dtype=np.int32)
-    prev = np.r_[-1, np.arange(n - 1)].astype(np.int32)
     z = np.zeros(n, np.float32)
-    edges = EdgeMap(v=v, u_int=np.full(n, 50, np.int32), u=z + 50, strength=z + 20,
-                    polarity=np.ones(n, np.int8), orientation=z, string_id=np.zeros(n, np.int32),
-                    string_prev=prev, string_length=np.array([n], np.int32), shape=(40, 100),
-                    threshold=4.0)
+    edges = _one_string(n)
     keep = np.r_[0:6, 7:n]                               # row 6 unmatched (a gap)
 
     def matches(d):
@@ -1186,7 +1194,6 @@ def test_hanging_runs_follow_a_long_chain_of_mismatched_stretches(monkeypatch, c
     one below it, and the lowest one by nothing. Four passes (the old limit) left the
     upper four standing."""
     from asmonc_vision.core import gpod
-    from asmonc_vision.core.edges import EdgeMap
     from asmonc_vision.core.gpod import hanging_runs, run_links
     from asmonc_vision.core.matching import Matches
     if not compiled:
@@ -1198,12 +1205,8 @@ def test_hanging_runs_follow_a_long_chain_of_mismatched_stretches(monkeypatch, c
     d = [13.0] * 3 + ([56.0] * 2 + [13.0] * 2) * stretches + [13.0] * 6
     n = len(d)
     v = np.arange(n, dtype=np.int32)
-    prev = np.r_[-1, np.arange(n - 1)].astype(np.int32)
     z = np.zeros(n, np.float32)
-    edges = EdgeMap(v=v, u_int=np.full(n, 50, np.int32), u=z + 50, strength=z + 20,
-                    polarity=np.ones(n, np.int8), orientation=z,
-                    string_id=np.zeros(n, np.int32), string_prev=prev,
-                    string_length=np.array([n], np.int32), shape=(80, 100), threshold=4.0)
+    edges = _one_string(n, (80, 100))
     i = np.arange(n, dtype=np.int32)
     d = np.asarray(d, np.float32)
     m = Matches(u_left=z + 50, u_right=z + 50 - d, v=v, d=d, strength=z + 20,
@@ -1221,17 +1224,12 @@ def test_continuation_alternatives():
     run ends the string) and a candidate of its own on that ground, is found. It is not when the string goes on below at the run's
     own depth (a real edge broken by a mismatch), when the lower ground is not seen by
     enough matches, or when the run had no candidate on it."""
-    from asmonc_vision.core.edges import EdgeMap
     from asmonc_vision.core.gpod import continuation_alternatives, run_links
     from asmonc_vision.core.matching import Candidates, Matches
     n = 30
     v = np.arange(n, dtype=np.int32)
-    prev = np.r_[-1, np.arange(n - 1)].astype(np.int32)
     z = np.zeros(n, np.float32)
-    edges = EdgeMap(v=v, u_int=np.full(n, 50, np.int32), u=z + 50, strength=z + 20,
-                    polarity=np.ones(n, np.int8), orientation=z,
-                    string_id=np.zeros(n, np.int32), string_prev=prev,
-                    string_length=np.array([n], np.int32), shape=(40, 100), threshold=4.0)
+    edges = _one_string(n)
     pd = 20.0 + 0.25 * v                                 # the plane's disparity, b = 0.25
     low = 0.9 * pd                                       # a lower ground (ratio 0.9)
     run = (v >= 10) & (v < 20)
