@@ -3238,8 +3238,8 @@ class GpodDetector:
         self._cov: np.ndarray | None = None
         self._last_fit: PlaneFit | None = None
         self._coast = 0
-        #: the plane (a, b, c) when the rig last came to stand still (None: moving)
-        self._still_abc: np.ndarray | None = None
+        #: the plane when the rig last came to stand still (None: moving, or no plane)
+        self._still_plane: MetricPlane | None = None
         #: residual spread of the initial fit: global, and per edge strength (bin
         #: strengths, bin sigmas), pixels
         self._sigma = float('nan')
@@ -3434,12 +3434,12 @@ class GpodDetector:
             # nothing stands on it: lost, as in 'refit' mode.
             return ('tracking', False) if enough else ('lost', False)
         fit = None
-        if not still:
-            self._still_abc = None
-        elif self._still_abc is None:
-            self._still_abc = self._abc.copy()     # the plane when the rig stopped
         current = plane_is_plausible(cam, self._abc, min_height_m=0.0,
                                      max_height_m=float('inf'), max_tilt_deg=90.0)
+        if not still:
+            self._still_plane = None
+        elif self._still_plane is None:
+            self._still_plane = current             # the plane when the rig stopped
         if enough and current is not None and not still:
             # Coarse refit from the nearer half of the features near the predicted plane
             # in disparity (a gate wide enough for walking motion), then a fine refit
@@ -3469,11 +3469,7 @@ class GpodDetector:
             # disparity, about the gate's 10 cm), each refit tilted the plane towards it
             # and the tilted plane let more of it in: 0.1 -> 3.8 degrees and 12 cm in
             # 0.5 s, and the pavement between the wearer and the kerb stood 20 cm up.
-            ref = current
-            if still and self._still_abc is not None:
-                ref = plane_is_plausible(cam, self._still_abc, min_height_m=0.0,
-                                         max_height_m=float('inf'),
-                                         max_tilt_deg=90.0) or current
+            ref = self._still_plane if still and self._still_plane is not None else current
             height = ref.signed_height(cam.triangulate(u, v, d))
             gate = np.abs(height) <= c.refit_gate_m
             fit = self._fit(u[gate], v[gate], d[gate], cam)
