@@ -36,12 +36,13 @@ def _rotation(pitch_deg):
                      [0.0, np.sin(t), np.cos(t)]], axis=1)
 
 
-def render_pair(boxes=(), step=None, seed=0, noise=2.0, ss=2, texel=0.01):
+def render_pair(boxes=(), step=None, seed=0, noise=2.0, ss=2, texel=0.01, advance=0.0):
     """Rectified stereo pair of the level-frame scene.
 
     Args:
         boxes: (x0, x1, z0, z1, height) boxes standing on the ground, level frame, m.
         step: (z_step, depth): the ground drops by ``depth`` m beyond ``Z = z_step``.
+        advance: the rig's place ahead of the level frame's origin, m (a walk forward).
     Returns:
         (left, right) uint8 images.
     """
@@ -56,7 +57,7 @@ def render_pair(boxes=(), step=None, seed=0, noise=2.0, ss=2, texel=0.01):
     rays = np.stack([(uu - CAM.cx) / CAM.f, (vv - CAM.cy) / CAM.f, np.ones_like(uu)], -1) @ rot.T
     out = []
     for cam_x in (0.0, CAM.baseline):
-        o = rot @ np.array([cam_x, 0.0, 0.0])
+        o = rot @ np.array([cam_x, 0.0, 0.0]) + np.array([0.0, 0.0, advance])
         ry = rays[..., 1]
         with np.errstate(divide='ignore', invalid='ignore'):
             t = np.where(ry > 1e-9, (HEIGHT - o[1]) / ry, np.inf)
@@ -110,6 +111,15 @@ def to_left_optical(p_level):
 
 
 BOX = (0.3, 0.7, 4.0, 4.4, 0.25)        # 25 cm high, 4 m ahead, slightly right
+
+
+_STEP_M = 0.2          # the walk's step between frames, m
+
+
+@pytest.fixture(scope='module')
+def walk():
+    """The box scene seen from four places on a walk towards it, a step apart."""
+    return [render_pair(boxes=[BOX], seed=2, advance=_STEP_M * (i + 1)) for i in range(4)]
 
 
 @pytest.fixture(scope='module')
@@ -175,9 +185,10 @@ def test_no_obstacles_on_flat_ground(scenes):
             # This texture (blurred noise, soft at near range) has one two-pixel string
             # of badly located edges ~2 px above the plane in 'free2': the least evidence
             # the detector acts on (min_obstacle_pixels), detected with low confidence,
-            # and reported, its evidence accumulated over the frames (the same images
-            # again here), below the alarm's min_confidence (0.3): two pixels never reach
-            # it in track_confidence_frames (3) frames. Nothing more may be there.
+            # and reported below the alarm's min_confidence (0.3): the same images again
+            # are one view, whose evidence does not add up over its frames (nor would two
+            # pixels' reach it in track_confidence_frames (3) views). Nothing more may be
+            # there.
             assert all(o.num_edge_pixels <= 2 and o.confidence < 0.2
                        for o in r.detections), [(o.height, o.range, o.roi) for o in r.obstacles]
             assert all(o.confidence < AlarmConfig().min_confidence for o in r.obstacles)
@@ -189,30 +200,55 @@ def test_no_obstacles_on_flat_ground(scenes):
             assert f.is_obstacle.sum() <= 2 * len(r.obstacles)
 
 
-def test_track_confidence_accumulates_the_latest_detections(scenes):
-    """A tracked obstacle's confidence is 1 - prod(1 - c) over the confidences c of its
-    latest track_confidence_frames detections; with 1 frame, the detection's own."""
+def _views_confidence_check(det, pairs, motions, k, noisy):
+    """Feeds ``pairs`` to ``det`` (fresh image noise each frame) with ``motions`` and
+    checks every reported track's confidence: 1 - prod(1 - c) over its latest k views,
+    each view's c the largest of its detections' in it (a view: a frame that moved and
+    the still frames after it). Returns how many reports combined several views, and
+    the largest of (report confidence - the largest detection confidence of its track)."""
+    views: dict[int, list[tuple[int, float]]] = {}
+    view, combined, over = 0, 0, 0.0
+    for (left, right), motion in zip(pairs, motions):
+        left, right = (np.clip(x + noisy.normal(0.0, 3.0, x.shape), 0, 255).astype(np.uint8)
+                       for x in (left, right))
+        r = det.process(left, right, CAM, motion=motion)
+        view += not r.still
+        for ob in r.obstacles:
+            if ob.age_s == 0.0:          # detected now: its detection, by its strings
+                d = [o for o in r.detections
+                     if np.array_equal(np.sort(o.string_ids), np.sort(ob.string_ids))]
+                assert len(d) == 1
+                seen = views.setdefault(ob.track_id, [])
+                if seen and seen[-1][0] == view:
+                    seen[-1] = (view, max(seen[-1][1], d[0].confidence))
+                else:
+                    seen.append((view, d[0].confidence))
+            seen = [c for _, c in views[ob.track_id][-k:]]
+            assert ob.confidence == pytest.approx(1.0 - np.prod([1.0 - c for c in seen]),
+                                                  abs=1e-9)
+            combined += len(seen) > 1 and max(seen) < 1.0
+            over = max(over, ob.confidence - max(c for _, c in views[ob.track_id]))
+    return combined, over
+
+
+def test_track_confidence_accumulates_over_views_not_over_still_frames(scenes, walk):
+    """A tracked obstacle's confidence is 1 - prod(1 - c) over its latest
+    track_confidence_frames views, c a view's largest detection confidence; with 1, the
+    latest view's alone. While the rig stands still its frames are one view: they repeat
+    the same matches (and their errors), so the confidence is never more than that of
+    its best detection. Walking, each frame is a new view, and the evidence adds up."""
+    forward = to_left_optical([0.0, 0.0, _STEP_M])
     for k in (1, 3):
         det, _ = _calibrated(scenes['free'], GpodConfig(track_confidence_frames=k))
         noisy = np.random.default_rng(5)
-        history: dict[int, list[float]] = {}
-        accumulated = 0
-        for _ in range(6):
-            # fresh image noise each frame: the box, and weak blips tracked over frames
-            left, right = (np.clip(x + noisy.normal(0.0, 3.0, x.shape), 0, 255).astype(np.uint8)
-                           for x in scenes['box'])
-            r = det.process(left, right, CAM)
-            for ob in r.obstacles:
-                if ob.age_s == 0.0:          # detected now: its detection, by its strings
-                    d = [o for o in r.detections
-                         if np.array_equal(np.sort(o.string_ids), np.sort(ob.string_ids))]
-                    assert len(d) == 1
-                    history.setdefault(ob.track_id, []).append(d[0].confidence)
-                seen = history[ob.track_id][-k:]
-                assert ob.confidence == pytest.approx(1.0 - np.prod([1.0 - c for c in seen]),
-                                                      abs=1e-9)
-                accumulated += len(seen) > 1 and max(seen) < 1.0
-        assert (accumulated > 0) == (k > 1)                  # weak tracks seen again
+        combined, over = _views_confidence_check(det, [scenes['box']] * 6, [None] * 6, k,
+                                                 noisy)
+        assert combined == 0 and over <= 1e-9
+        det, _ = _calibrated(scenes['free'], GpodConfig(track_confidence_frames=k))
+        combined, over = _views_confidence_check(
+            det, walk, [(np.eye(3), forward)] * len(walk), k, noisy)
+        assert (combined > 0) == (k > 1)                     # weak tracks seen again
+        assert (over > 0.01) == (k > 1)
     with pytest.raises(ValueError, match='track_confidence_frames'):
         GpodConfig(track_confidence_frames=0)
 

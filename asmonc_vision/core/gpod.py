@@ -466,8 +466,9 @@ class GpodConfig(PlausiblePlaneConfig):
         range=(1, 100000))
     track_confidence_frames: int = param(
         3, 'Obstacle tracks: a tracked obstacle\'s confidence combines its detections in up '
-        'to this many of its latest frames, 1 - prod(1 - confidence) (evidence accumulated '
-        'over frames; 1 = the latest detection\'s alone)', range=(1, 100))
+        'to this many of its latest views, 1 - prod(1 - confidence) (evidence accumulated '
+        'over frames; the frames of a rig standing still are one view, at its best '
+        'detection; 1 = the latest view\'s alone)', range=(1, 100))
     track_coast_s: float = param(
         1.0, 'Obstacle tracks (DGPR): an obstacle detected before is still reported for up to '
         'this long after its last detection, at its tracked place (moved by the camera '
@@ -558,8 +559,9 @@ class GpodObstacle:
             * min(1, pixels / ``confidence_full_pixels``), a pixel weaker than
             ``obstacle_min_strength`` counted as (strength / that)^2 of one (as the
             edge-string rule counts it). A reported (tracked) obstacle's:
-            1 - prod(1 - c) over the detection confidences c of its track's latest
-            ``track_confidence_frames`` detections.
+            1 - prod(1 - c) over its track's latest ``track_confidence_frames`` views, c
+            the largest detection confidence in a view (the frames while the rig stands
+            still are one view).
         roi: (x, y, w, h) ints, region in the left image (from the top of the obstacle
             down to its foot on the ground).
         num_edge_pixels: matched edge pixels beyond the threshold in the obstacle.
@@ -3263,9 +3265,11 @@ class GpodDetector:
                                         min_hit_fraction=c.track_min_hit_fraction,
                                         sure_hits=c.track_sure_hits,
                                         unseen_coast_s=c.track_unseen_coast_s)
-        #: track id -> the detection confidences of its latest track_confidence_frames
-        #: detections
-        self._track_conf: dict[int, deque] = {}
+        #: track id -> (the detection confidences of its latest track_confidence_frames
+        #: views, the view of the latest); a view: the frames from one that moved to the
+        #: next that moves (a still rig's frames see one view)
+        self._track_conf: dict[int, tuple[deque, int]] = {}
+        self._view = 0
         #: the last given motion (R, t, dt s), the pairs carried by it since, the stamp
         #: of the last tracked pair (s)
         self._last_motion: tuple | None = None
@@ -4033,7 +4037,7 @@ class GpodDetector:
         out = list(drops)
         feet_t = np.array([tr.foot for tr in tracks]).reshape(-1, 3)
         rngs, brgs = ground_range_bearing(metric, feet_t)
-        confs = self._track_confidences(tracks)
+        confs = self._track_confidences(tracks, still)
         for tr, rng_k, brg_k, conf in zip(tracks, rngs.tolist(), brgs.tolist(), confs):
             ob = tr.payload
             seen = tr.index >= 0
@@ -4075,20 +4079,31 @@ class GpodDetector:
         # the walker may have changed pace or turned: half the step either way
         return R, t, (0.5 * float(np.linalg.norm(t))) ** 2 * np.eye(3)
 
-    def _track_confidences(self, tracks) -> list[float]:
+    def _track_confidences(self, tracks, still: bool = False) -> list[float]:
         """The confidence of each track (`ObstacleTracker.update`'s outputs) reported this
-        frame: 1 - prod(1 - c) over the detection confidences c of its latest
-        ``track_confidence_frames`` detections, this frame's included when it was
-        detected (each frame's evidence taken as independent of the others'). Forgets
-        the tracks that ended."""
+        frame: 1 - prod(1 - c) over its detection confidences c in its latest
+        ``track_confidence_frames`` views, this frame's included when it was detected.
+        A view is one frame, or a run of frames while the rig stands still (``still``:
+        this frame saw what the previous one saw), which counts once, at its largest
+        confidence: each view's evidence is taken as independent of the others', but a
+        still view's frames repeat the same matches, their errors as well (a mismatch
+        made by the scene repeats in every frame), and their noise is already averaged
+        in the detection (``temporal_frames``). Forgets the tracks that ended."""
         k = self.config.track_confidence_frames
+        if not still:
+            self._view += 1
         old, self._track_conf = self._track_conf, {}
         out = []
         for tr in tracks:
-            hist = old.get(tr.track_id) or deque(maxlen=k)
+            hist, view = old.get(tr.track_id) or (deque(maxlen=k), -1)
             if tr.index >= 0:
-                hist.append(float(tr.payload.confidence))
-            self._track_conf[tr.track_id] = hist
+                c = float(tr.payload.confidence)
+                if hist and view == self._view:
+                    hist[-1] = max(hist[-1], c)      # the same view seen again
+                else:
+                    hist.append(c)
+                view = self._view
+            self._track_conf[tr.track_id] = (hist, view)
             # 1 - prod(1 - c_i)
             q = math.prod(1.0 - c for c in hist) if hist else 1.0 - tr.payload.confidence
             out.append(float(min(max(1.0 - q, 0.0), 1.0)))
