@@ -1831,3 +1831,55 @@ def test_an_obstacle_walked_up_to_is_still_reported_once_its_foot_leaves_the_vie
     tol = 0.5 if len(missing) > 2 else 0.25 if missing else 0.12
     assert all(e <= tol for _, e, _ in near), near
     assert any(age is not None and age > 0 for _, _, age in near), near   # coasted
+
+
+def test_a_whole_placed_at_a_lower_body_takes_that_body_s_description():
+    """An obstacle joined from parts and reported at one part's nearest point is
+    described by that part when it is another, lower body: a two-pixel blip of the
+    ground 0.7 m in front of an 18 cm box once made an '18 cm obstacle, confidence 1, 2
+    metres ahead' (a false WARNING on a static scene; the box stood 20 degrees right).
+    Parts of a like height (one box's two silhouette edges), a low part with no ground
+    seen between it and the rest (a wall's end at the image's border, seen only near its
+    foot) and a whole placed between its parts keep the whole's description."""
+    from asmonc_vision.core.gpod import GpodObstacle, described_by_part
+    up = np.array([0.0, -0.94, -0.34])
+
+    def ob(rng, bearing_deg, height, conf, roi, n):
+        return GpodObstacle(position=np.array([0.0, 1.0, rng]) + height * up, height=height,
+                            range=rng, bearing=math.radians(bearing_deg), width=0.6,
+                            disparity_excess=3.0 * height / 0.18, confidence=conf, roi=roi,
+                            num_edge_pixels=n, string_ids=np.array([80, 129, 133], np.int32))
+
+    whole = ob(2.06, 1.2, 0.18, 1.0, (40, 131, 124, 49), 37)
+    blip = ob(1.91, -1.0, 0.03, 0.13, (163, 185, 2, 6), 2)
+    edge_a = ob(2.64, 12.8, 0.18, 0.9, (96, 131, 3, 20), 18)
+    edge_b = ob(2.71, 23.1, 0.18, 0.85, (40, 133, 4, 22), 17)
+    # the pavement seen everywhere but under the box (2.45-2.95 m ahead, 0.5-1.1 m left)
+    gx, gy = np.meshgrid(np.arange(1.0, 4.0, 0.05), np.arange(-1.0, 1.5, 0.05))
+    ground = np.stack([gx.ravel(), gy.ravel()], axis=1)
+    ground = ground[~((ground[:, 0] > 2.45) & (ground[:, 1] > 0.5))]
+    out = described_by_part([whole], [blip, edge_a, edge_b], np.zeros(3, np.int64), 0.35,
+                            up, ground)
+    got = out[0]
+    assert (got.height, got.confidence, got.roi, got.num_edge_pixels) == (0.03, 0.13,
+                                                                          blip.roi, 2)
+    assert got.range == whole.range and got.bearing == whole.bearing
+    assert got.width == whole.width and np.array_equal(got.string_ids, whole.string_ids)
+    assert np.allclose(got.position - got.height * up, whole.position - whole.height * up)
+    # no ground seen behind the line from the low part to the highest: one body
+    near = ground[ground[:, 0] < 1.8]
+    assert described_by_part([whole], [blip, edge_a, edge_b], np.zeros(3, np.int64), 0.35,
+                             up, near)[0] is whole
+    # the nearer part as high as the whole (a box's near edge): the whole's own
+    near_edge = ob(1.95, -0.5, 0.16, 0.6, (150, 150, 3, 20), 12)
+    assert described_by_part([whole], [near_edge, edge_a], np.zeros(2, np.int64), 0.35,
+                             up, ground)[0] is whole
+    # placed between two parts within 0.35 m of both (a hidden corner), or a whole of
+    # one part: its own
+    low, high = ob(2.0, 0.0, 0.03, 0.13, (160, 150, 2, 6), 2), ob(2.0, 8.0, 0.18, 1.0,
+                                                                  (120, 140, 20, 20), 30)
+    between = ob(2.0, 4.0, 0.18, 1.0, (120, 140, 42, 20), 32)
+    assert described_by_part([between], [low, high], np.zeros(2, np.int64), 0.35,
+                             up, ground)[0] is between
+    assert described_by_part([between, whole], [low, high], np.array([1, 1]), 0.35,
+                             up, ground)[0] is between

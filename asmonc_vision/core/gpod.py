@@ -197,6 +197,11 @@ _WEAK_SIGMAS = 4.0
 _WEAK_CORR = 2.0
 _WEAK_HEIGHT_RATIO = 2.0
 
+#: A whole obstacle placed at one part's nearest point takes that part's height and
+#: confidence when the part is lower than this fraction of the whole's height (another
+#: body, `GpodDetector._described_by_part`; the factor 2 of ``_WEAK_HEIGHT_RATIO``).
+_OTHER_BODY_HEIGHT_FRACTION = 1.0 / _WEAK_HEIGHT_RATIO
+
 #: `cluster_points_2d` links up to this many (thinned) points by testing all pairs, more
 #: on a grid.
 _PAIRWISE_POINTS = 256
@@ -2825,6 +2830,60 @@ def view_edge_points(xy: np.ndarray, group: np.ndarray, n_groups: int, to_image,
 _PAIRS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
 
+def described_by_part(whole: list[GpodObstacle], parts: list[GpodObstacle],
+                      owner: np.ndarray, radius: float, normal_up: np.ndarray,
+                      ground_xy: np.ndarray) -> list[GpodObstacle]:
+    """Obstacles joined from parts (`GpodDetector._parts`), each described by the part
+    at its place when that part is another body than the one that gives it its height.
+
+    A whole is reported at its nearest point. When that point lies within ``radius`` of
+    exactly one of its parts' nearest points, that part is lower than half the whole's
+    height, and visible ground separates it from the whole's highest part (`_body_gap`:
+    side by side, not one face), the part is another body: a two-pixel blip of the
+    ground 0.7 m in front of a box is no 18 cm obstacle with the box's confidence (the
+    box is reported as a part of its own). The whole then takes that part's height,
+    confidence, image region, excess and pixel count, and keeps its place, width and
+    strings. Parts of a like height may be one body (the two silhouette edges of a
+    box), whose evidence the whole sums; so may a low part with no ground seen between
+    it and the highest (a wall's end at the image's border, seen only near its foot);
+    and a whole placed between its parts (a hidden corner) keeps its own.
+
+    Args:
+        whole: the C obstacles (heights > 0), each made of one or more parts.
+        parts: the P parts of the wholes of more than one.
+        owner: (P,) int, the index in ``whole`` of each part's whole.
+        radius: metres along the ground (``part_radius_m``).
+        normal_up: (3,) the ground's unit normal, left optical frame.
+        ground_xy: (G, 2) the frame's ground features, metres along the ground
+            (forward, left) from the point below the camera.
+    Returns:
+        The C obstacles, in order.
+    """
+    at = np.array([[o.range * math.cos(o.bearing), o.range * math.sin(o.bearing)]
+                   for o in parts]).reshape(-1, 2)
+    out = list(whole)
+    for k, ob in enumerate(whole):
+        mine = np.flatnonzero(owner == k)
+        if mine.size < 2:
+            continue
+        here = np.array([ob.range * math.cos(ob.bearing), ob.range * math.sin(ob.bearing)])
+        dist = np.hypot(*(at[mine] - here).T)
+        near = dist <= radius
+        if near.sum() == 1:
+            j = int(mine[np.argmax(near)])
+            p = parts[j]
+            others = mine[mine != j]
+            q = int(others[np.argmax([parts[i].height for i in others])])
+            if (p.height < _OTHER_BODY_HEIGHT_FRACTION * ob.height
+                    and _body_gap(ground_xy, at[j], at[q])):
+                out[k] = dataclasses.replace(
+                    ob, position=ob.position + (p.height - ob.height) * normal_up,
+                    height=p.height, confidence=p.confidence, roi=p.roi,
+                    disparity_excess=p.disparity_excess,
+                    num_edge_pixels=p.num_edge_pixels)
+    return out
+
+
 def _pairs_of(n: int) -> tuple[np.ndarray, np.ndarray]:
     """``np.triu_indices(n, 1)``: (P,) int64 i < j of every pair of 0..n-1, in row-major
     order (cached up to n = 256; read-only)."""
@@ -4223,6 +4282,10 @@ class GpodDetector:
         _, part = np.unique(fine[sel], return_inverse=True)
         parts = self._describe(idx[sel], part.astype(np.int64), sign, min_pixels, hh[sel],
                                g2[sel], m, excess, cam, metric, fwd, lft)
+        owner = np.zeros(len(parts), np.int64)
+        owner[part] = label[sel]
+        whole[:] = described_by_part(whole, parts, owner, radius, metric.normal_up,
+                                     self._ctx.ground_xy)
         at = np.array([[o.range * math.cos(o.bearing), o.range * math.sin(o.bearing)]
                        for o in whole])
         return [p for p in parts
