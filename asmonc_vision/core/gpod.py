@@ -214,6 +214,10 @@ _THIN_MAX_CELLS = 1 << 16
 #: within this many ``plane_inlier_px`` of the fitted plane.
 _SIGMA_GATE = 3.0
 
+#: `GpodDetector._stillness` compares the strong edges when there are this many, else
+#: all edges.
+_STILL_MIN_EDGES = 100
+
 #: The left image's pixel noise is estimated (`edges.image_noise_sigma`, 0.2 ms at
 #: 320 x 240) on the first frame and then every this many frames.
 _NOISE_EVERY = 8
@@ -266,7 +270,8 @@ class GpodConfig(PlausiblePlaneConfig):
         range=(1, 1000))
     still_overlap: float = param(
         0.8, 'The rig counts as still when at least this fraction of the left edge pixels '
-        'lie within one column of an edge pixel of the previous frame on the same row',
+        'lie within one column of an edge pixel of the previous frame on the same row (the '
+        'edges as strong as obstacle evidence needs, when there are enough of them)',
         range=(0.0, 1.0))
     temporal_gate_px: float = param(
         1.0, 'An edge pixel joins the running average of the pixel at its place in the '
@@ -3814,22 +3819,33 @@ class GpodDetector:
 
     def _stillness(self, el: EdgeMap) -> bool:
         """Whether the rig stood still since the previous frame: most left edge pixels
-        are where an edge pixel was (same row, within one column). Remembers the edges."""
+        are where an edge pixel was (same row, within one column). Only the edges at
+        least as strong as an obstacle's evidence needs (``obstacle_min_strength``, or
+        more on a noisy camera) are compared, when there are ``_STILL_MIN_EDGES`` of
+        them: the weak ones come and go with the pixel noise (a camera of noise sigma 4
+        standing still kept 0.68 of all its edges in place, 0.93 of the strong ones).
+        Remembers the edges compared."""
         h, w = el.shape
         prev = self._prev_edges
+        strong = el.strength >= self._min_strength
+        if int(np.count_nonzero(strong)) >= _STILL_MIN_EDGES:
+            v, u_int = el.v[strong], el.u_int[strong]
+        else:
+            v, u_int = el.v, el.u_int
+        n = v.shape[0]
         if _nb_still is not None:
             # The same image and hits, compiled.
-            use = prev is not None and prev.shape == (h, w + 2) and len(el) > 0
-            img, hits = _nb_still(prev if use else np.zeros((1, 1), bool), use, el.v,
-                                  el.u_int, h, w)
+            use = prev is not None and prev.shape == (h, w + 2) and n > 0
+            img, hits = _nb_still(prev if use else np.zeros((1, 1), bool), use, v, u_int,
+                                  h, w)
             self._prev_edges = img
-            return use and bool(hits / len(el) >= self.config.still_overlap)
+            return use and bool(hits / n >= self.config.still_overlap)
         img = np.zeros((h, w + 2), bool)
-        img[el.v, el.u_int + 1] = True
+        img[v, u_int + 1] = True
         self._prev_edges = img
-        if prev is None or prev.shape != img.shape or len(el) == 0:
+        if prev is None or prev.shape != img.shape or n == 0:
             return False
-        hit = prev[el.v, el.u_int] | prev[el.v, el.u_int + 1] | prev[el.v, el.u_int + 2]
+        hit = prev[v, u_int] | prev[v, u_int + 1] | prev[v, u_int + 2]
         return bool(hit.mean() >= self.config.still_overlap)
 
     def _temporal_excess(self, m: Matches, excess: np.ndarray, still: bool,
