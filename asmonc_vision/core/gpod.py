@@ -199,7 +199,7 @@ _WEAK_HEIGHT_RATIO = 2.0
 
 #: A whole obstacle placed at one part's nearest point takes that part's height and
 #: confidence when the part is lower than this fraction of the whole's height (another
-#: body, `GpodDetector._described_by_part`; the factor 2 of ``_WEAK_HEIGHT_RATIO``).
+#: body, `described_by_part`; the factor 2 of ``_WEAK_HEIGHT_RATIO``).
 _OTHER_BODY_HEIGHT_FRACTION = 1.0 / _WEAK_HEIGHT_RATIO
 
 #: `cluster_points_2d` links up to this many (thinned) points by testing all pairs, more
@@ -2835,9 +2835,16 @@ def view_edge_points(xy: np.ndarray, group: np.ndarray, n_groups: int, to_image,
 _PAIRS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
 
+def _ground_points(obstacles) -> np.ndarray:
+    """(N, 2) ground coordinates (forward, left), metres, of obstacles' reported points,
+    from their range and bearing."""
+    return np.array([[o.range * math.cos(o.bearing), o.range * math.sin(o.bearing)]
+                     for o in obstacles]).reshape(-1, 2)
+
+
 def described_by_part(whole: list[GpodObstacle], parts: list[GpodObstacle],
                       owner: np.ndarray, radius: float, normal_up: np.ndarray,
-                      ground_xy: np.ndarray) -> list[GpodObstacle]:
+                      ground_xy) -> list[GpodObstacle]:
     """Obstacles joined from parts (`GpodDetector._parts`), each described by the part
     at its place when that part is another body than the one that gives it its height.
 
@@ -2860,19 +2867,19 @@ def described_by_part(whole: list[GpodObstacle], parts: list[GpodObstacle],
         radius: metres along the ground (``part_radius_m``).
         normal_up: (3,) the ground's unit normal, left optical frame.
         ground_xy: (G, 2) the frame's ground features, metres along the ground
-            (forward, left) from the point below the camera.
+            (forward, left) from the point below the camera, or a callable returning
+            them (asked only when a whole qualifies by height).
     Returns:
         The C obstacles, in order.
     """
-    at = np.array([[o.range * math.cos(o.bearing), o.range * math.sin(o.bearing)]
-                   for o in parts]).reshape(-1, 2)
+    at = _ground_points(parts)
+    here_all = _ground_points(whole)
     out = list(whole)
     for k, ob in enumerate(whole):
         mine = np.flatnonzero(owner == k)
         if mine.size < 2:
             continue
-        here = np.array([ob.range * math.cos(ob.bearing), ob.range * math.sin(ob.bearing)])
-        dist = np.hypot(*(at[mine] - here).T)
+        dist = np.hypot(*(at[mine] - here_all[k]).T)
         near = dist <= radius
         if near.sum() == 1:
             j = int(mine[np.argmax(near)])
@@ -2880,7 +2887,8 @@ def described_by_part(whole: list[GpodObstacle], parts: list[GpodObstacle],
             others = mine[mine != j]
             q = int(others[np.argmax([parts[i].height for i in others])])
             if (p.height < _OTHER_BODY_HEIGHT_FRACTION * ob.height
-                    and _body_gap(ground_xy, at[j], at[q])):
+                    and _body_gap(ground_xy() if callable(ground_xy) else ground_xy,
+                                  at[j], at[q])):
                 out[k] = dataclasses.replace(
                     ob, position=ob.position + (p.height - ob.height) * normal_up,
                     height=p.height, confidence=p.confidence, roi=p.roi,
@@ -3712,8 +3720,7 @@ class GpodDetector:
         if self._unseen is None:
             return ()
         # the known feet on the ground: (forward, left) from their range and bearing
-        explained = (np.array([[o.range * math.cos(o.bearing), o.range * math.sin(o.bearing)]
-                               for o in known]) if known else None)
+        explained = _ground_points(known) if known else None
         thr = features.threshold if features.threshold is not None else threshold
         r = self._unseen.update(cam, metric, features.u_left, features.v, features.excess,
                                 thr, explained, left=self._left)
@@ -4279,34 +4286,36 @@ class GpodDetector:
                              fwd, lft)
         pr = self.config.part_radius_m
         if sign > 0 and 0.0 < pr < radius and out:
-            out.extend(self._parts(out, idx, label, pr, sign, min_pixels, hh, g2, m, excess,
-                                   cam, metric, fwd, lft))
+            out, parts = self._parts(out, idx, label, pr, sign, min_pixels, hh, g2, m,
+                                     excess, cam, metric, fwd, lft)
+            out.extend(parts)
         return out
 
     def _parts(self, whole: list[GpodObstacle], idx, label, radius: float, sign: float,
                min_pixels: int, hh, g2, m: Matches, excess, cam, metric, fwd, lft
-               ) -> list[GpodObstacle]:
-        """The parts (clustered at ``radius``) of the obstacles made of several, as
-        obstacles of their own, those whose nearest point lies more than ``radius`` from
+               ) -> tuple[list[GpodObstacle], list[GpodObstacle]]:
+        """The whole obstacles as their parts describe them (`described_by_part`), and
+        the parts (clustered at ``radius``) of the obstacles made of several, as
+        obstacles of their own: those whose nearest point lies more than ``radius`` from
         every whole obstacle's (the nearest part is the whole's report already)."""
         fine = cluster_points_2d(g2, m.string_id[idx], radius)
         pairs = np.unique(label * (int(fine.max()) + 1) + fine)
         n_parts = np.bincount(pairs // (int(fine.max()) + 1), minlength=int(label.max()) + 1)
         sel = n_parts[label] > 1
         if not sel.any():
-            return []
+            return whole, []
         _, part = np.unique(fine[sel], return_inverse=True)
         parts = self._describe(idx[sel], part.astype(np.int64), sign, min_pixels, hh[sel],
                                g2[sel], m, excess, cam, metric, fwd, lft)
         owner = np.zeros(len(parts), np.int64)
         owner[part] = label[sel]
-        whole[:] = described_by_part(whole, parts, owner, radius, metric.normal_up,
-                                     self._ctx.ground_xy)
-        at = np.array([[o.range * math.cos(o.bearing), o.range * math.sin(o.bearing)]
-                       for o in whole])
-        return [p for p in parts
-                if np.hypot(*(at - [p.range * math.cos(p.bearing),
-                                    p.range * math.sin(p.bearing)]).T).min() > radius]
+        ctx = self._ctx
+        whole = described_by_part(whole, parts, owner, radius, metric.normal_up,
+                                  lambda: ctx.ground_xy)
+        at, p_at = _ground_points(whole), _ground_points(parts)
+        far = np.hypot(p_at[:, None, 0] - at[None, :, 0],
+                       p_at[:, None, 1] - at[None, :, 1]).min(axis=1) > radius
+        return whole, [p for p, f in zip(parts, far.tolist()) if f]
 
     def _obstacle_feet(self, idx: np.ndarray, label: np.ndarray, sid: np.ndarray, n_c: int,
                        m: Matches, height: np.ndarray
