@@ -1,10 +1,12 @@
 """Robust ground-plane fit in disparity space (core.ground_plane)."""
+import math
+
 import numpy as np
 import pytest
 
 from asmonc_vision.core.camera import MetricPlane, StereoCamera, plane_from_metric
 from asmonc_vision.core.ground_plane import (PlaneFit, _median, fit_ground_plane, lsq_plane,
-                                             plane_is_plausible)
+                                             plane_is_plausible, predict_plane)
 
 CAM = StereoCamera(f=300.0, cx=159.5, cy=119.5, baseline=0.35, width=320, height=240)
 
@@ -157,3 +159,47 @@ def test_weights_prefer_the_near_surface():
 def test_median_is_numpy_median(n):
     x = np.random.default_rng(n).normal(0.0, 1.0, n)
     assert _median(x) == float(np.median(x))
+
+
+def _rotation(rvec):
+    """Rodrigues: the (3, 3) rotation of a rotation vector (radians)."""
+    rvec = np.asarray(rvec, float)
+    a = float(np.linalg.norm(rvec))
+    if a == 0.0:
+        return np.eye(3)
+    k = rvec / a
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + math.sin(a) * K + (1 - math.cos(a)) * K @ K
+
+
+@pytest.mark.parametrize('seed', range(5))
+def test_predict_plane_is_the_plane_seen_after_the_motion(seed):
+    """The plane carried through a motion X_prev = R X + t (left optical frames) is the
+    plane the moved camera sees, n' = R^T n, h' = h + n.t, and F is its Jacobian."""
+    rng = np.random.default_rng(seed)
+    cam = CAM
+    plane, _ = _ground(rng.uniform(10, 30), rng.uniform(0.8, 1.6), rng.uniform(-5, 5))
+    n = plane.normal_up
+    R, t = _rotation(rng.normal(0, 0.05, 3)), rng.normal(0, 0.1, 3)
+    abc = plane_from_metric(cam, plane)
+    pred, F = predict_plane(cam, abc, R, t)
+    seen = plane_from_metric(cam, MetricPlane(normal_up=R.T @ n, height=plane.height + n @ t))
+    np.testing.assert_allclose(pred, seen, rtol=1e-9, atol=1e-9)
+    eps = 1e-6
+    F_num = np.column_stack([(predict_plane(cam, abc + e, R, t)[0]
+                              - predict_plane(cam, abc - e, R, t)[0]) / (2 * eps)
+                             for e in np.eye(3) * eps])
+    np.testing.assert_allclose(F, F_num, rtol=1e-5, atol=1e-7)
+    # no motion: the same plane, F = I
+    same, F0 = predict_plane(cam, abc, np.eye(3), np.zeros(3))
+    np.testing.assert_allclose(same, abc, atol=1e-12)
+    np.testing.assert_allclose(F0, np.eye(3), atol=1e-12)
+
+
+def test_predict_plane_none_when_the_camera_goes_below_the_plane():
+    cam = CAM
+    plane, abc = _ground(20.0, 1.2)
+    n = plane.normal_up
+    assert predict_plane(cam, abc, np.eye(3), -1.5 * n) is None     # 1.5 m down
+    assert predict_plane(cam, abc, np.eye(3), np.array([np.nan, 0, 0])) is None
+    assert predict_plane(cam, abc, np.eye(3), -1.0 * n) is not None  # still 0.2 m up

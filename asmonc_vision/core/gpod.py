@@ -13,9 +13,15 @@ Per stereo pair:
    ``refit_gate_px`` of the predicted plane, then a fine fit on the features within
    ``refit_gate_m`` of the coarse plane (when that took another surface: of the
    current plane; standing still: of the plane the rig had when it stopped), accepted
-   if it moved the plane plausibly little and smoothed by a constant-plane Kalman
-   filter. This is a step towards the paper's
-   dynamic recalibration, which will add a motion model to the prediction. The RANSAC
+   if it moved the plane plausibly little and smoothed by a Kalman filter on (a, b, c).
+   The filter's prediction is the paper's dynamic recalibration: with the camera's
+   motion given (`process`'s ``motion``; /egomotion in the node graph) the plane is
+   carried through it (`ground_plane.predict_plane`), the refits are gated closer to
+   the prediction (``motion_gate_m``) and limited to a small change from it
+   (``motion_max_*``), the plane the rig stopped with stays the gate while the wearer
+   shifts on the spot (``still_anchor_travel_m``), and frames too poor in ground
+   features to refit are bridged by the motion (``motion_coast_frames``); without a
+   motion, a constant-plane model with the walking process noise. The RANSAC
    fits weigh features by disparity cubed: of two surfaces, the near one -- the ground
    the wearer stands on -- wins.
 4. The obstacle threshold: ``threshold_mode='fixed'``: ``threshold_px`` (1.7 px in the
@@ -84,7 +90,8 @@ from .edges import (EdgeMap, chain_roots, detect_vertical_edges, gradient_noise_
 from .edges import warm_up as edges_warm_up
 from .obstacle_tracks import ObstacleTracker
 from .unseen_ground import UnseenGroundMonitor
-from .ground_plane import PlaneFit, PlausiblePlaneConfig, fit_ground_plane, plane_is_plausible
+from .ground_plane import (PlaneFit, PlausiblePlaneConfig, fit_ground_plane, plane_is_plausible,
+                           predict_plane)
 from .ground_plane import _median
 from .jit import jit as _jit
 from .jit import nb_pairwise_sum as _nb_pairwise_sum
@@ -217,6 +224,10 @@ _SIGMA_GATE = 3.0
 #: `GpodDetector._stillness` compares the strong edges when there are this many, else
 #: all edges.
 _STILL_MIN_EDGES = 100
+#: Largest camera translation (m) and rotation (rad) between two frames of a rig seen
+#: standing still (its edges within a pixel) that is taken as a real motion
+_STILL_MAX_TRANSLATION_M = 0.02
+_STILL_MAX_ROTATION_RAD = math.radians(1.0)
 
 #: The left image's pixel noise is estimated (`edges.image_noise_sigma`, 0.2 ms at
 #: 320 x 240) on the first frame and then every this many frames.
@@ -348,6 +359,36 @@ class GpodConfig(PlausiblePlaneConfig):
     recover_max_angle_deg: float = param(
         25.0, "'refit': ... and its normal within this angle of the calibrated normal, "
         'degrees', range=(0.0, 90.0))
+    # with the camera's motion known (`process`'s motion: /egomotion in the node graph)
+    # the plane is predicted through it (the paper's dynamic recalibration)
+    motion_process_noise_px: float = param(
+        0.2, "'refit', the camera's motion known: expected change of the ground disparity "
+        'from one frame to the next that the motion does not explain (uneven ground, '
+        'motion error), pixels; the Kalman process noise in place of '
+        'refit_process_noise_px', range=(0.001, 100.0))
+    motion_gate_m: float = param(
+        0.05, "'refit', the camera's motion known: features within this height of the "
+        'plane predicted through the motion (or of the coarse refit) take part in the fine '
+        'refit, metres, in place of refit_gate_m (the prediction is good to millimetres: '
+        'the ground beyond a kerb down leaks in less)', range=(0.001, 100.0))
+    motion_max_height_change_m: float = param(
+        0.05, "'refit', the camera's motion known: a refit that moves the camera height by "
+        'more than this from the plane predicted through the motion is rejected, metres '
+        '(in place of refit_max_height_change_m)', range=(0.001, 100.0))
+    motion_max_angle_change_deg: float = param(
+        2.0, "'refit', the camera's motion known: a refit that turns the plane normal by "
+        'more than this from the plane predicted through the motion is rejected, degrees '
+        '(in place of refit_max_angle_change_deg)', range=(0.01, 90.0))
+    motion_coast_frames: int = param(
+        10, "'refit', the camera's motion known: frames the plane is carried through the "
+        'motion alone while refits fail (in place of max_coast_frames; refits rejected by '
+        'the motion_max_* limits max_coast_frames times in a row lift those limits '
+        'instead: the motion may be wrong)', range=(0, 100000))
+    still_anchor_travel_m: float = param(
+        0.3, "'refit', the camera's motion known: the plane the rig had when it came to "
+        'stand still stays the refit gate, carried through the motion, until the camera '
+        'has travelled this far (a wearer who shifts or turns on the spot stands on the '
+        'same ground), metres', range=(0.0, 100.0))
     # --- edges ---------------------------------------------------------------------
     edge_threshold: float = param(
         4.0, 'Least horizontal intensity gradient of a vertical edge, grey levels per pixel',
@@ -3211,6 +3252,18 @@ class _Pass(NamedTuple):
     er: EdgeMap
     still: bool
     timings: dict[str, float]
+    #: the camera's motion since the previous pair as `GpodDetector.process` takes it
+    #: (a callable resolved once the plane was calibrated), or None
+    motion: tuple | None = None
+
+
+def _still_motion(motion: tuple) -> bool:
+    """Whether a camera motion (R (3, 3), t (3,) m, ...) is small enough for a rig seen
+    standing still: |t| <= 2 cm and a rotation of at most 1 degree."""
+    R, t = np.asarray(motion[0], float), np.asarray(motion[1], float)
+    cos_angle = float(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))
+    return (float(np.linalg.norm(t)) <= _STILL_MAX_TRANSLATION_M
+            and math.acos(cos_angle) <= _STILL_MAX_ROTATION_RAD)
 
 
 def bin_pair(left: np.ndarray, right: np.ndarray, cam: StereoCamera
@@ -3314,6 +3367,11 @@ class GpodDetector:
         self._coast = 0
         #: the plane when the rig last came to stand still (None: moving, or no plane)
         self._still_plane: MetricPlane | None = None
+        self._still_travel = 0.0
+        #: refits rejected in a row by the change limits around a motion's prediction
+        self._rejected = 0
+        #: the plane before this frame's motion (None: no motion this frame)
+        self._unmoved: MetricPlane | None = None
         #: residual spread of the initial fit: global, and per edge strength (bin
         #: strengths, bin sigmas), pixels
         self._sigma = float('nan')
@@ -3396,20 +3454,62 @@ class GpodDetector:
         cosang = float(np.clip(np.dot(fit.metric.normal_up, cal.normal_up), -1.0, 1.0))
         return math.degrees(math.acos(cosang)) <= c.recover_max_angle_deg
 
+    def _predict_plane(self, cam: StereoCamera, motion: tuple) -> bool:
+        """Carry the plane state (and the plane the rig stopped with) through the camera's
+        motion (R, t, ...) since the previous frame: x = f(x), P = F P F^T
+        (`ground_plane.predict_plane`); the plane before it is kept as ``_unmoved``.
+        False, with nothing changed, when it cannot."""
+        r = predict_plane(cam, self._abc, motion[0], motion[1])
+        if r is None:
+            return False
+        R, t = np.asarray(motion[0], float), np.asarray(motion[1], float)
+        self._unmoved = plane_is_plausible(cam, self._abc, min_height_m=0.0,
+                                           max_height_m=float('inf'), max_tilt_deg=90.0)
+        self._abc, F = r
+        self._cov = F @ self._cov @ F.T
+        if self._still_plane is not None:
+            n = self._still_plane.normal_up
+            # n . X_prev + h = 0, X_prev = R X + t  =>  (R^T n) . X + (h + n . t) = 0
+            self._still_plane = MetricPlane(normal_up=R.T @ n,
+                                            height=self._still_plane.height + float(n @ t))
+        self._still_travel += float(np.linalg.norm(t))
+        return True
+
+    def _near_still_place(self) -> bool:
+        """Whether the camera has travelled at most ``still_anchor_travel_m`` since the rig
+        came to stand still (so it still stands on the ground it stopped on)."""
+        return self._still_travel <= self.config.still_anchor_travel_m
+
     def _close_to_current(self, fit: PlaneFit, cam: StereoCamera,
-                          cur: MetricPlane | None = None) -> bool:
+                          cur: MetricPlane | None = None, tight: bool = False) -> bool:
         """Whether a refit is within the per-frame change limits of the current plane
-        (``cur``: its metric plane, if known)."""
+        (``cur``: its metric plane, if known; ``tight``: the current plane was predicted
+        through the camera's motion: the limits ``motion_max_*``, from the prediction or
+        from the plane before the motion -- a wrong motion (visual egomotion once 4 cm
+        off) must not reject the ground; another surface differs from both)."""
         c = self.config
+        if tight:
+            max_h, max_a = c.motion_max_height_change_m, c.motion_max_angle_change_deg
+        else:
+            max_h, max_a = c.refit_max_height_change_m, c.refit_max_angle_change_deg
         if cur is None:
             cur = plane_is_plausible(cam, self._abc, min_height_m=0.0,
                                      max_height_m=float('inf'), max_tilt_deg=90.0)
         if cur is None or fit.metric is None:
             return False
-        if abs(fit.metric.height - cur.height) > c.refit_max_height_change_m:
+        if tight and self._unmoved is not None and self._within(fit.metric, self._unmoved,
+                                                                max_h, max_a):
+            return True
+        return self._within(fit.metric, cur, max_h, max_a)
+
+    @staticmethod
+    def _within(plane: MetricPlane, ref: MetricPlane, max_h: float, max_a: float) -> bool:
+        """Whether ``plane`` is within ``max_h`` metres of camera height and ``max_a``
+        degrees of normal of ``ref``."""
+        if abs(plane.height - ref.height) > max_h:
             return False
-        cosang = float(np.clip(np.dot(fit.metric.normal_up, cur.normal_up), -1.0, 1.0))
-        return math.degrees(math.acos(cosang)) <= c.refit_max_angle_change_deg
+        cosang = float(np.clip(np.dot(plane.normal_up, ref.normal_up), -1.0, 1.0))
+        return math.degrees(math.acos(cosang)) <= max_a
 
     @property
     def sigma_px(self) -> float:
@@ -3476,11 +3576,12 @@ class GpodDetector:
         thr = np.clip(c.threshold_k * sig, c.threshold_floor_px, c.threshold_ceiling_px)
         return thr, glob
 
-    def _update_plane(self, u, v, d, s, cam: StereoCamera, still: bool = False
-                      ) -> tuple[str, bool]:
+    def _update_plane(self, u, v, d, s, cam: StereoCamera, still: bool = False,
+                      motion: tuple | None = None) -> tuple[str, bool]:
         """Advance the plane state with this frame's features (s: their
         :func:`_noise_key`, for the residual spread; ``still``: the rig stood still since
-        the previous frame). Returns (status, updated)."""
+        the previous frame; ``motion``: the camera's (R, t, ...) since the previous frame,
+        as `process` takes it, or None). Returns (status, updated)."""
         c = self.config
         if self._calib is None:
             self._init_window.append((u, v, d, s))
@@ -3510,13 +3611,36 @@ class GpodDetector:
             # nothing stands on it: lost, as in 'refit' mode.
             return ('tracking', False) if enough else ('lost', False)
         fit = None
+        # Kalman predict: through the camera's motion when it is known (the paper's
+        # dynamic recalibration), else the constant-plane model below. While the rig
+        # stands still (its edges stayed in place) a motion larger than a standing
+        # wearer's sway can only be an error: the identity instead (a wrong one carried
+        # the plane the rig stopped with off the ground for as long as the wearer stood).
+        self._unmoved = None
+        if motion is not None and still and not _still_motion(motion):
+            motion = (np.eye(3), np.zeros(3))
+        predicted = motion is not None and self._predict_plane(cam, motion)
         current = plane_is_plausible(cam, self._abc, min_height_m=0.0,
                                      max_height_m=float('inf'), max_tilt_deg=90.0)
-        if not still:
+        if not still and not (predicted and self._still_plane is not None
+                              and self._near_still_place()):
             self._still_plane = None
         elif self._still_plane is None:
             self._still_plane = current             # the plane when the rig stopped
-        if enough and current is not None and not still:
+            self._still_travel = 0.0
+        anchored = self._still_plane is not None
+        # Refits near the prediction through the motion: a narrower gate and tighter
+        # change limits, unless refits were rejected by those limits max_coast_frames
+        # times in a row (the motion may be wrong: then as without one, around the
+        # predicted plane). With a motion the plane is carried through frames with too
+        # few ground features to refit for up to motion_coast_frames.
+        # (Standing, with a motion source, the plane the rig stopped with is as good a
+        # prediction.)
+        tight = predicted and self._rejected < c.max_coast_frames
+        gate_m = c.motion_gate_m if tight else c.refit_gate_m
+        coast_frames = c.motion_coast_frames if predicted else c.max_coast_frames
+        rejected = False
+        if enough and current is not None and not anchored:
             # Coarse refit from the nearer half of the features near the predicted plane
             # in disparity (a gate wide enough for walking motion), then a fine refit
             # from all features near the coarse plane in disparity *and* metric height,
@@ -3529,10 +3653,10 @@ class GpodDetector:
             if coarse is not None:
                 height = coarse.metric.signed_height(cam.triangulate(u, v, d))
                 gate = ((np.abs(d - plane_disparity(coarse.abc, u, v)) <= c.refit_gate_px)
-                        & (np.abs(height) <= c.refit_gate_m))
+                        & (np.abs(height) <= gate_m))
                 fit = self._fit(u[gate], v[gate], d[gate], cam)
-            if fit is not None and not self._close_to_current(fit, cam, current):
-                fit = None
+            if fit is not None and not self._close_to_current(fit, cam, current, tight):
+                fit, rejected = None, True
         if enough and current is not None and fit is None:
             # Standing still the current plane is where the ground is: refit from the
             # features within refit_gate_m of it. So too when the coarse fit took another
@@ -3545,13 +3669,13 @@ class GpodDetector:
             # disparity, about the gate's 10 cm), each refit tilted the plane towards it
             # and the tilted plane let more of it in: 0.1 -> 3.8 degrees and 12 cm in
             # 0.5 s, and the pavement between the wearer and the kerb stood 20 cm up.
-            ref = self._still_plane if still and self._still_plane is not None else current
+            ref = self._still_plane if self._still_plane is not None else current
             height = ref.signed_height(cam.triangulate(u, v, d))
-            gate = np.abs(height) <= c.refit_gate_m
+            gate = np.abs(height) <= gate_m
             fit = self._fit(u[gate], v[gate], d[gate], cam)
-            if fit is not None and not self._close_to_current(fit, cam, current):
-                fit = None
-        if fit is None and enough and self._coast >= c.max_coast_frames:
+            if fit is not None and not self._close_to_current(fit, cam, current, tight):
+                fit, rejected = None, True
+        if fit is None and enough and self._coast >= coast_frames:
             # Lost: recover from the nearer half of the features (the ground the wearer
             # stands on, rather than the ground beyond a step) if the result is near the
             # calibration.
@@ -3559,22 +3683,30 @@ class GpodDetector:
             ungated = self._fit(u[near], v[near], d[near], cam)
             if ungated is not None and self._near_calibration(ungated):
                 fit = ungated
-        if fit is None:
-            if self._coast < c.max_coast_frames and enough:
-                self._coast += 1
-                return 'tracking', False
-            self._coast = c.max_coast_frames      # stay lost until a refit succeeds
-            return 'lost', False
-        # Kalman filter, constant-plane model: predict with the walking process noise,
-        # update with the refit and its covariance.
-        sq = c.refit_process_noise_px ** 2
+        noise = c.motion_process_noise_px if predicted else c.refit_process_noise_px
+        sq = noise ** 2
         q = np.diag([sq / (0.5 * cam.width) ** 2, sq / (0.5 * cam.height) ** 2, sq])
+        if fit is None:
+            self._rejected = self._rejected + 1 if rejected else 0
+            if self._coast < coast_frames and enough:
+                self._coast += 1
+                if predicted:
+                    self._cov = self._cov + q
+                return 'tracking', False
+            # stay lost until a refit succeeds
+            self._coast = max(c.max_coast_frames, c.motion_coast_frames)
+            return 'lost', False
+        # Kalman filter: predict with the process noise Q (the walking motion's, or what
+        # the known motion leaves unexplained): P = F P F^T + Q (F P F^T is already in
+        # self._cov when predicted through the motion, F = I otherwise); update with the
+        # refit z and its covariance R: K = P (P + R)^-1, x = x + K (z - x),
+        # P = (I - K) P.
         p_pred = self._cov + q
         gain = p_pred @ np.linalg.inv(p_pred + fit.cov)
         self._abc = self._abc + gain @ (fit.abc - self._abc)
         self._cov = (np.eye(3) - gain) @ p_pred
         self._last_fit = fit
-        self._coast = 0
+        self._coast = self._rejected = 0
         return 'tracking', True
 
     # ------------------------------------------------------------------ main
@@ -3604,19 +3736,21 @@ class GpodDetector:
         t_start = time.perf_counter()
         self._begin(left, right, cam)
         c = self.config
-        p = self._frame_pass(left, right, cam)
+        p = self._frame_pass(left, right, cam, motion)
+        motion = p.motion
         status, metric, timings = p.status, p.metric, p.timings
         detections = p.detections
         if self._coarse_wanted(cam):
             t0 = time.perf_counter()
-            detections = self._with_coarse(detections, p.features, left, right, cam, metric)
+            detections = self._with_coarse(detections, p.features, left, right, cam, metric,
+                                           None if callable(motion) else motion)
             timings['coarse'] = (time.perf_counter() - t0) * 1e3
         t3 = time.perf_counter()
         obstacles: tuple[GpodObstacle, ...] = ()
         if status == 'tracking':
             stamp_s = (self._frame * c.track_frame_period_s if stamp_ns is None
                        else stamp_ns * 1e-9)
-            if callable(motion):
+            if callable(motion):            # the frame that completed the calibration
                 motion = motion()
             obstacles = self._track(detections, stamp_s, p.still, cam, metric, motion)
             unseen = self._unseen_ground(p.features, p.threshold, cam, metric,
@@ -3654,10 +3788,12 @@ class GpodDetector:
             self.reset()
         self._cam = cam
 
-    def _frame_pass(self, left: np.ndarray, right: np.ndarray, cam: StereoCamera
-                    ) -> '_Pass':
+    def _frame_pass(self, left: np.ndarray, right: np.ndarray, cam: StereoCamera,
+                    motion: tuple | Callable[[], tuple | None] | None = None) -> '_Pass':
         """One pair's edges, matches, plane and detections (no tracking): the images
-        already checked against ``cam``, the camera already this detector's."""
+        already checked against ``cam``, the camera already this detector's; ``motion``
+        as `process` takes it (a callable is called once the pair is matched, before
+        the plane is updated; not while the plane is being calibrated)."""
         self._left = left
         self._frame += 1
         c = self.config
@@ -3687,7 +3823,10 @@ class GpodDetector:
         v = m.v.astype(np.float64)
         d = m.d.astype(np.float64)
         still = self._stillness(el)
-        status, updated = self._update_plane(u, v, d, _noise_key(m), cam, still)
+        if callable(motion) and self._calib is not None:     # not while calibrating
+            motion = motion()
+        status, updated = self._update_plane(u, v, d, _noise_key(m), cam, still,
+                                             None if callable(motion) else motion)
         t3 = time.perf_counter()
         timings['plane'] = (t3 - t2) * 1e3
 
@@ -3707,7 +3846,7 @@ class GpodDetector:
             features = _features(m, np.full(len(m), np.nan, np.float32))
         timings['obstacles'] = (time.perf_counter() - t3) * 1e3
         return _Pass(status, bool(updated), metric, features, detections, threshold, el, er,
-                     still, timings)
+                     still, timings, motion)
 
     def _unseen_ground(self, features: GpodFeatures, threshold: float, cam: StereoCamera,
                        metric: MetricPlane, known: tuple[GpodObstacle, ...]
@@ -3748,7 +3887,8 @@ class GpodDetector:
 
     def _with_coarse(self, detections: tuple[GpodObstacle, ...], features: GpodFeatures,
                      left: np.ndarray, right: np.ndarray, cam: StereoCamera,
-                     metric: MetricPlane | None) -> tuple[GpodObstacle, ...]:
+                     metric: MetricPlane | None, motion: tuple | None = None
+                     ) -> tuple[GpodObstacle, ...]:
         """The frame's detections joined by those of the binned pass that no full-size
         detection explains.
 
@@ -3773,7 +3913,7 @@ class GpodDetector:
             self._coarse = GpodDetector(dataclasses.replace(c, coarse_min_width=0))
         lb, rb, cam_b = bin_pair(left, right, cam)
         self._coarse._begin(lb, rb, cam_b)
-        p = self._coarse._frame_pass(lb, rb, cam_b)
+        p = self._coarse._frame_pass(lb, rb, cam_b, motion)
         if metric is None or not p.detections:
             return detections
         n = metric.normal_up

@@ -372,3 +372,51 @@ def fit_ground_plane(u, v, d, *, cam: StereoCamera | None = None, method: str = 
     return PlaneFit(abc=np.asarray(abc, np.float64), cov=np.asarray(cov, np.float64),
                     num_features=int(inl.sum()), residual_rms=float(rms), inliers=mask,
                     metric=metric, residual_sigma=sigma)
+
+
+def predict_plane(cam: StereoCamera, abc: np.ndarray, R: np.ndarray, t: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray] | None:
+    """The ground plane carried through a camera motion (the prediction of the paper's
+    dynamic ground-plane recalibration).
+
+    The plane ``d = a*u + b*v + c`` is ``w . X = 1`` for cyclopean points X on it, with
+    ``w = n_down / h`` (n_down the plane's downward unit normal, h the cyclopean centre's
+    height above it) linear in (a, b, c): ``w = M (a, b, c)``, ``M = [[1, 0, 0], [0, 1, 0],
+    [cx/f, cy/f, 1/f]] / B``. A motion ``X_prev = R X_curr + t`` of the left optical frame
+    is ``X_prev = R X_curr + t_c`` of the cyclopean one (``t_c = R o + t - o``, o = (B/2, 0,
+    0) the cyclopean centre in the left frame), so the plane seen now is
+    ``w' = R^T w / s`` with ``s = 1 - w . t_c`` (the ratio of the camera's new height to
+    its old one).
+
+    Args:
+        cam: the rectified stereo camera.
+        abc: (3,) float64 plane (a: px/px, b: px/px, c: px) in the previous pair.
+        R: (3, 3) rotation, t: (3,) translation (m) of the left camera from the previous
+            pair to this one, ``X_prev = R X_curr + t`` (left optical frames, x right,
+            y down, z forward; `/egomotion`'s convention).
+    Returns:
+        (abc', F): the (3,) plane in this pair and the (3, 3) Jacobian d abc' / d abc
+        (the Kalman filter's state transition, ``P' = F P F^T + Q``); None when the
+        camera would not be above the plane after the motion (s <= 0) or the input is
+        not finite.
+    """
+    abc = np.asarray(abc, np.float64).reshape(3)
+    R = np.asarray(R, np.float64).reshape(3, 3)
+    t = np.asarray(t, np.float64).reshape(3)
+    if not (np.all(np.isfinite(abc)) and np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
+        return None
+    M = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0],
+                  [cam.cx / cam.f, cam.cy / cam.f, 1.0 / cam.f]]) / cam.baseline
+    M_inv = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0],
+                      [-cam.cx, -cam.cy, cam.f]]) * cam.baseline
+    o = np.array([cam.baseline / 2.0, 0.0, 0.0])
+    t_c = R @ o + t - o
+    w = M @ abc
+    s = 1.0 - float(w @ t_c)
+    if not np.isfinite(s) or s <= 1e-6:
+        return None
+    Rt_w = R.T @ w
+    w_new = Rt_w / s
+    # d w' / d w = R^T / s + (R^T w) t_c^T / s^2
+    J_w = R.T / s + np.outer(Rt_w, t_c) / s ** 2
+    return M_inv @ w_new, M_inv @ J_w @ M

@@ -15,11 +15,13 @@ callbacks that receive images stay fast. Publishes, per processed pair:
 
 Subscribes to `/egomotion` (geometry_msgs/TransformStamped, the visual egomotion node's
 motion of the left camera from the previous pair to this one) as the motion input of the
-obstacle tracks: after detecting a pair the worker waits up to ``egomotion_wait`` for that
-pair's motion, and tracks are carried through the motion (an obstacle whose evidence dips
-for a frame is still reported, moved to where it now is). With no motion (no egomotion
-node, a pair it could not estimate, a pair dropped here) tracks are carried only while
-the rig stands still; detection itself never waits on anything.
+ground plane and the obstacle tracks: once a pair's edges are matched the worker waits
+up to ``egomotion_wait`` for that pair's motion (the egomotion node works on the pair
+meanwhile); the ground plane is predicted through the motion (`gpod.motion_*`) and the
+tracks are carried through it (an obstacle whose evidence dips for a frame is still
+reported, moved to where it now is). With no motion (no egomotion node, a pair it could
+not estimate, a pair dropped here) the plane is refitted without a prediction, and the
+tracks are carried only while the rig stands still.
 
 Focal length, principal point and baseline come from the CameraInfo on the wire, the
 ground plane from the images: the node works on any rectified rig and image size.
@@ -70,10 +72,11 @@ class DetectorNodeConfig(StereoInputConfig):
     publish_markers: bool = param(True, 'publish /obstacles/markers')
     use_egomotion: bool = param(
         True, 'use /egomotion (the visual egomotion node) as the motion input of the '
-        'obstacle tracks')
+        'ground plane and the obstacle tracks')
     egomotion_wait: float = param(
-        0.1, 'longest wait, after detecting a pair, for its /egomotion message (wall time, '
-        's); without it the tracks are carried only while the rig stands still',
+        0.1, 'longest wait, once a pair is matched, for its /egomotion message (wall time, '
+        's); without it the plane is refitted unpredicted and the tracks are carried only '
+        'while the rig stands still',
         range=(0.0, 2.0))
 
 
