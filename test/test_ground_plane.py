@@ -1,10 +1,9 @@
 """Robust ground-plane fit in disparity space (core.ground_plane)."""
-import math
-
 import numpy as np
 import pytest
 
 from asmonc_vision.core.camera import MetricPlane, StereoCamera, plane_from_metric
+from asmonc_vision.core.rotations import rotvec_to_matrix
 from asmonc_vision.core.ground_plane import (PlaneFit, _median, fit_ground_plane, lsq_plane,
                                              plane_is_plausible, predict_plane)
 
@@ -161,17 +160,6 @@ def test_median_is_numpy_median(n):
     assert _median(x) == float(np.median(x))
 
 
-def _rotation(rvec):
-    """Rodrigues: the (3, 3) rotation of a rotation vector (radians)."""
-    rvec = np.asarray(rvec, float)
-    a = float(np.linalg.norm(rvec))
-    if a == 0.0:
-        return np.eye(3)
-    k = rvec / a
-    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + math.sin(a) * K + (1 - math.cos(a)) * K @ K
-
-
 @pytest.mark.parametrize('seed', range(5))
 def test_predict_plane_is_the_plane_seen_after_the_motion(seed):
     """The plane carried through a motion X_prev = R X + t (left optical frames) is the
@@ -180,7 +168,7 @@ def test_predict_plane_is_the_plane_seen_after_the_motion(seed):
     cam = CAM
     plane, _ = _ground(rng.uniform(10, 30), rng.uniform(0.8, 1.6), rng.uniform(-5, 5))
     n = plane.normal_up
-    R, t = _rotation(rng.normal(0, 0.05, 3)), rng.normal(0, 0.1, 3)
+    R, t = rotvec_to_matrix(rng.normal(0, 0.05, 3)), rng.normal(0, 0.1, 3)
     abc = plane_from_metric(cam, plane)
     pred, F = predict_plane(cam, abc, R, t)
     seen = plane_from_metric(cam, MetricPlane(normal_up=R.T @ n, height=plane.height + n @ t))

@@ -88,6 +88,7 @@ from .config import param
 from .edges import (EdgeMap, chain_roots, detect_vertical_edges, gradient_noise_gain,
                     image_noise_sigma)
 from .edges import warm_up as edges_warm_up
+from .motion.geometry import so3_log
 from .obstacle_tracks import ObstacleTracker
 from .unseen_ground import UnseenGroundMonitor
 from .ground_plane import (PlaneFit, PlausiblePlaneConfig, fit_ground_plane, plane_is_plausible,
@@ -3257,13 +3258,18 @@ class _Pass(NamedTuple):
     motion: tuple | None = None
 
 
+def _state_metric(cam: StereoCamera, abc: np.ndarray) -> MetricPlane | None:
+    """The metric plane of a plane state (a, b, c): any plane below the camera, however
+    high or tilted (None: not below the camera, or not finite)."""
+    return plane_is_plausible(cam, abc, min_height_m=0.0, max_height_m=float('inf'),
+                              max_tilt_deg=90.0)
+
+
 def _still_motion(motion: tuple) -> bool:
     """Whether a camera motion (R (3, 3), t (3,) m, ...) is small enough for a rig seen
     standing still: |t| <= 2 cm and a rotation of at most 1 degree."""
-    R, t = np.asarray(motion[0], float), np.asarray(motion[1], float)
-    cos_angle = float(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))
-    return (float(np.linalg.norm(t)) <= _STILL_MAX_TRANSLATION_M
-            and math.acos(cos_angle) <= _STILL_MAX_ROTATION_RAD)
+    return (float(np.linalg.norm(np.asarray(motion[1], float))) <= _STILL_MAX_TRANSLATION_M
+            and float(np.linalg.norm(so3_log(motion[0]))) <= _STILL_MAX_ROTATION_RAD)
 
 
 def bin_pair(left: np.ndarray, right: np.ndarray, cam: StereoCamera
@@ -3367,6 +3373,7 @@ class GpodDetector:
         self._coast = 0
         #: the plane when the rig last came to stand still (None: moving, or no plane)
         self._still_plane: MetricPlane | None = None
+        #: how far the camera has travelled (m, by the motions given) since then
         self._still_travel = 0.0
         #: refits rejected in a row by the change limits around a motion's prediction
         self._rejected = 0
@@ -3463,8 +3470,7 @@ class GpodDetector:
         if r is None:
             return False
         R, t = np.asarray(motion[0], float), np.asarray(motion[1], float)
-        self._unmoved = plane_is_plausible(cam, self._abc, min_height_m=0.0,
-                                           max_height_m=float('inf'), max_tilt_deg=90.0)
+        self._unmoved = _state_metric(cam, self._abc)
         self._abc, F = r
         self._cov = F @ self._cov @ F.T
         if self._still_plane is not None:
@@ -3474,11 +3480,6 @@ class GpodDetector:
                                             height=self._still_plane.height + float(n @ t))
         self._still_travel += float(np.linalg.norm(t))
         return True
-
-    def _near_still_place(self) -> bool:
-        """Whether the camera has travelled at most ``still_anchor_travel_m`` since the rig
-        came to stand still (so it still stands on the ground it stopped on)."""
-        return self._still_travel <= self.config.still_anchor_travel_m
 
     def _close_to_current(self, fit: PlaneFit, cam: StereoCamera,
                           cur: MetricPlane | None = None, tight: bool = False) -> bool:
@@ -3493,8 +3494,7 @@ class GpodDetector:
         else:
             max_h, max_a = c.refit_max_height_change_m, c.refit_max_angle_change_deg
         if cur is None:
-            cur = plane_is_plausible(cam, self._abc, min_height_m=0.0,
-                                     max_height_m=float('inf'), max_tilt_deg=90.0)
+            cur = _state_metric(cam, self._abc)
         if cur is None or fit.metric is None:
             return False
         if tight and self._unmoved is not None and self._within(fit.metric, self._unmoved,
@@ -3620,10 +3620,11 @@ class GpodDetector:
         if motion is not None and still and not _still_motion(motion):
             motion = (np.eye(3), np.zeros(3))
         predicted = motion is not None and self._predict_plane(cam, motion)
-        current = plane_is_plausible(cam, self._abc, min_height_m=0.0,
-                                     max_height_m=float('inf'), max_tilt_deg=90.0)
+        current = _state_metric(cam, self._abc)
+        # moving: the plane the rig stopped with is kept, carried through the motion,
+        # while the camera is still near where it stopped (on the same ground)
         if not still and not (predicted and self._still_plane is not None
-                              and self._near_still_place()):
+                              and self._still_travel <= c.still_anchor_travel_m):
             self._still_plane = None
         elif self._still_plane is None:
             self._still_plane = current             # the plane when the rig stopped
@@ -3634,8 +3635,6 @@ class GpodDetector:
         # times in a row (the motion may be wrong: then as without one, around the
         # predicted plane). With a motion the plane is carried through frames with too
         # few ground features to refit for up to motion_coast_frames.
-        # (Standing, with a motion source, the plane the rig stopped with is as good a
-        # prediction.)
         tight = predicted and self._rejected < c.max_coast_frames
         gate_m = c.motion_gate_m if tight else c.refit_gate_m
         coast_frames = c.motion_coast_frames if predicted else c.max_coast_frames
@@ -3833,8 +3832,7 @@ class GpodDetector:
         metric = None
         detections: tuple[GpodObstacle, ...] = ()
         if status == 'tracking':
-            metric = plane_is_plausible(cam, self._abc, min_height_m=0.0,
-                                        max_height_m=float('inf'), max_tilt_deg=90.0)
+            metric = _state_metric(cam, self._abc)
         threshold = self.pixel_thresholds(np.zeros(0))[1]
         if status == 'tracking' and metric is not None:
             features, detections = self._detect(m, u, v, d, cam, metric, d_min, d_max, el,
