@@ -842,6 +842,36 @@ def test_silhouette_owners_place_only_next_to_a_matching_obstacle():
         [0, -1, -1, 0])
 
 
+def test_a_candidate_is_no_side_of_a_body_that_would_hide_visible_ground():
+    """A candidate silhouette in front of a low obstacle claims the body between them.
+    Ground seen right behind that body's face, where a body of their height would hide it
+    from the camera (1.2 m up), says the candidate is something else (a noise string in
+    front of a box); ground in front of the face, or beyond its shadow, says nothing."""
+    from asmonc_vision.core.gpod import silhouette_owners
+    xy = np.array([[5.0, 0.2]])                        # an 8 cm obstacle's foot
+    g_lab = np.array([0])
+    height = np.array([0.08])
+    w = np.array([[4.6, 0.3]])                         # candidate, 0.41 m in front
+    mid = 0.5 * (w[0] + xy[0])                         # the face w-p's middle
+
+    def along(behind):                                 # ground on the ray through mid
+        r = np.hypot(*mid)
+        return np.array([mid * (r + b) / r for b in behind])
+
+    shadow = np.hypot(*mid) * 0.08 / 1.2               # 0.32 m
+    hidden = along([0.12, 0.15])
+    kw = dict(sigma_w=np.array([0.03]), sigma=np.array([0.03]))
+    assert silhouette_owners(w, [0.08], xy, g_lab, height, 0.7, hidden)[0] == 0
+    assert silhouette_owners(w, [0.08], xy, g_lab, height, 0.7, hidden, 1.2, **kw)[0] == -1
+    for seen in (along([-0.15, -0.1]), along([shadow + 0.05, shadow + 0.1]),
+                 along([0.03, 0.05]), hidden[:1]):
+        # in front; beyond the shadow; within the feet's range error; one point only
+        assert silhouette_owners(w, [0.08], xy, g_lab, height, 0.7, seen, 1.2, **kw)[0] == 0
+    # A taller body casts a longer shadow.
+    far = along([shadow + 0.05, shadow + 0.1])
+    assert silhouette_owners(w, [0.3], xy, g_lab, np.array([0.3]), 0.7, far, 1.2, **kw)[0] == -1
+
+
 # ---------------------------------------------------------------- obstacle tracks
 def test_tracks_bridge_a_missed_detection_and_end_when_the_obstacle_goes(scenes,
                                                                          monkeypatch):
@@ -1700,7 +1730,10 @@ def test_silhouette_owners_compiled_equals_numpy(monkeypatch):
         xw = centre[rng.integers(0, n_c, w_n)] + rng.normal(0.0, 0.5, (w_n, 2))
         top = rng.uniform(0.02, 0.6, w_n)
         ground = rng.uniform([2.5, -1.5], [5.5, 1.5], (int(rng.integers(0, 300)), 2))
-        cases.append((xw, top, xy, g_lab, height, 0.7, ground))
+        # every other case with the hidden-ground test (a camera 0.8-1.6 m up)
+        cam_h = float(rng.uniform(0.8, 1.6)) if len(cases) % 2 else math.inf
+        cases.append((xw, top, xy, g_lab, height, 0.7, ground, cam_h,
+                      rng.uniform(0.0, 0.08, w_n), rng.uniform(0.0, 0.08, s_n)))
     fast, _ = _compiled_equals_numpy(monkeypatch, gpod, ('_nb_owners',),
                                      lambda: [gpod.silhouette_owners(*c) for c in cases])
     flat = np.concatenate(fast)

@@ -204,6 +204,10 @@ _WEAK_MIN_PIXELS = 3
 _WEAK_SIGMAS = 4.0
 _WEAK_CORR = 2.0
 _WEAK_HEIGHT_RATIO = 2.0
+#: A candidate silhouette is no side of an obstacle when at least this many ground
+#: features are seen where the body between it and the obstacle's feet would hide them
+#: (`_face_hides_kernel`).
+_FACE_HIDDEN_MIN = 2
 
 #: A whole obstacle placed at one part's nearest point takes that part's height and
 #: confidence when the part is lower than this fraction of the whole's height (another
@@ -1310,7 +1314,7 @@ def _warm_up() -> None:
                          np.zeros(1, np.float32), np.zeros(1, np.int32), np.zeros(1, np.int32),
                          True)
     _nb_owners = _warmed(_nb_owners, f2, f1, np.zeros((2, 2)), np.zeros(2, np.int64), f1 + 1.0,
-                         0.5, f1, np.zeros(2), f2, True)
+                         0.5, 1.2, f1, np.zeros(2), f1, np.zeros(2), f2, True)
     _nb_contact_bounds = _warmed(_nb_contact_bounds, f1, f1, f1, f1, f2[:, :1], f2[:, :1],
                                  np.ones((1, 1), bool), 2, 2)
     _nb_link_groups = _warmed(_nb_link_groups, np.zeros((2, 2)), np.arange(2), 2, 1.0)
@@ -3045,7 +3049,9 @@ def face_gap_points(xy: np.ndarray, group: np.ndarray, n_groups: int, q: np.ndar
 
 
 def silhouette_owners(xw: np.ndarray, top: np.ndarray, xy: np.ndarray, g_lab: np.ndarray,
-                      height: np.ndarray, radius: float, ground_xy) -> np.ndarray:
+                      height: np.ndarray, radius: float, ground_xy,
+                      camera_height: float = math.inf, sigma_w: np.ndarray | None = None,
+                      sigma: np.ndarray | None = None) -> np.ndarray:
     """The detected obstacle whose silhouette foot each candidate edge may be (-1: none).
 
     A candidate (an edge string just under the obstacle thresholds, never an obstacle
@@ -3057,7 +3063,11 @@ def silhouette_owners(xw: np.ndarray, top: np.ndarray, xy: np.ndarray, g_lab: np
     inside a triangle w-p-q (p, q feet of the obstacle) separates w from it. A
     silhouette lies beyond the obstacle's feet in bearing (by more than that margin
     across the line of sight): of the candidates of one obstacle only the outermost on
-    either side is kept.
+    either side is kept. Nor may the body between them hide visible ground: with the
+    camera ``camera_height`` above the ground, ``_FACE_HIDDEN_MIN`` ground features
+    behind a segment w-p (p a foot of the obstacle), where a body of the obstacle's
+    height would hide them, separate w from it (`_face_hides_kernel`; a noise string in
+    front of a box is no side of it).
 
     Args:
         xw: (W, 2) ground coordinates of the candidates' feet, ``top`` (W,) their tops.
@@ -3065,18 +3075,23 @@ def silhouette_owners(xw: np.ndarray, top: np.ndarray, xy: np.ndarray, g_lab: np
         height: (C,) the obstacles' heights, metres.
         radius: metres (``GpodConfig.cluster_radius_m``).
         ground_xy: (G, 2) visible ground, or a callable returning it.
+        camera_height: metres above the ground (inf: no test of hidden ground).
+        sigma_w, sigma: (W,), (S,) range sigmas of the candidates' feet and the
+            obstacles' feet, metres (None: 0).
     Returns:
         (W,) int obstacle of each candidate, -1 for none.
     """
     w_n = xw.shape[0]
     if w_n == 0 or xy.shape[0] == 0:
         return np.full(w_n, -1, np.int64)
+    sw = np.zeros(w_n) if sigma_w is None else np.asarray(sigma_w, np.float64)
+    sf = np.zeros(xy.shape[0]) if sigma is None else np.asarray(sigma, np.float64)
     if _nb_owners is not None:
         # The same tests, compiled (numpy's bearings: its atan2 differs in last bits).
         xw = np.ascontiguousarray(xw, np.float64)
         xy = np.ascontiguousarray(xy, np.float64)
         args = (xw, np.asarray(top, np.float64), xy, np.asarray(g_lab, np.int64),
-                np.asarray(height, np.float64), float(radius),
+                np.asarray(height, np.float64), float(radius), float(camera_height), sw, sf,
                 np.arctan2(xw[:, 1], xw[:, 0]), np.arctan2(xy[:, 1], xy[:, 0]))
         out, need = _nb_owners(*args, np.zeros((0, 2)), False)
         if need:            # a candidate to test against visible ground
@@ -3103,22 +3118,27 @@ def silhouette_owners(xw: np.ndarray, top: np.ndarray, xy: np.ndarray, g_lab: np
     for k in np.unique(lab[lab >= 0]):
         mine = np.flatnonzero(lab == k)
         f = xy[g_lab == k]
+        sf_k = sf[g_lab == k]
         bk = bf[g_lab == k]
         for sgn, side in ((1.0, mine[bw[mine] > bk.max() + tol[mine]]),
                           (-1.0, mine[bw[mine] < bk.min() - tol[mine]])):
             # The outermost candidate on this side that no visible ground separates.
             for w in side[np.argsort(-sgn * bw[side], kind='stable')]:
-                if f.shape[0] >= 2:
-                    if g_all is None:
-                        g_all = ground_xy() if callable(ground_xy) else ground_xy
-                    if _separated(xw[w], f, g_all, m_):
-                        continue
+                if g_all is None:
+                    g_all = ground_xy() if callable(ground_xy) else ground_xy
+                if f.shape[0] >= 2 and _separated(xw[w], f, g_all, m_):
+                    continue
+                h_ratio = float(height[k]) / camera_height
+                if _face_hides_kernel(float(xw[w, 0]), float(xw[w, 1]), float(sw[w]), f,
+                                      sf_k, np.asarray(g_all, np.float64), h_ratio, m_,
+                                      _FACE_HIDDEN_MIN):
+                    continue
                 out[w] = k
                 break
     return out
 
 
-def _owners_kernel(xw, top, xy, g_lab, height, radius, bw, bf, g_all, have_g):
+def _owners_kernel(xw, top, xy, g_lab, height, radius, cam_h, sw, sf, bw, bf, g_all, have_g):
     """`silhouette_owners` (for numba), with its tests and arithmetic; ``bw``, ``bf``
     (W,), (S,) the bearings of the candidates and feet (numpy's arctan2).
 
@@ -3157,10 +3177,12 @@ def _owners_kernel(xw, top, xy, g_lab, height, radius, bw, bf, g_all, have_g):
         if n_f == 0:
             continue
         f = np.empty((n_f, 2))
+        sf_k = np.empty(n_f)
         n_f = 0
         for q in range(s_n):
             if g_lab[q] == k:
                 f[n_f, 0], f[n_f, 1] = xy[q, 0], xy[q, 1]
+                sf_k[n_f] = sf[q]
                 n_f += 1
         for sgn in (1.0, -1.0):
             # the candidates beyond the feet on this side, outermost first (stable)
@@ -3183,14 +3205,74 @@ def _owners_kernel(xw, top, xy, g_lab, height, radius, bw, bf, g_all, have_g):
                 side[q] = w
             for t in range(n_side):
                 w = side[t]
-                if n_f >= 2:
-                    if not have_g:
-                        return out, True
-                    if _nb_separated(xw[w, 0], xw[w, 1], f, g_all, m_):
-                        continue
+                if not have_g:
+                    return out, True
+                if n_f >= 2 and _nb_separated(xw[w, 0], xw[w, 1], f, g_all, m_):
+                    continue
+                if _nb_face_hides(xw[w, 0], xw[w, 1], sw[w], f, sf_k, g_all,
+                                  height[k] / cam_h, m_, _FACE_HIDDEN_MIN):
+                    continue
                 out[w] = k
                 break
     return out, False
+
+
+def _face_hides_kernel(wx, wy, sw, f, sf, g_all, h_ratio, margin, need):
+    """Whether ``need`` or more ground points of g_all (G, 2) would be hidden by a body
+    standing on the segments from w = (wx, wy) to the points f (F, 2), of height
+    ``h_ratio`` times the camera's (for numba; ground coordinates from the point below
+    the camera, metres; ``sw``, ``sf`` (F,) the range sigmas of w and f).
+
+    The camera's ray to a ground point g at range r passes below the height h at
+    horizontal distances beyond r (1 - h / H). A vertical face on a segment w-p that the
+    ray crosses there, between r (1 - h / H) + ``margin`` and r - ``margin`` - sigma
+    (the larger range sigma of w and p: where the face is) and more than ``margin`` from
+    both of the segment's ends, hides g. A body whose footprint holds w and p (convex:
+    its silhouette edge at w) holds the segment.
+    """
+    if g_all.shape[0] == 0 or f.shape[0] == 0 or not h_ratio > 0.0:
+        return False
+    # bearing and range window of the points that can be behind a segment
+    b_lo = b_hi = math.atan2(wy, wx)
+    r_lo = r_hi = math.hypot(wx, wy)
+    for i in range(f.shape[0]):
+        b = math.atan2(f[i, 1], f[i, 0])
+        r = math.hypot(f[i, 0], f[i, 1])
+        b_lo, b_hi = min(b_lo, b), max(b_hi, b)
+        r_lo, r_hi = min(r_lo, r), max(r_hi, r)
+    r_hi = r_hi / max(1.0 - h_ratio, 1e-6)
+    count = 0
+    for p in range(g_all.shape[0]):
+        gx, gy = g_all[p, 0], g_all[p, 1]
+        rg = math.hypot(gx, gy)
+        if not (rg > r_lo and rg < r_hi + margin) or rg <= 0.0:
+            continue
+        bg = math.atan2(gy, gx)
+        if not (bg > b_lo and bg < b_hi):
+            continue
+        ux, uy = gx / rg, gy / rg
+        s_lo = rg * (1.0 - h_ratio) + margin
+        for i in range(f.shape[0]):
+            s_hi = rg - margin - max(sw, sf[i])
+            if not s_lo < s_hi:
+                continue
+            ex, ey = f[i, 0] - wx, f[i, 1] - wy
+            den = ux * ey - uy * ex                 # cross(u, e)
+            le = math.hypot(ex, ey)
+            if abs(den) < 1e-12 or le <= 2.0 * margin:
+                continue
+            s_c = (wx * ey - wy * ex) / den         # cross(w, e) / cross(u, e)
+            t_c = (wx * uy - wy * ux) / den         # cross(w, u) / cross(u, e)
+            if (s_c > s_lo and s_c < s_hi and t_c * le > margin
+                    and (1.0 - t_c) * le > margin):
+                count += 1
+                break
+        if count >= need:
+            return True
+    return False
+
+
+_nb_face_hides = _jit(_face_hides_kernel)
 
 
 def _separated_kernel(wx, wy, f, g_all, margin):
@@ -3222,7 +3304,8 @@ def _separated_kernel(wx, wy, f, g_all, margin):
 
 
 _nb_separated = _jit(_separated_kernel)
-_nb_owners = _jit(_owners_kernel) if _nb_separated is not None else None
+_nb_owners = (_jit(_owners_kernel) if _nb_separated is not None and _nb_face_hides is not None
+              else None)
 
 
 def _separated(w: np.ndarray, f: np.ndarray, g_all: np.ndarray, margin: float) -> bool:
@@ -4493,7 +4576,8 @@ class GpodDetector:
         xy_w = None
         if n_w:
             lw = silhouette_owners(xw, ctx.weak_top, xy, g_lab, height,
-                                   self.config.cluster_radius_m, lambda: ctx.ground_xy)
+                                   self.config.cluster_radius_m, lambda: ctx.ground_xy,
+                                   ctx.metric.height, sw, sr)
             keep = lw >= 0
             if keep.any():
                 uw = m.u_left[ctx.weak_start[keep]]
