@@ -1314,7 +1314,7 @@ def _warm_up() -> None:
                          np.zeros(1, np.float32), np.zeros(1, np.int32), np.zeros(1, np.int32),
                          True)
     _nb_owners = _warmed(_nb_owners, f2, f1, np.zeros((2, 2)), np.zeros(2, np.int64), f1 + 1.0,
-                         0.5, 1.2, f1, np.zeros(2), f1, np.zeros(2), f2, True)
+                         0.5, 1.2, f1, np.zeros(2), f1, np.zeros(2), f2)
     _nb_contact_bounds = _warmed(_nb_contact_bounds, f1, f1, f1, f1, f2[:, :1], f2[:, :1],
                                  np.ones((1, 1), bool), 2, 2)
     _nb_link_groups = _warmed(_nb_link_groups, np.zeros((2, 2)), np.arange(2), 2, 1.0)
@@ -3086,18 +3086,16 @@ def silhouette_owners(xw: np.ndarray, top: np.ndarray, xy: np.ndarray, g_lab: np
         return np.full(w_n, -1, np.int64)
     sw = np.zeros(w_n) if sigma_w is None else np.asarray(sigma_w, np.float64)
     sf = np.zeros(xy.shape[0]) if sigma is None else np.asarray(sigma, np.float64)
+    g_all = np.ascontiguousarray(ground_xy() if callable(ground_xy) else ground_xy,
+                                 np.float64).reshape(-1, 2)
     if _nb_owners is not None:
         # The same tests, compiled (numpy's bearings: its atan2 differs in last bits).
         xw = np.ascontiguousarray(xw, np.float64)
         xy = np.ascontiguousarray(xy, np.float64)
-        args = (xw, np.asarray(top, np.float64), xy, np.asarray(g_lab, np.int64),
-                np.asarray(height, np.float64), float(radius), float(camera_height), sw, sf,
-                np.arctan2(xw[:, 1], xw[:, 0]), np.arctan2(xy[:, 1], xy[:, 0]))
-        out, need = _nb_owners(*args, np.zeros((0, 2)), False)
-        if need:            # a candidate to test against visible ground
-            g_all = ground_xy() if callable(ground_xy) else ground_xy
-            out, _ = _nb_owners(*args, np.ascontiguousarray(g_all, np.float64), True)
-        return out
+        return _nb_owners(xw, np.asarray(top, np.float64), xy, np.asarray(g_lab, np.int64),
+                          np.asarray(height, np.float64), float(radius),
+                          float(camera_height), sw, sf, np.arctan2(xw[:, 1], xw[:, 0]),
+                          np.arctan2(xy[:, 1], xy[:, 0]), g_all)
     dist = np.hypot(xw[:, None, 0] - xy[None, :, 0], xw[:, None, 1] - xy[None, :, 1])
     tp = np.asarray(top, np.float64)[:, None]
     hk = np.asarray(height, np.float64)[g_lab][None, :]
@@ -3114,7 +3112,6 @@ def silhouette_owners(xw: np.ndarray, top: np.ndarray, xy: np.ndarray, g_lab: np
     tol = m_ / np.maximum(np.hypot(xw[:, 0], xw[:, 1]), 1e-9)
     bf = np.arctan2(xy[:, 1], xy[:, 0])
     out = np.full(w_n, -1, np.int64)
-    g_all = None
     for k in np.unique(lab[lab >= 0]):
         mine = np.flatnonzero(lab == k)
         f = xy[g_lab == k]
@@ -3124,13 +3121,10 @@ def silhouette_owners(xw: np.ndarray, top: np.ndarray, xy: np.ndarray, g_lab: np
                           (-1.0, mine[bw[mine] < bk.min() - tol[mine]])):
             # The outermost candidate on this side that no visible ground separates.
             for w in side[np.argsort(-sgn * bw[side], kind='stable')]:
-                if g_all is None:
-                    g_all = ground_xy() if callable(ground_xy) else ground_xy
                 if f.shape[0] >= 2 and _separated(xw[w], f, g_all, m_):
                     continue
-                h_ratio = float(height[k]) / camera_height
                 if _face_hides_kernel(float(xw[w, 0]), float(xw[w, 1]), float(sw[w]), f,
-                                      sf_k, np.asarray(g_all, np.float64), h_ratio, m_,
+                                      sf_k, g_all, float(height[k]) / camera_height, m_,
                                       _FACE_HIDDEN_MIN):
                     continue
                 out[w] = k
@@ -3138,14 +3132,13 @@ def silhouette_owners(xw: np.ndarray, top: np.ndarray, xy: np.ndarray, g_lab: np
     return out
 
 
-def _owners_kernel(xw, top, xy, g_lab, height, radius, cam_h, sw, sf, bw, bf, g_all, have_g):
+def _owners_kernel(xw, top, xy, g_lab, height, radius, cam_h, sw, sf, bw, bf, g_all):
     """`silhouette_owners` (for numba), with its tests and arithmetic; ``bw``, ``bf``
-    (W,), (S,) the bearings of the candidates and feet (numpy's arctan2).
+    (W,), (S,) the bearings of the candidates and feet (numpy's arctan2), ``g_all``
+    (G, 2) the visible ground.
 
     Returns:
-        ((W,) int64 obstacle of each candidate, -1 for none; True when a candidate
-        needs the visible ground ``g_all`` (G, 2) and ``have_g`` is False: then call
-        again with it.)
+        (W,) int64 obstacle of each candidate, -1 for none.
     """
     w_n, s_n = xw.shape[0], xy.shape[0]
     m_ = _FREE_SPACE_MARGIN_M
@@ -3205,8 +3198,6 @@ def _owners_kernel(xw, top, xy, g_lab, height, radius, cam_h, sw, sf, bw, bf, g_
                 side[q] = w
             for t in range(n_side):
                 w = side[t]
-                if not have_g:
-                    return out, True
                 if n_f >= 2 and _nb_separated(xw[w, 0], xw[w, 1], f, g_all, m_):
                     continue
                 if _nb_face_hides(xw[w, 0], xw[w, 1], sw[w], f, sf_k, g_all,
@@ -3214,7 +3205,7 @@ def _owners_kernel(xw, top, xy, g_lab, height, radius, cam_h, sw, sf, bw, bf, g_
                     continue
                 out[w] = k
                 break
-    return out, False
+    return out
 
 
 def _face_hides_kernel(wx, wy, sw, f, sf, g_all, h_ratio, margin, need):
