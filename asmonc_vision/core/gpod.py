@@ -3236,7 +3236,7 @@ def _face_hides_kernel(wx, wy, sw, f, sf, g_all, h_ratio, margin, need):
     for p in range(g_all.shape[0]):
         gx, gy = g_all[p, 0], g_all[p, 1]
         rg = math.hypot(gx, gy)
-        if not (rg > r_lo and rg < r_hi + margin) or rg <= 0.0:
+        if not (rg > r_lo and rg < r_hi + margin):      # rg > r_lo >= 0
             continue
         bg = math.atan2(gy, gx)
         if not (bg > b_lo and bg < b_hi):
