@@ -16,8 +16,8 @@ from asmonc_vision.core.evaluation import score_sequence
 from conftest import BAGS
 
 
-def asmonc_run(*args, timeout=240):
-    env = dict(os.environ)
+def asmonc_run(*args, timeout=240, **env_overrides):
+    env = dict(os.environ, **env_overrides)
     return subprocess.run([sys.executable, '-m', 'asmonc_vision.cli', 'run', *map(str, args)],
                           env=env, capture_output=True, text=True, timeout=timeout)
 
@@ -236,6 +236,12 @@ def test_the_gait_node_is_stopped_after_its_last_state_not_before():
     assert not stopper.is_alive() and not gait.stop_calls
 
 
+def test_domain_id_out_of_range_is_a_clear_error():
+    res = asmonc_run(BAGS / 'clear_static', ROS_DOMAIN_ID='500')
+    assert res.returncode == 2
+    assert 'ROS_DOMAIN_ID must be in [0, 232]' in res.stderr and 'got 500' in res.stderr
+
+
 def test_missing_bag_is_a_clear_error(tmp_path):
     res = asmonc_run(tmp_path / 'no_such_bag')
     assert res.returncode == 2
@@ -353,12 +359,18 @@ def test_recorded_egomotion_scores_against_the_true_camera_pose(static_run):
 
 
 def test_side_by_side_runs_claim_different_domains(tmp_path):
-    from asmonc_vision.cli.run import MAX_DOMAIN_ID, claim_domain
+    from asmonc_vision.cli.run import MAX_DOMAIN_ID, MAX_LINUX_DOMAIN_ID, claim_domain
     d1, f1 = claim_domain(7, tmp_path)
     d2, f2 = claim_domain(7, tmp_path)
     assert (d1, d2) == (7, 8)
     f1.close()                                       # the first run ends: its id is free
     d3, f3 = claim_domain(7, tmp_path)
     assert d3 == 7
-    assert claim_domain(MAX_DOMAIN_ID + 1, tmp_path) == (None, None)
     f2.close(), f3.close()
+    # an id set beyond the portable range is honoured (up to the Linux limit), not refused
+    d4, f4 = claim_domain(MAX_DOMAIN_ID + 20, tmp_path)
+    assert d4 == MAX_DOMAIN_ID + 20
+    f4.close()
+    fs = [claim_domain(MAX_LINUX_DOMAIN_ID, tmp_path)[1]]
+    assert claim_domain(MAX_LINUX_DOMAIN_ID, tmp_path) == (None, None)
+    fs[0].close()

@@ -318,13 +318,22 @@ def first_image_stamp(bag: Path) -> int | None:
 # --- run ----------------------------------------------------------------------------------------
 
 MAX_DOMAIN_ID = 101   # the highest domain id that is portable across DDS vendors
+#: The highest domain id a DDS participant can take on Linux (ROS 2 "The ROS_DOMAIN_ID"):
+#: a ROS_DOMAIN_ID set above `MAX_DOMAIN_ID` is honoured up to this.
+MAX_LINUX_DOMAIN_ID = 232
+
+
+def domain_search_limit(preferred: int) -> int:
+    """The last domain id `claim_domain` tries from ``preferred``: `MAX_DOMAIN_ID`, or
+    `MAX_LINUX_DOMAIN_ID` for a preferred id already above the portable range."""
+    return MAX_DOMAIN_ID if preferred <= MAX_DOMAIN_ID else MAX_LINUX_DOMAIN_ID
 
 
 def claim_domain(preferred: int, lock_dir: Path | None = None):
     """Claim a ROS domain id for one `asmonc run`, so that runs started side by side on one
     machine do not hear each other's topics (each would see the other's /obstacles).
 
-    Tries ``preferred``, then the ids above it up to `MAX_DOMAIN_ID`, taking an exclusive
+    Tries ``preferred``, then the ids above it up to `domain_search_limit`, taking an exclusive
     ``flock`` on ``<lock_dir>/asmonc-run-domain-<id>.lock`` (the system temp dir by
     default); the lock lasts as long as the returned file object is open, and the OS
     releases it if the process dies. Other ROS programs in the domain are not seen: this
@@ -335,7 +344,7 @@ def claim_domain(preferred: int, lock_dir: Path | None = None):
     """
     import fcntl
     lock_dir = Path(lock_dir or tempfile.gettempdir())
-    for domain in range(max(0, preferred), MAX_DOMAIN_ID + 1):
+    for domain in range(max(0, preferred), domain_search_limit(preferred) + 1):
         f = open(lock_dir / f'asmonc-run-domain-{domain}.lock', 'a')
         try:
             fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -387,10 +396,14 @@ def run(args) -> int:
         console_err(f"asmonc run: ROS_DOMAIN_ID must be an integer, got "
                     f"'{os.environ['ROS_DOMAIN_ID']}'")
         return 2
+    if not 0 <= preferred <= MAX_LINUX_DOMAIN_ID:
+        console_err(f'asmonc run: ROS_DOMAIN_ID must be in [0, {MAX_LINUX_DOMAIN_ID}] '
+                    f'(0..{MAX_DOMAIN_ID} is portable across DDS vendors), got {preferred}')
+        return 2
     domain, domain_lock = claim_domain(preferred)   # held until this function returns
     if domain is None:
-        console_err(f'asmonc run: every ROS domain {preferred}..{MAX_DOMAIN_ID} is in use by '
-                    'another asmonc run')
+        console_err(f'asmonc run: every ROS domain {preferred}..{domain_search_limit(preferred)} '
+                    'is in use by another asmonc run')
         return 2
     os.environ['ROS_DOMAIN_ID'] = str(domain)
     env = dict(os.environ)
