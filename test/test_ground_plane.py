@@ -191,3 +191,26 @@ def test_predict_plane_none_when_the_camera_goes_below_the_plane():
     assert predict_plane(cam, abc, np.eye(3), -1.5 * n) is None     # 1.5 m down
     assert predict_plane(cam, abc, np.eye(3), np.array([np.nan, 0, 0])) is None
     assert predict_plane(cam, abc, np.eye(3), -1.0 * n) is not None  # still 0.2 m up
+
+
+def test_inliers_along_one_slanted_line_are_refused_with_a_least_spread():
+    """Points along one slanted image line (a single grout joint, both of its edges 2 px
+    apart) fit many planes exactly -- any turned about the line -- so the fit's residuals
+    cannot tell it is wrong; with ``min_spread_px`` it is refused, and points spread over
+    the image are still fitted."""
+    from asmonc_vision.core.ground_plane import _minor_spread
+    _, abc = _ground()
+    rng = np.random.default_rng(3)
+    t = rng.uniform(0.0, 1.0, 200)
+    u = 250.0 - 40.0 * t + rng.choice([0.0, 2.0], 200)     # a line from (250, 60) down-left
+    v = 60.0 + 180.0 * t
+    d = abc[0] * u + abc[1] * v + abc[2] + rng.normal(0.0, 0.1, 200)
+    assert _minor_spread(u, v) < 1.5
+    assert fit_ground_plane(u, v, d, rng=0) is not None                   # 0: any spread
+    assert fit_ground_plane(u, v, d, min_spread_px=3.0, rng=0) is None
+    u2, v2, d2, _ = _noisy_points(abc, outlier_frac=0.0)
+    assert _minor_spread(u2, v2) > 30.0
+    fit = fit_ground_plane(u2, v2, d2, min_spread_px=3.0, rng=0)
+    assert fit is not None and np.allclose(fit.abc, abc, atol=0.05)
+    with pytest.raises(ValueError, match='min_spread_px'):
+        fit_ground_plane(u2, v2, d2, min_spread_px=-1.0)

@@ -162,6 +162,32 @@ def test_the_near_edge_moves_to_where_the_ground_texture_ends():
     assert mon._foot_by_texture(_texture_energy(flat), CAM, PLANE, 2.6, 5.0) == 2.6
 
 
+def test_a_band_that_shows_the_grounds_texture_is_not_reported():
+    """Fewer edge pixels beyond 3 m (a blurred camera, faint far joints: a clear walk on
+    smooth slabs once gave CAUTION "obstacle, 3 metres, ahead") are reported only when
+    the image beyond shows a plain face: the same pixel counts with an image whose
+    texture goes on to the horizon give nothing, and with one that turns plain at 3 m
+    give the wall."""
+    n_up = PLANE.normal_up
+    fwd = np.array([0.0, 0.0, 1.0]) - n_up[2] * n_up
+    fwd /= np.linalg.norm(fwd)
+    _, v_foot = CAM.project_left((-PLANE.height * n_up + 3.0 * fwd)[None, :])
+    rows = np.arange(CAM.height)[:, None] > v_foot[0]
+    tex = np.random.default_rng(8).integers(90, 150, (CAM.height, CAM.width))
+    textured = tex.astype(np.uint8)
+    walled = np.where(rows, tex, 120).astype(np.uint8)
+    for left, want in ((textured, False), (walled, True)):
+        rng, mon = _learnt(9, frames=1)
+        xy, u, v = _ground_points(rng, 4000)
+        keep = xy[:, 0] < 3.0
+        r = mon.update(CAM, PLANE, u[keep], v[keep], np.zeros(keep.sum()), 0.8, left=left)
+        assert (r is not None) == want, (want, r)
+    rng, mon = _learnt(9, frames=1)                  # no image: the counts alone
+    xy, u, v = _ground_points(rng, 4000)
+    keep = xy[:, 0] < 3.0
+    assert mon.update(CAM, PLANE, u[keep], v[keep], np.zeros(keep.sum()), 0.8) is not None
+
+
 @pytest.mark.parametrize('kw, match', [
     (dict(max_ratio=1.0), 'max_ratio'), (dict(min_expected=0.0), 'min_expected'),
     (dict(frames=0), 'frames'), (dict(max_range=0.2), 'max_range'),

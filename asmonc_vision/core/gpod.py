@@ -340,6 +340,11 @@ class GpodConfig(PlausiblePlaneConfig):
         'iteratively trimmed least squares', choices=('ransac', 'trimmed'))
     plane_inlier_px: float = param(
         1.0, 'Inlier bound of the robust plane fit, pixels of disparity', range=(0.05, 20.0))
+    plane_min_spread_px: float = param(
+        3.0, 'A plane fit is taken only if its inliers spread at least this far across '
+        'their main direction in the image (standard deviation along the minor axis), '
+        'pixels: features along one line, such as the only joint of smooth slabs, leave '
+        'the plane free to turn about it; 0 = any', range=(0.0, 1000.0))
     ransac_iterations: int = param(
         1000, 'Most RANSAC hypotheses per plane fit (it stops earlier once 99% sure)',
         range=(1, 100000))
@@ -3521,7 +3526,7 @@ class GpodDetector:
         return fit_ground_plane(
             u, v, d, cam=cam, method=c.plane_method, inlier_threshold_px=c.plane_inlier_px,
             iterations=c.ransac_iterations, weights=np.maximum(d, 0.0) ** 3,
-            min_features=c.min_plane_features,
+            min_features=c.min_plane_features, min_spread_px=c.plane_min_spread_px,
             rng=self._rng, **c.plausibility())
 
     def _near_calibration(self, fit: PlaneFit) -> bool:
@@ -3713,23 +3718,30 @@ class GpodDetector:
         gate_m = c.motion_gate_m if tight else c.refit_gate_m
         coast_frames = c.motion_coast_frames if predicted else c.max_coast_frames
         rejected = False
-        if enough and current is not None and not anchored:
+
+        def coarse_then_fine() -> PlaneFit | None:
             # Coarse refit from the nearer half of the features near the predicted plane
             # in disparity (a gate wide enough for walking motion), then a fine refit
             # from all features near the coarse plane in disparity *and* metric height,
             # so that another surface (the ground beyond a step, a kerb top) cannot
             # take over.
+            nonlocal rejected
             gate = np.abs(d - plane_disparity(self._abc, u, v)) <= c.refit_gate_px
             if gate.any():      # the coarse fit sees only the nearer half: the ground here
                 gate &= d >= _median(d[gate])      # (np.median's arithmetic, finite d)
             coarse = self._fit(u[gate], v[gate], d[gate], cam)
+            out = None
             if coarse is not None:
                 height = coarse.metric.signed_height(cam.triangulate(u, v, d))
                 gate = ((np.abs(d - plane_disparity(coarse.abc, u, v)) <= c.refit_gate_px)
                         & (np.abs(height) <= gate_m))
-                fit = self._fit(u[gate], v[gate], d[gate], cam)
-            if fit is not None and not self._close_to_current(fit, cam, current, tight):
-                fit, rejected = None, True
+                out = self._fit(u[gate], v[gate], d[gate], cam)
+            if out is not None and not self._close_to_current(out, cam, current, tight):
+                out, rejected = None, True
+            return out
+
+        if enough and current is not None and not anchored:
+            fit = coarse_then_fine()
         if enough and current is not None and fit is None:
             # Standing still the current plane is where the ground is: refit from the
             # features within refit_gate_m of it. So too when the coarse fit took another
@@ -3748,6 +3760,13 @@ class GpodDetector:
             fit = self._fit(u[gate], v[gate], d[gate], cam)
             if fit is not None and not self._close_to_current(fit, cam, current, tight):
                 fit, rejected = None, True
+            if fit is None and anchored and not predicted:
+                # "Still" by the edges, with no motion to carry the plane, but no ground
+                # where the rig stopped: the edges can stay in place while the camera
+                # moves (the only edges of smooth slabs are joints along the walk,
+                # which forward motion keeps in place while the body's pitch sway moves
+                # the ground by pixels). Refit as when moving.
+                fit = coarse_then_fine()
         if fit is None and enough and self._coast >= coast_frames:
             # Lost: recover from the nearer half of the features (the ground the wearer
             # stands on, rather than the ground beyond a step) if the result is near the

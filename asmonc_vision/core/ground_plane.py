@@ -249,7 +249,7 @@ def fit_ground_plane(u, v, d, *, cam: StereoCamera | None = None, method: str = 
                      refine_iterations: int = 3, trim_fraction: float = 0.2,
                      min_features: int = 10, min_height_m: float = 0.1,
                      max_height_m: float = 10.0, max_tilt_deg: float = 75.0,
-                     rng=None) -> PlaneFit | None:
+                     min_spread_px: float = 0.0, rng=None) -> PlaneFit | None:
     """Robust least-squares ground plane ``d = a*u + b*v + c`` from matched features.
 
     ``'ransac'``: the best of at most ``iterations`` random minimal triples (MSAC score
@@ -277,6 +277,12 @@ def fit_ground_plane(u, v, d, *, cam: StereoCamera | None = None, method: str = 
         trim_fraction: fraction trimmed per round for 'trimmed', in [0, 0.9].
         min_features: least number of inliers for a valid fit (>= 3).
         min_height_m, max_height_m, max_tilt_deg: plausibility bounds (with ``cam``).
+        min_spread_px: least spread of the inliers across their main direction in the
+            image (the standard deviation of (u, v) along the minor principal axis),
+            pixels (>= 0; 0: any). Inliers along one line -- the only grout joint of
+            smooth slabs -- leave the plane free to turn about that line: fitted to
+            them it is off by pixels everywhere else, with residuals as small as a
+            good fit's.
         rng: int seed or numpy Generator (RANSAC sampling).
     Returns:
         The PlaneFit, or None when the fit fails (too few points, degenerate, or not a
@@ -288,6 +294,8 @@ def fit_ground_plane(u, v, d, *, cam: StereoCamera | None = None, method: str = 
         raise ValueError(f'method must be one of {METHODS}, got {method!r}')
     if not inlier_threshold_px > 0:
         raise ValueError(f'inlier_threshold_px must be > 0, got {inlier_threshold_px}')
+    if not min_spread_px >= 0:
+        raise ValueError(f'min_spread_px must be >= 0, got {min_spread_px}')
     u = np.asarray(u, np.float64).ravel()
     v = np.asarray(v, np.float64).ravel()
     d = np.asarray(d, np.float64).ravel()
@@ -358,6 +366,8 @@ def fit_ground_plane(u, v, d, *, cam: StereoCamera | None = None, method: str = 
     abc, cov, rms = fit
     if int(inl.sum()) < min_features or not np.all(np.isfinite(abc)):
         return None
+    if min_spread_px > 0 and _minor_spread(uf[inl], vf[inl]) < min_spread_px:
+        return None
     metric = None
     if cam is not None:
         metric = plane_is_plausible(cam, abc, min_height_m=min_height_m,
@@ -372,6 +382,18 @@ def fit_ground_plane(u, v, d, *, cam: StereoCamera | None = None, method: str = 
     return PlaneFit(abc=np.asarray(abc, np.float64), cov=np.asarray(cov, np.float64),
                     num_features=int(inl.sum()), residual_rms=float(rms), inliers=mask,
                     metric=metric, residual_sigma=sigma)
+
+
+def _minor_spread(u: np.ndarray, v: np.ndarray) -> float:
+    """Standard deviation (pixels) of the points (u, v) (N,) along the minor principal
+    axis of their scatter: about 0 for points on one line."""
+    if u.shape[0] < 3:
+        return 0.0
+    du, dv = u - u.mean(), v - v.mean()
+    suu, svv, suv = float(du @ du), float(dv @ dv), float(du @ dv)
+    # the smaller eigenvalue of the 2 x 2 scatter matrix [[suu, suv], [suv, svv]]
+    lam = 0.5 * (suu + svv) - math.sqrt(max(0.25 * (suu - svv) ** 2 + suv ** 2, 0.0))
+    return math.sqrt(max(lam, 0.0) / u.shape[0])
 
 
 def predict_plane(cam: StereoCamera, abc: np.ndarray, R: np.ndarray, t: np.ndarray

@@ -26,11 +26,14 @@ from R out to the corridor's far end (at least ``MIN_CELLS`` of them):
 - and, for a band not already being reported, the cells in front of R showed at least
   ``FRONT_RATIO`` of theirs (a poor view everywhere, such as motion blur, is not ground
   hidden from some range on).
+- and, when the left image is given, the band does not show the ground's own fine
+  texture: a blurred camera or faint far joints give fewer matched edges over ground that
+  is still there, while a surface with no edges is plain (`_foot_and_face`).
 The nearest such R, found in ``frames`` pairs in a row (within a cell of the previous
 one), is reported as an obstacle at R straight ahead, unless a detected obstacle or
 drop-off already stands in the corridor no farther than R + ``EXPLAINED_M`` (what hides
 the ground is already reported). R is the last ground edge pixel seen, moved on to where
-the ground's fine texture gives way to a plain face (`_foot_by_texture`).
+the ground's fine texture gives way to a plain face (`_foot_and_face`).
 
 Limits, which no passive stereo cue avoids: ground that itself has no edges for metres (a
 smooth floor after a textured one) looks the same as a wall with none, and is reported;
@@ -78,6 +81,10 @@ MARGIN_PX = 3.0
 FOOT_SEARCH_M = 0.75
 FOOT_STEP_M = 0.02
 FOOT_CONTRAST = 2.0
+#: Rows of ground and of face (samples FOOT_STEP_M apart, half of FOOT_SEARCH_M) it takes
+#: to say that the face is not plain (that the band is not hidden by a surface with no
+#: edges).
+PLAIN_MIN_SAMPLES = int(round(0.5 * FOOT_SEARCH_M / FOOT_STEP_M))
 FOOT_RUN = 3
 #: Least number of trusted cells in view in a reported band.
 MIN_CELLS = 2
@@ -196,7 +203,14 @@ class UnseenGroundMonitor:
 
     def _foot_by_texture(self, energy: np.ndarray, cam: StereoCamera, metric: MetricPlane,
                          r_near: float, far: float) -> float:
-        """The near edge of the unseen band, refined in the image.
+        """The near edge of the unseen band, refined in the image (`_foot_and_face`'s
+        first value)."""
+        return self._foot_and_face(energy, cam, metric, r_near, far)[0]
+
+    def _foot_and_face(self, energy: np.ndarray, cam: StereoCamera, metric: MetricPlane,
+                       r_near: float, far: float) -> tuple[float, bool | None]:
+        """The near edge of the unseen band, refined in the image, and whether what hides
+        the band has a plain face.
 
         The last ground edge pixel seen (``r_near``) can lie short of what hides the
         ground: a tile's plain inside shows no edges. The ground's fine texture
@@ -210,7 +224,12 @@ class UnseenGroundMonitor:
         ``FOOT_RUN`` samples. Otherwise ``r_near`` stands.
 
         Returns:
-            metres along the ground, at least ``r_near``.
+            (metres along the ground, at least ``r_near``; True when the face is plain --
+            the ground's energy at least ``FOOT_CONTRAST`` times the face's --, False when
+            it is not -- the band shows the ground's own fine texture, only fewer matched
+            edges: a blurred camera, faint far joints, not a surface with no edges --,
+            None when too few rows of either are in the image to tell: fewer than
+            ``FOOT_RUN``, or fewer than ``PLAIN_MIN_SAMPLES`` to say it is not plain).
         """
         origin, fwd, lft = ground_axes(metric)
         h, w = energy.shape
@@ -235,18 +254,22 @@ class UnseenGroundMonitor:
         face = rows(np.arange(max(r_near, far - FOOT_SEARCH_M), far, step))
         ground, face = ground[np.isfinite(ground)], face[np.isfinite(face)]
         if len(ground) < FOOT_RUN or len(face) < FOOT_RUN:
-            return r_near
+            return r_near, None
         e_g, e_f = float(np.median(ground)), float(np.median(face))
         if e_g < FOOT_CONTRAST * max(e_f, 1e-6):
-            return r_near
+            # not plain -- if enough of both was seen to tell: a wall walked up to leaves
+            # only the image's last rows of ground before it, which may be the wall's
+            # foot itself
+            told = min(len(ground), len(face)) >= PLAIN_MIN_SAMPLES
+            return r_near, (False if told else None)
         thr = 0.5 * (e_g + e_f)
         r = np.arange(r_near, min(far, r_near + FOOT_SEARCH_M) + 1e-9, step)
         e = rows(r)
         low = np.isfinite(e) & (e < thr)
         for j in range(len(r) - FOOT_RUN + 1):
             if low[j:j + FOOT_RUN].all():
-                return float(max(r_near, r[j] - 0.5 * step))
-        return r_near
+                return float(max(r_near, r[j] - 0.5 * step)), True
+        return r_near, True
 
     # ---------------------------------------------------------------- update
     def _band_start(self, trusted: np.ndarray, k_all: np.ndarray) -> int | None:
@@ -349,7 +372,11 @@ class UnseenGroundMonitor:
         r_near = float(np.max(xy[inside, 0])) if inside.any() else r0
         far = float(self.range_edges[np.flatnonzero(band)[-1] + 1])
         if left is not None:
-            r_near = self._foot_by_texture(_texture_energy(left), cam, metric, r_near, far)
+            r_near, plain = self._foot_and_face(_texture_energy(left), cam, metric, r_near,
+                                                far)
+            if plain is False:
+                # the band shows the ground's fine texture: nothing plain hides it
+                return None
         if explained is not None and len(explained):
             ex = np.asarray(explained, float).reshape(-1, 2)
             if np.any((np.abs(ex[:, 1]) <= self.half_width + 0.1)
