@@ -2060,3 +2060,28 @@ def test_smooth_slabs_walked_on_without_motion_keep_the_plane_or_lose_it():
     assert len(off) <= 4, off
     assert lost <= 25, lost
     assert len(false) <= 10, false
+
+
+@pytest.mark.parametrize('ground_fraction, fraction, want', [
+    (0.06, 0.1, 'initialising'), (0.06, 0.0, 'tracking'), (0.5, 0.1, 'tracking')])
+def test_the_initial_plane_must_hold_a_part_of_the_features(ground_fraction, fraction, want):
+    """On ground with no clear edges (an asphalt-like texture in the simulator) most
+    matches are wrong, and the calibration took a plane through 41 of 1238 features (3 %):
+    every later frame stood on it, with two false STOPs. Features of which only 6 % lie
+    on a plane leave the detector initialising (the alarm says "starting up", then
+    "cannot see the ground"), though the plane is found (RANSAC run long enough to find
+    it surely); half on it calibrate."""
+    from asmonc_vision.core.camera import MetricPlane, plane_from_metric
+    pitch = math.radians(20.0)
+    abc = plane_from_metric(CAM, MetricPlane(
+        normal_up=np.array([0.0, -math.cos(pitch), -math.sin(pitch)]), height=1.25))
+    rng = np.random.default_rng(5)
+    n = 1000
+    u, v = rng.uniform(0, 319, n), rng.uniform(60, 239, n)
+    d = rng.uniform(2.0, 30.0, n)                         # mismatches
+    on = rng.random(n) < ground_fraction
+    d[on] = abc[0] * u[on] + abc[1] * v[on] + abc[2] + rng.normal(0.0, 0.1, on.sum())
+    det = GpodDetector(GpodConfig(init_frames=1, init_min_inlier_fraction=fraction,
+                                  ransac_iterations=30000))
+    status, _ = det._update_plane(u, v, d, np.full(n, 10.0), CAM)
+    assert status == want

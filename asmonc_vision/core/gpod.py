@@ -318,6 +318,11 @@ class GpodConfig(PlausiblePlaneConfig):
     init_frames: int = param(
         3, 'Frames, assumed obstacle-free, whose features calibrate the initial ground '
         'plane (accumulated, fitted robustly)', range=(1, 1000))
+    init_min_inlier_fraction: float = param(
+        0.1, 'The initial ground plane is taken only if at least this fraction of the '
+        'calibration features lie on it (the ground is a large part of any view the rig '
+        'starts in; a plane through a few per cent of them is a chance consensus of '
+        'mismatches, as on ground with no clear edges); 0 = any', range=(0.0, 1.0))
     plane_update: str = param(
         'refit', "'fixed': keep the calibrated plane (the paper's GPOD); 'refit': robust "
         'refit every frame from features near the predicted plane, smoothed',
@@ -3679,6 +3684,8 @@ class GpodDetector:
                 if last is not None and not _planes_agree(fit.abc, last.abc, cam,
                                                           c.plane_inlier_px):
                     fit, uu, vv, dd, ss = last, u, v, d, s
+            if fit.num_features < c.init_min_inlier_fraction * uu.shape[0]:
+                return 'initialising', False
             self._calib = self._last_fit = fit
             self._abc, self._cov = fit.abc.copy(), fit.cov.copy()
             self._calibrate_sigma(uu, vv, dd, ss.astype(np.float64))
