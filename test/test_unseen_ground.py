@@ -155,11 +155,11 @@ def test_the_near_edge_moves_to_where_the_ground_texture_ends():
     rows = np.arange(CAM.height)[:, None] > v_foot[0]
     img = np.where(rows, rng.integers(90, 150, img.shape), img).astype(np.uint8)
     energy = _texture_energy(img)
-    r = mon._foot_by_texture(energy, CAM, PLANE, 2.6, 5.0)
+    r = mon._foot_and_face(energy, CAM, PLANE, 2.6, 5.0)[0]
     assert abs(r - foot) <= 0.06, r
     # no contrast between the two: the last ground edge pixel stands
     flat = np.full_like(img, 120)
-    assert mon._foot_by_texture(_texture_energy(flat), CAM, PLANE, 2.6, 5.0) == 2.6
+    assert mon._foot_and_face(_texture_energy(flat), CAM, PLANE, 2.6, 5.0)[0] == 2.6
 
 
 def test_a_band_that_shows_the_grounds_texture_is_not_reported():

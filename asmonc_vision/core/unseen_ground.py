@@ -75,7 +75,7 @@ FRONT_RATIO = 0.5
 FRONT_MIN = 0.5
 #: Image margin a cell's corners must keep to count as in view, pixels.
 MARGIN_PX = 3.0
-#: Foot refinement (`UnseenGroundMonitor._foot_by_texture`): search span and step
+#: Foot refinement (`UnseenGroundMonitor._foot_and_face`): search span and step
 #: along the ground (metres), the least ratio of the ground's texture energy to the
 #: hiding face's, and the samples in a row that must be plain.
 FOOT_SEARCH_M = 0.75
@@ -201,12 +201,6 @@ class UnseenGroundMonitor:
               & (xy[:, 1] <= self.half_width))
         return np.histogram(xy[ok, 0], bins=self.range_edges)[0].astype(float)
 
-    def _foot_by_texture(self, energy: np.ndarray, cam: StereoCamera, metric: MetricPlane,
-                         r_near: float, far: float) -> float:
-        """The near edge of the unseen band, refined in the image (`_foot_and_face`'s
-        first value)."""
-        return self._foot_and_face(energy, cam, metric, r_near, far)[0]
-
     def _foot_and_face(self, energy: np.ndarray, cam: StereoCamera, metric: MetricPlane,
                        r_near: float, far: float) -> tuple[float, bool | None]:
         """The near edge of the unseen band, refined in the image, and whether what hides
@@ -308,7 +302,7 @@ class UnseenGroundMonitor:
                 the frame's detected obstacles and drop-offs (None: none).
             left: (H, W) uint8 the left image, to place the band's near edge where the
                 ground's fine texture gives way to the hiding surface's
-                (`_foot_by_texture`); None: at the last ground edge pixel seen.
+                (`_foot_and_face`); None: at the last ground edge pixel seen.
         Returns:
             the report, or None.
         """
