@@ -21,7 +21,9 @@ Per stereo pair:
    (``motion_max_*``), the plane the rig stopped with stays the gate while the wearer
    shifts on the spot (``still_anchor_travel_m``), and frames too poor in ground
    features to refit are bridged by the motion (``motion_coast_frames``); without a
-   motion, a constant-plane model with the walking process noise. The RANSAC
+   motion, a constant-plane model with the walking process noise (a refit that finds
+   no ground then tries once more within ``refit_retry_gate_px``, and a walking rig's
+   plane is carried unrefitted only while the near features agree with it). The RANSAC
    fits weigh features by disparity cubed: of two surfaces, the near one -- the ground
    the wearer stands on -- wins.
 4. The obstacle threshold: ``threshold_mode='fixed'``: ``threshold_px`` (1.7 px in the
@@ -331,6 +333,11 @@ class GpodConfig(PlausiblePlaneConfig):
         8.0, 'Features within this disparity of the predicted plane take part in the '
         'coarse per-frame refit (wide enough for the walking motion between frames), '
         'pixels', range=(0.1, 100.0))
+    refit_retry_gate_px: float = param(
+        16.0, 'With no camera motion to predict the plane (or a plane carried over a frame '
+        'that had none), a coarse refit that finds no ground within refit_gate_px is tried '
+        'once more with this wider gate: a vigorous walker sways the ground by more than '
+        'refit_gate_px between frames, pixels; 0 = no second try', range=(0.0, 100.0))
     refit_gate_m: float = param(
         0.1, 'Features within this height of the coarse plane take part in the fine '
         'per-frame refit, metres (keeps the ground beyond a step or on a kerb out)',
@@ -3461,6 +3468,9 @@ class GpodDetector:
         self._still_travel = 0.0
         #: refits rejected in a row by the change limits around a motion's prediction
         self._rejected = 0
+        #: the plane was carried over a frame without a motion and without a refit: it
+        #: is not where the camera's later motions would carry it (until a refit)
+        self._stale = False
         #: the plane before this frame's motion (None: no motion this frame)
         self._unmoved: MetricPlane | None = None
         #: residual spread of the initial fit: global, and per edge strength (bin
@@ -3721,26 +3731,32 @@ class GpodDetector:
         # times in a row (the motion may be wrong: then as without one, around the
         # predicted plane). With a motion the plane is carried through frames with too
         # few ground features to refit for up to motion_coast_frames.
-        tight = predicted and self._rejected < c.max_coast_frames
+        # A plane carried unrefitted over a frame whose motion was missing has not moved
+        # with the camera over that frame: its prediction through the later motions is
+        # off by that frame's motion (a vigorous walker's sway: 10 px of disparity). It
+        # gets neither the narrow gate nor the long coast until a refit has found the
+        # ground again (it coasted at most max_coast_frames, then recovers).
+        tight = predicted and not self._stale and self._rejected < c.max_coast_frames
         gate_m = c.motion_gate_m if tight else c.refit_gate_m
-        coast_frames = c.motion_coast_frames if predicted else c.max_coast_frames
+        coast_frames = (c.motion_coast_frames if predicted and not self._stale
+                        else c.max_coast_frames)
         rejected = False
 
-        def coarse_then_fine() -> PlaneFit | None:
+        def coarse_then_fine(gate_px: float = c.refit_gate_px) -> PlaneFit | None:
             # Coarse refit from the nearer half of the features near the predicted plane
             # in disparity (a gate wide enough for walking motion), then a fine refit
             # from all features near the coarse plane in disparity *and* metric height,
             # so that another surface (the ground beyond a step, a kerb top) cannot
             # take over.
             nonlocal rejected
-            gate = np.abs(d - plane_disparity(self._abc, u, v)) <= c.refit_gate_px
+            gate = np.abs(d - plane_disparity(self._abc, u, v)) <= gate_px
             if gate.any():      # the coarse fit sees only the nearer half: the ground here
                 gate &= d >= _median(d[gate])      # (np.median's arithmetic, finite d)
             coarse = self._fit(u[gate], v[gate], d[gate], cam)
             out = None
             if coarse is not None:
                 height = coarse.metric.signed_height(cam.triangulate(u, v, d))
-                gate = ((np.abs(d - plane_disparity(coarse.abc, u, v)) <= c.refit_gate_px)
+                gate = ((np.abs(d - plane_disparity(coarse.abc, u, v)) <= gate_px)
                         & (np.abs(height) <= gate_m))
                 out = self._fit(u[gate], v[gate], d[gate], cam)
             if out is not None and not self._close_to_current(out, cam, current, tight):
@@ -3774,6 +3790,14 @@ class GpodDetector:
                 # which forward motion keeps in place while the body's pitch sway moves
                 # the ground by pixels). Refit as when moving.
                 fit = coarse_then_fine()
+        if (fit is None and enough and current is not None and (self._stale or not predicted)
+                and self._coast < coast_frames and c.refit_retry_gate_px > c.refit_gate_px):
+            # Nothing predicted where the ground went: a vigorous walker (the paper's
+            # extreme motion: 5 degrees of sway) moves the ground by 10 px of disparity
+            # between frames, and a frame whose /egomotion is missing then kept the
+            # previous frame's plane, 10 px off, and reported the whole ground as a drop.
+            # (Not once lost: the plane to widen the gate around is then stale.)
+            fit = coarse_then_fine(c.refit_retry_gate_px)
         if fit is None and enough and self._coast >= coast_frames:
             # Lost: recover from the nearer half of the features (the ground the wearer
             # stands on, rather than the ground beyond a step) if the result is near the
@@ -3787,7 +3811,9 @@ class GpodDetector:
         q = np.diag([sq / (0.5 * cam.width) ** 2, sq / (0.5 * cam.height) ** 2, sq])
         if fit is None:
             self._rejected = self._rejected + 1 if rejected else 0
-            if self._coast < coast_frames and enough:
+            self._stale = self._stale or not predicted
+            if self._coast < coast_frames and enough and (
+                    predicted or still or self._near_ground_agrees(u, v, d)):
                 self._coast += 1
                 if predicted:
                     self._cov = self._cov + q
@@ -3806,7 +3832,36 @@ class GpodDetector:
         self._cov = (np.eye(3) - gain) @ p_pred
         self._last_fit = fit
         self._coast = self._rejected = 0
+        self._stale = False
         return 'tracking', True
+
+    def _near_ground_agrees(self, u: np.ndarray, v: np.ndarray, d: np.ndarray) -> bool:
+        """Whether the current plane may be carried, unconfirmed by a refit, over a frame
+        of a walk with no motion to carry it by (u, v, d: (N,) the frame's features,
+        pixels; "near": the half with d at least the median).
+
+        It may if it still lies on the near features (their median disparity residual
+        within ``plane_inlier_px``), or if they stand above it as a surface that is not
+        the ground (an obstacle filling the near view: their disparity does not grow
+        down the image as the plane's does), or if there are fewer than twice
+        ``min_plane_features`` of them (a plain wall filling the view leaves a few
+        mismatches). Not if they lie below it (the near view is the ground the wearer
+        stands on, or an obstacle on it: never lower; the plane is off and every
+        feature a drop) or above it as a ground (the plane is too low: every feature an
+        obstacle)."""
+        near = d >= _median(d)
+        un, vn, dn = u[near], v[near], d[near]
+        if un.shape[0] < 2 * self.config.min_plane_features:
+            return True
+        res = dn - plane_disparity(self._abc, un, vn)
+        med = _median(res)
+        if abs(med) <= self.config.plane_inlier_px:
+            return True
+        if med < 0:
+            return False
+        a = np.column_stack((un, vn, np.ones_like(un)))
+        b_near = np.linalg.lstsq(a, dn, rcond=None)[0][1]
+        return bool(b_near < 0.5 * float(self._abc[1]))
 
     # ------------------------------------------------------------------ main
     def process(self, left: np.ndarray, right: np.ndarray, cam: StereoCamera,
