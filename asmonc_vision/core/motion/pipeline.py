@@ -86,6 +86,11 @@ class EgomotionConfig:
     search_radius_px: float = param(40.0, 'temporal search radius around the previous '
                                     'position without a motion prediction, pixels',
                                     range=(1.0, 500.0))
+    wide_search_radius_px: float = param(80.0, 'when the search within search_radius_px '
+                                         'finds no consistent motion, a last search within '
+                                         'this radius of the previous position (a vigorous '
+                                         'walker turns the camera 6-7 degrees, 35 px, between '
+                                         'frames), pixels; 0 = none', range=(0.0, 500.0))
     predicted_search_radius_px: float = param(20.0, 'temporal search radius around the '
                                               'predicted position, pixels',
                                               range=(1.0, 500.0))
@@ -262,12 +267,16 @@ class EgomotionEstimator:
         if stamp_ns is not None and ref.stamp_ns is not None:
             dt = (stamp_ns - ref.stamp_ns) / 1e9
         pred = prediction if prediction is not None else self._constant_velocity(dt)
-        attempts = [pred, None] if (pred is not None) else [None]
+        # the prediction, then around the previous positions, then wider around them
+        attempts = ([(pred, c.predicted_search_radius_px)] if pred is not None else []) + [
+            (None, c.search_radius_px)]
+        if c.wide_search_radius_px > c.search_radius_px:
+            attempts.append((None, c.wide_search_radius_px))
         est, n_matches, used_pred = None, 0, False
         t_match = t_solve = 0.0
-        for p in attempts:
+        for p, radius in attempts:
             t1 = time.thread_time()
-            corr = self._correspondences(ref, feats, cam, p)
+            corr = self._correspondences(ref, feats, cam, p, radius)
             t2 = time.thread_time()
             n_matches = len(corr)
             if n_matches >= c.min_inliers:
@@ -321,7 +330,10 @@ class EgomotionEstimator:
         return so3_exp(so3_log(r) * k), t * k
 
     def _correspondences(self, ref: StereoFeatures, cur: StereoFeatures, cam: StereoCamera,
-                         prediction) -> Correspondences:
+                         prediction, radius: float) -> Correspondences:
+        """Temporal matches of the reference's stereo features: searched within
+        ``radius`` px of where ``prediction`` (R, t = T_ref_cur) puts them, or of where
+        they were when it is None."""
         c = self.config
         s = ref.stereo
         prev_l, prev_r, prev_d = ref.left[s], ref.right[s], ref.desc[s]
@@ -332,9 +344,8 @@ class EgomotionEstimator:
             with np.errstate(invalid='ignore', divide='ignore'):
                 pred = project(x1, cam.f, cam.cx, cam.cy)
             pred[~(x1[:, 2] > 0.05)] = np.nan
-            radius = c.predicted_search_radius_px
         else:
-            pred, radius = prev_l, c.search_radius_px
+            pred = prev_l
         idx = match_temporal(prev_d, pred, cur.left, cur.desc, radius, c.min_ncc, c.ncc_margin)
         m = idx >= 0
         return Correspondences(prev_l[m], prev_r[m], cur.left[idx[m]], cur.right[idx[m]])
