@@ -2124,20 +2124,10 @@ def test_a_vigorous_walker_frame_without_motion_does_not_leave_the_plane_off(mis
     motion missing, the plane is right or lost (a fault the wearer hears), in all but a
     frame or two."""
     from asmonc_vision.core.camera import plane_from_metric, plane_disparity
-    from asmonc_vision.sim import StereoRenderer, simulate_frame
-    from asmonc_vision.sim import scenarios
+    from asmonc_vision.sim import StereoRenderer, make_scenario, simulate_frame
     from asmonc_vision.sim.motion import GaitSettings
 
-    trajectory = scenarios.Trajectory
-
-    def extreme(legs, rig, world=None, **kw):
-        return trajectory(legs, rig, world, gait=GaitSettings.extreme(), **kw)
-
-    scenarios.Trajectory = extreme
-    try:
-        sc = scenarios.make_scenario('clear_walk', seed=8202)
-    finally:
-        scenarios.Trajectory = trajectory
+    sc = make_scenario('clear_walk', seed=8202, gait=GaitSettings.extreme())
     rend, cam = StereoRenderer(sc.rig), sc.rig.camera()
     det = GpodDetector(GpodConfig())
     uu, vv = np.meshgrid([40.0, 160.0, 280.0], [140.0, 190.0, 235.0])

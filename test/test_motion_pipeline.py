@@ -84,18 +84,9 @@ def test_a_vigorous_walkers_sway_is_found_by_the_wide_search(wide):
     corners move ~35 px, at the edge of search_radius_px (40), and too few matches agreed
     (10 inliers): no motion, and the detector's ground plane was left 10 px off. The
     last, wider search (wide_search_radius_px 80) finds the motion; without it none."""
-    from asmonc_vision.sim import StereoRenderer, scenarios, simulate_frame
+    from asmonc_vision.sim import StereoRenderer, make_scenario, simulate_frame
     from asmonc_vision.sim.motion import GaitSettings
-    trajectory = scenarios.Trajectory
-
-    def extreme(legs, rig, world=None, **kw):
-        return trajectory(legs, rig, world, gait=GaitSettings.extreme(), **kw)
-
-    scenarios.Trajectory = extreme
-    try:
-        sc = scenarios.make_scenario('clear_walk', seed=8202)
-    finally:
-        scenarios.Trajectory = trajectory
+    sc = make_scenario('clear_walk', seed=8202, gait=GaitSettings.extreme())
     rend, cam = StereoRenderer(sc.rig), sc.rig.camera()
     a, b = simulate_frame(sc, 40, rend), simulate_frame(sc, 41, rend)
     r0, r1 = a.left_pose.rotation, b.left_pose.rotation

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import time
 
@@ -649,6 +650,20 @@ def test_cli(tmp_path, capsys):
     from asmonc_vision.bagio import read_messages
     _, _, info = next(read_messages(rigged, ['/stereo/right/camera_info']))
     assert info.p[3] == pytest.approx(-info.p[0] * 0.2)     # Tx = -f B
+    # Another walker: the paper's extreme motion, then a change of it; recorded in the
+    # bag's metadata. Wrong gait settings are usage errors too.
+    for bad, words in ((['--gait', 'wild'], 'FIELD=VALUE'),
+                       (['--gait', 'no_such=1'], "unknown gait setting 'no_such'"),
+                       (['--gait', 'pitch_amp_deg=99'], 'pitch_amp_deg')):
+        assert main(['clear_static', str(tmp_path / 'bad'), '--quiet', *bad]) == 2
+        assert words in capsys.readouterr().err
+    walker = tmp_path / 'walker'
+    assert main(['clear_walk', str(walker), '--duration', '0.1', '--quiet', '--width', '160',
+                 '--height', '120', '--gait', 'extreme', '--gait', 'bob_amp=0.08']) == 0
+    import yaml
+    info = yaml.safe_load((walker / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    meta = json.loads(info['custom_data']['asmonc_vision.sim'])
+    assert meta['gait']['pitch_amp_deg'] == 5.0 and meta['gait']['bob_amp'] == 0.08
 
 
 def test_render_speed_report(capsys):

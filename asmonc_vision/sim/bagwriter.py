@@ -6,7 +6,7 @@ right Image (mono8), then /ground_truth/obstacles, /ground_truth/camera_pose and
 clock) are interleaved by time. Bag timestamps equal header stamps, which start at
 ``EPOCH_NS`` (a realistic wall-clock time). Topic names and types come from
 ``bagio.TOPICS``; frame ids from ``sim.rig``. The bag's metadata ``custom_data`` records
-the scenario, seed, duration and rig.
+the scenario, seed, duration, rig and gait.
 """
 from __future__ import annotations
 
@@ -179,6 +179,7 @@ def write_bag(scenario: Scenario, out_dir: str | Path,
         meta = {'scenario': scenario.name, 'description': scenario.description,
                 'seed': scenario.seed, 'duration': scenario.duration,
                 'rig': dataclasses.asdict(scenario.rig),
+                'gait': dataclasses.asdict(scenario.trajectory.gait),
                 'inclinometer': dataclasses.asdict(scenario.inclinometer),
                 'epoch_ns': EPOCH_NS, 'generator': 'asmonc_vision.sim'}
         writer.set_custom_data('asmonc_vision.sim', json.dumps(meta, sort_keys=True))

@@ -1,7 +1,8 @@
 """Command line: render a scenario to a rosbag2 directory.
 
     python -m asmonc_vision.sim SCENARIO OUT_DIR [--seed N] [--duration S] [--fps F]
-        [--width W --height H --focal F] [--rig FIELD=VALUE ...] [--force] [--list]
+        [--width W --height H --focal F] [--rig FIELD=VALUE ...]
+        [--gait extreme|FIELD=VALUE ...] [--force] [--list]
 
 (console script ``asmonc-sim``). Exit status 0 on success, 2 on a usage error (unknown
 scenario, existing non-empty OUT_DIR without --force, bad settings).
@@ -15,6 +16,7 @@ import sys
 import time
 from pathlib import Path
 
+from asmonc_vision.sim.motion import GaitSettings
 from asmonc_vision.sim.rig import RigSettings
 from asmonc_vision.sim.scenarios import DEFAULT_DURATIONS, SCENARIOS, make_scenario
 
@@ -38,34 +40,62 @@ def _parser() -> argparse.ArgumentParser:
                    help='any other rig setting, e.g. baseline=0.2, camera_height=1.0, '
                         'camera_pitch_deg=30, noise_sigma=5 (repeatable; fields and ranges: '
                         'asmonc_vision.sim.rig.RigSettings)')
+    p.add_argument('--gait', action='append', default=[], metavar='extreme|FIELD=VALUE',
+                   help="the walker: 'extreme' (the paper's extreme motion: 5 degrees of "
+                        'sway, 10 cm bob) and/or any gait setting, e.g. pitch_amp_deg=3.5, '
+                        'bob_amp=0.05 (repeatable, applied in order; fields and ranges: '
+                        'asmonc_vision.sim.motion.GaitSettings)')
     p.add_argument('--force', action='store_true',
                    help='replace OUT_DIR if it is an existing rosbag2 directory')
     p.add_argument('--quiet', action='store_true', help='no progress output')
     return p
 
 
-def _rig_changes(items: list[str]) -> dict:
-    """``FIELD=VALUE`` strings as RigSettings changes, each value converted to its field's
-    type.
+def _settings_changes(items: list[str], cls, option: str) -> dict:
+    """``FIELD=VALUE`` strings as changes of the settings dataclass ``cls`` (the CLI
+    ``option``, for messages), each value converted to its field's type.
 
     Raises:
         ValueError: not FIELD=VALUE, an unknown field, or a value of the wrong type.
     """
-    fields = {f.name: f for f in dataclasses.fields(RigSettings)}
+    fields = {f.name: f for f in dataclasses.fields(cls)}
     out = {}
     for item in items:
         name, sep, text = item.partition('=')
         name = name.strip()
         if not sep or not name:
-            raise ValueError(f"--rig expects FIELD=VALUE, got '{item}'")
+            raise ValueError(f"{option} expects FIELD=VALUE, got '{item}'")
         if name not in fields:
-            raise ValueError(f"--rig: unknown rig setting '{name}'; known: {', '.join(fields)}")
-        kind = type(getattr(RigSettings(), name))
+            raise ValueError(f"{option}: unknown {option[2:]} setting '{name}'; known: "
+                             f"{', '.join(fields)}")
+        kind = type(getattr(cls(), name))
         try:
             out[name] = kind(text)
         except ValueError:
-            raise ValueError(f"--rig {name}: expected a {kind.__name__}, got '{text}'") from None
+            raise ValueError(f"{option} {name}: expected a {kind.__name__}, got '{text}'"
+                             ) from None
     return out
+
+
+def _rig_changes(items: list[str]) -> dict:
+    """``--rig FIELD=VALUE`` strings as RigSettings changes."""
+    return _settings_changes(items, RigSettings, '--rig')
+
+
+def _gait(items: list[str]) -> GaitSettings | None:
+    """``--gait`` items: ``extreme`` (the paper's extreme walking motion,
+    `GaitSettings.extreme`) and/or ``FIELD=VALUE`` changes of GaitSettings, applied in
+    order; None when there are none (the default walker)."""
+    if not items:
+        return None
+    gait = GaitSettings()
+    for item in items:
+        if item.strip() == 'extreme':
+            gait = GaitSettings.extreme()
+        else:
+            gait = dataclasses.replace(gait, **_settings_changes([item], GaitSettings,
+                                                                 '--gait'))
+    return gait
 
 
 def _is_bag_dir(path: Path) -> bool:
@@ -119,7 +149,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.duration is not None and not args.duration > 0:
             raise ValueError(f'--duration must be > 0 s, got {args.duration}')
         scenario = make_scenario(args.scenario, seed=args.seed, duration=args.duration,
-                                 rig=rig)
+                                 rig=rig, gait=_gait(args.gait))
     except (ValueError, TypeError) as exc:
         print(f'asmonc-sim: error: {exc}', file=sys.stderr)
         return 2

@@ -22,7 +22,7 @@ import numpy as np
 from asmonc_vision.core.camera import MetricPlane
 from asmonc_vision.sim.geometry import CameraPose, RigPose
 from asmonc_vision.sim.inclinometer import InclinometerSettings
-from asmonc_vision.sim.motion import Leg, Trajectory
+from asmonc_vision.sim.motion import GaitSettings, Leg, Trajectory
 from asmonc_vision.sim.render import StereoRenderer
 from asmonc_vision.sim.rig import RigSettings
 from asmonc_vision.sim.truth import ObstacleTruth, ground_plane_truth, obstacle_truth
@@ -201,7 +201,8 @@ def _rngs(name: str, seed: int) -> tuple[np.random.Generator, np.random.Generato
 
 
 def static_obstacles(seed: int = 0, duration: float = 8.0,
-                     rig: RigSettings | None = None) -> Scenario:
+                     rig: RigSettings | None = None,
+                     gait: GaitSettings | None = None) -> Scenario:
     """Standing still; the first 2 s are obstacle-free (for initialisation), then boxes of
     5, 10, 20 and 30 cm appear at 2 s, a post at 3 s and a bollard at 4 s, at 2-5 m."""
     rig = _rig(rig)
@@ -233,24 +234,26 @@ def static_obstacles(seed: int = 0, duration: float = 8.0,
         else:
             obstacles.append(bollard(x, y, height=h, appear=4.0, name='bollard'))
     world = World(ground, obstacles, seed=seed)
-    traj = Trajectory([Leg(duration, 0.0)], rig, world, rng=walker)
+    traj = Trajectory([Leg(duration, 0.0)], rig, world, gait=gait, rng=walker)
     return Scenario('static_obstacles', static_obstacles.__doc__.split('\n')[0].strip(),
                     seed, duration, rig, world, traj)
 
 
 def clear_static(seed: int = 0, duration: float = 5.0,
-                 rig: RigSettings | None = None) -> Scenario:
+                 rig: RigSettings | None = None,
+                 gait: GaitSettings | None = None) -> Scenario:
     """Standing still on a clear pavement: nothing above the ground (false alarms)."""
     rig = _rig(rig)
     rng, walker = _rngs('clear_static', seed)
     world = World(Ground(pavement=random_pavement(rng)), [], seed=seed)
-    traj = Trajectory([Leg(duration, 0.0)], rig, world, rng=walker)
+    traj = Trajectory([Leg(duration, 0.0)], rig, world, gait=gait, rng=walker)
     return Scenario('clear_static', clear_static.__doc__.split('\n')[0].strip(), seed,
                     duration, rig, world, traj)
 
 
 def walk_obstacles(seed: int = 0, duration: float = 10.0,
-                   rig: RigSettings | None = None) -> Scenario:
+                   rig: RigSettings | None = None,
+                   gait: GaitSettings | None = None) -> Scenario:
     """Stand 1.5 s, then walk (~1.2 m/s, speed changes) among boxes of 3-30 cm, posts, a
     bollard, a door opened into the path from a wall, towards a 12 cm kerb up."""
     rig = _rig(rig)
@@ -299,13 +302,14 @@ def walk_obstacles(seed: int = 0, duration: float = 10.0,
     obstacles.append(kerb_up(kerb, 0.0, float(rng.uniform(-8.0, 8.0)), rise=0.12,
                              name='kerb up 12 cm'))
     world = World(ground, obstacles, seed=seed)
-    traj = Trajectory(legs, rig, world, rng=walker)
+    traj = Trajectory(legs, rig, world, gait=gait, rng=walker)
     return Scenario('walk_obstacles', walk_obstacles.__doc__.split('\n')[0].strip(), seed,
                     duration, rig, world, traj)
 
 
 def clear_walk(seed: int = 0, duration: float = 8.0,
-               rig: RigSettings | None = None) -> Scenario:
+               rig: RigSettings | None = None,
+               gait: GaitSettings | None = None) -> Scenario:
     """Walking on a clear pavement at ~1.2 m/s with a speed change and a gentle bend."""
     rig = _rig(rig)
     rng, walker = _rngs('clear_walk', seed)
@@ -315,13 +319,14 @@ def clear_walk(seed: int = 0, duration: float = 8.0,
                                         turn_deg=float(rng.choice([-1, 1])
                                                        * rng.uniform(5, 15)), ramp=1.5),
             Leg(duration * 0.3, v, ramp=1.5)]
-    traj = Trajectory(legs, rig, world, start_speed=v, rng=walker)
+    traj = Trajectory(legs, rig, world, start_speed=v, gait=gait, rng=walker)
     return Scenario('clear_walk', clear_walk.__doc__.split('\n')[0].strip(), seed,
                     duration, rig, world, traj)
 
 
 def walk_stop_turn(seed: int = 0, duration: float = 12.0,
-                   rig: RigSettings | None = None) -> Scenario:
+                   rig: RigSettings | None = None,
+                   gait: GaitSettings | None = None) -> Scenario:
     """Walk towards a wall, stop, turn ~90 degrees left in place, walk on past a few
     obstacles."""
     rig = _rig(rig)
@@ -349,13 +354,13 @@ def walk_stop_turn(seed: int = 0, duration: float = 12.0,
     x, y = _along(stop_xy, heading, 6.5, float(rng.choice([-1, 1]) * rng.uniform(0.7, 1.2)))
     obstacles.append(bollard(x, y, name='bollard'))
     world = World(ground, obstacles, seed=seed)
-    traj = Trajectory(legs, rig, world, start_speed=v, rng=walker)
+    traj = Trajectory(legs, rig, world, start_speed=v, gait=gait, rng=walker)
     return Scenario('walk_stop_turn', walk_stop_turn.__doc__.split('\n')[0].strip(), seed,
                     duration, rig, world, traj)
 
 
 def slope(seed: int = 0, duration: float = 6.0, rig: RigSettings | None = None,
-          slope_deg: float = 5.0) -> Scenario:
+          slope_deg: float = 5.0, gait: GaitSettings | None = None) -> Scenario:
     """Walking uphill on a 5 degree slope with a few obstacles ahead."""
     rig = _rig(rig)
     rng, walker = _rngs('slope', seed)
@@ -377,13 +382,14 @@ def slope(seed: int = 0, duration: float = 6.0, rig: RigSettings | None = None,
         s += float(rng.uniform(1.8, 2.6))
         k += 1
     world = World(ground, obstacles, seed=seed)
-    traj = Trajectory(legs, rig, world, start_speed=v, rng=walker)
+    traj = Trajectory(legs, rig, world, start_speed=v, gait=gait, rng=walker)
     return Scenario('slope', slope.__doc__.split('\n')[0].strip(), seed, duration, rig,
                     world, traj)
 
 
 def step_down(seed: int = 0, duration: float = 8.0,
-              rig: RigSettings | None = None, drop: float = 0.15) -> Scenario:
+              rig: RigSettings | None = None, drop: float = 0.15,
+              gait: GaitSettings | None = None) -> Scenario:
     """Walking towards a 15 cm kerb down (the ground beyond a line drops), stopping ~2 m
     before the edge."""
     rig = _rig(rig)
@@ -398,13 +404,14 @@ def step_down(seed: int = 0, duration: float = 8.0,
     obstacles = [drop_terrace(edge, 0.0, float(rng.uniform(-10, 10)), drop=drop,
                               name=f'kerb down {drop * 100:.0f} cm')]
     world = World(ground, obstacles, seed=seed)
-    traj = Trajectory(legs, rig, world, start_speed=v, rng=walker)
+    traj = Trajectory(legs, rig, world, start_speed=v, gait=gait, rng=walker)
     return Scenario('step_down', step_down.__doc__.split('\n')[0].strip(), seed, duration,
                     rig, world, traj)
 
 
 def plain_wall(seed: int = 0, duration: float = 8.0,
-               rig: RigSettings | None = None) -> Scenario:
+               rig: RigSettings | None = None,
+               gait: GaitSettings | None = None) -> Scenario:
     """Walking towards a plain painted wall across the path (no texture on its face, so
     no vertical edges in front), stopping ~1.5 m before it."""
     rig = _rig(rig)
@@ -417,7 +424,7 @@ def plain_wall(seed: int = 0, duration: float = 8.0,
     albedo = _obstacle_albedo(rng, ground.pavement.brightness)
     obstacles = [wall(wx, -8.0, wx, 8.0, albedo=albedo, texture=0.0, name='plain wall')]
     world = World(ground, obstacles, seed=seed)
-    traj = Trajectory(legs, rig, world, start_speed=v, rng=walker)
+    traj = Trajectory(legs, rig, world, start_speed=v, gait=gait, rng=walker)
     return Scenario('plain_wall', plain_wall.__doc__.split('\n')[0].strip(), seed, duration,
                     rig, world, traj)
 
@@ -441,8 +448,11 @@ DEFAULT_DURATIONS = {'static_obstacles': 8.0, 'clear_static': 5.0, 'walk_obstacl
 
 
 def make_scenario(name: str, seed: int = 0, duration: float | None = None,
-                  rig: RigSettings | None = None) -> Scenario:
-    """Build a scenario by name (``duration`` None = its default).
+                  rig: RigSettings | None = None,
+                  gait: GaitSettings | None = None) -> Scenario:
+    """Build a scenario by name (``duration`` None = its default; ``gait`` None = the
+    default walker, `GaitSettings`, whose amplitudes and step frequency still vary per
+    seed; e.g. ``GaitSettings.extreme()``, the paper's extreme motion).
 
     Raises:
         KeyError: unknown scenario name (the message lists the known ones).
@@ -451,4 +461,4 @@ def make_scenario(name: str, seed: int = 0, duration: float | None = None,
         raise KeyError(f"unknown scenario '{name}'; known: {', '.join(SCENARIOS)}")
     fn = SCENARIOS[name]
     return fn(seed=seed, duration=duration if duration is not None else DEFAULT_DURATIONS[name],
-              rig=rig)
+              rig=rig, gait=gait)
