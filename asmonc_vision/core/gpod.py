@@ -1511,6 +1511,24 @@ def hanging_runs(edges: EdgeMap, m: Matches, prev: np.ndarray, h: np.ndarray,
     return out
 
 
+def _robust_row_slope(u: np.ndarray, v: np.ndarray, d: np.ndarray) -> float:
+    """The slope b of ``d = a u + b v + c`` (pixels of disparity per image row) fitted to
+    features (u, v, d: (N,) pixels, N >= 3) by least squares trimmed twice to the
+    residuals within 2.5 robust sigmas (at least 0.5 px): the mismatches among a
+    frame's features (any disparity, anywhere) flatten a plain least-squares slope."""
+    a = np.column_stack((u, v, np.ones_like(u)))
+    keep = np.ones(u.shape[0], bool)
+    coef = np.linalg.lstsq(a, d, rcond=None)[0]
+    for _ in range(2):
+        r = d - a @ coef
+        sigma = 1.4826 * _median(np.abs(r - _median(r)))
+        keep = np.abs(r - _median(r)) <= max(2.5 * sigma, 0.5)
+        if keep.sum() < 3:
+            break
+        coef = np.linalg.lstsq(a[keep], d[keep], rcond=None)[0]
+    return float(coef[1])
+
+
 def floating_bottom_runs(sid: np.ndarray, v: np.ndarray, prev: np.ndarray, h: np.ndarray,
                          ok: np.ndarray, max_height: float, only: np.ndarray) -> np.ndarray:
     """Matches in the lowest matched run of their edge string when that run floats: its
@@ -3919,9 +3937,7 @@ class GpodDetector:
             return True
         if med < 0:
             return False
-        a = np.column_stack((un, vn, np.ones_like(un)))
-        b_near = np.linalg.lstsq(a, dn, rcond=None)[0][1]
-        return bool(b_near < 0.5 * float(self._abc[1]))
+        return bool(_robust_row_slope(un, vn, dn) < 0.5 * float(self._abc[1]))
 
     # ------------------------------------------------------------------ main
     def process(self, left: np.ndarray, right: np.ndarray, cam: StereoCamera,
