@@ -993,6 +993,27 @@ def test_view_edge_points_extend_a_wall_to_the_view_edge():
         assert np.isnan(view_edge_points(p, g, 1, to_image, 320, 240, np.zeros((0, 2)))).all()
 
 
+def test_view_edge_points_no_face_along_the_line_of_sight():
+    """Feet err along the line of sight. The three strings of a post 4 m ahead (their feet
+    0.1 m apart in range) and one string matched a period off, 2.9 m farther at almost
+    the same bearing, lay on "a line" pointing at the camera (640x480 walker, seed
+    8237): it was extended to the bottom of the view and the post reported 1.63 m
+    away, 1.5 m tall. A line within _FACE_MIN_ANGLE_DEG of the line of sight is no face;
+    the same feet turned 30 degrees across it still are."""
+    from asmonc_vision.core.gpod import view_edge_points
+    to_image = _view_edge_camera()
+    b = np.radians(7.0)
+    r = np.array([3.9, 4.0, 4.1, 6.8])
+    feet = np.stack([r * np.cos(b), r * np.sin(b)], axis=1)
+    group = np.zeros(4, np.int64)
+    assert np.isnan(view_edge_points(feet, group, 1, to_image, 320, 240, np.zeros((0, 2)))).all()
+    turn = np.radians(30.0)
+    rot = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
+    oblique = (feet - feet[0]) @ rot.T + feet[0]
+    assert np.isfinite(view_edge_points(oblique, group, 1, to_image, 320, 240,
+                                        np.zeros((0, 2)))).all()
+
+
 def test_view_edge_points_see_through_the_gap_between_objects_in_a_row():
     """A post and a box 0.6 m apart, their feet on one line: the ground shows only
     through the gap between them (each hides the ground behind itself), which is too

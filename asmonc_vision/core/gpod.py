@@ -162,7 +162,13 @@ _FREE_SPACE_MARGIN_M = 0.05
 #: feet at least, along a line (orthogonal RMS residual at most _FACE_MAX_RMS_M metres)
 #: over _FACE_MIN_SPAN_M metres or more; it is extended by at most its own span, and not
 #: where ground is seen behind the extension (the face ends before the view's edge).
+#: Nor when the line runs within _FACE_MIN_ANGLE_DEG of the line of sight at its near end:
+#: feet err along the line of sight (range), so feet at one bearing make such a line out
+#: of range errors (the strings of a post, with one string matched a period off 2.9 m
+#: farther, made a "face" pointing at the camera that left the view 2.3 m in front of the
+#: post).
 _FACE_MIN_FEET = 3
+_FACE_MIN_ANGLE_DEG = 15.0
 _FACE_MAX_RMS_M = 0.06
 _FACE_MIN_SPAN_M = 0.3
 #: Ground features this far (metres) behind the extended line end the face: at least
@@ -2891,7 +2897,8 @@ def view_edge_points(xy: np.ndarray, group: np.ndarray, n_groups: int, to_image,
     visible point, which its edge strings' feet (inside the view) cannot reach.
 
     For each obstacle with at least ``_FACE_MIN_FEET`` feet lying along one line (total
-    least squares, orthogonal RMS <= ``_FACE_MAX_RMS_M``, spanning >= ``_FACE_MIN_SPAN_M``)
+    least squares, orthogonal RMS <= ``_FACE_MAX_RMS_M``, spanning >= ``_FACE_MIN_SPAN_M``,
+    at least ``_FACE_MIN_ANGLE_DEG`` from the line of sight at its near end)
     whose range falls towards its outermost foot, the line is followed beyond that foot
     (by at most the feet's span) to where it leaves the image (left or right border, or
     the bottom row). Feet with the ground seen through their line (between them, or
@@ -2928,6 +2935,9 @@ def view_edge_points(xy: np.ndarray, group: np.ndarray, n_groups: int, to_image,
         step = sgn * d
         if float(e @ step) >= 0.0:          # the nearest point of the line is in the face
             continue
+        if abs(float(e[0] * d[1] - e[1] * d[0])) < (math.sin(math.radians(_FACE_MIN_ANGLE_DEG))
+                                                  * float(np.hypot(*e))):
+            continue                        # along the line of sight: range errors
         u0, v0 = (w[0] for w in to_image(e[None]))
         if not (0.0 <= u0 <= width - 1 and 0.0 <= v0 <= height - 1):
             continue
