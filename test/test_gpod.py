@@ -2056,6 +2056,15 @@ def test_a_noisy_camera_standing_still_is_still():
             assert not any(flags[3:]), flags          # walking from the start
 
 
+def _plane_off_px(abc, truth_plane, cam) -> float:
+    """Largest disparity error (px) of the plane ``abc`` against the true ground plane
+    (metric, left optical frame) at nine points of the image's lower part."""
+    from asmonc_vision.core.camera import plane_disparity, plane_from_metric
+    uu, vv = np.meshgrid([40.0, 160.0, 280.0], [140.0, 190.0, 235.0])
+    return float(np.abs(plane_disparity(abc, uu, vv)
+                        - plane_disparity(plane_from_metric(cam, truth_plane), uu, vv)).max())
+
+
 def test_smooth_slabs_walked_on_without_motion_keep_the_plane_or_lose_it():
     """A clear walk on smooth concrete slabs (1.5 m, faint texture; simulator clear_walk
     seed 8113 with that pavement), with no camera motion (the egomotion node finds too
@@ -2070,7 +2079,6 @@ def test_smooth_slabs_walked_on_without_motion_keep_the_plane_or_lose_it():
     (a fault the wearer hears), in all but a few frames."""
     import dataclasses
 
-    from asmonc_vision.core.camera import plane_from_metric, plane_disparity
     from asmonc_vision.sim import StereoRenderer, simulate_frame
     from asmonc_vision.sim import scenarios
 
@@ -2087,18 +2095,14 @@ def test_smooth_slabs_walked_on_without_motion_keep_the_plane_or_lose_it():
         scenarios.random_pavement = random_pavement
     rend, cam = StereoRenderer(sc.rig), sc.rig.camera()
     det = GpodDetector(GpodConfig())
-    uu, vv = np.meshgrid([40.0, 160.0, 280.0], [140.0, 190.0, 235.0])
     off, lost, false = [], 0, []
     for k in range(sc.n_frames):
         f = simulate_frame(sc, k, rend)
         r = det.process(f.left, f.right, cam)
         if r.status == 'lost':
             lost += 1
-        elif r.status == 'tracking':
-            err = np.abs(plane_disparity(r.plane_abc, uu, vv)
-                         - plane_disparity(plane_from_metric(cam, f.plane), uu, vv))
-            if err.max() > 1.0:
-                off.append(k)
+        elif r.status == 'tracking' and _plane_off_px(r.plane_abc, f.plane, cam) > 1.0:
+            off.append(k)
         false += [k for o in r.obstacles if o.confidence >= 0.3 and o.range <= 5.0
                   and abs(o.height) >= 0.05 and o.num_edge_pixels > 0]
     assert len(off) <= 4, off
@@ -2144,14 +2148,12 @@ def test_a_vigorous_walker_frame_without_motion_does_not_leave_the_plane_off(mis
     neither the narrow gate nor the long coast until a refit. Also with every third
     motion missing, the plane is right or lost (a fault the wearer hears), in all but a
     frame or two."""
-    from asmonc_vision.core.camera import plane_from_metric, plane_disparity
     from asmonc_vision.sim import StereoRenderer, make_scenario, simulate_frame
     from asmonc_vision.sim.motion import GaitSettings
 
     sc = make_scenario('clear_walk', seed=8202, gait=GaitSettings.extreme())
     rend, cam = StereoRenderer(sc.rig), sc.rig.camera()
     det = GpodDetector(GpodConfig())
-    uu, vv = np.meshgrid([40.0, 160.0, 280.0], [140.0, 190.0, 235.0])
     prev, off, lost, false = None, [], [], []
     for k in range(sc.n_frames):
         f = simulate_frame(sc, k, rend)
@@ -2163,11 +2165,8 @@ def test_a_vigorous_walker_frame_without_motion_does_not_leave_the_plane_off(mis
         r = det.process(f.left, f.right, cam, motion=motion)
         if r.status == 'lost':
             lost.append(k)
-        elif r.status == 'tracking':
-            err = np.abs(plane_disparity(r.plane_abc, uu, vv)
-                         - plane_disparity(plane_from_metric(cam, f.plane), uu, vv))
-            if err.max() > 1.0:
-                off.append(k)
+        elif r.status == 'tracking' and _plane_off_px(r.plane_abc, f.plane, cam) > 1.0:
+            off.append(k)
         false += [k for o in r.obstacles if o.confidence >= 0.3 and o.range <= 5.0
                   and abs(o.height) >= 0.05]
     if len(missing) == 1:
