@@ -1523,12 +1523,11 @@ def _robust_row_slope(u: np.ndarray, v: np.ndarray, d: np.ndarray) -> float:
     residuals within 2.5 robust sigmas (at least 0.5 px): the mismatches among a
     frame's features (any disparity, anywhere) flatten a plain least-squares slope."""
     a = np.column_stack((u, v, np.ones_like(u)))
-    keep = np.ones(u.shape[0], bool)
     coef = np.linalg.lstsq(a, d, rcond=None)[0]
     for _ in range(2):
         r = d - a @ coef
-        sigma = 1.4826 * _median(np.abs(r - _median(r)))
-        keep = np.abs(r - _median(r)) <= max(2.5 * sigma, 0.5)
+        dev = np.abs(r - _median(r))
+        keep = dev <= max(2.5 * 1.4826 * _median(dev), 0.5)
         if keep.sum() < 3:
             break
         coef = np.linalg.lstsq(a[keep], d[keep], rcond=None)[0]

@@ -77,11 +77,6 @@ def _settings_changes(items: list[str], cls, option: str) -> dict:
     return out
 
 
-def _rig_changes(items: list[str]) -> dict:
-    """``--rig FIELD=VALUE`` strings as RigSettings changes."""
-    return _settings_changes(items, RigSettings, '--rig')
-
-
 def _gait(items: list[str]) -> GaitSettings | None:
     """``--gait`` items: ``extreme`` (the paper's extreme walking motion,
     `GaitSettings.extreme`) and/or ``FIELD=VALUE`` changes of GaitSettings, applied in
@@ -141,7 +136,7 @@ def main(argv: list[str] | None = None) -> int:
         else:
             out.rmdir()
     try:
-        changes = _rig_changes(args.rig)
+        changes = _settings_changes(args.rig, RigSettings, '--rig')
         changes.update({k: v for k, v in (('fps', args.fps), ('width', args.width),
                                           ('height', args.height), ('focal', args.focal))
                         if v is not None})
