@@ -77,6 +77,44 @@ def test_one_result_per_pair_and_obstacles_found(graph):
     assert got['debug'][-1].step == 3 * 160 and len(got['debug'][-1].data) == 3 * 160 * 120
 
 
+def test_a_rig_off_its_calibration_is_corrected_and_reported(ros_context):
+    """Right images 1.5 px below the left's rows (a rig knocked off its calibration):
+    the detector measures it, resamples the right image, still finds the obstacles, and
+    reports the misalignment in /diagnostics as a WARN."""
+    import cv2
+    import numpy as np
+
+    from asmonc_vision.nodes.conversions import array_to_image_msg
+    from conftest import diagnostic_statuses
+
+    def shifted(img):
+        a = np.frombuffer(bytes(img.data), np.uint8).reshape(img.height, img.width)
+        m = np.float32([[1, 0, 0], [0, 1, 1.5]])
+        return array_to_image_msg(cv2.warpAffine(a, m, (img.width, img.height),
+                                                 flags=cv2.INTER_LINEAR,
+                                                 borderMode=cv2.BORDER_REPLICATE),
+                                  img.header)
+
+    with detector_graph(ros_context, []) as (det, ex, send, got):
+        probe = Node('diag_probe', context=ros_context)
+        ex.add_node(probe)
+        diags = diagnostic_statuses(probe, 'asmonc_vision: detector')
+        frames = load_frames(BAGS / 'static_obstacles', list(range(0, 8)) + [45, 46, 47])
+        for i, (left, right, li, ri) in enumerate(frames):
+            send(left, shifted(right), li, ri)
+            assert spin_until(ex, lambda: len(got['obstacles']) == i + 1, timeout=15)
+        assert spin_until(ex, lambda: any('misaligned' in d.message for d in diags),
+                          timeout=5)
+        last = [d for d in diags if 'misaligned' in d.message][-1]
+        assert last.level == bytes([1])
+        values = {kv.key: kv.value for kv in last.values}
+        assert float(values['misalignment_px']) == pytest.approx(1.5, abs=0.3)
+        assert values['misalignment_corrected'] == 'True'
+        assert len(got['obstacles'][-1].obstacles) >= 3
+        ex.remove_node(probe)
+        probe.destroy_node()
+
+
 def test_walking_tracks_take_egomotion_as_their_motion_input(graph):
     """Walking: with the pair's /egomotion (here from the core estimator on the same
     frames) the node's obstacle tracks are carried from frame to frame and keep their

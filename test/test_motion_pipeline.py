@@ -103,6 +103,30 @@ def test_a_vigorous_walkers_sway_is_found_by_the_wide_search(wide):
         assert r.status == NO_MOTION and r.motion is None
 
 
+@pytest.mark.parametrize('align', [True, False])
+def test_a_rig_off_its_calibration_still_gives_motions(align):
+    """The right camera turned 0.3 degrees about its x axis (after rectification) parts the
+    rows by 1.6 px, beyond the stereo matching's 1 px row tolerance: without the
+    misalignment check there are too few stereo matches for any motion; with it the right
+    corners are moved onto the left's rows and the motions are found."""
+    from asmonc_vision.sim import RigSettings, StereoRenderer, make_scenario, simulate_frame
+    sc = make_scenario('clear_walk', seed=29, rig=RigSettings(right_tilt_deg=0.3))
+    rend, cam = StereoRenderer(sc.rig), sc.rig.camera()
+    est = EgomotionEstimator(EgomotionConfig(align_vertical=align))
+    frames = [simulate_frame(sc, k, rend) for k in range(30, 38)]
+    res = [est.process(f.left, f.right, cam, k * 100_000_000) for k, f in enumerate(frames)]
+    ok = [r for r in res[3:] if r.status == OK]
+    if align:
+        assert len(ok) == len(res) - 3
+        for r, a, b in zip(res[4:], frames[3:], frames[4:]):
+            r0, r1 = a.left_pose.rotation, b.left_pose.rotation
+            truth = (r0.T @ r1, r0.T @ (b.left_pose.centre - a.left_pose.centre))
+            deg, mm = _errors(r.motion, truth)
+            assert deg.max() < 0.3 and mm < 20.0
+    else:
+        assert len(ok) <= 1
+
+
 def test_settings_are_validated():
     with pytest.raises(ValueError, match=r'EgomotionConfig\.min_ncc = 2\.0 is out of range'):
         EgomotionConfig(min_ncc=2.0)

@@ -121,6 +121,31 @@ def test_world_points_project_to_the_same_row():
     assert np.allclose(u_c, (ul + ur) / 2) and np.allclose(v_c, vl) and np.allclose(d, ul - ur)
 
 
+def test_a_rig_off_its_calibration_parts_the_rows():
+    """right_tilt_deg moves the right image's rows by f tan(tilt); right_roll_deg turns
+    them about the optical axis (-f roll x); camera_roll_deg rolls the whole rig."""
+    rig = RigSettings(right_tilt_deg=0.2, right_roll_deg=0.3, camera_roll_deg=5.0)
+    pose = _pose(z=1.3)
+    left, right = camera_poses(pose, rig.baseline, rig.right_misalignment)
+    rng = np.random.default_rng(2)
+    pts = np.column_stack([rng.uniform(3, 10, 40), rng.uniform(-2, 2, 40),
+                           rng.uniform(0, 1.5, 40)])
+    pl, pr = left.to_optical(pts), right.to_optical(pts)
+    vl = rig.focal * pl[:, 1] / pl[:, 2] + rig.cy
+    vr = rig.focal * pr[:, 1] / pr[:, 2] + rig.cy
+    ur = rig.focal * pr[:, 0] / pr[:, 2] + rig.cx
+    y = (vl - rig.cy) / rig.focal       # the tilt moves a row by f tilt (1 + y^2)
+    expect = (rig.focal * math.radians(0.2) * (1 + y * y)
+              - rig.focal * math.radians(0.3) * (ur - rig.cx) / rig.focal)
+    assert np.allclose(vr - vl, expect, atol=0.05)
+    assert np.all(np.abs(vr - vl) > 0.2)
+    # a perfect rig's rows agree; the mounting roll goes into the rig's roll
+    l0, r0 = camera_poses(pose, rig.baseline, RigSettings().right_misalignment)
+    assert np.allclose(l0.rotation, r0.rotation)
+    sc = make_scenario('clear_static', seed=1, rig=rig)
+    assert math.degrees(sc.trajectory.pose(1.0).rpy[0]) == pytest.approx(5.0, abs=0.5)
+
+
 def test_right_image_is_the_left_shifted_by_the_true_disparity():
     """Both cameras see the same world-fixed texture at consistent places."""
     rig = RigSettings(noise_sigma=0.0, right_gain=1.0, right_offset=0.0, vignetting=0.0)

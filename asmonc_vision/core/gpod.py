@@ -85,6 +85,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from .alignment import AlignmentConfig, VerticalAlignment
 from .camera import MetricPlane, StereoCamera, ground_range_bearing, plane_disparity
 from .config import param
 from .edges import (EdgeMap, chain_roots, detect_vertical_edges, gradient_noise_gain,
@@ -601,6 +602,19 @@ class GpodConfig(PlausiblePlaneConfig):
     track_frame_period_s: float = param(
         0.1, 'Time between frames assumed when process() is given no stamp, s',
         range=(1e-4, 10.0))
+    align_vertical: bool = param(
+        True, 'Measure the vertical misalignment of the rectified pair from corners matched '
+        'between its images (core.alignment) and, where it reaches align_apply_px, resample '
+        'the right image onto the left\'s rows before matching: a rig turned off its '
+        'calibration by a tenth of a degree parts the rows by half a pixel, which raises '
+        'the ground\'s disparity noise and the obstacle threshold')
+    align_every_frames: int = param(
+        10, 'Once the misalignment is known, measure it in one pair of this many (in every '
+        'pair until then)', range=(1, 1000))
+    align_apply_px: float = param(
+        0.2, 'Resample the right image when the measured misalignment reaches this at an '
+        'image side (and is sure), pixels; it stops below half of this',
+        range=(0.01, 100.0))
     seed: int = param(0, 'Seed of the random generator of the robust plane fit',
                       range=(0, 2 ** 31 - 1))
 
@@ -761,6 +775,9 @@ class GpodResult:
             being averaged over frames).
         detections: this frame's own obstacles and drop-offs, before tracking, nearest
             first (per-frame detection rates are measured on these).
+        misalignment_px: the rig's measured vertical misalignment, the largest over the
+            image, pixels (NaN before the first measurement; core.alignment).
+        misalignment_corrected: True when the right image was resampled to remove it.
     """
 
     status: str
@@ -779,6 +796,8 @@ class GpodResult:
     sigma_px: float = float('nan')
     still: bool = False
     detections: tuple[GpodObstacle, ...] = ()
+    misalignment_px: float = float('nan')
+    misalignment_corrected: bool = False
 
     @property
     def plane(self) -> GpodPlane | None:
@@ -3536,6 +3555,12 @@ class GpodDetector:
     def __init__(self, config: GpodConfig | None = None) -> None:
         self.config = config if config is not None else GpodConfig()
         _warm_up()
+        c = self.config
+        #: the rig's vertical misalignment (a property of the cameras: kept over resets
+        #: of the detector, restarted by a new camera)
+        self.alignment = VerticalAlignment(AlignmentConfig(
+            enabled=c.align_vertical, every_frames=c.align_every_frames,
+            apply_min_px=c.align_apply_px))
         self.reset()
 
     def reset(self) -> None:
@@ -3564,6 +3589,8 @@ class GpodDetector:
         #: strengths, bin sigmas), pixels
         self._sigma = float('nan')
         self._sigma_bins: tuple[np.ndarray, np.ndarray] | None = None
+        #: the residual spread is to be taken again (the right image's correction changed)
+        self._sigma_stale = False
         #: the previous frame's left edge pixels (H, W+2) bool, and the running sums of
         #: the excess (S, W) at the matched edge pixels, (H, W) float32 each
         self._prev_edges: np.ndarray | None = None
@@ -3975,6 +4002,15 @@ class GpodDetector:
         t_start = time.perf_counter()
         self._begin(left, right, cam)
         c = self.config
+        corrected = self.alignment.applied
+        right = self.alignment.process(left, right, cam.f, cam.cx, cam.cy)
+        if self.alignment.applied != corrected:
+            if self._calib is None:
+                # the calibration frames must all be seen alike (their residual spread
+                # sets the obstacle threshold)
+                self._init_window.clear()
+            else:
+                self._sigma_stale = True
         p = self._frame_pass(left, right, cam, motion)
         motion = p.motion
         status, metric, timings = p.status, p.metric, p.timings
@@ -4006,6 +4042,7 @@ class GpodDetector:
         timings['obstacles'] = timings.get('obstacles', 0.0) + (t4 - t3) * 1e3
         timings['total'] = (t4 - t_start) * 1e3
         have_plane = status == 'tracking'
+        al = self.alignment
         fit = self._last_fit
         return GpodResult(
             status=status, frame_index=self._frame,
@@ -4017,7 +4054,9 @@ class GpodDetector:
             plane_updated=p.updated and have_plane, metric_plane=metric if have_plane else None,
             obstacles=obstacles, features=p.features, threshold_px=p.threshold,
             num_edges=(len(p.el), len(p.er)), timings_ms=timings, sigma_px=self._sigma,
-            still=p.still, detections=detections)
+            still=p.still, detections=detections,
+            misalignment_px=al.max_px if al.measurements else float('nan'),
+            misalignment_corrected=al.applied)
 
     def _begin(self, left: np.ndarray, right: np.ndarray, cam: StereoCamera) -> None:
         """Check a pair against its camera (ValueError, `_check_images`); a camera
@@ -4066,6 +4105,11 @@ class GpodDetector:
             motion = motion()
         status, updated = self._update_plane(u, v, d, _noise_key(m), cam, still,
                                              None if callable(motion) else motion)
+        if self._sigma_stale and status == 'tracking' and updated:
+            # the images changed since the calibration (the right one is now resampled,
+            # or no longer): the residual spread is taken again, about this frame's plane
+            self._calibrate_sigma(u, v, d, _noise_key(m).astype(np.float64))
+            self._sigma_stale = False
         t3 = time.perf_counter()
         timings['plane'] = (t3 - t2) * 1e3
 

@@ -52,6 +52,8 @@ from asmonc_vision.nodes.common import (IMAGE_QOS, RESULT_QOS, Diagnostics, decl
 from asmonc_vision.nodes.conversions import array_to_image_msg, stamp_to_ns
 from asmonc_vision.nodes.stereo_input import StereoInputConfig, StereoInputNode, StereoPair
 
+#: A rectified pair's rows this far apart (pixels) is reported: the rig needs recalibrating.
+_MISALIGNMENT_WARN_PX = 1.0
 _STATUS = {'initialising': GroundPlane.INITIALISING, 'tracking': GroundPlane.TRACKING,
            'lost': GroundPlane.LOST}
 
@@ -209,11 +211,25 @@ class DetectorNode(StereoInputNode):
                 self._debug_slot = (left, result, header)   # replaces one not yet drawn
                 self._debug_cv.notify()
         level = Diagnostics.OK if result.status == 'tracking' else Diagnostics.WARN
-        self.diag.update(level, f'{result.status}: {len(result.obstacles)} obstacles',
+        message = f'{result.status}: {len(result.obstacles)} obstacles'
+        mis = result.misalignment_px
+        if np.isfinite(mis) and mis >= _MISALIGNMENT_WARN_PX:
+            level = Diagnostics.WARN
+            message += (f'; rows misaligned by {mis:.1f} px '
+                        f"({'corrected' if result.misalignment_corrected else 'not corrected'})"
+                        ': recalibrate the stereo rig')
+            self.get_logger().warn(
+                f'left and right rows misaligned by {mis:.1f} px (the stereo rig has moved '
+                'off its calibration); '
+                + ('the right image is resampled to match, ' if result.misalignment_corrected
+                   else '') + 'recalibrate the cameras', throttle_duration_sec=30.0)
+        self.diag.update(level, message,
                          frames_in=self.frames_in, frames_done=self.frames_done + 1,
                          frames_dropped=self.frames_dropped, frames_bad=self.frames_bad,
                          motions_used=self.motions_used,
                          image_noise=f'{self.detector.image_noise_sigma:.2f}',
+                         misalignment_px=f'{mis:.2f}',
+                         misalignment_corrected=result.misalignment_corrected,
                          total_ms=f"{result.timings.get('total', float('nan')):.1f}")
 
 

@@ -82,12 +82,16 @@ class CameraPose:
         return p @ self.rotation.T + self.centre
 
 
-def camera_poses(pose: RigPose, baseline: float) -> tuple[CameraPose, CameraPose]:
+def camera_poses(pose: RigPose, baseline: float, right_misalignment=None
+                 ) -> tuple[CameraPose, CameraPose]:
     """Left and right optical frames of the rig at ``pose``.
 
     Args:
         pose: the body pose in the world.
         baseline: metres between the optical centres.
+        right_misalignment: optional (3,) rotation vector, radians, in the right optical
+            frame: the right camera's residual rotation after rectification (None or
+            zeros: a perfectly rectified pair).
     Returns:
         (left, right) CameraPose; the right centre is the left moved +baseline along the
         optical x axis (rectified pair).
@@ -95,6 +99,20 @@ def camera_poses(pose: RigPose, baseline: float) -> tuple[CameraPose, CameraPose
     r_wb = pose.rotation
     r_wo = r_wb @ R_BODY_OPTICAL
     half = np.array([0.0, baseline / 2.0, 0.0])
+    r_right = r_wo
+    if right_misalignment is not None and np.any(right_misalignment):
+        r_right = r_wo @ _rotvec_matrix(np.asarray(right_misalignment, float))
     left = CameraPose(rotation=r_wo, centre=np.asarray(pose.position, float) + r_wb @ half)
-    right = CameraPose(rotation=r_wo, centre=np.asarray(pose.position, float) - r_wb @ half)
+    right = CameraPose(rotation=r_right,
+                       centre=np.asarray(pose.position, float) - r_wb @ half)
     return left, right
+
+
+def _rotvec_matrix(rv: np.ndarray) -> np.ndarray:
+    """(3, 3) rotation of a (3,) rotation vector (radians), by Rodrigues' formula."""
+    th = float(np.linalg.norm(rv))
+    if th < 1e-15:
+        return np.eye(3)
+    k = rv / th
+    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + np.sin(th) * kx + (1.0 - np.cos(th)) * (kx @ kx)

@@ -221,7 +221,7 @@ class Trajectory:
             gx = gy = 0.0
         uphill = np.arctan(gx * c + gy * s)        # slope angle along the heading
         pz = ground + self.rig.camera_height + env * bob
-        roll = env * roll_o + sway_ang * post[0]
+        roll = math.radians(self.rig.camera_roll_deg) + env * roll_o + sway_ang * post[0]
         pitch = self.rig.pitch + g.slope_lean * uphill + env * pitch_o + sway_ang * post[1]
         yaw = psi + env * yaw_o
         return np.column_stack([px, py, pz]), np.column_stack([roll, pitch, yaw])

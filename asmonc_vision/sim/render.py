@@ -319,7 +319,8 @@ class StereoRenderer:
             StereoImages (mono8 pair, left depth/labels/faces, camera poses).
         """
         rng = np.random.default_rng(rng)
-        left_cam, right_cam = camera_poses(pose, self.rig.baseline)
+        left_cam, right_cam = camera_poses(pose, self.rig.baseline,
+                                           self.rig.right_misalignment)
         if self._pool is not None:
             jobs = [self._pool.submit(self.radiance, world, t, left_cam),
                     self._pool.submit(self.radiance, world, t, right_cam),

@@ -40,6 +40,16 @@ class RigSettings:
     camera_pitch_deg: float = param(20.0, 'nominal downward tilt of the optical axes, '
                                     'degrees (REP 103 pitch of inclinometer_link)',
                                     range=(-10.0, 80.0))
+    camera_roll_deg: float = param(0.0, 'mounting roll of the rig (a backpack worn '
+                                   'crooked), degrees, REP 103 roll of inclinometer_link '
+                                   '(positive = left side up)', range=(-20.0, 20.0))
+    right_tilt_deg: float = param(0.0, 'rectification residual: the right camera turned '
+                                  'about its optical x axis, degrees (a vertical '
+                                  'misalignment of about f * this in radians, pixels; '
+                                  'positive = the right image moves down)',
+                                  range=(-2.0, 2.0))
+    right_roll_deg: float = param(0.0, 'rectification residual: the right camera turned '
+                                  'about its optical axis, degrees', range=(-5.0, 5.0))
     fps: float = param(10.0, 'camera frame rate, Hz', range=(0.5, 120.0))
     supersample: int = param(2, 'rays per pixel along each image axis (anti-aliasing)',
                              range=(1, 4))
@@ -73,6 +83,12 @@ class RigSettings:
     def pitch(self) -> float:
         """Nominal camera pitch, radians (positive = looking down)."""
         return math.radians(self.camera_pitch_deg)
+
+    @property
+    def right_misalignment(self) -> np.ndarray:
+        """(3,) rotation vector, radians, in the right optical frame: the right camera's
+        rotation away from the rectified pose (zero for a perfectly rectified pair)."""
+        return np.radians([self.right_tilt_deg, 0.0, self.right_roll_deg])
 
     def camera(self) -> StereoCamera:
         """The rectified stereo camera model of ``core.camera``."""

@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from asmonc_vision.core.alignment import VerticalAlignment
 from asmonc_vision.core.camera import StereoCamera
 from asmonc_vision.core.config import check_fields, param
 from asmonc_vision.core.motion.estimators import (METHODS, Correspondences, MotionEstimate,
@@ -79,6 +80,12 @@ class EgomotionConfig:
                               range=(0.0, 1.0))
     stereo_row_tolerance_px: float = param(1.0, 'largest row difference of a left-right '
                                            'match (rectified), pixels', range=(0.0, 10.0))
+    align_vertical: bool = param(True, 'measure the vertical misalignment of the rectified '
+                                 'pair (core.alignment) and, where it is sure, move the '
+                                 "right image's corners onto the left's rows before the "
+                                 'stereo matching (a rig turned off its calibration by a '
+                                 'fifth of a degree parts the rows by more than '
+                                 'stereo_row_tolerance_px)')
     min_disparity_px: float = param(1.0, 'smallest disparity of a stereo match, pixels',
                                     range=(0.1, 100.0))
     min_depth_m: float = param(0.7, 'nearest depth of a stereo match (largest disparity '
@@ -194,6 +201,8 @@ class EgomotionEstimator:
     def __init__(self, config: EgomotionConfig | None = None) -> None:
         self.config = config or EgomotionConfig()
         self._rng = np.random.default_rng(self.config.seed)
+        #: the rig's vertical misalignment (kept over resets; a new camera restarts it)
+        self.alignment = VerticalAlignment()
         self.reset()
 
     def reset(self) -> None:
@@ -218,6 +227,11 @@ class EgomotionEstimator:
         dr, vr = patches(rf, pr, c.patch_half_size)
         pl, dl = pl[vl], dl[vl]
         pr, dr = pr[vr], dr[vr]
+        if c.align_vertical:
+            self.alignment.update(left, right, cam.f, cam.cx, cam.cy)
+            if self.alignment.wanted():
+                pr = pr.copy()
+                pr[:, 1] -= self.alignment.dv_at(pr[:, 0])
         idx = match_stereo(pl, dl, pr, dr, row_tol=c.stereo_row_tolerance_px,
                            min_disparity=c.min_disparity_px,
                            max_disparity=cam.fb / c.min_depth_m, min_ncc=c.min_ncc,
