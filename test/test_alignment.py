@@ -62,7 +62,7 @@ def test_a_turned_right_camera_is_measured_and_corrected(tilt, roll):
     for f in frames:
         al.update(f.left, f.right, rig.focal, rig.cx, rig.cy)
     sides = np.array([0.0, rig.width - 1.0])
-    dv, sd = al.corner_px()
+    dv, sd = al.sides_px()
     assert dv == pytest.approx(_truth_dv(rig, sides), abs=0.15)
     assert np.all(sd < 0.1) and al.settled()
     assert al.wanted()
@@ -120,4 +120,4 @@ def test_a_bumped_rig_is_followed():
                                borderMode=cv2.BORDER_REFLECT)
         for _ in range(n):
             al.update(left, right, 150.0, 79.5, 59.5)
-        assert al.corner_px()[0] == pytest.approx([dv_true, dv_true], abs=0.1)
+        assert al.sides_px()[0] == pytest.approx([dv_true, dv_true], abs=0.1)

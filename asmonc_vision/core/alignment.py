@@ -6,8 +6,9 @@ fraction of a degree, and the rows part by a fraction of a pixel to a few pixels
 matching on one row (PMF) then matches each slanted edge a little off along it: the
 disparity error is dv / tan(edge angle), so the ground's disparity spread, the obstacle
 threshold taken from it and the smallest obstacle that stands out all grow (on the
-simulated paper rig: the threshold 0.72 -> 0.89 px for 0.5 px of misalignment, 0.68 ->
-1.19 px for 1.5 px).
+simulated paper rig, the edge pixels' median threshold: 0.73 -> 0.91 px for 0.5 px of
+misalignment, 0.71 -> 1.43 px for 1.6 px; and the egomotion's stereo matching, whose row
+tolerance is 1 px, finds nothing beyond it).
 
 This module measures the misalignment from corners matched between the two images of
 each pair (pyramidal Lucas-Kanade, checked forwards and backwards), fits the vertical
@@ -248,18 +249,18 @@ class VerticalAlignment:
         self._cam: tuple[float, float, float] | None = None
 
     # ----------------------------------------------------------------- estimate
-    def _corner_xy(self) -> np.ndarray:
+    def _sides_x(self) -> np.ndarray:
         """(2, 2) rows (1, x) of the image's first and last columns."""
         f, cx, _ = self._cam
         w = self._shape[1]
         return np.array([[1.0, -cx / f], [1.0, (w - 1.0 - cx) / f]])
 
-    def corner_px(self) -> tuple[np.ndarray, np.ndarray]:
+    def sides_px(self) -> tuple[np.ndarray, np.ndarray]:
         """The tracked misalignment dv at the image's left and right edges and its
         standard deviation there: ((2,), (2,)) pixels (zeros before the first pair)."""
         if self._shape is None:
             return np.zeros(2), np.zeros(2)
-        a = self._corner_xy()
+        a = self._sides_x()
         return a @ self.x, np.sqrt(np.einsum('ij,jk,ik->i', a, self.P, a))
 
     def dv_at(self, u: np.ndarray) -> np.ndarray:
@@ -273,7 +274,7 @@ class VerticalAlignment:
     @property
     def max_px(self) -> float:
         """The largest |dv| of the tracked misalignment over the image, pixels."""
-        return float(np.max(np.abs(self.corner_px()[0])))
+        return float(np.max(np.abs(self.sides_px()[0])))
 
     def settled(self) -> bool:
         """Whether the misalignment is known: its standard deviation fell below
@@ -281,7 +282,7 @@ class VerticalAlignment:
         if self.measurements == 0:
             self._settled = False
             return False
-        sd = self.corner_px()[1]
+        sd = self.sides_px()[1]
         limit = self.config.settled_sd_px * (2.0 if self._settled else 1.0)
         self._settled = bool(np.all(sd < limit))
         return self._settled
@@ -347,7 +348,7 @@ class VerticalAlignment:
         when no longer sure."""
         if self.measurements == 0:
             return False
-        dv, sd = self.corner_px()
+        dv, sd = self.sides_px()
         if not (self.applied or self.settled() or np.all(sd < 0.25 * np.max(np.abs(dv)))):
             return False                 # not yet known well enough to resample by
         sure = np.abs(dv) > 3.0 * np.hypot(sd, self.config.scene_bias_px)
@@ -365,7 +366,7 @@ class VerticalAlignment:
             replicated).
         """
         h, w = self._shape
-        if self._maps is None or np.max(np.abs(self._corner_xy() @ (self.x - self._map_x))) > 0.02:
+        if self._maps is None or np.max(np.abs(self._sides_x() @ (self.x - self._map_x))) > 0.02:
             f, cx, cy = self._cam
             uu, vv = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
             dv = self.x[0] + self.x[1] * (uu - cx) / f
