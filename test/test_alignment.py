@@ -39,17 +39,17 @@ def test_fit_recovers_offset_and_roll_and_ignores_outliers():
     pts = np.column_stack([rng.uniform(0, 320, 120), rng.uniform(0, 240, 120)])
     dv = 0.6 - 1.5 * (pts[:, 0] - 160) / 300 + rng.normal(0, 0.05, 120)
     dv[:10] += 3.0                                    # mismatches
-    m = fit_misalignment(pts, dv, 300.0, 160.0, 120.0)
+    m = fit_misalignment(pts, dv, 300.0, 160.0)
     assert m is not None and m.matches == 120
     assert m.p == pytest.approx([0.6, -1.5], abs=0.05)
     assert np.all(np.sqrt(np.diag(m.cov)) < 0.1)
-    assert fit_misalignment(pts[:3], dv[:3], 300.0, 160.0, 120.0) is None
+    assert fit_misalignment(pts[:3], dv[:3], 300.0, 160.0) is None
 
 
 def _sides_px(left, right, rig) -> np.ndarray:
     """One pair's measured misalignment at the image's left and right edges, pixels."""
     p, disp = corner_displacements(left, right)
-    m = fit_misalignment(p + disp, disp[:, 1], rig.focal, rig.cx, rig.cy)
+    m = fit_misalignment(p + disp, disp[:, 1], rig.focal, rig.cx)
     return m.p[0] + m.p[1] * (np.array([0.0, rig.width - 1.0]) - rig.cx) / rig.focal
 
 

@@ -182,7 +182,7 @@ def corner_displacements(left: np.ndarray, right: np.ndarray, max_corners: int =
     return pts[ok], disp[ok]
 
 
-def fit_misalignment(points: np.ndarray, dv: np.ndarray, f: float, cx: float, cy: float
+def fit_misalignment(points: np.ndarray, dv: np.ndarray, f: float, cx: float
                      ) -> AlignmentMeasurement | None:
     """Fit dv = p0 + p1 x to corner matches (Huber-weighted least squares).
 
@@ -190,7 +190,7 @@ def fit_misalignment(points: np.ndarray, dv: np.ndarray, f: float, cx: float, cy
         points: (N, 2) float64 right-image (u, v), pixels (the right camera's rotation
             acts about its own centre).
         dv: (N,) float64 vertical displacement right - left, pixels.
-        f, cx, cy: the rectified camera's focal length and principal point, pixels.
+        f, cx: the rectified camera's focal length and principal point's column, pixels.
     Returns:
         The AlignmentMeasurement, or None with fewer than 4 points or a degenerate spread.
     """
@@ -237,7 +237,6 @@ class VerticalAlignment:
         """Forget the misalignment (a new camera)."""
         self.x = np.zeros(2)
         self.P = np.diag(np.square(_P0_SD))
-        self.frames = 0
         self.measurements = 0
         self.applied = False
         self._outliers = 0
@@ -304,7 +303,6 @@ class VerticalAlignment:
         if self._shape != shape or self._cam != cam:
             self.reset()
             self._shape, self._cam = shape, cam
-        self.frames += 1
         # predict: x = F x (F = I), P = F P F' + Q
         self.P = self.P + (c.drift_px ** 2) * np.eye(2)
         self._since += 1
@@ -315,7 +313,7 @@ class VerticalAlignment:
                                          c.match_error_px)
         if pts.shape[0] < c.min_matches:
             return None
-        m = fit_misalignment(pts + disp, disp[:, 1], f, cx, cy)
+        m = fit_misalignment(pts + disp, disp[:, 1], f, cx)
         if m is None:
             return None
         z, R = m.p, m.cov
@@ -367,10 +365,8 @@ class VerticalAlignment:
         """
         h, w = self._shape
         if self._maps is None or np.max(np.abs(self._sides_x() @ (self.x - self._map_x))) > 0.02:
-            f, cx, cy = self._cam
             uu, vv = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
-            dv = self.x[0] + self.x[1] * (uu - cx) / f
-            self._maps = (uu.astype(np.float32), (vv + dv).astype(np.float32))
+            self._maps = (uu.astype(np.float32), (vv + self.dv_at(uu)).astype(np.float32))
             self._map_x = self.x.copy()
         return cv2.remap(right, self._maps[0], self._maps[1], cv2.INTER_LINEAR,
                          borderMode=cv2.BORDER_REPLICATE)

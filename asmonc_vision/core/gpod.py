@@ -4103,12 +4103,13 @@ class GpodDetector:
         still = self._stillness(el)
         if callable(motion) and self._calib is not None:     # not while calibrating
             motion = motion()
-        status, updated = self._update_plane(u, v, d, _noise_key(m), cam, still,
+        s = _noise_key(m)
+        status, updated = self._update_plane(u, v, d, s, cam, still,
                                              None if callable(motion) else motion)
         if self._sigma_stale and status == 'tracking' and updated:
             # the images changed since the calibration (the right one is now resampled,
             # or no longer): the residual spread is taken again, about this frame's plane
-            self._calibrate_sigma(u, v, d, _noise_key(m).astype(np.float64))
+            self._calibrate_sigma(u, v, d, s.astype(np.float64))
             self._sigma_stale = False
         t3 = time.perf_counter()
         timings['plane'] = (t3 - t2) * 1e3

@@ -215,9 +215,10 @@ class DetectorNode(StereoInputNode):
         mis = result.misalignment_px
         if np.isfinite(mis) and mis >= _MISALIGNMENT_WARN_PX:
             level = Diagnostics.WARN
-            message += (f'; rows misaligned by {mis:.1f} px '
-                        f"({'corrected' if result.misalignment_corrected else 'not corrected'})"
-                        ': recalibrate the stereo rig')
+            # (the size is in misalignment_px: a message that changes is republished)
+            message += ('; rows misaligned, '
+                        + ('corrected' if result.misalignment_corrected else 'not corrected')
+                        + ': recalibrate the stereo rig')
             self.get_logger().warn(
                 f'left and right rows misaligned by {mis:.1f} px (the stereo rig has moved '
                 'off its calibration); '
