@@ -398,6 +398,32 @@ def test_calibrates_from_one_frame_when_the_walk_starts_at_once():
     assert first[0].frame_index == 3 and not first[0].still
 
 
+@pytest.mark.parametrize('scenario,seed', [('walk_stop_turn', 9013), ('slope', 9019),
+                                           ('plain_wall', 9035), ('static_obstacles', 9001)])
+def test_a_walking_start_calibrates_the_threshold_on_one_plane(scenario, seed):
+    """The obstacle threshold comes from the calibration's residual spread. A wearer who
+    walks from the first frame gives the window's frames planes a little apart (on
+    slope 9019 each within 1 px of their joint plane): about the joint plane their
+    spread was 0.75 px (plain_wall 9035: 1.24 px; walk_stop_turn 9013: 1.56 px, the
+    threshold at its 1.7 px ceiling), against 0.2 px about each frame's own. Each frame must lie on the joint
+    plane as tightly as on its own, else the latest frame alone calibrates. A standing
+    start keeps the whole window (three frames' features)."""
+    from asmonc_vision.sim.scenarios import make_scenario, simulate_frame
+    sc = make_scenario(scenario, seed=seed)
+    cam = sc.rig.camera()
+    det = GpodDetector(GpodConfig())
+    n_last = 0
+    for k in range(GpodConfig().init_frames):
+        f = simulate_frame(sc, k)
+        r = det.process(f.left, f.right, cam)
+        n_last = len(r.features)
+    assert r.status == 'tracking'
+    assert 0.05 < det.sigma_px < 0.3, det.sigma_px
+    assert r.threshold_px < 1.2, r.threshold_px
+    standing = scenario == 'static_obstacles'
+    assert (det.calibrated_plane.num_features > 1.5 * n_last) == standing
+
+
 def test_no_texture_is_a_status_not_an_exception(scenes):
     blank = np.full((CAM.height, CAM.width), 128, np.uint8)
     det = GpodDetector()

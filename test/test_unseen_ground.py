@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from asmonc_vision.core.camera import MetricPlane, StereoCamera
-from asmonc_vision.core.gpod import GpodConfig, GpodDetector
+from asmonc_vision.core.gpod import GpodConfig, GpodDetector, GpodObstacle
 from asmonc_vision.core.unseen_ground import UnseenGroundMonitor, _texture_energy
 
 CAM = StereoCamera(f=300.0, cx=159.5, cy=119.5, baseline=0.35, width=320, height=240)
@@ -201,16 +201,14 @@ def test_bad_settings_are_refused(kw, match):
         GpodConfig(unseen_max_ratio=0.99)
 
 
-def test_a_plain_wall_that_appears_ahead_is_reported_at_its_foot():
-    """The simulator's wall with no texture on its faces (uniform grey) appears 2.4 m
-    ahead of the paper's rig standing still: no vertical edge on it, so GPOD alone does not
-    find it, and the ground it hides does."""
+def _plain_wall_frames(seed: int = 3, n: int = 20):
+    """The simulator's wall with no texture on its faces (uniform grey), appearing 2.4 m
+    ahead of the paper's rig standing still at 0.8 s: (camera, frames)."""
     from asmonc_vision.sim import RigSettings, StereoRenderer, simulate_frame
     from asmonc_vision.sim.motion import Leg, Trajectory
     from asmonc_vision.sim.scenarios import Scenario, random_pavement
     from asmonc_vision.sim.world import Ground, World, wall
 
-    seed = 3
     rig = RigSettings()
     rng = np.random.default_rng(seed)
     w = wall(2.4, -6.0, 2.4, 6.0, appear=0.8, texture=0.0)
@@ -218,20 +216,54 @@ def test_a_plain_wall_that_appears_ahead_is_reported_at_its_foot():
     traj = Trajectory([Leg(2.0, 0.0)], rig, world, rng=np.random.default_rng(seed + 1))
     scene = Scenario('plain_wall', 'a plain wall appears', seed, 2.0, rig, world, traj)
     ren = StereoRenderer(rig)
-    cam = rig.camera()
-    frames = [simulate_frame(scene, k, ren) for k in range(20)]
-    found = {}
-    for ratio in (0.15, 0.0):
-        det = GpodDetector(GpodConfig(unseen_max_ratio=ratio))
-        hits = 0
-        for f in frames:
-            r = det.process(f.left, f.right, cam, stamp_ns=int(f.time * 1e9))
-            if f.time < 1.0:                        # appears at 0.8 s; two frames to report
-                continue
-            truth = min(o.range for o in f.obstacles)
-            ahead = [o for o in r.obstacles if abs(o.range * math.sin(o.bearing)) <= 0.5
-                     and o.confidence >= 0.3 and abs(o.height) >= 0.05]
-            hits += any(abs(o.range - truth) <= 0.3 for o in ahead)
-        found[ratio] = hits
+    return rig.camera(), [simulate_frame(scene, k, ren) for k in range(n)]
+
+
+def _wall_hits(det, cam, frames) -> int:
+    """Frames after the wall appeared (two to report it) in which a report that the alarm
+    would announce (in the corridor, confidence >= 0.3, >= 5 cm) lies within 0.3 m of
+    the wall's range."""
+    hits = 0
+    for f in frames:
+        r = det.process(f.left, f.right, cam, stamp_ns=int(f.time * 1e9))
+        if f.time < 1.0:                        # appears at 0.8 s; two frames to report
+            continue
+        truth = min(o.range for o in f.obstacles)
+        ahead = [o for o in r.obstacles if abs(o.range * math.sin(o.bearing)) <= 0.5
+                 and o.confidence >= 0.3 and abs(o.height) >= 0.05]
+        hits += any(abs(o.range - truth) <= 0.3 for o in ahead)
+    return hits
+
+
+def test_a_plain_wall_that_appears_ahead_is_reported_at_its_foot():
+    """The plain wall appears 2.4 m ahead of the rig standing still: no vertical edge on
+    it, so GPOD alone does not find it, and the ground it hides does."""
+    cam, frames = _plain_wall_frames()
+    found = {ratio: _wall_hits(GpodDetector(GpodConfig(unseen_max_ratio=ratio)), cam, frames)
+             for ratio in (0.15, 0.0)}
     assert found[0.15] >= 9, found                  # of 10 frames (measured 10)
     assert found[0.0] <= 1, found                   # the scene needs the cue (measured 0)
+
+
+@pytest.mark.parametrize('confidence,explains', [(0.08, False), (0.9, True)])
+def test_only_a_confident_report_explains_the_unseen_ground(monkeypatch, confidence,
+                                                             explains):
+    """A detected obstacle in the corridor nearer than the hidden band explains it: the
+    wearer is warned of that one first. A weak report that no alarm announces must not:
+    a 4 cm blip at confidence 0.08, 0.4 m before a plain wall, hid the wall from the
+    wearer at 2.7 and 1.9 m (plain_wall 8080, B = 0.2 m)."""
+    cam, frames = _plain_wall_frames()
+    det = GpodDetector(GpodConfig())
+    track = GpodDetector._track
+
+    def with_blip(self, *args, **kwargs):
+        out = track(self, *args, **kwargs)
+        blip = GpodObstacle(position=np.zeros(3), height=0.04, range=2.0, bearing=0.05,
+                            width=0.0, disparity_excess=0.7, confidence=confidence,
+                            roi=(150, 150, 2, 4), num_edge_pixels=2,
+                            string_ids=np.zeros(0, np.int32), track_id=99)
+        return out + (blip,)
+
+    monkeypatch.setattr(GpodDetector, '_track', with_blip)
+    hits = _wall_hits(det, cam, frames)
+    assert (hits <= 1) if explains else (hits >= 9), hits

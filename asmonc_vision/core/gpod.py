@@ -94,8 +94,8 @@ from .edges import warm_up as edges_warm_up
 from .motion.geometry import so3_log
 from .obstacle_tracks import ObstacleTracker
 from .unseen_ground import UnseenGroundMonitor
-from .ground_plane import (PlaneFit, PlausiblePlaneConfig, fit_ground_plane, plane_is_plausible,
-                           predict_plane)
+from .ground_plane import (PlaneFit, PlausiblePlaneConfig, fit_ground_plane, lsq_plane,
+                           plane_is_plausible, predict_plane)
 from .ground_plane import _median
 from .jit import jit as _jit
 from .jit import nb_pairwise_sum as _nb_pairwise_sum
@@ -234,6 +234,10 @@ _THIN_MAX_CELLS = 1 << 16
 #: The residual spread sigma of the initial fit is taken over the calibration features
 #: within this many ``plane_inlier_px`` of the fitted plane.
 _SIGMA_GATE = 3.0
+#: The initial plane is fitted to the calibration window's frames together only if each
+#: frame's residual spread about it is at most this many times that about the frame's
+#: own plane (a standing rig: 1.00-1.03; a wearer already walking: 1.2-10).
+_WINDOW_SIGMA_RATIO = 1.15
 
 #: `GpodDetector._stillness` compares the strong edges when there are this many, else
 #: all edges.
@@ -536,6 +540,11 @@ class GpodConfig(PlausiblePlaneConfig):
     unseen_half_width_m: float = param(
         0.5, 'Unseen ground: half width of the watched corridor, metres',
         range=(0.05, 10.0))
+    unseen_explain_min_confidence: float = param(
+        0.3, 'Unseen ground: only a detected obstacle or drop-off at least this confident '
+        'explains the missing ground (a weak report that no alarm would announce must not '
+        'silence the unseen ground behind it; the alarm node\'s min_confidence), 0..1',
+        range=(0.0, 1.0))
     disparity_sigma_px: float = param(
         1.0, 'Standard deviation of the disparity excess of ground features, pixels (the '
         "paper's sigma = 1), for the confidence", range=(0.01, 20.0))
@@ -3725,6 +3734,36 @@ class GpodDetector:
         pixels (NaN while initialising)."""
         return self._sigma
 
+    def _window_shares_plane(self, joint: PlaneFit, cam: StereoCamera) -> bool:
+        """Whether the calibration window's frames all lie on the plane ``joint`` fitted
+        to them together: each frame's own plane (least squares from ``joint``, refitted
+        on its features within ``plane_inlier_px``, weighted as `_fit` weights them)
+        differs from it by at most ``plane_inlier_px`` over the image's lower half, and
+        the frame's residual spread about ``joint`` (robust sigma within ``_SIGMA_GATE *
+        plane_inlier_px``) is at most ``_WINDOW_SIGMA_RATIO`` times that about its own.
+        Deterministic (draws nothing from the detector's random generator). A frame
+        whose own plane cannot be fitted counts as not sharing it."""
+        tol = self.config.plane_inlier_px
+        gate = _SIGMA_GATE * tol
+        for u, v, d, _ in self._init_window:
+            own = joint.abc
+            for it in range(3):
+                near = np.abs(d - plane_disparity(own, u, v)) <= (gate if it == 0 else tol)
+                ls = lsq_plane(u[near], v[near], d[near], np.maximum(d[near], 0.0) ** 3)
+                if ls is None:
+                    return False
+                own = ls[0]
+            if not _planes_agree(joint.abc, own, cam, tol):
+                return False
+            sig = []
+            for abc in (own, joint.abc):
+                res = d - plane_disparity(abc, u, v)
+                res = res[np.abs(res) <= gate]
+                sig.append(_mad_sigma(res) if res.size >= 3 else math.nan)
+            if not (sig[1] <= _WINDOW_SIGMA_RATIO * sig[0]):      # NaN: not shared
+                return False
+        return True
+
     def _calibrate_sigma(self, u, v, d, s) -> None:
         """Residual spread of the calibration features about the calibrated plane.
 
@@ -3801,12 +3840,13 @@ class GpodDetector:
                 return 'initialising', False
             if len(self._init_window) > 1:
                 # Frames of different ground planes (a wearer who walks from the first
-                # frame sways): their joint plane is tilted between them (3 degrees:
-                # obstacles everywhere). Then this frame alone calibrates. (A car on a
-                # flat road moves, but its ground plane does not.)
+                # frame sways): their joint plane lies between them, tilted for each
+                # (3 degrees: obstacles everywhere), and its residual spread, which sets
+                # the obstacle threshold, is theirs plus the sway's. Then this frame
+                # alone calibrates. (A car on a flat road moves, but its ground plane
+                # does not.)
                 last = self._fit(u, v, d, cam)
-                if last is not None and not _planes_agree(fit.abc, last.abc, cam,
-                                                          c.plane_inlier_px):
+                if last is not None and not self._window_shares_plane(fit, cam):
                     fit, uu, vv, dd, ss = last, u, v, d, s
             if fit.num_features < c.init_min_inlier_fraction * uu.shape[0]:
                 return 'initialising', False
@@ -4135,13 +4175,17 @@ class GpodDetector:
                        metric: MetricPlane, known: tuple[GpodObstacle, ...]
                        ) -> tuple[GpodObstacle, ...]:
         """The frame's band of unseen corridor ground (`core.unseen_ground`), unless an
-        obstacle or drop-off in ``known`` explains it, as an untracked obstacle straight
+        obstacle or drop-off in ``known`` at least ``unseen_explain_min_confidence``
+        confident explains it, as an untracked obstacle straight
         ahead (``track_id`` 0; ``disparity_excess`` 0: nothing was measured on it;
         ``num_edge_pixels`` 0; ``confidence`` 1 - seen / expected). Empty when there is
         none or ``unseen_max_ratio`` is 0."""
         if self._unseen is None:
             return ()
-        # the known feet on the ground: (forward, left) from their range and bearing
+        # the known feet on the ground: (forward, left) from their range and bearing; a
+        # weak report (a 4 cm blip at 0.08) would hide a wall from the wearer
+        known = tuple(o for o in known
+                      if o.confidence >= self.config.unseen_explain_min_confidence)
         explained = _ground_points(known) if known else None
         thr = features.threshold if features.threshold is not None else threshold
         r = self._unseen.update(cam, metric, features.u_left, features.v, features.excess,
