@@ -131,6 +131,33 @@ def test_a_drop_off_and_a_detected_obstacle_explain_the_missing_ground():
                       explained=np.array([[2.9, 1.2]])) is not None
 
 
+@pytest.mark.parametrize('faces,reported', [
+    ((None, None, None), (False, True, True)),
+    ((False, None, None), (False, False, True)),
+    ((None, False, None), (False, False, False)),
+])
+def test_a_band_that_showed_the_grounds_texture_breaks_the_pairs_in_a_row(
+        monkeypatch, faces, reported):
+    """The band must be found hidden in ``frames`` (2) pairs in a row. A pair in which it
+    shows the ground's own fine texture (`_foot_and_face` says: not plain) is evidence
+    against it, not one of the row; a pair too close to tell (None) is not evidence
+    either way. On walk_stop_turn 9013, turning away from a wall set the tile joints
+    aslant (fewer vertical edges): the band showed texture in one pair, the next was too
+    close to tell, and the two together reported a wall 1.75 m ahead over open ground."""
+    rng, mon = _learnt(12, frames=2)
+    seq = iter(faces)
+    monkeypatch.setattr(UnseenGroundMonitor, '_foot_and_face',
+                        lambda self, energy, cam, metric, r_near, far: (r_near, next(seq)))
+    left = np.zeros((CAM.height, CAM.width), np.uint8)
+    got = []
+    for _ in faces:
+        xy, u, v = _ground_points(rng, 4000)
+        keep = xy[:, 0] < 3.0
+        got.append(mon.update(CAM, PLANE, u[keep], v[keep], np.zeros(keep.sum()), 0.8,
+                              left=left) is not None)
+    assert tuple(got) == reported
+
+
 def test_a_hidden_band_is_not_learnt_as_ground_that_shows_nothing():
     rng, mon = _learnt(6, frames=1)
     for k in range(40):

@@ -30,7 +30,7 @@ from R out to the corridor's far end (at least ``MIN_CELLS`` of them):
   texture: a blurred camera or faint far joints give fewer matched edges over ground that
   is still there, while a surface with no edges is plain (`_foot_and_face`).
 The nearest such R, found in ``frames`` pairs in a row (within a cell of the previous
-one), is reported as an obstacle at R straight ahead, unless a detected obstacle or
+one; a pair whose band shows the ground's texture breaks the row), is reported as an obstacle at R straight ahead, unless a detected obstacle or
 drop-off already stands in the corridor no farther than R + ``EXPLAINED_M`` (what hides
 the ground is already reported). R is the last ground edge pixel seen, moved on to where
 the ground's fine texture gives way to a plain face (`_foot_and_face`).
@@ -161,6 +161,8 @@ class UnseenGroundMonitor:
         #: pairs in a row the band was found, and its first cell in the last of them
         self._streak = 0
         self._last_cell = -10
+        #: the last band looked at showed the ground's own fine texture (`_report`)
+        self._textured = False
 
     # -------------------------------------------------------------- geometry
     def pixel_ground(self, cam: StereoCamera, metric: MetricPlane, u: np.ndarray,
@@ -334,8 +336,16 @@ class UnseenGroundMonitor:
             if front_ok or near:
                 self._streak = self._streak + 1 if near else 1
                 self._last_cell = found
+                self._textured = False
                 report = self._report(cam, metric, xy, excess, threshold, band, found,
                                       k_all, explained, left)
+                if self._textured:
+                    # the band showed the ground's own texture: this pair is evidence
+                    # against it, and the pairs in a row start again (a turn that sets
+                    # the tile joints aslant gives fewer vertical edges over ground still
+                    # there; the next pair, too close to tell, must not complete a
+                    # streak that this one broke)
+                    self._streak, self._last_cell = 0, -10
             else:
                 self._streak, self._last_cell = 0, -10
         # learn: the running mean of each cell in view and not hidden; a cell that looks
@@ -370,6 +380,7 @@ class UnseenGroundMonitor:
                                                 far)
             if plain is False:
                 # the band shows the ground's fine texture: nothing plain hides it
+                self._textured = True
                 return None
         if explained is not None and len(explained):
             ex = np.asarray(explained, float).reshape(-1, 2)
