@@ -3845,8 +3845,14 @@ class GpodDetector:
                 # the obstacle threshold, is theirs plus the sway's. Then this frame
                 # alone calibrates. (A car on a flat road moves, but its ground plane
                 # does not.)
+                # Both tests: the latest frame's own robust fit may find another surface
+                # than the joint fit (the near ground before a kerb down, where the joint
+                # took the lower ground beyond it), which a least-squares refit started
+                # from the joint plane does not.
                 last = self._fit(u, v, d, cam)
-                if last is not None and not self._window_shares_plane(fit, cam):
+                if last is not None and (
+                        not _planes_agree(fit.abc, last.abc, cam, c.plane_inlier_px)
+                        or not self._window_shares_plane(fit, cam)):
                     fit, uu, vv, dd, ss = last, u, v, d, s
             if fit.num_features < c.init_min_inlier_fraction * uu.shape[0]:
                 return 'initialising', False
