@@ -3744,11 +3744,11 @@ class GpodDetector:
         Deterministic (draws nothing from the detector's random generator). A frame
         whose own plane cannot be fitted counts as not sharing it."""
         tol = self.config.plane_inlier_px
-        gate = _SIGMA_GATE * tol
         for u, v, d, _ in self._init_window:
             own = joint.abc
             for it in range(3):
-                near = np.abs(d - plane_disparity(own, u, v)) <= (gate if it == 0 else tol)
+                near = (self._gated_residuals(own, u, v, d)[1] if it == 0
+                        else np.abs(d - plane_disparity(own, u, v)) <= tol)
                 ls = lsq_plane(u[near], v[near], d[near], np.maximum(d[near], 0.0) ** 3)
                 if ls is None:
                     return False
@@ -3757,12 +3757,19 @@ class GpodDetector:
                 return False
             sig = []
             for abc in (own, joint.abc):
-                res = d - plane_disparity(abc, u, v)
-                res = res[np.abs(res) <= gate]
-                sig.append(_mad_sigma(res) if res.size >= 3 else math.nan)
+                res, near = self._gated_residuals(abc, u, v, d)
+                sig.append(_mad_sigma(res[near]) if near.sum() >= 3 else math.nan)
             if not (sig[1] <= _WINDOW_SIGMA_RATIO * sig[0]):      # NaN: not shared
                 return False
         return True
+
+    def _gated_residuals(self, abc, u, v, d) -> tuple[np.ndarray, np.ndarray]:
+        """Disparity residuals of features (u, v, d: (N,) pixels) about the plane ``abc``
+        (N,) px, and (N,) bool: within ``_SIGMA_GATE * plane_inlier_px`` of it (the
+        features whose spread is the fit's error; far off it are other surfaces, walls,
+        trees)."""
+        res = d - plane_disparity(abc, u, v)
+        return res, np.abs(res) <= _SIGMA_GATE * self.config.plane_inlier_px
 
     def _calibrate_sigma(self, u, v, d, s) -> None:
         """Residual spread of the calibration features about the calibrated plane.
@@ -3773,10 +3780,7 @@ class GpodDetector:
         and factors (>= 1) in bands of image rows by which the residuals, divided by their
         bin's sigma, are still spread (the far ground, foreshortened, matches less well).
         """
-        res = d - plane_disparity(self._abc, u, v)
-        # Features near the plane only: far off it are other surfaces (walls, trees),
-        # not the fit's error.
-        near = np.abs(res) <= _SIGMA_GATE * self.config.plane_inlier_px
+        res, near = self._gated_residuals(self._abc, u, v, d)
         res, s, v = res[near], s[near], v[near]
         self._sigma = _mad_sigma(res)
         n_bins = int(min(8, res.size // 100))

@@ -30,9 +30,10 @@ from R out to the corridor's far end (at least ``MIN_CELLS`` of them):
   texture: a blurred camera or faint far joints give fewer matched edges over ground that
   is still there, while a surface with no edges is plain (`_foot_and_face`).
 The nearest such R, found in ``frames`` pairs in a row (within a cell of the previous
-one; a pair whose band shows the ground's texture breaks the row), is reported as an obstacle at R straight ahead, unless a detected obstacle or
-drop-off already stands in the corridor no farther than R + ``EXPLAINED_M`` (what hides
-the ground is already reported). R is the last ground edge pixel seen, moved on to where
+one; a pair whose band shows the ground's texture breaks the row), is reported as an
+obstacle at R straight ahead, unless a detected obstacle or drop-off already stands in
+the corridor no farther than R + ``EXPLAINED_M`` (what hides the ground is already
+reported). R is the last ground edge pixel seen, moved on to where
 the ground's fine texture gives way to a plain face (`_foot_and_face`).
 
 Limits, which no passive stereo cue avoids: ground that itself has no edges for metres (a
@@ -161,8 +162,6 @@ class UnseenGroundMonitor:
         #: pairs in a row the band was found, and its first cell in the last of them
         self._streak = 0
         self._last_cell = -10
-        #: the last band looked at showed the ground's own fine texture (`_report`)
-        self._textured = False
 
     # -------------------------------------------------------------- geometry
     def pixel_ground(self, cam: StereoCamera, metric: MetricPlane, u: np.ndarray,
@@ -336,10 +335,9 @@ class UnseenGroundMonitor:
             if front_ok or near:
                 self._streak = self._streak + 1 if near else 1
                 self._last_cell = found
-                self._textured = False
-                report = self._report(cam, metric, xy, excess, threshold, band, found,
-                                      k_all, explained, left)
-                if self._textured:
+                report, textured = self._report(cam, metric, xy, excess, threshold, band,
+                                                found, k_all, explained, left)
+                if textured:
                     # the band showed the ground's own texture: this pair is evidence
                     # against it, and the pairs in a row start again (a turn that sets
                     # the tile joints aslant gives fewer vertical edges over ground still
@@ -363,9 +361,10 @@ class UnseenGroundMonitor:
     def _report(self, cam: StereoCamera, metric: MetricPlane, xy: np.ndarray,
                 excess: np.ndarray, threshold, band: np.ndarray, found: int,
                 k_all: np.ndarray, explained: np.ndarray | None,
-                left: np.ndarray | None) -> UnseenReport | None:
+                left: np.ndarray | None) -> tuple[UnseenReport | None, bool]:
         """The found band as a report: its near edge placed, unless a known obstacle
-        explains it or it has not yet been found ``frames`` pairs in a row."""
+        explains it or it has not yet been found ``frames`` pairs in a row. Returns
+        (the report or None, whether the band showed the ground's own fine texture)."""
         r0 = float(self.range_edges[found])
         # the last ground seen in the band's first cell moves R to it
         thr = np.broadcast_to(np.asarray(threshold, float), excess.shape)
@@ -380,22 +379,21 @@ class UnseenGroundMonitor:
                                                 far)
             if plain is False:
                 # the band shows the ground's fine texture: nothing plain hides it
-                self._textured = True
-                return None
+                return None, True
         if explained is not None and len(explained):
             ex = np.asarray(explained, float).reshape(-1, 2)
             if np.any((np.abs(ex[:, 1]) <= self.half_width + 0.1)
                       & (ex[:, 0] <= r_near + EXPLAINED_M)):
-                return None
+                return None, False
         if self._streak < self.frames:
-            return None
+            return None, False
         height = metric.height * max(0.0, 1.0 - r_near / far)
         origin, fwd, _ = ground_axes(metric)
         pos = origin + r_near * fwd + height * np.asarray(metric.normal_up, float)
         return UnseenReport(position=pos, height=height, range=r_near,
                             width=2.0 * self.half_width,
                             expected=float(self.expected[band].sum()),
-                            seen=float(k_all[band].sum()), far_range=far)
+                            seen=float(k_all[band].sum()), far_range=far), False
 
 
 def _texture_energy(left: np.ndarray) -> np.ndarray:

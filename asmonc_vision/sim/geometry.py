@@ -19,6 +19,7 @@ import numpy as np
 
 from asmonc_vision.core.rotations import (R_BODY_OPTICAL, matrix_to_quaternion,  # noqa: F401
                                          matrix_to_rpy, rpy_to_quaternion)
+from asmonc_vision.core.motion.geometry import so3_exp
 from asmonc_vision.core.rotations import rpy_to_matrix as _rpy_to_matrix
 
 
@@ -101,18 +102,9 @@ def camera_poses(pose: RigPose, baseline: float, right_misalignment=None
     half = np.array([0.0, baseline / 2.0, 0.0])
     r_right = r_wo
     if right_misalignment is not None and np.any(right_misalignment):
-        r_right = r_wo @ _rotvec_matrix(np.asarray(right_misalignment, float))
+        r_right = r_wo @ so3_exp(np.asarray(right_misalignment, float))
     left = CameraPose(rotation=r_wo, centre=np.asarray(pose.position, float) + r_wb @ half)
     right = CameraPose(rotation=r_right,
                        centre=np.asarray(pose.position, float) - r_wb @ half)
     return left, right
 
-
-def _rotvec_matrix(rv: np.ndarray) -> np.ndarray:
-    """(3, 3) rotation of a (3,) rotation vector (radians), by Rodrigues' formula."""
-    th = float(np.linalg.norm(rv))
-    if th < 1e-15:
-        return np.eye(3)
-    k = rv / th
-    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + np.sin(th) * kx + (1.0 - np.cos(th)) * (kx @ kx)
