@@ -91,6 +91,34 @@ def test_constant_shift_with_gain_difference():
     assert np.mean(np.abs(m.d - shift) > 1.0) < 0.03
 
 
+
+@pytest.mark.parametrize('gain', [1.6, 0.6])
+def test_a_right_camera_with_its_own_gain_is_compared_on_the_lefts_scale(gain):
+    """The strength test with the right camera's gain: the raw strengths of a true match
+    differ by the gain, so at 1.6 or 0.6 (with ratio 0.7) the raw test rejects many
+    true matches (about 40 % here); told the gain, it keeps them, and what it keeps obeys
+    the test on the left's scale. The matches' strengths stay the edges' own."""
+    rng = np.random.default_rng(7)
+    tex = _texture(rng, 120, 260)
+    shift = 12.4
+    uu, vv = np.meshgrid(np.arange(200, dtype=np.float32), np.arange(120, dtype=np.float32))
+    left = np.clip(tex[:, :200] + rng.normal(0, 1.0, (120, 200)), 0, 255).astype(np.uint8)
+    right = cv2.remap(tex, uu + shift, vv, cv2.INTER_CUBIC) * gain + 30.0 * (1 - gain)
+    right = np.clip(right + rng.normal(0, 1.0, right.shape), 0, 255).astype(np.uint8)
+    el, er = detect_vertical_edges(left, min_string_length=3), detect_vertical_edges(right, min_string_length=3)
+    true = {}
+    for told in (1.0, 1.0 / gain):
+        c = candidate_matches(el, er, 1.0, 40.0, min_strength_ratio=0.7, right_gain=told)
+        s1, s2 = el.strength[c.left], er.strength[c.right] * np.float32(told)
+        assert np.all(np.minimum(s1, s2) >= 0.7 * np.maximum(s1, s2) - 1e-4)
+        true[told] = int(np.sum(np.abs(c.d - shift) < 0.5))
+    assert true[1.0 / gain] > 1.4 * true[1.0], true
+    m = pmf_match(el, er, 1.0, 40.0, right_gain=1.0 / gain)[0]
+    np.testing.assert_allclose(
+        m.strength, 0.5 * (el.strength[m.left_index] + er.strength[m.right_index]), rtol=1e-6)
+    with pytest.raises(ValueError, match='right_gain'):
+        candidate_matches(el, er, 1.0, 40.0, right_gain=0.0)
+
 def test_candidates_obey_polarity_strength_and_range(plane_pair):
     _, el, er = plane_pair
     c = candidate_matches(el, er, 5.0, 40.0, min_strength_ratio=0.6, max_orientation_diff_deg=25.0)

@@ -153,14 +153,31 @@ def matched_brightness(left: np.ndarray, right: np.ndarray) -> np.ndarray:
         (H, W) uint8 right image, gain * right + offset, rounded and clipped to 0..255;
         the right image itself when either image is uniform.
     """
+    go = brightness_gain_offset(left, right)
+    if go is None:
+        return right
+    gain, offset = go
+    return np.clip(np.rint(right * gain + offset), 0, 255).astype(np.uint8)
+
+
+def brightness_gain_offset(left: np.ndarray, right: np.ndarray) -> tuple[float, float] | None:
+    """The gain and offset that give the right image the left's mean and standard
+    deviation of grey level (`matched_brightness`).
+
+    Args:
+        left, right: (H, W) uint8 grey images of one pair.
+    Returns:
+        (gain, offset): ``gain * right + offset`` is on the left camera's scale (gain
+        dimensionless, offset grey levels); None when either image is uniform (standard
+        deviation below 1e-3 grey levels).
+    """
     mu_l, sd_l = cv2.meanStdDev(left)
     mu_r, sd_r = cv2.meanStdDev(right)
     sd_l, sd_r = float(sd_l[0, 0]), float(sd_r[0, 0])
     if sd_l < 1e-3 or sd_r < 1e-3:
-        return right
+        return None
     gain = sd_l / sd_r
-    offset = float(mu_l[0, 0]) - gain * float(mu_r[0, 0])
-    return np.clip(np.rint(right * gain + offset), 0, 255).astype(np.uint8)
+    return gain, float(mu_l[0, 0]) - gain * float(mu_r[0, 0])
 
 
 def corner_displacements(left: np.ndarray, right: np.ndarray, max_corners: int = 150,

@@ -85,7 +85,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .alignment import AlignmentConfig, VerticalAlignment
+from .alignment import AlignmentConfig, VerticalAlignment, brightness_gain_offset
 from .camera import MetricPlane, StereoCamera, ground_range_bearing, plane_disparity
 from .config import param
 from .edges import (EdgeMap, chain_roots, detect_vertical_edges, gradient_noise_gain,
@@ -440,6 +440,12 @@ class GpodConfig(PlausiblePlaneConfig):
     match_min_strength_ratio: float = param(
         0.5, 'Least ratio of the weaker to the stronger edge strength of a match',
         range=(0.0, 1.0))
+    right_gain_frames: int = param(
+        5, 'The right camera\'s gain relative to the left\'s (the ratio of the images\' '
+        'grey-level spreads) is the median over this many latest pairs, and the matching\'s '
+        'strength test compares edges on the left\'s scale: two cameras with their own '
+        'exposure or gain otherwise fail it on true matches and pass it on wrong ones '
+        '(0: the cameras are taken as alike)', range=(0, 100))
     match_max_orientation_diff_deg: float = param(
         30.0, 'Largest difference of gradient directions of a match, degrees',
         range=(0.0, 180.0))
@@ -1376,11 +1382,12 @@ def _warm_up() -> None:
     i32, f32 = np.zeros(2, np.int32), np.zeros(2, np.float32)
     _nb_occluded_all = (None if _nb_occluded is None else _warmed(
         _nb_occluded_all, i32, i32, np.ones(2, bool), i32, f32, f32, f32, 1.0, 16))
-    _nb_hanging = _warmed(_nb_hanging, i, i, np.zeros(1), i - 1, i, i - 1, 1, 2, 1.0, 0.1)
+    _nb_hanging = _warmed(_nb_hanging, i, i, np.zeros(1), i - 1, i, i - 1, 1, 2, 1.0, 0.1,
+                          np.ones(1, bool))
     _nb_hanging_all = (None if _nb_hanging is None else _warmed(
         _nb_hanging_all, np.full(1, -1, np.int32), np.zeros(1, np.int32),
         np.zeros(1, np.int32), np.zeros(1, np.float32), i - 1, np.ones(1), 0.5, True,
-        np.ones(1, bool), 32, 1.0, 0.1))
+        np.ones(1, bool), 32, 1.0, 0.1, np.ones(1, bool)))
     # The soft nearest points (four kernels, one switch) and the per-obstacle extremes.
     one = np.ones(1, bool)
     soft = _warmed(_nb_soft_args, f2, f1 + 1.0, i1, one, 1, 2.0)
@@ -1457,7 +1464,8 @@ def string_pieces(sid: np.ndarray, v: np.ndarray, ground: np.ndarray,
 
 def hanging_runs(edges: EdgeMap, m: Matches, prev: np.ndarray, h: np.ndarray,
                  max_height: float, tolerance_px: float, slope: float,
-                 only: np.ndarray | None = None, max_gap: int = 32) -> np.ndarray:
+                 only: np.ndarray | None = None, max_gap: int = 32,
+                 solid: np.ndarray | None = None) -> np.ndarray:
     """Matches in runs that hang in the air over another depth: the run's lowest pixel is
     more than ``max_height`` metres above the ground, and the same edge string goes on
     below it (matched pixels within ``max_gap`` rows) but never at the run's disparity
@@ -1477,6 +1485,11 @@ def hanging_runs(edges: EdgeMap, m: Matches, prev: np.ndarray, h: np.ndarray,
         only: (K,) bool, or None: only the runs of edge strings with such a match are
             tested (the obstacle pixels: the rest cannot matter).
         max_gap: rows searched below a run's bottom.
+        solid: (K,) bool, or None (every match): the matches that can hold a run up. A
+            stray match or two at the run's depth below it is as likely a mismatch the
+            same period off as the run: only a matched run of its own (figural
+            continuity, ``min_matched_run``) holds it up. A wall's streak matched 7 px off
+            for 11 rows, 5 m away, was held up by two pixels matched alike 25 rows below.
     Returns:
         (K,) bool.
     """
@@ -1484,13 +1497,14 @@ def hanging_runs(edges: EdgeMap, m: Matches, prev: np.ndarray, h: np.ndarray,
     out = np.zeros(k, bool)
     if k == 0:
         return out
+    solid = np.ones(k, bool) if solid is None else np.asarray(solid, bool)
     if _nb_hanging_all is not None:
         # The same run bottoms and walk, compiled (one pass).
         return _nb_hanging_all(edges.string_prev, m.left_index, m.string_id, m.d,
                                np.asarray(prev, np.int64), np.asarray(h, np.float64),
                                float(max_height), only is not None,
                                np.zeros(k, bool) if only is None else np.asarray(only, bool),
-                               int(max_gap), float(tolerance_px), float(slope))
+                               int(max_gap), float(tolerance_px), float(slope), solid)
     is_prev = np.zeros(k, bool)
     is_prev[prev[prev >= 0]] = True
     cand = ~is_prev & (h > max_height)                        # floating run bottoms
@@ -1511,7 +1525,7 @@ def hanging_runs(edges: EdgeMap, m: Matches, prev: np.ndarray, h: np.ndarray,
     if _nb_hanging is not None:
         return _nb_hanging(bottom, m.left_index.astype(np.int64), m.d.astype(np.float64),
                            below, feat_of_edge, prev.astype(np.int64), k, int(max_gap),
-                           float(tolerance_px), float(slope))
+                           float(tolerance_px), float(slope), solid)
     d0 = m.d[bottom].astype(np.float64)
     # A run held up only by a run that hangs itself hangs too (two stretches matched
     # the same period off, one above the other, or a chain of them down an edge that
@@ -1531,7 +1545,7 @@ def hanging_runs(edges: EdgeMap, m: Matches, prev: np.ndarray, h: np.ndarray,
             seen |= hit
             fh = f[hit]
             held[hit] |= ((np.abs(m.d[fh] - d0[hit]) <= tolerance_px + slope * r)
-                          & ~out[fh])
+                          & solid[fh] & ~out[fh])
         hang = seen & ~held
         new = np.zeros(k, bool)
         cur = bottom[hang]                      # whole runs, from the bottom up
@@ -1760,7 +1774,7 @@ def continuation_alternatives(edges: EdgeMap, m: Matches, prev: np.ndarray,
 
 
 def _hanging_kernel(bottom, left_index, d, below, feat_of_edge, prev, k, max_gap, tol,
-                    slope):
+                    slope, solid):
     """:func:`hanging_runs` after its candidate run bottoms, as loops (for numba): the
     same walk, tests and passes."""
     out = np.zeros(k, np.bool_)
@@ -1780,7 +1794,7 @@ def _hanging_kernel(bottom, left_index, d, below, feat_of_edge, prev, k, max_gap
                 if f < 0:
                     continue
                 seen = True
-                if abs(d[f] - d[b]) <= tol + slope * r and not out[f]:
+                if abs(d[f] - d[b]) <= tol + slope * r and solid[f] and not out[f]:
                     held = True
                     break
             if seen and not held:
@@ -1799,7 +1813,7 @@ def _hanging_kernel(bottom, left_index, d, below, feat_of_edge, prev, k, max_gap
 
 
 def _hanging_all_kernel(string_prev, left_index, string_id, d, prev, h, max_height, use_only,
-                        only, max_gap, tol, slope):
+                        only, max_gap, tol, slope, solid):
     """`hanging_runs` (for numba): its candidate run bottoms (no match below in the run,
     higher than ``max_height``; of strings with an ``only`` match when ``use_only``), the
     edges below each edge and `_hanging_kernel`'s walk; (K,) bool."""
@@ -1841,7 +1855,8 @@ def _hanging_all_kernel(string_prev, left_index, string_id, d, prev, h, max_heig
     for e in range(n_e):
         if string_prev[e] >= 0:
             below[string_prev[e]] = e
-    return _nb_hanging(bottom, li, d64, below, feat_of_edge, prev, k, max_gap, tol, slope)
+    return _nb_hanging(bottom, li, d64, below, feat_of_edge, prev, k, max_gap, tol, slope,
+                       solid)
 
 
 _nb_hanging = _jit(_hanging_kernel)
@@ -3629,6 +3644,8 @@ class GpodDetector:
         self._last_motion: tuple | None = None
         self._motion_held = 0
         self._track_stamp: float | None = None
+        #: log of the right camera's gain relative to the left's, latest pairs
+        self._log_gains: deque = deque(maxlen=max(self.config.right_gain_frames, 1))
         #: the detector of the binned pass (`_with_coarse`), made on its first pair
         self._coarse: GpodDetector | None = None
         #: the corridor's ground edge pixels expected, and its bands gone unseen
@@ -4143,7 +4160,8 @@ class GpodDetector:
                                max_orientation_diff_deg=c.match_max_orientation_diff_deg,
                                support_radius=c.pmf_support_radius_px,
                                disparity_gradient_limit=c.pmf_disparity_gradient_limit,
-                               iterations=c.pmf_iterations, min_support=c.pmf_min_support)
+                               iterations=c.pmf_iterations, min_support=c.pmf_min_support,
+                               right_gain=self._right_gain(left, right))
         t2 = time.perf_counter()
         timings['matching'] = (t2 - t1) * 1e3
 
@@ -4277,6 +4295,20 @@ class GpodDetector:
         if not added:
             return detections
         return tuple(sorted(detections + tuple(added), key=lambda o: o.range))
+
+    def _right_gain(self, left: np.ndarray, right: np.ndarray) -> float:
+        """The factor that puts the right image's grey levels on the left's scale: the
+        median over the latest ``right_gain_frames`` pairs of the ratio of their grey-level
+        spreads (`alignment.brightness_gain_offset`), within [1/4, 4]; 1 when disabled or
+        before a pair with contrast."""
+        if self.config.right_gain_frames == 0:
+            return 1.0
+        go = brightness_gain_offset(left, right)
+        if go is not None:
+            self._log_gains.append(math.log(min(max(go[0], 0.25), 4.0)))
+        if not self._log_gains:
+            return 1.0
+        return math.exp(float(np.median(np.asarray(self._log_gains))))
 
     @property
     def image_noise_sigma(self) -> float:
@@ -4428,7 +4460,8 @@ class GpodDetector:
         below = (ex_mean < -thr) & (h >= -c.max_drop_depth_m)
         if obst.any():
             obst &= ~hanging_runs(el, m, prev, h, c.max_floating_height_m,
-                                  c.string_disparity_tolerance_px, slope, obst)
+                                  c.string_disparity_tolerance_px, slope, obst,
+                                  solid=run >= c.min_matched_run)
             obst &= ~floating_bottom_runs(m.string_id, m.v, prev, h, reliable & in_range,
                                           c.max_floating_height_m, obst)
             high = obst & (excess > _AMBIGUOUS_EXCESS_PX)

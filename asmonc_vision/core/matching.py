@@ -156,7 +156,8 @@ def _expand(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def candidate_matches(left: EdgeMap, right: EdgeMap, d_min: float, d_max: float, *,
                       min_strength_ratio: float = 0.5,
-                      max_orientation_diff_deg: float = 30.0) -> Candidates:
+                      max_orientation_diff_deg: float = 30.0,
+                      right_gain: float = 1.0) -> Candidates:
     """All admissible (left edge, right edge) pairs on the same row.
 
     Args:
@@ -164,6 +165,9 @@ def candidate_matches(left: EdgeMap, right: EdgeMap, d_min: float, d_max: float,
         d_min, d_max: disparity search range, pixels (``d_min <= d <= d_max``).
         min_strength_ratio: least ratio of the weaker to the stronger edge, 0..1.
         max_orientation_diff_deg: largest difference of gradient directions, degrees.
+        right_gain: > 0, the factor that puts the right image's grey levels on the
+            left's scale (two cameras with their own gain): the strength test compares
+            each left strength with the right one times this.
     Returns:
         Candidates grouped by left edge.
     """
@@ -172,12 +176,16 @@ def candidate_matches(left: EdgeMap, right: EdgeMap, d_min: float, d_max: float,
     if len(left) == 0 or len(right) == 0 or d_max < d_min:
         z = np.zeros(0, np.intp)
         return Candidates(z, z, np.zeros(0))
+    if not right_gain > 0:
+        raise ValueError(f'right_gain must be > 0, got {right_gain}')
+    right_strength = (right.strength if right_gain == 1.0
+                      else right.strength * np.float32(right_gain))
     if (_nb_candidates is not None and type(min_strength_ratio) in (float, int)
             and type(max_orientation_diff_deg) in (float, int)):
         # The same keys, ranges and tests, compiled (one pass, no temporaries).
         li, rj, d = _nb_candidates(
             left.polarity, left.v, left.u, left.strength, left.orientation,
-            right.polarity, right.v, right.u, right.strength, right.orientation,
+            right.polarity, right.v, right.u, right_strength, right.orientation,
             int(left.shape[0]), float(left.shape[1]), float(d_min), float(d_max),
             np.float32(min_strength_ratio), float(np.deg2rad(max_orientation_diff_deg)))
         return Candidates(left=li, right=rj, d=d)
@@ -199,7 +207,7 @@ def candidate_matches(left: EdgeMap, right: EdgeMap, d_min: float, d_max: float,
     li, pos = _expand(lo, hi)
     rj = order_r[pos]
     sl = left.strength[li]
-    sr = right.strength[rj]
+    sr = right_strength[rj]
     ok = np.minimum(sl, sr) >= min_strength_ratio * np.maximum(sl, sr)
     dori = np.abs(left.orientation[li] - right.orientation[rj])
     dori = np.minimum(dori, 2.0 * np.pi - dori)
@@ -954,15 +962,20 @@ def _select_kernel(c_left, c_right, n_l, n_r, l_cand, l_start, pair_cand, weight
 def pmf_match(left: EdgeMap, right: EdgeMap, d_min: float, d_max: float, *,
               min_strength_ratio: float = 0.5, max_orientation_diff_deg: float = 30.0,
               support_radius: float = 3.0, disparity_gradient_limit: float = 1.0,
-              iterations: int = 3, min_support: float = 0.5
+              iterations: int = 3, min_support: float = 0.5, right_gain: float = 1.0
               ) -> tuple[Matches, Candidates, np.ndarray]:
     """:func:`match_edges`, also returning every candidate and its final support.
+
+    ``right_gain`` (> 0) is the factor that puts the right image's grey levels on the
+    left's scale, for the strength test only (`candidate_matches`); the matches'
+    strengths are the edges' own.
 
     Returns:
         (matches, candidates, support (M,) float64 of each candidate in the last round).
     """
     cand = candidate_matches(left, right, d_min, d_max, min_strength_ratio=min_strength_ratio,
-                             max_orientation_diff_deg=max_orientation_diff_deg)
+                             max_orientation_diff_deg=max_orientation_diff_deg,
+                             right_gain=right_gain)
     links = support_links(left, right, cand, d_min, d_max, support_radius=support_radius,
                           disparity_gradient_limit=disparity_gradient_limit)
     acc, support = select_matches(cand, links, left, right, iterations=iterations,
