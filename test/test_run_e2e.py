@@ -22,6 +22,13 @@ def asmonc_run(*args, timeout=240, **env_overrides):
                           env=env, capture_output=True, text=True, timeout=timeout)
 
 
+def strict_json(path):
+    """The JSON file at path, refusing NaN and Infinity (not JSON: other readers fail)."""
+    def refuse(name):
+        raise ValueError(f'{path} holds {name}, which is not JSON')
+    return json.loads(path.read_text(), parse_constant=refuse)
+
+
 def frames(bag, topic):
     return {bagio.header_stamp_ns(m): frame_from_obstacle_array(m)
             for _, _, m in bagio.read_messages(bag, [topic])}
@@ -54,7 +61,7 @@ def test_static_bag_every_true_obstacle_is_reported(static_run):
                            f'{o.frames_detected}/{o.frames_eligible} frames'
     assert score.false_per_frame < 0.1
     # the command's own summary agrees
-    summary = json.loads((out / 'summary.json').read_text())
+    summary = strict_json(out / 'summary.json')
     assert summary['dropped_frames'] == 0
     # paced by /obstacles (the default): nothing given up
     assert summary['replay']['mode'] == 'paced' and summary['replay']['pairs_given_up'] == 0
@@ -83,7 +90,9 @@ def test_clear_path_standing_still_gives_no_alarm(tmp_path):
     # strictly at the bag's rate, as a live camera (the default paces by the detector)
     res = asmonc_run(BAGS / 'clear_static', '--out', out, '--no-progress', '--realtime')
     assert res.returncode == 0, res.stdout + res.stderr
-    assert json.loads((out / 'summary.json').read_text())['replay']['mode'] == 'realtime'
+    summary = strict_json(out / 'summary.json')     # strict: no NaN where nothing is eligible
+    assert summary['replay']['mode'] == 'realtime'
+    assert summary['ground_truth']['eligible'] == 0 and summary['ground_truth']['recall'] is None
     assert 'pacing' not in (out / 'logs' / 'player.log').read_text()
     alarms = [m for _, _, m in bagio.read_messages(out, ['/alarms'])]
     assert alarms, 'the alarm node said nothing at all'
@@ -122,7 +131,7 @@ def test_missing_right_images_are_not_announced_as_a_fault(tmp_path):
     res = asmonc_run(bag, '--out', out, '--no-progress')
     assert res.returncode == 1, res.stdout + res.stderr       # 1: frames were dropped
     assert '28 of 30 processed, 2 dropped' in res.stdout
-    summary = json.loads((out / 'summary.json').read_text())
+    summary = strict_json(out / 'summary.json')
     assert summary['dropped_frames'] == 2 and not summary['errors']
     assert summary['processed_frames'] == summary['input_pairs'] - 2
     levels = [m.level for _, _, m in bagio.read_messages(out, ['/alarms'])]
@@ -261,7 +270,7 @@ def test_truncated_bag_replays_what_can_be_read(tmp_path):
     assert res.returncode == 1, res.stderr[-2000:]
     assert 'cut.mcap' in res.stderr and 'truncated' in res.stderr
     assert 'replaying the messages before it' in res.stderr
-    summary = json.loads((out / 'summary.json').read_text())
+    summary = strict_json(out / 'summary.json')
     assert 10 <= summary['input_pairs'] < 55
     assert summary['processed_frames'] == summary['input_pairs']
     assert summary['player_exit_code'] == 2 and summary['errors']

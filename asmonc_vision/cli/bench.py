@@ -453,5 +453,5 @@ def run(args) -> int:
                f'{render_s:.0f} s ({clear} clear + {n} frames with obstacles)', res)
     if args.json:
         from asmonc_vision.core.evaluation import json_ready
-        args.json.write_text(json.dumps(json_ready(results), indent=2) + '\n')
+        args.json.write_text(json.dumps(json_ready(results), indent=2, allow_nan=False) + '\n')
     return 0

@@ -428,6 +428,6 @@ def run(args) -> int:
             doc['egomotion'] = {k: ({kk: vv for kk, vv in v.items() if kk != 'per_frame'}
                                     if v else None) for k, v in motion_results.items()}
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(json_ready(doc), indent=2) + '\n')
+        args.json.write_text(json.dumps(json_ready(doc), indent=2, allow_nan=False) + '\n')
         print(f'json: {args.json}')
     return 0

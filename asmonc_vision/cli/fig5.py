@@ -41,6 +41,7 @@ import numpy as np
 
 from asmonc_vision.core.detection_model import (PAPER_SIGMA_PX, PAPER_THRESHOLD_PX,
                                                 ModelRig, fig5_curves, min_height_for)
+from asmonc_vision.core.evaluation import json_ready
 
 #: Ranges (m) of the table columns and of the empirical boxes.
 RANGES_M = (2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0)
@@ -826,7 +827,7 @@ def plot_empirical(res: dict, path: Path, excess: np.ndarray | None = None) -> N
 
 def _write_json(path: Path, obj: dict) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(obj, indent=1, default=float) + '\n')
+    path.write_text(json.dumps(json_ready(obj), indent=1, allow_nan=False) + '\n')
 
 
 def _parse_params(items: list, cls) -> dict:

@@ -47,6 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
+from asmonc_vision.core.evaluation import json_ready
 from asmonc_vision.core.gait import GaitConfig, GaitTracker
 from asmonc_vision.core.gait import scoring
 from asmonc_vision.core.gait.rotations import (R_BODY_OPTICAL, rotvec_to_matrix,
@@ -547,7 +548,7 @@ def run(args) -> int:
         summary = evaluate_sim(args.scenarios, range(args.seeds))
         print_sim(summary)
         if args.json:
-            args.json.write_text(json.dumps(summary, indent=1))
+            args.json.write_text(json.dumps(json_ready(summary), indent=1, allow_nan=False))
         return 0
     if cmd == 'fusion':
         if args.seeds < 1 or not args.egomotion_sigma > 0:
@@ -561,7 +562,7 @@ def run(args) -> int:
             print()
             out[name] = res
         if args.json:
-            args.json.write_text(json.dumps(out, indent=1))
+            args.json.write_text(json.dumps(json_ready(out), indent=1, allow_nan=False))
         return 0
     if cmd == 'real':
         try:
@@ -571,7 +572,7 @@ def run(args) -> int:
             return 2
         print_real(res)
         if args.json:
-            args.json.write_text(json.dumps(res, indent=1))
+            args.json.write_text(json.dumps(json_ready(res), indent=1, allow_nan=False))
         return 0
     if cmd == 'figs':
         for path in draw_figures(args.out, args.data):

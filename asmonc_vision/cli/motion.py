@@ -36,6 +36,8 @@ from pathlib import Path
 
 import numpy as np
 
+from asmonc_vision.core.evaluation import json_ready
+
 DEFAULT_BAGS = ('walk_obstacles', 'walk_stop_turn', 'slope', 'clear_walk')
 ANGLES = ('pitch', 'roll', 'yaw')
 
@@ -182,7 +184,7 @@ def run_tables(args) -> int:
         out['runs']['minimal'] = mins
     out['paper'] = {k: {str(a): list(v) for a, v in t.items()} for k, t in PAPER_TABLES.items()}
     if args.json:
-        args.json.write_text(json.dumps(out, indent=2) + '\n')
+        args.json.write_text(json.dumps(json_ready(out), indent=2, allow_nan=False) + '\n')
     return 0
 
 
@@ -381,7 +383,7 @@ def run_eval(args) -> int:
         results[str(bag)] = r
         _print_eval(Path(bag).name, r, frames[0]['cam'])
     if args.json:
-        args.json.write_text(json.dumps(results, indent=2) + '\n')
+        args.json.write_text(json.dumps(json_ready(results), indent=2, allow_nan=False) + '\n')
     return 0
 
 

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from asmonc_vision import bagio
-from asmonc_vision.core.evaluation import FrameObstacles, score_sequence
+from asmonc_vision.core.evaluation import FrameObstacles, json_ready, score_sequence
 
 LEVEL_NAMES = {0: 'CLEAR', 1: 'CAUTION', 2: 'WARNING', 3: 'STOP', 4: 'FAULT'}
 #: every topic a node of the graph publishes (recorded with --out)
@@ -605,7 +605,7 @@ def run(args) -> int:
     print_summary(summary, console)
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / 'summary.json').write_text(json.dumps(summary, indent=2) + '\n')
+        (args.out / 'summary.json').write_text(json.dumps(json_ready(summary), indent=2, allow_nan=False) + '\n')
         shutil.copytree(log_dir, args.out / 'logs', dirs_exist_ok=True)
         console.line(f'outputs recorded in {args.out}')
     shutil.rmtree(log_dir, ignore_errors=True)

@@ -46,6 +46,8 @@ from pathlib import Path
 
 import numpy as np
 
+from asmonc_vision.core.evaluation import json_ready
+
 METHODS = ('gpod', 'sgbm')
 #: The row of GPOD's own per-frame detections, before its obstacle tracks.
 PER_FRAME = 'gpod/frame'
@@ -368,7 +370,7 @@ def run(args) -> int:
                'cells': [{'height': h, 'range': r,
                           **{m: summarise(per[m]) for m in rows(args.method)}}
                          for (h, r), per in cells.items()]}
-        args.json.write_text(json.dumps(out, indent=1))
+        args.json.write_text(json.dumps(json_ready(out), indent=1, allow_nan=False))
     return 0
 
 

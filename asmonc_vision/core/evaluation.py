@@ -380,7 +380,9 @@ def json_ready(obj):
         return [json_ready(v) for v in obj]
     if isinstance(obj, np.ndarray):
         return json_ready(obj.tolist())
-    if isinstance(obj, (np.integer,)):
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    if isinstance(obj, np.integer):
         return int(obj)
     if isinstance(obj, (float, np.floating)):
         f = float(obj)
