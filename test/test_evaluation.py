@@ -100,3 +100,98 @@ def test_a_report_of_a_true_obstacle_that_has_left_the_view_is_remembered_not_fa
     # beyond the memory an obstacle is forgotten
     assert len(out_of_view_truth(truth, poses, {k: plane for k in poses},
                                  memory_s=0.05)[2 * s]) == 0
+
+
+# --- warnings in time -----------------------------------------------------------------------
+
+def _approach(ranges, lateral=0.0, height=0.2, oid=7, t0=1_000_000_000, dt=100_000_000):
+    """Truth of one obstacle walked up to: frame k at t0 + k dt, at ranges[k] along the
+    ground, ``lateral`` m to the left (None in ranges: out of view in that frame)."""
+    out = {}
+    for k, r in enumerate(ranges):
+        s = t0 + k * dt
+        if r is None:
+            out[s] = FrameObstacles.empty(s)
+            continue
+        rr = float(np.hypot(r, lateral))
+        b = float(np.arctan2(lateral, r))
+        out[s] = _frame(s, [(oid, -lateral, 1.0, r, height, rr, b, ROI)])
+    return out
+
+
+def _alarm(stamp, level):
+    return {'stamp_ns': int(stamp), 'level': level}
+
+
+T0, DT = 1_000_000_000, 100_000_000
+RANGES = [4.5, 4.0, 3.5, 3.0, 2.5, 2.0, 1.5, 1.2]
+
+
+def test_alarm_level_in_force_at_each_frame():
+    from asmonc_vision.core.evaluation import alarm_levels_at
+    st = [T0 + k * DT for k in range(6)]
+    # starting-up FAULT stamped on another clock (wall time), then CLEAR and CAUTION on frames
+    alarms = [_alarm(1_800_000_000_000_000_000, 4), _alarm(st[1], 0), _alarm(st[3], 1),
+              _alarm(1_800_000_000_500_000_000, 4)]      # a timer FAULT after frame 3's CAUTION
+    lv = alarm_levels_at(st, alarms)
+    # the first FAULT counts from before the frames; the last one right after the CAUTION
+    assert lv.tolist() == [4, 0, 0, 4, 4, 4]
+    assert alarm_levels_at(st, []).tolist() == [-1] * 6
+
+
+def test_an_obstacle_warned_before_it_comes_onto_the_path():
+    from asmonc_vision.core.evaluation import path_warnings, path_warnings_summary
+    truth = _approach(RANGES)
+    alarms = [_alarm(T0, 0), _alarm(T0 + 2 * DT, 1), _alarm(T0 + 5 * DT, 2)]  # CAUTION at 3.5 m
+    (o,) = path_warnings(truth, alarms)
+    assert o.id == 7 and o.frames_on_path == 4 and o.frames_unwarned == 0
+    assert o.first_on_path_m == pytest.approx(2.5) and o.nearest_m == pytest.approx(1.2)
+    assert o.warned_at_m == pytest.approx(3.5) and o.warned_in_time
+    s = path_warnings_summary([o], {})
+    assert (s['on_path'], s['warned_in_time'], s['warned_late'], s['never_warned']) == (1, 1, 0, 0)
+
+
+def test_an_obstacle_warned_late_or_never():
+    from asmonc_vision.core.evaluation import path_warnings, path_warnings_summary
+    truth = _approach(RANGES)
+    # the warning comes at 1.5 m: two frames on the path (2.5, 2.0 m) went unwarned
+    (late,) = path_warnings(truth, [_alarm(T0, 0), _alarm(T0 + 6 * DT, 3)])
+    assert late.warned_at_m == pytest.approx(1.5) and not late.warned_in_time
+    assert late.frames_unwarned == 2 and late.nearest_unwarned_m == pytest.approx(2.0)
+    # all clear throughout
+    (never,) = path_warnings(truth, [_alarm(T0, 0)])
+    assert never.warned_at_m is None and never.frames_unwarned == 4
+    assert never.nearest_unwarned_m == pytest.approx(1.2)
+    # a FAULT in force is neither a warning nor silence
+    (fault,) = path_warnings(truth, [_alarm(T0, 4)])
+    assert fault.frames_fault == 4 and fault.frames_unwarned == 0 and fault.warned_at_m is None
+    s = path_warnings_summary([late, never], {'warning_range': 2.5})
+    assert (s['warned_in_time'], s['warned_late'], s['never_warned']) == (0, 1, 1)
+    assert s['frames_unwarned'] == 6 and s['criteria'] == {'warning_range': 2.5}
+
+
+def test_only_obstacles_in_the_corridor_high_enough_count():
+    from asmonc_vision.core.evaluation import path_warnings
+    assert path_warnings(_approach(RANGES, lateral=0.8), []) == []      # beside the path
+    assert path_warnings(_approach(RANGES, height=0.03), []) == []      # too low
+    assert len(path_warnings(_approach(RANGES, height=-0.15), [])) == 1  # a drop counts
+    assert path_warnings(_approach(RANGES, lateral=0.8), [], corridor_half_width=1.0)
+    assert path_warnings(_approach([4.5, 4.0, 3.5, 3.0]), []) == []     # never within 2.5 m
+
+
+def test_an_obstacle_walked_up_to_counts_at_its_remembered_place():
+    """Out of view (below the image) it is taken at its remembered place: silence there
+    counts as unwarned."""
+    from asmonc_vision.core.evaluation import path_warnings
+    seen = [4.0, 3.0, 2.4, None, None]
+    truth = _approach(seen)
+    remembered = {s: (_frame(s, [(7, 0.0, 1.0, r, 0.2, r, 0.0, (0, 0, 0, 0))]) if r else
+                      FrameObstacles.empty(s))
+                  for s, r in zip(sorted(truth), [None, None, None, 1.9, 1.4])}
+    alarms = [_alarm(T0, 0), _alarm(T0 + DT, 2), _alarm(T0 + 3 * DT, 0)]
+    (o,) = path_warnings(truth, alarms, remembered)
+    assert o.frames_on_path == 3 and o.nearest_m == pytest.approx(1.4)
+    assert o.warned_in_time and o.frames_unwarned == 2
+    assert o.nearest_unwarned_m == pytest.approx(1.4)
+    (o2,) = path_warnings(truth, alarms)                     # without the remembered places
+    assert o2.frames_on_path == 1 and o2.frames_unwarned == 0

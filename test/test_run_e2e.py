@@ -67,6 +67,12 @@ def test_static_bag_every_true_obstacle_is_reported(static_run):
     assert summary['replay']['mode'] == 'paced' and summary['replay']['pairs_given_up'] == 0
     assert summary['ground_truth']['detected'] == score.detected
     assert 'WARNING' in summary['alarms'] or 'STOP' in summary['alarms']
+    # every true obstacle that lay on the walking path was warned of before it came
+    # within the WARNING range, and no frame with one there was silent
+    pw = summary['path_warnings']
+    assert pw['on_path'] >= 1 and pw['warned_in_time'] == pw['on_path'], pw
+    assert pw['frames_unwarned'] == 0 and pw['criteria']['warning_range'] == 2.5
+    assert 'obstacles on the path' in res.stdout
     assert '=== summary ===' in res.stdout and 'DETECTED' in res.stdout
     # the end of the replay is not reported as a silent inclinometer (the gait filter is
     # stopped once the bag has been played and its last states are out)

@@ -28,7 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from asmonc_vision import bagio
-from asmonc_vision.core.evaluation import FrameObstacles, json_ready, score_sequence
+from asmonc_vision.core.evaluation import (FrameObstacles, json_ready, path_warnings,
+                                          path_warnings_summary, score_sequence)
 
 LEVEL_NAMES = {0: 'CLEAR', 1: 'CAUTION', 2: 'WARNING', 3: 'STOP', 4: 'FAULT'}
 #: every topic a node of the graph publishes (recorded with --out)
@@ -614,13 +615,14 @@ def run(args) -> int:
     return 0
 
 
-def _node_timeout(params_files: list[Path], node: str, default: float) -> float:
-    """A node's ``timeout`` parameter (s): the last of ``params_files`` that sets it for
-    ``node`` (or ``/**``), else ``default``. Unreadable files are left to the nodes to
-    report."""
+def _node_param(params_files: list[Path], node: str, name: str, default: float,
+                positive: bool = False) -> float:
+    """A node's non-negative (``positive``: positive) number parameter ``name``: the last
+    of ``params_files`` that sets it for ``node`` (or ``/**``), else ``default``.
+    Unreadable files, and other values, are left to the nodes to report."""
     import yaml
 
-    timeout = default
+    out = default
     for pf in params_files:
         try:
             data = yaml.safe_load(Path(pf).read_text())
@@ -631,10 +633,25 @@ def _node_timeout(params_files: list[Path], node: str, default: float) -> float:
         for key in ('/**', node, '/' + node):
             params = data.get(key)
             params = params.get('ros__parameters') if isinstance(params, dict) else None
-            value = params.get('timeout') if isinstance(params, dict) else None
-            if isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0:
-                timeout = float(value)
-    return timeout
+            value = params.get(name) if isinstance(params, dict) else None
+            if isinstance(value, (int, float)) and not isinstance(value, bool) \
+                    and (value > 0 or (value == 0 and not positive)):
+                out = float(value)
+    return out
+
+
+def _node_timeout(params_files: list[Path], node: str, default: float) -> float:
+    """A node's ``timeout`` parameter (s), as `_node_param` finds it."""
+    return _node_param(params_files, node, 'timeout', default, positive=True)
+
+
+def _path_criteria(params_files: list[Path]) -> dict:
+    """The alarm node's corridor, least height and WARNING/CAUTION ranges (m), from the
+    params files or its defaults: the criteria of `core.evaluation.path_warnings`."""
+    from asmonc_vision.core.alarm import AlarmConfig
+    d = AlarmConfig()
+    return {k: _node_param(params_files, 'alarm_node', k, getattr(d, k))
+            for k in ('corridor_half_width', 'min_height', 'warning_range', 'caution_range')}
 
 
 def _alarm_timeout(params_files: list[Path]) -> float:
@@ -760,6 +777,9 @@ def summarise(monitor: _Monitor, truth: dict, n_pairs: int, args,
                                            'min_height_m': args.min_height,
                                            'max_range_m': args.max_range}
         out['dropped_frames'] = max(out['dropped_frames'], len(missing))
+        crit = _path_criteria(args.params_file)
+        out['path_warnings'] = path_warnings_summary(
+            path_warnings(truth, alarms, out_of_view, **crit), crit)
     return out
 
 
@@ -802,6 +822,23 @@ def print_summary(s: dict, console: _Console) -> None:
         if gt['range_error_median_m'] is not None:
             p(f"median |range error| {gt['range_error_median_m']:.3f} m, "
               f"median |bearing error| {gt['bearing_error_median_deg']:.2f} deg")
+        pw = s.get('path_warnings')
+        if pw:
+            c = pw['criteria']
+            p(f"obstacles on the path (within {c['corridor_half_width']:g} m of it, "
+              f"{c['warning_range']:g} m ahead, >= {c['min_height'] * 100:.0f} cm): "
+              f"{pw['on_path']}; warned in time {pw['warned_in_time']}, late "
+              f"{pw['warned_late']}, never {pw['never_warned']}; frames on the path with no "
+              f"warning {pw['frames_unwarned']}/{pw['frames_on_path']} "
+              f"(FAULT in {pw['frames_fault']})")
+            for o in pw['obstacles']:
+                if o['warned_in_time'] and not o['frames_unwarned']:
+                    continue
+                warned = ('never warned' if o['warned_at_m'] is None
+                          else f"warned at {o['warned_at_m']:.1f} m")
+                p(f"  obstacle {o['id']:>3}: {o['height_m'] * 100:5.1f} cm, on the path from "
+                  f"{o['first_on_path_m']:.1f} m to {o['nearest_m']:.1f} m — {warned}, "
+                  f"{o['frames_unwarned']}/{o['frames_on_path']} frames without a warning")
     else:
         p('no ground truth in this bag: no score')
     for e in s.get('errors', []):

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Sequence
 
 import numpy as np
 
@@ -321,6 +322,165 @@ def out_of_view_truth(truth: dict[int, FrameObstacles], poses: dict[int, tuple],
             del pl[:-places_per_obstacle]
             last[i] = stamp
     return out
+
+
+# --- warnings in time: was the wearer warned of what lay on the path? -------------------------
+
+#: Alarm levels (asmonc_vision_msgs/Alarm) that warn of an obstacle: CAUTION, WARNING, STOP.
+WARNING_LEVELS = (1, 2, 3)
+#: Alarm level FAULT (the system says it cannot see).
+FAULT_LEVEL = 4
+
+
+@dataclass
+class PathObstacle:
+    """How one true obstacle that lay on the walking path was announced.
+
+    "On the path": inside the alarm's corridor (lateral offset |range·sin(bearing)| at most
+    the corridor's half width, ahead of the wearer), |height| at least the alarm's least
+    height, and within ``warning_range`` along the ground -- where the alarm node should
+    say at least WARNING. Ranges are true ranges along the ground, metres.
+
+    Attributes:
+        id: ground-truth id.
+        height: metres (negative for a drop).
+        frames_on_path: frames in which it was on the path.
+        frames_unwarned: of those, frames with no CAUTION, WARNING or STOP in force (CLEAR,
+            or nothing said yet); frames under a FAULT count in ``frames_fault`` instead.
+        frames_fault: of those, frames with a FAULT in force.
+        first_on_path_m: its range in the first frame on the path.
+        nearest_m: the nearest it came while on the path.
+        warned_at_m: its range in the first frame, from when it entered the corridor within
+            the caution range, with a warning in force; None if it never had one.
+        nearest_unwarned_m: its range in the nearest unwarned frame on the path, or None.
+    """
+
+    id: int
+    height: float
+    frames_on_path: int
+    frames_unwarned: int
+    frames_fault: int
+    first_on_path_m: float
+    nearest_m: float
+    warned_at_m: float | None
+    nearest_unwarned_m: float | None
+
+    @property
+    def warned_in_time(self) -> bool:
+        """A warning was in force by the time it came onto the path (its first frame
+        within the warning range, or earlier)."""
+        return self.warned_at_m is not None and self.warned_at_m >= self.first_on_path_m - 1e-9
+
+
+def alarm_levels_at(stamps: Sequence[int], alarms: Sequence[dict]) -> np.ndarray:
+    """The alarm level in force at each frame stamp: that of the last alarm announced at
+    or before it (-1 before the first).
+
+    Args:
+        stamps: frame stamps, ns, ascending.
+        alarms: the alarms in the order they were announced, each a dict with ``stamp_ns``
+            and ``level`` (as `asmonc run` logs /alarms). Alarms about a frame carry that
+            frame's stamp; those made by the alarm node's own timer (a FAULT for silence)
+            carry its clock's time, which need not be the recording's: an alarm stamped
+            more than a minute outside the frames' span is placed right after the alarm
+            announced before it.
+    Returns:
+        (len(stamps),) int64 levels.
+    """
+    st = np.asarray(stamps, np.int64)
+    out = np.full(st.shape, -1, np.int64)
+    if not len(alarms) or not st.size:
+        return out
+    lo, hi = int(st.min()) - 60_000_000_000, int(st.max()) + 60_000_000_000
+    eff, lev, prev = [], [], None
+    for a in alarms:
+        t = int(a['stamp_ns'])
+        if not lo <= t <= hi:
+            t = prev if prev is not None else lo
+        t = t if prev is None else max(t, prev)
+        eff.append(t)
+        lev.append(int(a['level']))
+        prev = t
+    idx = np.searchsorted(np.asarray(eff, np.int64), st, side='right') - 1
+    ok = idx >= 0
+    out[ok] = np.asarray(lev, np.int64)[idx[ok]]
+    return out
+
+
+def path_warnings(truth: dict[int, FrameObstacles], alarms: Sequence[dict],
+                  remembered: dict[int, FrameObstacles] | None = None, *,
+                  corridor_half_width: float = 0.5, min_height: float = 0.05,
+                  warning_range: float = 2.5, caution_range: float = 5.0
+                  ) -> list[PathObstacle]:
+    """Whether the wearer was warned of each true obstacle that lay on the walking path.
+
+    The criteria are the alarm node's own (`core.alarm.AlarmConfig`: corridor, least
+    height, WARNING and CAUTION ranges), applied to the true obstacles; an obstacle out of
+    view (walked up to) is taken at its remembered places (`out_of_view_truth`), the
+    nearest one in the corridor. A warning is any CAUTION, WARNING or STOP in force
+    (`alarm_levels_at`), whichever obstacle it named: the wearer has been told to take
+    care.
+
+    Args:
+        truth: stamp_ns -> true obstacles in view.
+        alarms: the announced alarms, in order (dicts with ``stamp_ns``, ``level``).
+        remembered: stamp_ns -> true obstacles out of view, or None.
+        corridor_half_width, min_height, warning_range, caution_range: metres.
+    Returns:
+        one `PathObstacle` per obstacle that was on the path in some frame, by id.
+    """
+    stamps = sorted(truth)
+    levels = alarm_levels_at(stamps, alarms)
+    track: dict[int, dict] = {}
+    for stamp, level in zip(stamps, levels):
+        best: dict[int, tuple[float, float]] = {}       # id -> (range, height) in corridor
+        for fo in (truth[stamp], (remembered or {}).get(stamp)):
+            if fo is None or not len(fo):
+                continue
+            x = fo.range * np.cos(fo.bearing)
+            y = fo.range * np.sin(fo.bearing)
+            ok = (np.abs(y) <= corridor_half_width) & (x >= 0) \
+                & (np.abs(fo.height) >= min_height) & (fo.range <= caution_range)
+            for k in np.flatnonzero(ok):
+                i, r = int(fo.ids[k]), float(fo.range[k])
+                if i not in best or r < best[i][0]:
+                    best[i] = (r, float(fo.height[k]))
+        for i, (r, h) in best.items():
+            o = track.setdefault(i, dict(h=h, on=0, unw=0, fault=0, first=None, near=math.inf,
+                                         warned=None, near_unw=None))
+            if o['warned'] is None and level in WARNING_LEVELS:
+                o['warned'] = r
+            if r > warning_range:
+                continue
+            o['on'] += 1
+            o['first'] = r if o['first'] is None else o['first']
+            o['near'] = min(o['near'], r)
+            if level == FAULT_LEVEL:
+                o['fault'] += 1
+            elif level not in WARNING_LEVELS:
+                o['unw'] += 1
+                o['near_unw'] = r if o['near_unw'] is None else min(o['near_unw'], r)
+    return [PathObstacle(i, o['h'], o['on'], o['unw'], o['fault'], o['first'], o['near'],
+                         o['warned'], o['near_unw'])
+            for i, o in sorted(track.items()) if o['on']]
+
+
+def path_warnings_summary(obstacles: Sequence[PathObstacle], criteria: dict) -> dict:
+    """JSON-ready summary of `path_warnings`: counts and one row per obstacle."""
+    return dict(
+        criteria=criteria,
+        on_path=len(obstacles),
+        warned_in_time=sum(o.warned_in_time for o in obstacles),
+        warned_late=sum(o.warned_at_m is not None and not o.warned_in_time for o in obstacles),
+        never_warned=sum(o.warned_at_m is None for o in obstacles),
+        frames_on_path=sum(o.frames_on_path for o in obstacles),
+        frames_unwarned=sum(o.frames_unwarned for o in obstacles),
+        frames_fault=sum(o.frames_fault for o in obstacles),
+        obstacles=[dict(id=o.id, height_m=o.height, frames_on_path=o.frames_on_path,
+                        frames_unwarned=o.frames_unwarned, frames_fault=o.frames_fault,
+                        first_on_path_m=o.first_on_path_m, nearest_m=o.nearest_m,
+                        warned_at_m=o.warned_at_m, nearest_unwarned_m=o.nearest_unwarned_m,
+                        warned_in_time=o.warned_in_time) for o in obstacles])
 
 
 # --- a whole evaluation: recall per bin, errors, ground plane, latency ---------------------
