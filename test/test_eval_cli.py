@@ -202,6 +202,57 @@ def test_eval_of_recorded_outputs(tmp_path, capsys):
     assert g['angle_median_deg'] == pytest.approx(0.0, abs=1e-3)
     assert g['height_median_abs_mm'] == pytest.approx(0.0, abs=1e-3)
     assert r['latency_ms']['n'] == 0
+    assert r['path_warnings'] is None                         # no /alarms in that bag
+
+
+def test_eval_of_recorded_outputs_scores_the_alarms(tmp_path, capsys):
+    """The /alarms of a recorded run against the true obstacles on the path: the static
+    bag's post stands 2.1 m ahead from 3 s on; a WARNING from then on warns of it in
+    time, an alarm that comes a second late does not."""
+    from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+
+    from asmonc_vision import bagio
+    from asmonc_vision.cli.bench import load_frames
+
+    frames = load_frames(STATIC, 0, images=False)
+    base = tmp_path / 'base'
+    _write_outputs_bag(base, frames)
+    ts = bagio.typestore()
+    T, P = ts.types, bagio.MSG_PACKAGE
+    on_path = [f.stamp_ns for f in frames if f.truth is not None and any(
+        abs(r * np.sin(b)) <= 0.5 and r <= 2.5 and h >= 0.05
+        for r, b, h in zip(f.truth.range, f.truth.bearing, f.truth.height))]
+    assert len(on_path) > 10
+
+    def with_alarms(path, alarms):
+        with Reader(base) as reader, Writer(path, version=9,
+                                            storage_plugin=StoragePlugin.MCAP) as w:
+            conns = {c.id: w.add_connection(c.topic, c.msgtype, typestore=ts)
+                     for c in reader.connections}
+            c_al = w.add_connection('/alarms', f'{P}/msg/Alarm', typestore=ts)
+            for c, t, raw in reader.messages():
+                w.write(conns[c.id], t, raw)
+            for ns, level in alarms:
+                hdr = T['std_msgs/msg/Header'](stamp=T['builtin_interfaces/msg/Time'](
+                    sec=ns // 10**9, nanosec=ns % 10**9), frame_id='')
+                msg = T[f'{P}/msg/Alarm'](header=hdr, level=level, obstacle_id=0, range=2.0,
+                                         bearing=0.0, text='obstacle')
+                w.write(c_al, ns, ts.serialize_cdr(msg, f'{P}/msg/Alarm'))
+
+    def score(alarms):
+        path = tmp_path / f'out{len(list(tmp_path.iterdir()))}'
+        with_alarms(path, alarms)
+        js = tmp_path / 'eval.json'
+        assert main(['eval', str(STATIC), '--outputs', str(path), '--json', str(js),
+                     '--no-progress']) == 0
+        return json.loads(js.read_text())['runs'][0]['path_warnings']
+
+    t0 = frames[0].stamp_ns
+    pw = score([(t0, 0), (on_path[0], 2)])
+    assert (pw['on_path'], pw['warned_in_time'], pw['frames_unwarned']) == (1, 1, 0)
+    assert 'warned in time 1' in capsys.readouterr().out
+    pw = score([(t0, 0), (on_path[10], 2)])
+    assert (pw['warned_in_time'], pw['warned_late'], pw['frames_unwarned']) == (0, 1, 10)
 
 
 def test_eval_refuses_bad_input(tmp_path, capsys):

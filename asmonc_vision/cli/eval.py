@@ -10,8 +10,10 @@ only while the rig stands still; the node graph feeds them the egomotion node's 
 so score a graph run with `asmonc run BAG --out DIR` and `--outputs DIR`); `--method sgbm` runs the OpenCV StereoSGBM baseline
 (core.baseline) instead, and several methods or `--threshold-px` values give one run
 each. With `--outputs DIR` (one per BAG) nothing is run: the /obstacles and
-/ground_plane recorded by `asmonc run BAG --out DIR` are scored against BAG's truth.
-Both paths are scored by the same code (core.evaluation.SequenceEvaluation):
+/ground_plane recorded by `asmonc run BAG --out DIR` are scored against BAG's truth,
+and its recorded /alarms tell whether each true obstacle on the walking path was warned of
+in time (`core.evaluation.path_warnings`, the alarm node's default criteria; as the
+summary of `asmonc run`). Both paths are scored by the same code (core.evaluation.SequenceEvaluation):
 
 * recall per frame, per |height| x range bin of the true obstacles (0-5, 5-10, 10-20,
   20-50, >= 50 cm x 1-2, 2-3, 3-4, 4-5, 5-8 m) with counts: a true obstacle is found in a
@@ -103,26 +105,35 @@ class _Progress:
 
 # --- scoring recorded outputs ------------------------------------------------------------
 
-def score_outputs(frames, outputs: Path, evaluation) -> None:
+def score_outputs(frames, outputs: Path, evaluation) -> dict | None:
     """Add the /obstacles and /ground_plane of a recorded outputs bag to `evaluation`,
     frame by frame against `frames` (from `load_frames`, truth needed); a frame with no
     /obstacles message counts as missing.
 
+    Returns:
+        whether the recorded /alarms warned of each true obstacle on the path in time
+        (`core.evaluation.path_warnings_summary`, with the alarm node's default criteria),
+        or None when the bag has no /alarms.
     Raises:
         bagio.BagError: unreadable bag, or one without /obstacles.
     """
     from asmonc_vision.cli.run import frame_from_obstacle_array
+    from asmonc_vision.core.alarm import AlarmConfig
+    from asmonc_vision.core.evaluation import path_warnings, path_warnings_summary
 
     t_obs, t_plane = bagio.TOPICS['obstacles'][0], bagio.TOPICS['ground_plane'][0]
+    t_alarm = bagio.TOPICS['alarms'][0]
     topics = bagio.bag_topics(outputs)
     if t_obs not in topics:
         raise bagio.BagError(f"bag '{outputs}' has no {t_obs} messages (topics: "
                              f"{', '.join(sorted(topics)) or 'none'})")
-    dets, planes = {}, {}
-    for topic, _, m in bagio.read_messages(outputs, [t_obs, t_plane]):
+    dets, planes, alarms = {}, {}, []
+    for topic, _, m in bagio.read_messages(outputs, [t_obs, t_plane, t_alarm]):
         if topic == t_obs:
             f = frame_from_obstacle_array(m)
             dets[f.stamp_ns] = f
+        elif topic == t_alarm:
+            alarms.append({'stamp_ns': bagio.header_stamp_ns(m), 'level': int(m.level)})
         else:
             planes[bagio.header_stamp_ns(m)] = m
     away = out_of_view_for(frames)
@@ -138,6 +149,13 @@ def score_outputs(frames, outputs: Path, evaluation) -> None:
                              truth_plane=f.truth_plane,
                              status=STATUS_NAMES.get(int(pm.status), str(pm.status))
                              if pm else 'no /ground_plane', remembered=away.get(f.stamp_ns))
+    if t_alarm not in topics:
+        return None
+    d = AlarmConfig()
+    crit = {k: getattr(d, k) for k in ('corridor_half_width', 'min_height', 'warning_range',
+                                       'caution_range')}
+    truth = {f.stamp_ns: f.truth for f in frames if f.truth is not None}
+    return path_warnings_summary(path_warnings(truth, alarms, away, **crit), crit)
 
 
 def egomotion_scores(bag: Path, outputs: Path | None, frames: int = 0) -> dict | None:
@@ -223,6 +241,19 @@ def format_summary(title: str, s: dict) -> list[str]:
     else:
         lines.append('latency: not measured (recorded outputs)')
     return lines
+
+
+def format_path_warnings(pw: dict | None) -> str:
+    """One line: the recorded alarms against the true obstacles on the path."""
+    if pw is None:
+        return '  warnings: no /alarms recorded'
+    c = pw['criteria']
+    line = (f"  warnings: obstacles on the path (within {c['corridor_half_width']:g} m, "
+            f"{c['warning_range']:g} m ahead, >= {c['min_height'] * 100:.0f} cm) "
+            f"{pw['on_path']}, warned in time {pw['warned_in_time']}, late "
+            f"{pw['warned_late']}, never {pw['never_warned']}; frames with no warning "
+            f"{pw['frames_unwarned']}/{pw['frames_on_path']} (FAULT in {pw['frames_fault']})")
+    return line
 
 
 def _slug(text: str) -> str:
@@ -346,14 +377,14 @@ def run(args) -> int:
         if args.outputs is not None:
             ev = SequenceEvaluation(**criteria)
             try:
-                score_outputs(frames, args.outputs[bi], ev)
+                warned = score_outputs(frames, args.outputs[bi], ev)
             except bagio.BagError as exc:
                 err(str(exc))
                 return 2
             key = ('outputs', None)
             runs.append({'bag': str(bag), 'name': name, 'method': 'outputs',
                          'source': 'recorded', 'outputs': str(args.outputs[bi]),
-                         'threshold_px': None, 'evaluation': ev})
+                         'threshold_px': None, 'path_warnings': warned, 'evaluation': ev})
             groups.setdefault(key, []).append(ev)
             continue
         for method in args.method:
@@ -388,6 +419,8 @@ def run(args) -> int:
 
     for r in runs:
         print('\n'.join(format_summary(title(r), r['evaluation'].summary())))
+        if r['method'] == 'outputs':
+            print(format_path_warnings(r['path_warnings']))
         print()
     for r in pooled:
         print('\n'.join(format_summary(title(r, True), r['evaluation'].summary())))
