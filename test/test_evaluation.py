@@ -171,11 +171,13 @@ def test_an_obstacle_warned_late_or_never():
 
 
 def test_only_obstacles_in_the_corridor_high_enough_count():
+    from asmonc_vision.core.alarm import AlarmConfig
     from asmonc_vision.core.evaluation import path_warnings
     assert path_warnings(_approach(RANGES, lateral=0.8), []) == []      # beside the path
     assert path_warnings(_approach(RANGES, height=0.03), []) == []      # too low
     assert len(path_warnings(_approach(RANGES, height=-0.15), [])) == 1  # a drop counts
-    assert path_warnings(_approach(RANGES, lateral=0.8), [], corridor_half_width=1.0)
+    assert path_warnings(_approach(RANGES, lateral=0.8), [],
+                         config=AlarmConfig(corridor_half_width=1.0))
     assert path_warnings(_approach([4.5, 4.0, 3.5, 3.0]), []) == []     # never within 2.5 m
 
 

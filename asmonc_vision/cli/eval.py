@@ -119,7 +119,7 @@ def score_outputs(frames, outputs: Path, evaluation) -> dict | None:
     """
     from asmonc_vision.cli.run import frame_from_obstacle_array
     from asmonc_vision.core.alarm import AlarmConfig
-    from asmonc_vision.core.evaluation import path_warnings, path_warnings_summary
+    from asmonc_vision.core.evaluation import path_criteria, path_warnings, path_warnings_summary
 
     t_obs, t_plane = bagio.TOPICS['obstacles'][0], bagio.TOPICS['ground_plane'][0]
     t_alarm = bagio.TOPICS['alarms'][0]
@@ -151,11 +151,9 @@ def score_outputs(frames, outputs: Path, evaluation) -> dict | None:
                              if pm else 'no /ground_plane', remembered=away.get(f.stamp_ns))
     if t_alarm not in topics:
         return None
-    d = AlarmConfig()
-    crit = {k: getattr(d, k) for k in ('corridor_half_width', 'min_height', 'warning_range',
-                                       'caution_range')}
     truth = {f.stamp_ns: f.truth for f in frames if f.truth is not None}
-    return path_warnings_summary(path_warnings(truth, alarms, away, **crit), crit)
+    return path_warnings_summary(path_warnings(truth, alarms, away),
+                                 path_criteria(AlarmConfig()))
 
 
 def egomotion_scores(bag: Path, outputs: Path | None, frames: int = 0) -> dict | None:
@@ -241,19 +239,6 @@ def format_summary(title: str, s: dict) -> list[str]:
     else:
         lines.append('latency: not measured (recorded outputs)')
     return lines
-
-
-def format_path_warnings(pw: dict | None) -> str:
-    """One line: the recorded alarms against the true obstacles on the path."""
-    if pw is None:
-        return '  warnings: no /alarms recorded'
-    c = pw['criteria']
-    line = (f"  warnings: obstacles on the path (within {c['corridor_half_width']:g} m, "
-            f"{c['warning_range']:g} m ahead, >= {c['min_height'] * 100:.0f} cm) "
-            f"{pw['on_path']}, warned in time {pw['warned_in_time']}, late "
-            f"{pw['warned_late']}, never {pw['never_warned']}; frames with no warning "
-            f"{pw['frames_unwarned']}/{pw['frames_on_path']} (FAULT in {pw['frames_fault']})")
-    return line
 
 
 def _slug(text: str) -> str:
@@ -417,10 +402,13 @@ def run(args) -> int:
         thr = f"_t{r['threshold_px']:g}" if (r.get('threshold_px') and args.threshold_px) else ''
         return _slug(f"{'all' if pooled_ else r['name']}_{r['method']}{thr}")
 
+    from asmonc_vision.cli.run import path_warning_lines
+
     for r in runs:
         print('\n'.join(format_summary(title(r), r['evaluation'].summary())))
         if r['method'] == 'outputs':
-            print(format_path_warnings(r['path_warnings']))
+            print('\n'.join(f'  {line}' for line in path_warning_lines(r['path_warnings'])
+                            or ['no /alarms recorded']))
         print()
     for r in pooled:
         print('\n'.join(format_summary(title(r, True), r['evaluation'].summary())))

@@ -28,8 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from asmonc_vision import bagio
-from asmonc_vision.core.evaluation import (FrameObstacles, json_ready, path_warnings,
-                                          path_warnings_summary, score_sequence)
+from asmonc_vision.core.evaluation import (FrameObstacles, json_ready, path_criteria,
+                                          path_warnings, path_warnings_summary, score_sequence)
 
 LEVEL_NAMES = {0: 'CLEAR', 1: 'CAUTION', 2: 'WARNING', 3: 'STOP', 4: 'FAULT'}
 #: every topic a node of the graph publishes (recorded with --out)
@@ -645,13 +645,19 @@ def _node_timeout(params_files: list[Path], node: str, default: float) -> float:
     return _node_param(params_files, node, 'timeout', default, positive=True)
 
 
-def _path_criteria(params_files: list[Path]) -> dict:
-    """The alarm node's corridor, least height and WARNING/CAUTION ranges (m), from the
-    params files or its defaults: the criteria of `core.evaluation.path_warnings`."""
+def _alarm_config(params_files: list[Path]):
+    """The alarm node's settings that decide which obstacles are on the path
+    (`core.evaluation.path_criteria`), from the params files or its defaults; the defaults
+    if the files' values do not make a valid `AlarmConfig` (the node reports that)."""
     from asmonc_vision.core.alarm import AlarmConfig
     d = AlarmConfig()
-    return {k: _node_param(params_files, 'alarm_node', k, getattr(d, k))
-            for k in ('corridor_half_width', 'min_height', 'warning_range', 'caution_range')}
+    values = {k: _node_param(params_files, 'alarm_node', k, getattr(d, k))
+              for k in ('corridor_half_width', 'min_height', 'stop_range', 'warning_range',
+                        'caution_range', 'max_range')}
+    try:
+        return AlarmConfig(**values)
+    except ValueError:
+        return d
 
 
 def _alarm_timeout(params_files: list[Path]) -> float:
@@ -777,10 +783,34 @@ def summarise(monitor: _Monitor, truth: dict, n_pairs: int, args,
                                            'min_height_m': args.min_height,
                                            'max_range_m': args.max_range}
         out['dropped_frames'] = max(out['dropped_frames'], len(missing))
-        crit = _path_criteria(args.params_file)
+        cfg = _alarm_config(args.params_file)
         out['path_warnings'] = path_warnings_summary(
-            path_warnings(truth, alarms, out_of_view, **crit), crit)
+            path_warnings(truth, alarms, out_of_view, cfg), path_criteria(cfg))
     return out
+
+
+def path_warning_lines(pw: dict | None) -> list[str]:
+    """The summary's lines on `core.evaluation.path_warnings_summary` ``pw``: the counts,
+    then each obstacle not warned in time or with unwarned frames (none if ``pw`` is
+    None)."""
+    if not pw:
+        return []
+    c = pw['criteria']
+    lines = [f"obstacles on the path (within {c['corridor_half_width']:g} m of it, "
+             f"{c['warning_range']:g} m ahead, >= {c['min_height'] * 100:.0f} cm): "
+             f"{pw['on_path']}; warned in time {pw['warned_in_time']}, late "
+             f"{pw['warned_late']}, never {pw['never_warned']}; frames on the path with no "
+             f"warning {pw['frames_unwarned']}/{pw['frames_on_path']} "
+             f"(FAULT in {pw['frames_fault']})"]
+    for o in pw['obstacles']:
+        if o['warned_in_time'] and not o['frames_unwarned']:
+            continue
+        warned = ('never warned' if o['warned_at_m'] is None
+                  else f"warned at {o['warned_at_m']:.1f} m")
+        lines.append(f"  obstacle {o['id']:>3}: {o['height_m'] * 100:5.1f} cm, on the path "
+                     f"from {o['first_on_path_m']:.1f} m to {o['nearest_m']:.1f} m — {warned}, "
+                     f"{o['frames_unwarned']}/{o['frames_on_path']} frames without a warning")
+    return lines
 
 
 def print_summary(s: dict, console: _Console) -> None:
@@ -822,23 +852,8 @@ def print_summary(s: dict, console: _Console) -> None:
         if gt['range_error_median_m'] is not None:
             p(f"median |range error| {gt['range_error_median_m']:.3f} m, "
               f"median |bearing error| {gt['bearing_error_median_deg']:.2f} deg")
-        pw = s.get('path_warnings')
-        if pw:
-            c = pw['criteria']
-            p(f"obstacles on the path (within {c['corridor_half_width']:g} m of it, "
-              f"{c['warning_range']:g} m ahead, >= {c['min_height'] * 100:.0f} cm): "
-              f"{pw['on_path']}; warned in time {pw['warned_in_time']}, late "
-              f"{pw['warned_late']}, never {pw['never_warned']}; frames on the path with no "
-              f"warning {pw['frames_unwarned']}/{pw['frames_on_path']} "
-              f"(FAULT in {pw['frames_fault']})")
-            for o in pw['obstacles']:
-                if o['warned_in_time'] and not o['frames_unwarned']:
-                    continue
-                warned = ('never warned' if o['warned_at_m'] is None
-                          else f"warned at {o['warned_at_m']:.1f} m")
-                p(f"  obstacle {o['id']:>3}: {o['height_m'] * 100:5.1f} cm, on the path from "
-                  f"{o['first_on_path_m']:.1f} m to {o['nearest_m']:.1f} m — {warned}, "
-                  f"{o['frames_unwarned']}/{o['frames_on_path']} frames without a warning")
+        for line in path_warning_lines(s.get('path_warnings')):
+            p(line)
     else:
         p('no ground truth in this bag: no score')
     for e in s.get('errors', []):

@@ -26,6 +26,7 @@ from typing import Sequence
 
 import numpy as np
 
+from .alarm import AlarmConfig, AlarmLevel, AlarmLogic, ObstacleInfo
 from .camera import MetricPlane, ground_range_bearing
 
 
@@ -326,10 +327,8 @@ def out_of_view_truth(truth: dict[int, FrameObstacles], poses: dict[int, tuple],
 
 # --- warnings in time: was the wearer warned of what lay on the path? -------------------------
 
-#: Alarm levels (asmonc_vision_msgs/Alarm) that warn of an obstacle: CAUTION, WARNING, STOP.
-WARNING_LEVELS = (1, 2, 3)
-#: Alarm level FAULT (the system says it cannot see).
-FAULT_LEVEL = 4
+#: Alarm levels that warn of an obstacle.
+WARNING_LEVELS = (AlarmLevel.CAUTION, AlarmLevel.WARNING, AlarmLevel.STOP)
 
 
 @dataclass
@@ -350,8 +349,9 @@ class PathObstacle:
         frames_fault: of those, frames with a FAULT in force.
         first_on_path_m: its range in the first frame on the path.
         nearest_m: the nearest it came while on the path.
-        warned_at_m: its range in the first frame, from when it entered the corridor within
-            the caution range, with a warning in force; None if it never had one.
+        warned_at_m: its range in the first frame, from when it first counted for the
+            alarm (in the corridor within its max range), with a warning in force; None if
+            it never had one.
         nearest_unwarned_m: its range in the nearest unwarned frame on the path, or None.
     """
 
@@ -407,44 +407,45 @@ def alarm_levels_at(stamps: Sequence[int], alarms: Sequence[dict]) -> np.ndarray
     return out
 
 
+def path_criteria(config: AlarmConfig) -> dict:
+    """The settings of ``config`` that decide which obstacles are on the path (metres)."""
+    return {k: getattr(config, k) for k in ('corridor_half_width', 'min_height',
+                                            'warning_range', 'max_range')}
+
+
 def path_warnings(truth: dict[int, FrameObstacles], alarms: Sequence[dict],
-                  remembered: dict[int, FrameObstacles] | None = None, *,
-                  corridor_half_width: float = 0.5, min_height: float = 0.05,
-                  warning_range: float = 2.5, caution_range: float = 5.0
-                  ) -> list[PathObstacle]:
+                  remembered: dict[int, FrameObstacles] | None = None,
+                  config: AlarmConfig | None = None) -> list[PathObstacle]:
     """Whether the wearer was warned of each true obstacle that lay on the walking path.
 
-    The criteria are the alarm node's own (`core.alarm.AlarmConfig`: corridor, least
-    height, WARNING and CAUTION ranges), applied to the true obstacles; an obstacle out of
-    view (walked up to) is taken at its remembered places (`out_of_view_truth`), the
-    nearest one in the corridor. A warning is any CAUTION, WARNING or STOP in force
-    (`alarm_levels_at`), whichever obstacle it named: the wearer has been told to take
-    care.
+    The criteria are the alarm's own: an obstacle counts where `AlarmLogic.in_corridor`
+    of ``config`` would count it (corridor, ahead, least height, max range), and is on the
+    path within its ``warning_range``. An obstacle out of view (walked up to) is taken at
+    its remembered places (`out_of_view_truth`), the nearest one that counts. A warning is
+    any CAUTION, WARNING or STOP in force (`alarm_levels_at`), whichever obstacle it named:
+    the wearer has been told to take care.
 
     Args:
         truth: stamp_ns -> true obstacles in view.
         alarms: the announced alarms, in order (dicts with ``stamp_ns``, ``level``).
         remembered: stamp_ns -> true obstacles out of view, or None.
-        corridor_half_width, min_height, warning_range, caution_range: metres.
+        config: the alarm's settings (default `AlarmConfig()`).
     Returns:
         one `PathObstacle` per obstacle that was on the path in some frame, by id.
     """
+    logic = AlarmLogic(config)
+    warning_range = logic.config.warning_range
     stamps = sorted(truth)
     levels = alarm_levels_at(stamps, alarms)
     track: dict[int, dict] = {}
     for stamp, level in zip(stamps, levels):
-        best: dict[int, tuple[float, float]] = {}       # id -> (range, height) in corridor
+        best: dict[int, tuple[float, float]] = {}       # id -> (range, height) that counts
         for fo in (truth[stamp], (remembered or {}).get(stamp)):
-            if fo is None or not len(fo):
-                continue
-            x = fo.range * np.cos(fo.bearing)
-            y = fo.range * np.sin(fo.bearing)
-            ok = (np.abs(y) <= corridor_half_width) & (x >= 0) \
-                & (np.abs(fo.height) >= min_height) & (fo.range <= caution_range)
-            for k in np.flatnonzero(ok):
-                i, r = int(fo.ids[k]), float(fo.range[k])
-                if i not in best or r < best[i][0]:
-                    best[i] = (r, float(fo.height[k]))
+            for k in range(len(fo) if fo is not None else 0):
+                ob = ObstacleInfo(int(fo.ids[k]), float(fo.range[k]), float(fo.bearing[k]),
+                                  float(fo.height[k]))
+                if logic.in_corridor(ob) and (ob.id not in best or ob.range < best[ob.id][0]):
+                    best[ob.id] = (ob.range, ob.height)
         for i, (r, h) in best.items():
             o = track.setdefault(i, dict(h=h, on=0, unw=0, fault=0, first=None, near=math.inf,
                                          warned=None, near_unw=None))
@@ -455,7 +456,7 @@ def path_warnings(truth: dict[int, FrameObstacles], alarms: Sequence[dict],
             o['on'] += 1
             o['first'] = r if o['first'] is None else o['first']
             o['near'] = min(o['near'], r)
-            if level == FAULT_LEVEL:
+            if level == AlarmLevel.FAULT:
                 o['fault'] += 1
             elif level not in WARNING_LEVELS:
                 o['unw'] += 1
