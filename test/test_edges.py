@@ -2,8 +2,9 @@
 import numpy as np
 import pytest
 
-from asmonc_vision.core.edges import (EdgeMap, detect_vertical_edges, gradient_noise_gain,
-                                      horizontal_gradient, image_noise_sigma)
+from asmonc_vision.core.edges import (DENSITY_ROWS, EdgeMap, detect_vertical_edges,
+                                      gradient_noise_gain, horizontal_gradient,
+                                      image_noise_sigma, textured_edge_threshold)
 
 
 def _step_image(h, w, x0, lo=50.0, hi=150.0, slope=0.0):
@@ -205,3 +206,82 @@ def test_gradient_noise_gain_is_the_deviation_of_the_gradient_of_unit_noise(blur
     noise = np.random.default_rng(5).normal(0.0, 1.0, (300, 300)).astype(np.float32)
     gx, _ = horizontal_gradient(noise, blur)
     assert float(gx[20:-20, 20:-20].std()) == pytest.approx(gradient_noise_gain(blur), rel=0.03)
+
+
+def _lower_half_density(img, thr):
+    """Edge candidates (row maxima of |dI/du| >= thr, before the angle test) in the
+    image's lower half, counted with detect_vertical_edges, per row of a 320 x 240 image
+    (over DENSITY_ROWS)."""
+    h, w = img.shape
+    e = detect_vertical_edges(img, abs_threshold=thr, max_angle_deg=90.0)
+    return np.count_nonzero(e.v >= h // 2) / DENSITY_ROWS
+
+
+def test_textured_edge_threshold_lowers_only_where_the_ground_shows_few_edges():
+    """Tiles with clear joints keep the usual threshold; a weak smooth texture (asphalt-like:
+    gradients of 1-3 grey levels per pixel), too few edges at it, gets the threshold that
+    gives the target density of edge candidates in the lower half, never below the floor."""
+    rng = np.random.default_rng(3)
+    h, w = 240, 320
+    yy, xx = np.mgrid[0:h, 0:w]
+    tiles = 100.0 + 60.0 * (((xx // 12) + (yy // 20)) % 2)
+    tiled = np.clip(np.rint(tiles + rng.normal(0, 2.0, (h, w))), 0, 255).astype(np.uint8)
+    assert _lower_half_density(tiled, 4.0) >= 8.0
+    assert textured_edge_threshold(tiled, 4.0, min_density=8.0, target_density=24.0,
+                                   floor=2.0) == 4.0
+
+    import cv2
+    blobs = cv2.GaussianBlur(rng.normal(0.0, 1.0, (h, w)).astype(np.float32), (0, 0), 3.0)
+    weak = 120.0 + 6.0 * blobs / blobs.std()
+    weak_u8 = np.clip(np.rint(weak + rng.normal(0, 1.0, (h, w))), 0, 255).astype(np.uint8)
+    assert _lower_half_density(weak_u8, 4.0) < 8.0
+    kw = dict(min_density=8.0, target_density=24.0)
+    t = textured_edge_threshold(weak_u8, 4.0, floor=0.5, **kw)
+    assert 0.5 < t < 4.0
+    # the threshold returned keeps (about) the target density, a higher one would not
+    assert _lower_half_density(weak_u8, t) >= 24.0
+    assert _lower_half_density(weak_u8, t + 0.2) < 24.0
+    # the floor bounds it; 0 density or a floor above the threshold leaves it alone
+    assert textured_edge_threshold(weak_u8, 4.0, floor=2.5, **kw) == 2.5
+    assert textured_edge_threshold(weak_u8, 4.0, min_density=0.0, target_density=24.0,
+                                   floor=0.5) == 4.0
+    assert textured_edge_threshold(weak_u8, 4.0, floor=5.0, **kw) == 4.0
+    # float images take the float path to the same threshold
+    assert textured_edge_threshold(weak_u8.astype(np.float32), 4.0, floor=0.5,
+                                   **kw) == pytest.approx(t)
+    # the counts do not scale with the image: 640 x 480 tiles seen from the same rig
+    # (twice the pixels per tile) have half the edges per 320 px of a row, but as many
+    # in all as the 320 x 240 image needs
+    yy2, xx2 = np.mgrid[0:2 * h, 0:2 * w]
+    big_tiles = 100.0 + 60.0 * (((xx2 // 48) + (yy2 // 40)) % 2)
+    big = np.clip(np.rint(big_tiles + rng.normal(0, 2.0, (2 * h, 2 * w))), 0, 255
+                  ).astype(np.uint8)
+    per_320 = _lower_half_density(big, 4.0) * DENSITY_ROWS / (h * 2.0)
+    assert per_320 < 8.0 <= _lower_half_density(big, 4.0)
+    assert textured_edge_threshold(big, 4.0, floor=0.5, **kw) == 4.0
+    with pytest.raises(ValueError, match='first_row_fraction'):
+        textured_edge_threshold(weak_u8, 4.0, floor=0.5, first_row_fraction=1.0, **kw)
+    with pytest.raises(ValueError, match='target_density'):
+        textured_edge_threshold(weak_u8, 4.0, min_density=8.0, target_density=4.0, floor=0.5)
+
+
+def test_compiled_textured_edge_threshold_equals_the_numpy_path(monkeypatch):
+    """The compiled count of candidates (numba, optional) gives the thresholds the numpy
+    path gives: lowered to a candidate's strength, to the floor, or left."""
+    import cv2
+    from asmonc_vision.core import edges as E
+    if not E.warm_up():
+        pytest.skip('numba not installed')
+    rng = np.random.default_rng(4)
+    blobs = cv2.GaussianBlur(rng.normal(0.0, 1.0, (240, 320)).astype(np.float32), (0, 0), 3.0)
+    weak = np.clip(np.rint(120.0 + 6.0 * blobs / blobs.std()
+                           + rng.normal(0, 1.0, (240, 320))), 0, 255).astype(np.uint8)
+    cases = [(weak, 0.5), (weak, 2.6), (np.asarray(weak[::2, 1::2]), 0.5),
+             (rng.integers(0, 256, (240, 320), dtype=np.uint8), 0.5),
+             (np.zeros((20, 30), np.uint8), 0.5)]
+    kw = dict(min_density=8.0, target_density=24.0)
+    fast = [E.textured_edge_threshold(i, 4.0, floor=f, **kw) for i, f in cases]
+    monkeypatch.setattr(E, '_nb_peak_count', None)
+    slow = [E.textured_edge_threshold(i, 4.0, floor=f, **kw) for i, f in cases]
+    assert fast == slow
+    assert 0.5 < slow[0] < 4.0 and slow[1] == 2.6 and slow[3] == 4.0 and slow[4] == 0.5

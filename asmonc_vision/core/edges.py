@@ -166,6 +166,111 @@ def gradient_noise_gain(blur_sigma: float = 0.0) -> float:
     return float(np.sqrt(np.sum(kernel.astype(np.float64) ** 2)))
 
 
+#: The densities of :func:`textured_edge_threshold` are candidates per row of the lower
+#: half of the paper's 320 x 240 image: counts divided by these 120 rows. A larger image
+#: needs as many edges for a ground plane, not as dense ones (and its faint texture gives
+#: less gradient per pixel), so the counts are not scaled with the image size.
+DENSITY_ROWS = 120.0
+
+
+def textured_edge_threshold(image: np.ndarray, abs_threshold: float, *,
+                            min_density: float, target_density: float, floor: float,
+                            first_row_fraction: float = 0.5,
+                            blur_sigma: float = 0.0) -> float:
+    """The edge threshold for an image whose lower rows show too few vertical edges.
+
+    Weakly textured ground (asphalt, plain concrete, large flags) has few vertical edges
+    as strong as ``abs_threshold``, and without them there is no ground plane, or one
+    through chance matches. The rows from ``first_row_fraction`` of the height down to
+    the bottom (where a rig pitched down sees the near ground) are searched for edge
+    candidates: maxima of ``|dI/du|`` along a row (as :func:`detect_vertical_edges` finds
+    them, before its angle test). With at least ``min_density`` times ``DENSITY_ROWS`` of
+    them at ``abs_threshold`` (a density per row of the paper's 320 x 240 image, whatever
+    this image's size), that threshold is returned unchanged. Otherwise it is lowered
+    until they number ``target_density`` times ``DENSITY_ROWS``, but not below ``floor``
+    (set it from the pixel noise, e.g.
+    a multiple of ``gradient_noise_gain() * image_noise_sigma()``, so that the edges
+    added are texture, not noise; the target bounds the edges added if the noise is
+    underestimated).
+
+    Args:
+        image: (H, W) grey image (uint8 or float).
+        abs_threshold: the usual threshold, grey levels per pixel (>= 0).
+        min_density: edge candidates per row of a 320 x 240 image's lower half (the
+            count over ``DENSITY_ROWS``) below which the threshold is lowered (>= 0;
+            0 = never lower).
+        target_density: the same density that the lowered threshold keeps
+            (>= min_density).
+        floor: the least threshold returned, grey levels per pixel (>= 0).
+        first_row_fraction: the first row searched, as a fraction of the height, [0, 1).
+        blur_sigma: the edges' Gaussian pre-blur, pixels (0 = none).
+    Returns:
+        The threshold, grey levels per pixel: ``abs_threshold``, or a value in
+        ``[floor, abs_threshold)`` (``abs_threshold`` when ``floor`` is not below it).
+    Raises:
+        ValueError: a non-2-D image, ``first_row_fraction`` outside [0, 1), or
+            ``target_density`` below ``min_density``.
+    """
+    img = np.asarray(image)
+    if img.ndim != 2:
+        raise ValueError(f'image must be 2-D (H, W), got shape {img.shape}')
+    if not 0.0 <= first_row_fraction < 1.0:
+        raise ValueError(f'first_row_fraction must be in [0, 1), got {first_row_fraction}')
+    if target_density < min_density:
+        raise ValueError(f'target_density ({target_density}) must be at least '
+                         f'min_density ({min_density})')
+    thr = float(abs_threshold)
+    h, w = img.shape
+    if not min_density > 0 or h < 3 or w < 5 or not floor < thr:
+        return thr
+    r0 = min(max(int(first_row_fraction * h), 1), h - 2)
+    band = img[r0 - 1:h]
+    have = int(math.ceil(min_density * DENSITY_ROWS))
+    need = int(math.ceil(target_density * DENSITY_ROWS))
+    if img.dtype == np.uint8 and not blur_sigma > 0:
+        # Integer Sobel sums (8 times |dI/du|, at most 1020), compared as
+        # detect_vertical_edges does. Most images have the edges: they are only counted.
+        amag = np.abs(cv2.Sobel(band, cv2.CV_16S, 1, 0, ksize=3,
+                                borderType=cv2.BORDER_REFLECT_101)[1:-1])
+        t8 = np.float32(thr) * np.float32(8.0)
+        thr_c = int(np.clip(np.ceil(t8), 0, 1021))
+        if _nb_peak_count is not None and _nb_peak_count(amag, thr_c) >= have:
+            return thr
+        c = amag[:, 2:-2]
+        hist = np.bincount(c[(c > amag[:, 1:-3]) & (c >= amag[:, 3:-1])], minlength=1022)
+        at_least = np.cumsum(hist[::-1])[::-1]           # candidates >= each sum
+        if int(at_least[thr_c]) >= have:
+            return thr
+        if int(at_least[0]) < need:
+            return max(float(floor), 0.0)
+        # The need-th strongest candidate, as the threshold that keeps need of them.
+        t_need = float(np.flatnonzero(at_least >= need)[-1]) / 8.0
+        return min(thr, max(float(floor), t_need, 0.0))
+    amag = np.abs(horizontal_gradient(band, blur_sigma)[0][1:-1])
+    c = amag[:, 2:-2]
+    peaks = c[(c > amag[:, 1:-3]) & (c >= amag[:, 3:-1])]
+    if int(np.count_nonzero(peaks >= np.float32(thr))) >= have:
+        return thr
+    if peaks.size < need:
+        return max(float(floor), 0.0)
+    t_need = float(np.partition(peaks, peaks.size - need)[peaks.size - need])
+    return min(thr, max(float(floor), t_need, 0.0))
+
+
+def _peak_count_kernel(amag, thr_c):
+    """The number of row maxima (strictly above the left neighbour, not below the right
+    one) of at least ``thr_c`` in the integer |Sobel sums| ``amag`` (H, W) int16, columns
+    2 to W - 3 of every row (for numba; the numpy path of `textured_edge_threshold`)."""
+    h, w = amag.shape
+    n = 0
+    for r in range(h):
+        row = amag[r]
+        for c in range(2, w - 2):
+            m = row[c]
+            n += np.int64((m > row[c - 1]) & (m >= row[c + 1]) & (m >= thr_c))
+    return n
+
+
 def detect_vertical_edges(image: np.ndarray, *, abs_threshold: float = 4.0,
                           rel_threshold: float = 0.0, max_angle_deg: float = 60.0,
                           min_string_length: int = 1, blur_sigma: float = 0.0) -> EdgeMap:
@@ -565,14 +670,16 @@ def _edges_kernel(amag, img, sx, thr_c, cos2, min_len):
 
 
 _nb_edges = jit(_edges_kernel) if _nb_maxima is not None else None
+_nb_peak_count = jit(_peak_count_kernel)
 
 
 def warm_up() -> bool:
     """Compile (or load from numba's disk cache) the edge kernel on a tiny image, so
     that the first frame does not pay for it; without numba, or if compiling fails, the
     numpy path is used. Returns whether numba is in use."""
-    global _nb_edges
+    global _nb_edges, _nb_peak_count
     img = np.zeros((3, 5), np.uint8)
     s = np.zeros((3, 5), np.int16)
     _nb_edges = warmed(_nb_edges, s, img, s, 1, 0.5, 3)
+    _nb_peak_count = warmed(_nb_peak_count, s, 1)
     return _nb_edges is not None

@@ -89,7 +89,7 @@ from .alignment import AlignmentConfig, VerticalAlignment, brightness_gain_offse
 from .camera import MetricPlane, StereoCamera, ground_range_bearing, plane_disparity
 from .config import param
 from .edges import (EdgeMap, chain_roots, detect_vertical_edges, gradient_noise_gain,
-                    image_noise_sigma)
+                    image_noise_sigma, textured_edge_threshold)
 from .edges import warm_up as edges_warm_up
 from .motion.geometry import so3_log
 from .obstacle_tracks import ObstacleTracker
@@ -434,6 +434,23 @@ class GpodConfig(PlausiblePlaneConfig):
     edge_blur_sigma: float = param(
         0.0, 'Gaussian pre-blur of the images before the Sobel operator, pixels (0 = none)',
         range=(0.0, 10.0))
+    edge_min_density: float = param(
+        8.0, 'Weakly textured ground: where the lower half of the left image (the near '
+        'ground) has fewer vertical-edge candidates at edge_threshold than this many times '
+        '120 (this many per row of the paper\'s 320 x 240 image, whatever the image size: a '
+        'ground plane needs as many edges, not as dense), the threshold of both images is '
+        'lowered for that pair to keep edge_target_density times 120 of them, but not below '
+        'edge_noise_floor_snr times the gradient noise (asphalt, plain concrete and large '
+        'flags otherwise give too few edges for a ground plane, or a plane through chance '
+        'matches); 0 = never lower', range=(0.0, 1000.0))
+    edge_target_density: float = param(
+        24.0, 'Vertical-edge candidates (times 120, as edge_min_density) in the lower half '
+        'of the left image that a threshold lowered by edge_min_density keeps (at least '
+        'edge_min_density)', range=(0.0, 1000.0))
+    edge_noise_floor_snr: float = param(
+        2.5, 'The least edge threshold that edge_min_density may lower to, in units of the '
+        "image's gradient noise (the deviation of |dI/du| that the left image's estimated "
+        'pixel noise gives)', range=(0.0, 100.0))
     min_string_length: int = param(
         3, 'Edge strings shorter than this many pixels are dropped', range=(1, 100000))
     # --- matching ------------------------------------------------------------------
@@ -648,6 +665,10 @@ class GpodConfig(PlausiblePlaneConfig):
             raise ValueError(
                 f'GpodConfig.threshold_floor_px = {self.threshold_floor_px} must not exceed '
                 f'threshold_ceiling_px = {self.threshold_ceiling_px}')
+        if self.edge_target_density < self.edge_min_density:
+            raise ValueError(
+                f'GpodConfig.edge_target_density = {self.edge_target_density} must be at '
+                f'least edge_min_density = {self.edge_min_density}')
 
 
 @dataclass(frozen=True)
@@ -793,6 +814,8 @@ class GpodResult:
         misalignment_px: the rig's measured vertical misalignment, the largest over the
             image, pixels (NaN before the first measurement; core.alignment).
         misalignment_corrected: True when the right image was resampled to remove it.
+        edge_threshold: the edge threshold used for this pair, grey levels per pixel
+            (``edge_threshold``, or lower on weakly textured ground: ``edge_min_density``).
     """
 
     status: str
@@ -813,6 +836,7 @@ class GpodResult:
     detections: tuple[GpodObstacle, ...] = ()
     misalignment_px: float = float('nan')
     misalignment_corrected: bool = False
+    edge_threshold: float = float('nan')
 
     @property
     def plane(self) -> GpodPlane | None:
@@ -4123,7 +4147,7 @@ class GpodDetector:
             num_edges=(len(p.el), len(p.er)), timings_ms=timings, sigma_px=self._sigma,
             still=p.still, detections=detections,
             misalignment_px=al.max_px if al.measurements else float('nan'),
-            misalignment_corrected=al.applied)
+            misalignment_corrected=al.applied, edge_threshold=p.el.threshold)
 
     def _begin(self, left: np.ndarray, right: np.ndarray, cam: StereoCamera) -> None:
         """Check a pair against its camera (ValueError, `_check_images`); a camera
@@ -4146,7 +4170,8 @@ class GpodDetector:
 
         t0 = time.perf_counter()
         self._estimate_noise(left)
-        edge_kw = dict(abs_threshold=c.edge_threshold, rel_threshold=c.edge_rel_threshold,
+        edge_kw = dict(abs_threshold=self._edge_threshold(left),
+                       rel_threshold=c.edge_rel_threshold,
                        max_angle_deg=c.edge_max_angle_deg, min_string_length=c.min_string_length,
                        blur_sigma=c.edge_blur_sigma)
         el = detect_vertical_edges(left, **edge_kw)
@@ -4326,6 +4351,21 @@ class GpodDetector:
         self._image_noise = image_noise_sigma(left)
         self._min_strength = max(c.obstacle_min_strength, c.obstacle_min_edge_snr
                                  * gradient_noise_gain(c.edge_blur_sigma) * self._image_noise)
+
+    def _edge_threshold(self, left: np.ndarray) -> float:
+        """The edge threshold of this pair, grey levels per pixel: ``edge_threshold``,
+        lowered on weakly textured ground (`edges.textured_edge_threshold`:
+        ``edge_min_density``, ``edge_target_density``) to no less than
+        ``edge_noise_floor_snr`` times the gradient noise; unchanged while the pixel noise
+        is unknown."""
+        c = self.config
+        if not c.edge_min_density > 0 or not math.isfinite(self._image_noise):
+            return c.edge_threshold
+        floor = (c.edge_noise_floor_snr * gradient_noise_gain(c.edge_blur_sigma)
+                 * self._image_noise)
+        return textured_edge_threshold(left, c.edge_threshold, min_density=c.edge_min_density,
+                                       target_density=c.edge_target_density, floor=floor,
+                                       blur_sigma=c.edge_blur_sigma)
 
     def _evidence_weight(self, strength: np.ndarray) -> np.ndarray:
         """How much of a pixel each matched edge pixel counts as evidence: weak edges are
