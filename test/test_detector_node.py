@@ -110,6 +110,8 @@ def test_a_rig_off_its_calibration_is_corrected_and_reported(ros_context):
         values = {kv.key: kv.value for kv in last.values}
         assert float(values['misalignment_px']) == pytest.approx(1.5, abs=0.3)
         assert values['misalignment_corrected'] == 'True'
+        # the tiled pavement shows its edges: the edge threshold is not lowered
+        assert float(values['edge_threshold']) == pytest.approx(4.0)
         assert len(got['obstacles'][-1].obstacles) >= 3
         ex.remove_node(probe)
         probe.destroy_node()

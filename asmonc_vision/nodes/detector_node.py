@@ -229,6 +229,7 @@ class DetectorNode(StereoInputNode):
                          frames_dropped=self.frames_dropped, frames_bad=self.frames_bad,
                          motions_used=self.motions_used,
                          image_noise=f'{self.detector.image_noise_sigma:.2f}',
+                         edge_threshold=f'{result.edge_threshold:.2f}',
                          misalignment_px=f'{mis:.2f}',
                          misalignment_corrected=result.misalignment_corrected,
                          total_ms=f"{result.timings.get('total', float('nan')):.1f}")
