@@ -228,31 +228,24 @@ def textured_edge_threshold(image: np.ndarray, abs_threshold: float, *,
     have = int(math.ceil(min_density * DENSITY_ROWS))
     need = int(math.ceil(target_density * DENSITY_ROWS))
     if img.dtype == np.uint8 and not blur_sigma > 0:
-        # Integer Sobel sums (8 times |dI/du|, at most 1020), compared as
+        # Integer Sobel sums (8 times |dI/du|, exact in float32 after / 8), compared as
         # detect_vertical_edges does. Most images have the edges: they are only counted.
         amag = np.abs(cv2.Sobel(band, cv2.CV_16S, 1, 0, ksize=3,
                                 borderType=cv2.BORDER_REFLECT_101)[1:-1])
-        t8 = np.float32(thr) * np.float32(8.0)
-        thr_c = int(np.clip(np.ceil(t8), 0, 1021))
+        thr_c = int(np.clip(np.ceil(np.float32(thr) * np.float32(8.0)), 0, 1021))
         if _nb_peak_count is not None and _nb_peak_count(amag, thr_c) >= have:
             return thr
-        c = amag[:, 2:-2]
-        hist = np.bincount(c[(c > amag[:, 1:-3]) & (c >= amag[:, 3:-1])], minlength=1022)
-        at_least = np.cumsum(hist[::-1])[::-1]           # candidates >= each sum
-        if int(at_least[thr_c]) >= have:
-            return thr
-        if int(at_least[0]) < need:
-            return max(float(floor), 0.0)
-        # The need-th strongest candidate, as the threshold that keeps need of them.
-        t_need = float(np.flatnonzero(at_least >= need)[-1]) / 8.0
-        return min(thr, max(float(floor), t_need, 0.0))
-    amag = np.abs(horizontal_gradient(band, blur_sigma)[0][1:-1])
+        scale = np.float32(_SOBEL_NORM)
+    else:
+        amag = np.abs(horizontal_gradient(band, blur_sigma)[0][1:-1])
+        scale = np.float32(1.0)
     c = amag[:, 2:-2]
-    peaks = c[(c > amag[:, 1:-3]) & (c >= amag[:, 3:-1])]
+    peaks = c[(c > amag[:, 1:-3]) & (c >= amag[:, 3:-1])].astype(np.float32) * scale
     if int(np.count_nonzero(peaks >= np.float32(thr))) >= have:
         return thr
     if peaks.size < need:
         return max(float(floor), 0.0)
+    # The need-th strongest candidate, as the threshold that keeps need of them.
     t_need = float(np.partition(peaks, peaks.size - need)[peaks.size - need])
     return min(thr, max(float(floor), t_need, 0.0))
 

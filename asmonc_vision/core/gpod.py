@@ -3646,6 +3646,8 @@ class GpodDetector:
         self._frame_thr = np.zeros(0)
         #: the left image's pixel noise, grey levels (NaN until estimated)
         self._image_noise = float('nan')
+        #: the deviation of |dI/du| per grey level of pixel noise, after the edges' blur
+        self._noise_gain = gradient_noise_gain(self.config.edge_blur_sigma)
         #: obstacle_min_strength in force (raised on a noisy camera)
         self._min_strength = self.config.obstacle_min_strength
         #: the current left image and the current frame's context for describing obstacles
@@ -4350,7 +4352,7 @@ class GpodDetector:
         c = self.config
         self._image_noise = image_noise_sigma(left)
         self._min_strength = max(c.obstacle_min_strength, c.obstacle_min_edge_snr
-                                 * gradient_noise_gain(c.edge_blur_sigma) * self._image_noise)
+                                 * self._noise_gain * self._image_noise)
 
     def _edge_threshold(self, left: np.ndarray) -> float:
         """The edge threshold of this pair, grey levels per pixel: ``edge_threshold``,
@@ -4361,8 +4363,7 @@ class GpodDetector:
         c = self.config
         if not c.edge_min_density > 0 or not math.isfinite(self._image_noise):
             return c.edge_threshold
-        floor = (c.edge_noise_floor_snr * gradient_noise_gain(c.edge_blur_sigma)
-                 * self._image_noise)
+        floor = c.edge_noise_floor_snr * self._noise_gain * self._image_noise
         return textured_edge_threshold(left, c.edge_threshold, min_density=c.edge_min_density,
                                        target_density=c.edge_target_density, floor=floor,
                                        blur_sigma=c.edge_blur_sigma)
