@@ -66,7 +66,11 @@ Per stereo pair:
    probability of being the nearest: the middle of a frontal face), as it is when the
    corner would lie beyond the feet. A face running out of the view, or seen as two
    obstacles with a blank middle, is placed at its nearest point (`view_edge_points`,
-   `face_gap_points`), unless the ground is seen through its line.
+   `face_gap_points`), unless the ground is seen through its line. A low obstacle seen
+   by one silhouette edge only (a frontal box whose other end is matched at the
+   ground's disparity) is placed along the face beside that edge which the image shows
+   as two parallel intensity edges, its contact line and its top outline
+   (`lone_face_points`), when that brings its nearest point nearer.
 
 Status per frame: ``'initialising'`` (not enough calibration frames yet), ``'tracking'``
 (a plane is valid for this frame, refitted or carried over for up to
@@ -192,6 +196,35 @@ _FACE_SEEN_THROUGH = 0.5
 _FACE_GAP_SEEN_M = 0.35
 #: Least span (metres) of the feet of two obstacles taken for one face (`face_gap_points`).
 _GAP_MIN_SPAN_M = 1.0
+#: A lone silhouette's face (`lone_face_points`): a low obstacle (at most
+#: _LONE_MAX_HEIGHT_M high) seen by one silhouette edge only (the feet of its strings
+#: within _LONE_SPREAD_M of each other) may stand with a face that has no vertical edge
+#: of its own (a frontal box: its near corner or middle lies beside the one edge seen).
+#: Such a face shows in the image as two parallel intensity edges: its contact line on
+#: the ground and its top outline, the same line raised by the obstacle's height. From
+#: the foot, the directions of _LONE_DIRECTIONS on the ground that run towards the
+#: camera's side are followed in steps of _LONE_STEP_M up to _LONE_MAX_M; a face is the
+#: extent along a direction over which the weaker of the two edges (the image gradient
+#: across each line) exceeds a bar by the largest sum: _LONE_BAR times the median over
+#: those directions of the mean evidence (the ground's own texture), at least
+#: _LONE_FLOOR_SIGMAS times the gradient noise.
+#: It must be _LONE_MIN_M long or more; its two lines at least _LONE_MIN_SEP_PX apart
+#: across their direction (a line along the line of sight is its own raised copy), and
+#: no visible ground may lie where it would be hidden (`_face_hides_kernel`). Of the
+#: faces that bring the obstacle's nearest point nearer by _LONE_MIN_GAIN_M or more, the
+#: best supported gives it.
+_LONE_MAX_HEIGHT_M = 0.3
+_LONE_SPREAD_M = 0.15
+_LONE_DIRECTIONS = 72
+_LONE_STEP_M = 0.02
+_LONE_MAX_M = 0.7
+_LONE_MIN_M = 0.1
+_LONE_BAR = 2.0
+_LONE_FLOOR_SIGMAS = 4.0
+_LONE_MIN_SEP_PX = 2.5
+_LONE_MIN_GAIN_M = 0.05
+#: The standard deviation of the unblurred Sobel gradient per grey level of pixel noise.
+_SOBEL_NOISE_GAIN = gradient_noise_gain(0.0)
 #: `soft_nearest` averages the nearest foot with the feet as near as it only over one
 #: body: not with a foot more than _BODY_GAP_SPAN_M away from it when at least
 #: _FACE_BEHIND_MIN ground features lie between the two, _BODY_GAP_BAND_M[0] to [1]
@@ -1948,6 +1981,7 @@ class _FrameContext:
         self.weak_top = np.zeros(0)
         self._ground_xy: np.ndarray | None = None
         self._left = left
+        self._gradients: tuple[np.ndarray, np.ndarray] | None = None
 
     @property
     def nxt(self) -> np.ndarray:
@@ -1981,6 +2015,55 @@ class _FrameContext:
         if self._ground_xy is None:
             self._ground_xy = self.to_xy(self._ground_points)
         return self._ground_xy
+
+    def outline_evidence(self, foot: np.ndarray, height: float, phi: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The image's evidence for a face of ``height`` (m) starting at the ground point
+        ``foot`` (2,) in each direction ``phi`` (D,) on the ground (radians from the
+        ground's x axis towards y).
+
+        Returns:
+            points: (D, S, 2) ground coordinates of the samples (every `_LONE_STEP_M`
+                metres from the foot, up to `_LONE_MAX_M`), metres;
+            evidence: (D, S) the weaker of the image gradients across the contact line
+                (the samples) and across the top outline (the samples raised by
+                ``height``), grey levels per pixel (the largest within one pixel across
+                the line; 0 outside the image);
+            separation: (D, S) the distance between the two lines across their
+                direction, pixels.
+        """
+        if self._gradients is None:
+            img = self._left.astype(np.float32)
+            self._gradients = (cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=3, scale=0.125),
+                               cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=3, scale=0.125))
+        gx, gy = self._gradients
+        img_h, img_w = gx.shape
+        s = np.arange(int(round(_LONE_MAX_M / _LONE_STEP_M)) + 1) * _LONE_STEP_M
+        dirs = np.stack([np.cos(phi), np.sin(phi)], axis=-1)
+        points = foot[None, None, :] + s[None, :, None] * dirs[:, None, :]
+        p3 = (self.origin[None, None, :] + points[..., :1] * self.fwd
+              + points[..., 1:] * self.lft)
+        lines = []
+        for lift in (0.0, height):
+            q = (p3 + lift * self.metric.normal_up).reshape(-1, 3)
+            q[:, 2] = np.maximum(q[:, 2], 1e-6)
+            u, v = self.cam.project_left(q)
+            u, v = u.reshape(points.shape[:2]), v.reshape(points.shape[:2])
+            # a line on the ground (or parallel to it) is a line in the image: one
+            # normal per direction, from its ends
+            du, dv = u[:, -1:] - u[:, :1], v[:, -1:] - v[:, :1]
+            length = np.maximum(np.hypot(du, dv), 1e-9)
+            nu, nv = -dv / length, du / length
+            best = np.zeros(u.shape)
+            for off in (-1.0, 0.0, 1.0):
+                ui = np.clip(np.rint(u + off * nu), 0, img_w - 1).astype(np.int64)
+                vi = np.clip(np.rint(v + off * nv), 0, img_h - 1).astype(np.int64)
+                best = np.maximum(best, np.abs(gx[vi, ui] * nu + gy[vi, ui] * nv))
+            inside = (u >= 0) & (u <= img_w - 1) & (v >= 0) & (v <= img_h - 1)
+            lines.append((np.where(inside, best, 0.0), u, v, nu, nv))
+        (g_c, uc, vc, nuc, nvc), (g_t, ut, vt, _, _) = lines
+        separation = np.abs((ut - uc) * nuc + (vt - vc) * nvc)
+        return points, np.minimum(g_c, g_t), separation
 
     def contact_edge_score(self, a: np.ndarray, n: np.ndarray, b: np.ndarray) -> np.ndarray:
         """How well the left image's intensity edges follow the ground polylines
@@ -3125,6 +3208,75 @@ def _pairs_of(n: int) -> tuple[np.ndarray, np.ndarray]:
         out = (ia, ib)
         if n <= 256:
             _PAIRS[n] = out
+    return out
+
+
+def lone_face_points(ctx: _FrameContext, xy: np.ndarray, group: np.ndarray, n_groups: int,
+                     q: np.ndarray, height: np.ndarray, at_border: np.ndarray,
+                     noise_floor: float = 0.0) -> np.ndarray:
+    """The nearest point of a low obstacle seen by one silhouette edge, along the face the
+    image shows beside it (see `_LONE_MAX_HEIGHT_M` and below it for the rule).
+
+    Args:
+        ctx: the frame (its left image, plane, camera and visible ground).
+        xy: (S, 2) ground coordinates of the obstacles' string feet, metres;
+            ``group`` (S,) the obstacle of each; ``n_groups`` the number of obstacles.
+        q: (n_groups, 2) each obstacle's nearest point so far, metres.
+        height: (n_groups,) the obstacles' heights, metres.
+        at_border: (S,) the string lies at the image's left or right border.
+        noise_floor: the least bar of the edge evidence, grey levels per pixel.
+    Returns:
+        (n_groups, 2): the nearer point, NaN where none is found (or the obstacle is not
+        a low one placed at its one silhouette).
+    """
+    out = np.full((n_groups, 2), np.nan)
+    if xy.shape[0] == 0:
+        return out
+    g_all = None
+    cam_h = ctx.metric.height
+    for k in range(n_groups):
+        mine = group == k
+        h = float(height[k])
+        if not (0.0 < h <= _LONE_MAX_HEIGHT_M) or not mine.any() or at_border[mine].any():
+            continue
+        f = xy[mine]
+        if np.ptp(f[:, 0]) > _LONE_SPREAD_M or np.ptp(f[:, 1]) > _LONE_SPREAD_M:
+            continue        # more than one silhouette: the corner searches place it
+        foot = q[k]
+        if np.min(np.hypot(f[:, 0] - foot[0], f[:, 1] - foot[1])) > _LONE_SPREAD_M:
+            continue        # placed elsewhere already (a face out of the view, a gap)
+        # Only a face that runs towards the camera's side can bring the point nearer.
+        phi = np.arange(_LONE_DIRECTIONS) * (2.0 * np.pi / _LONE_DIRECTIONS)
+        phi = phi[np.cos(phi) * foot[0] + np.sin(phi) * foot[1] < 0.0]
+        if phi.size == 0:
+            continue
+        points, ev, sep = ctx.outline_evidence(foot, h, phi)
+        ev, sep, points = ev[:, 1:], sep[:, 1:], points[:, 1:]
+        bar = max(_LONE_BAR * float(np.median(ev.mean(axis=1))), noise_floor)
+        gain = np.cumsum(ev - bar, axis=1)
+        end = np.argmax(gain, axis=1)
+        rows = np.arange(ev.shape[0])
+        support = gain[rows, end]
+        ok = ((support > 0.0) & ((end + 1) * _LONE_STEP_M >= _LONE_MIN_M)
+              & (np.median(sep, axis=1) >= _LONE_MIN_SEP_PX))
+        # each face's nearest point to the camera (the foot, its end, or between)
+        ends = points[rows, end]
+        d = ends - foot
+        t = np.clip(-(d @ foot) / np.maximum(np.einsum('ij,ij->i', d, d), 1e-12), 0.0, 1.0)
+        near = foot + t[:, None] * d
+        ok &= np.hypot(near[:, 0], near[:, 1]) <= math.hypot(*foot) - _LONE_MIN_GAIN_M
+        best = None
+        for j in np.flatnonzero(ok)[np.argsort(-support[ok], kind='stable')]:
+            if g_all is None:
+                g_all = np.ascontiguousarray(ctx.ground_xy, np.float64).reshape(-1, 2)
+            hides = _nb_face_hides if _nb_face_hides is not None else _face_hides_kernel
+            if not hides(float(ends[j, 0]), float(ends[j, 1]), 0.0,
+                         np.ascontiguousarray(foot[None]), np.zeros(1), g_all, h / cam_h,
+                         _FREE_SPACE_MARGIN_M, _FACE_HIDDEN_MIN):
+                best = near[j]                  # the best supported face that hides no
+                break                           # visible ground
+        if best is not None:
+            out[k] = best
     return out
 
 
@@ -4948,6 +5100,14 @@ class GpodDetector:
         if gap.any():
             q = q.copy()
             q[gap] = qg[gap]
+        # A low obstacle seen by one silhouette edge: the face the image shows beside it.
+        ql = lone_face_points(ctx, xy, g_lab, n_c, q, height, at_border,
+                              _LONE_FLOOR_SIGMAS * _SOBEL_NOISE_GAIN * self._image_noise
+                              if math.isfinite(self._image_noise) else 0.0)
+        lone = ~np.isnan(ql[:, 0])
+        if lone.any():
+            q = q.copy()
+            q[lone] = ql[lone]
         rng = np.array([math.hypot(x, y) for x, y in q.tolist()])
         brg = np.array([math.atan2(y, x) for x, y in q.tolist()])
         return rng, brg, q0
