@@ -223,6 +223,10 @@ _LONE_BAR = 2.0
 _LONE_FLOOR_SIGMAS = 4.0
 _LONE_MIN_SEP_PX = 2.5
 _LONE_MIN_GAIN_M = 0.05
+#: The directions searched (radians from the ground's x axis towards y) and the steps
+#: along each (metres from the foot).
+_LONE_PHI = np.arange(_LONE_DIRECTIONS) * (2.0 * np.pi / _LONE_DIRECTIONS)
+_LONE_STEPS = np.arange(1, int(round(_LONE_MAX_M / _LONE_STEP_M)) + 1) * _LONE_STEP_M
 #: The standard deviation of the unblurred Sobel gradient per grey level of pixel noise.
 _SOBEL_NOISE_GAIN = gradient_noise_gain(0.0)
 #: `soft_nearest` averages the nearest foot with the feet as near as it only over one
@@ -2023,8 +2027,8 @@ class _FrameContext:
         ground's x axis towards y).
 
         Returns:
-            points: (D, S, 2) ground coordinates of the samples (every `_LONE_STEP_M`
-                metres from the foot, up to `_LONE_MAX_M`), metres;
+            points: (D, S, 2) ground coordinates of the samples (`_LONE_STEPS` metres
+                from the foot), metres;
             evidence: (D, S) the weaker of the image gradients across the contact line
                 (the samples) and across the top outline (the samples raised by
                 ``height``), grey levels per pixel (the largest within one pixel across
@@ -2038,9 +2042,8 @@ class _FrameContext:
                                cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=3, scale=0.125))
         gx, gy = self._gradients
         img_h, img_w = gx.shape
-        s = np.arange(int(round(_LONE_MAX_M / _LONE_STEP_M)) + 1) * _LONE_STEP_M
         dirs = np.stack([np.cos(phi), np.sin(phi)], axis=-1)
-        points = foot[None, None, :] + s[None, :, None] * dirs[:, None, :]
+        points = foot[None, None, :] + _LONE_STEPS[None, :, None] * dirs[:, None, :]
         p3 = (self.origin[None, None, :] + points[..., :1] * self.fwd
               + points[..., 1:] * self.lft)
         lines = []
@@ -3234,6 +3237,7 @@ def lone_face_points(ctx: _FrameContext, xy: np.ndarray, group: np.ndarray, n_gr
         return out
     g_all = None
     cam_h = ctx.metric.height
+    hides = _nb_face_hides if _nb_face_hides is not None else _face_hides_kernel
     for k in range(n_groups):
         mine = group == k
         h = float(height[k])
@@ -3246,12 +3250,10 @@ def lone_face_points(ctx: _FrameContext, xy: np.ndarray, group: np.ndarray, n_gr
         if np.min(np.hypot(f[:, 0] - foot[0], f[:, 1] - foot[1])) > _LONE_SPREAD_M:
             continue        # placed elsewhere already (a face out of the view, a gap)
         # Only a face that runs towards the camera's side can bring the point nearer.
-        phi = np.arange(_LONE_DIRECTIONS) * (2.0 * np.pi / _LONE_DIRECTIONS)
-        phi = phi[np.cos(phi) * foot[0] + np.sin(phi) * foot[1] < 0.0]
+        phi = _LONE_PHI[np.cos(_LONE_PHI) * foot[0] + np.sin(_LONE_PHI) * foot[1] < 0.0]
         if phi.size == 0:
             continue
         points, ev, sep = ctx.outline_evidence(foot, h, phi)
-        ev, sep, points = ev[:, 1:], sep[:, 1:], points[:, 1:]
         bar = max(_LONE_BAR * float(np.median(ev.mean(axis=1))), noise_floor)
         gain = np.cumsum(ev - bar, axis=1)
         end = np.argmax(gain, axis=1)
@@ -3269,7 +3271,6 @@ def lone_face_points(ctx: _FrameContext, xy: np.ndarray, group: np.ndarray, n_gr
         for j in np.flatnonzero(ok)[np.argsort(-support[ok], kind='stable')]:
             if g_all is None:
                 g_all = np.ascontiguousarray(ctx.ground_xy, np.float64).reshape(-1, 2)
-            hides = _nb_face_hides if _nb_face_hides is not None else _face_hides_kernel
             if not hides(float(ends[j, 0]), float(ends[j, 1]), 0.0,
                          np.ascontiguousarray(foot[None]), np.zeros(1), g_all, h / cam_h,
                          _FREE_SPACE_MARGIN_M, _FACE_HIDDEN_MIN):
