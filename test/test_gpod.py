@@ -1825,6 +1825,27 @@ def test_nearest_points_compiled_equals_numpy(box_frame, monkeypatch):
     assert np.isfinite(fast[2][:, 0]).sum() >= 2
 
 
+def test_outline_evidence_compiled_equals_numpy(box_frame, monkeypatch):
+    """The lone-face search's evidence (`_FrameContext.outline_evidence`) compiled gives
+    the numpy path's values, on a real frame's image: feet near and far, faces low and
+    high (raised lines partly out of the image), every direction."""
+    gpod, _ = _need_numba()
+    det, _, _ = box_frame
+    ctx = det._ctx
+    feet = [np.array([3.0, 0.3]), np.array([4.6, -0.8]), np.array([2.2, 1.1])]
+
+    def run():
+        out = []
+        for foot in feet:
+            for h in (0.04, 0.3, 1.5):
+                _, ev, sep = ctx.outline_evidence(foot, h, gpod._LONE_PHI)
+                out += [ev, sep]
+        return out
+
+    fast, _ = _compiled_equals_numpy(monkeypatch, gpod, ('_nb_outline',), run)
+    assert max(float(x.max()) for x in fast[0::2]) > 10.0     # edges were seen
+
+
 def test_silhouette_owners_compiled_equals_numpy(monkeypatch):
     """The compiled `silhouette_owners` (nearest matching obstacle, outermost candidate
     per side, free-space test against the visible ground) assigns as the numpy path."""

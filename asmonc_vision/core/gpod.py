@@ -1400,7 +1400,7 @@ def _warm_up() -> None:
     global _warm, _nb_occluded, _nb_hanging, _nb_link_groups, _nb_corner_free, _nb_contact, \
         _nb_walk_down, _nb_extremes, _nb_soft_args, _nb_arcs, _nb_contact_bounds, _nb_owners, \
         _nb_group_quantile, _nb_extent, _nb_runs, _nb_occluded_all, _nb_hanging_all, \
-        _nb_on_ground, _nb_still, _nb_temporal, _nb_thin
+        _nb_on_ground, _nb_still, _nb_temporal, _nb_thin, _nb_outline
     if _warm:
         return
     _warm = True
@@ -1410,6 +1410,7 @@ def _warm_up() -> None:
         _nb_walk_down = _nb_extremes = _nb_soft_args = _nb_arcs = _nb_contact_bounds = None
         _nb_owners = _nb_group_quantile = _nb_extent = _nb_runs = _nb_occluded_all = None
         _nb_hanging_all = _nb_on_ground = _nb_still = _nb_temporal = _nb_thin = None
+        _nb_outline = None
         return
     f2, f1, i1 = np.zeros((1, 2)), np.zeros(1), np.zeros(1, np.int64)
     _nb_corner_free = _warmed(_nb_corner_free, f2, f2, f2, f2, f1 + 1.0, np.zeros((1, 1, 2)),
@@ -1437,6 +1438,10 @@ def _warm_up() -> None:
                                  np.ones((1, 1), bool), 2, 2)
     _nb_link_groups = _warmed(_nb_link_groups, np.zeros((2, 2)), np.arange(2), 2, 1.0)
     _nb_thin = _warmed(_nb_thin, np.zeros((2, 2)), np.arange(2), 0.1)
+    g32 = np.zeros((2, 2), np.float32)
+    _nb_outline = _warmed(_nb_outline, np.ones((1, 2, 2)), np.zeros(3), np.zeros(3),
+                          np.zeros(3), np.zeros(3), 0.1, 300.0, 1.0, 1.0, g32, g32, 0, 0,
+                          2, 2)
     z, i = np.zeros(2), np.zeros(1, np.int64)
     _nb_occluded = _warmed(_nb_occluded, np.zeros(2, np.int64), np.ones(2, bool), z, z, z,
                            1.0, 1)
@@ -1985,7 +1990,6 @@ class _FrameContext:
         self.weak_top = np.zeros(0)
         self._ground_xy: np.ndarray | None = None
         self._left = left
-        self._gradients: tuple[np.ndarray, np.ndarray] | None = None
 
     @property
     def nxt(self) -> np.ndarray:
@@ -2036,14 +2040,30 @@ class _FrameContext:
             separation: (D, S) the distance between the two lines across their
                 direction, pixels.
         """
-        if self._gradients is None:
-            img = self._left.astype(np.float32)
-            self._gradients = (cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=3, scale=0.125),
-                               cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=3, scale=0.125))
-        gx, gy = self._gradients
-        img_h, img_w = gx.shape
+        img_h, img_w = self._left.shape
         dirs = np.stack([np.cos(phi), np.sin(phi)], axis=-1)
         points = foot[None, None, :] + _LONE_STEPS[None, :, None] * dirs[:, None, :]
+        # The gradient on the patch that holds every sample (the lines' ends and the
+        # foot bound them, raised or not), two pixels wider than the samples one pixel
+        # across the lines reach: the full image's values there.
+        ends = np.concatenate((foot[None], points[:, -1]))
+        e3 = self.origin[None, :] + ends[:, :1] * self.fwd + ends[:, 1:] * self.lft
+        e3 = np.concatenate((e3, e3 + height * self.metric.normal_up))
+        e3[:, 2] = np.maximum(e3[:, 2], 1e-6)
+        ue, ve = self.cam.project_left(e3)
+        x0 = int(np.clip(np.floor(ue.min()) - 3, 0, img_w - 1))
+        x1 = int(np.clip(np.ceil(ue.max()) + 4, x0 + 1, img_w))
+        y0 = int(np.clip(np.floor(ve.min()) - 3, 0, img_h - 1))
+        y1 = int(np.clip(np.ceil(ve.max()) + 4, y0 + 1, img_h))
+        patch = self._left[y0:y1, x0:x1].astype(np.float32)
+        gx = cv2.Sobel(patch, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
+        gy = cv2.Sobel(patch, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+        if _nb_outline is not None:
+            ev, sep = _nb_outline(points, self.origin, self.fwd, self.lft,
+                                  self.metric.normal_up, float(height), float(self.cam.f),
+                                  float(self.cam.cx), float(self.cam.cy), gx, gy, x0, y0,
+                                  img_w, img_h)
+            return points, ev, sep
         p3 = (self.origin[None, None, :] + points[..., :1] * self.fwd
               + points[..., 1:] * self.lft)
         lines = []
@@ -2059,8 +2079,8 @@ class _FrameContext:
             nu, nv = -dv / length, du / length
             best = np.zeros(u.shape)
             for off in (-1.0, 0.0, 1.0):
-                ui = np.clip(np.rint(u + off * nu), 0, img_w - 1).astype(np.int64)
-                vi = np.clip(np.rint(v + off * nv), 0, img_h - 1).astype(np.int64)
+                ui = np.clip(np.rint(u + off * nu), 0, img_w - 1).astype(np.int64) - x0
+                vi = np.clip(np.rint(v + off * nv), 0, img_h - 1).astype(np.int64) - y0
                 best = np.maximum(best, np.abs(gx[vi, ui] * nu + gy[vi, ui] * nv))
             inside = (u >= 0) & (u <= img_w - 1) & (v >= 0) & (v <= img_h - 1)
             lines.append((np.where(inside, best, 0.0), u, v, nu, nv))
@@ -2157,6 +2177,57 @@ class _FrameContext:
         total = best.mean(axis=-1) * length
         score = (total[:, 0] + total[:, 1]) / np.maximum(length[:, 0] + length[:, 1], 1e-9)
         return np.where(ok, score, -inf)
+
+
+def _outline_kernel(points, origin, fwd, lft, nup, height, f, cx, cy, gx, gy, x0, y0,
+                    img_w, img_h):
+    """`_FrameContext.outline_evidence` after the sample points (for numba): the same
+    arithmetic in the same order; gx, gy the gradient patch at (x0, y0) of the img_w x
+    img_h image; returns (evidence, separation), (D, S) each."""
+    n_d, n_s = points.shape[0], points.shape[1]
+    grad = np.zeros((2, n_d, n_s))
+    uu = np.empty((2, n_d, n_s))
+    vv = np.empty((2, n_d, n_s))
+    nus = np.empty((2, n_d))
+    nvs = np.empty((2, n_d))
+    for line in range(2):
+        lift = 0.0 if line == 0 else height
+        for d in range(n_d):
+            for k in range(n_s):
+                px, py = points[d, k, 0], points[d, k, 1]
+                q0 = origin[0] + px * fwd[0] + py * lft[0] + lift * nup[0]
+                q1 = origin[1] + px * fwd[1] + py * lft[1] + lift * nup[1]
+                q2 = max(origin[2] + px * fwd[2] + py * lft[2] + lift * nup[2], 1e-6)
+                uu[line, d, k] = f * q0 / q2 + cx
+                vv[line, d, k] = f * q1 / q2 + cy
+            du = uu[line, d, n_s - 1] - uu[line, d, 0]
+            dv = vv[line, d, n_s - 1] - vv[line, d, 0]
+            length = max(math.hypot(du, dv), 1e-9)
+            nu, nv = -dv / length, du / length
+            nus[line, d], nvs[line, d] = nu, nv
+            for k in range(n_s):
+                u, v = uu[line, d, k], vv[line, d, k]
+                if not (u >= 0 and u <= img_w - 1 and v >= 0 and v <= img_h - 1):
+                    continue
+                best = 0.0
+                for off in (-1.0, 0.0, 1.0):
+                    ui = int(min(max(np.rint(u + off * nu), 0.0), img_w - 1.0))
+                    vi = int(min(max(np.rint(v + off * nv), 0.0), img_h - 1.0))
+                    val = abs(np.float64(gx[vi - y0, ui - x0]) * nu
+                              + np.float64(gy[vi - y0, ui - x0]) * nv)
+                    best = max(best, val)
+                grad[line, d, k] = best
+    ev = np.empty((n_d, n_s))
+    sep = np.empty((n_d, n_s))
+    for d in range(n_d):
+        for k in range(n_s):
+            ev[d, k] = min(grad[0, d, k], grad[1, d, k])
+            sep[d, k] = abs((uu[1, d, k] - uu[0, d, k]) * nus[0, d]
+                            + (vv[1, d, k] - vv[0, d, k]) * nvs[0, d])
+    return ev, sep
+
+
+_nb_outline = _jit(_outline_kernel)
 
 
 def _contact_bounds_kernel(ua, va, ub, vb, un, vn, ok, img_w, img_h):
