@@ -1838,13 +1838,72 @@ def test_outline_evidence_compiled_equals_numpy(box_frame, monkeypatch):
         out = []
         for foot in feet:
             for h in (0.04, 0.3, 1.5):
-                _, ev, sep = ctx.outline_evidence(foot, h, gpod._LONE_PHI)
-                out += [ev, sep]
+                _, ev, sep, shift = ctx.outline_evidence(foot, h, gpod._LONE_PHI)
+                out += [ev, sep, shift]
         return out
 
     fast, _ = _compiled_equals_numpy(monkeypatch, gpod, ('_nb_outline',), run)
-    assert max(float(x.max()) for x in fast[0::2]) > 10.0     # edges were seen
+    assert max(float(x.max()) for x in fast[0::3]) > 10.0     # edges were seen
+    # the separation is the raise's part across the lines
+    assert all(np.all(sep <= shift + 1e-9) for sep, shift in zip(fast[1::3], fast[2::3]))
 
+
+
+def _face_image(ctx, foot, phi, height, face_band):
+    """A flat grey left image (100) with one bright (160) region in the frame's view:
+    with ``face_band``, the band between the ground line from ``foot`` along ``phi``
+    (0.6 m) and the same line raised by ``height`` (a box's face: two parallel edges);
+    without, the half-plane on one side of that ground line (one edge)."""
+    d = np.array([math.cos(phi), math.sin(phi)])
+    g = np.stack([foot, foot + 0.6 * d])
+    u, v = ctx.to_image(g)
+    img = np.full(ctx._left.shape, 100, np.uint8)
+    if face_band:
+        p3 = ctx.origin[None, :] + g[:, :1] * ctx.fwd + g[:, 1:] * ctx.lft
+        ut, vt = ctx.cam.project_left(p3 + height * ctx.metric.normal_up)
+        poly = np.array([[u[0], v[0]], [u[1], v[1]], [ut[1], vt[1]], [ut[0], vt[0]]])
+    else:
+        e = np.array([u[1] - u[0], v[1] - v[0]]) * 50.0
+        n = np.array([-e[1], e[0]])
+        p0 = np.array([u[0], v[0]])
+        poly = np.array([p0 - e, p0 + e, p0 + e + n, p0 - e + n])
+    cv2.fillPoly(img, [np.round(poly * 16).astype(np.int32)], 160, cv2.LINE_AA, 4)
+    return cv2.GaussianBlur(img, (0, 0), 0.6)
+
+
+def test_a_lone_face_must_cross_its_raise(box_frame, monkeypatch):
+    """A single edge leading from a low obstacle's foot nearly along the line of sight
+    (a paving joint towards the camera) meets its own copy raised by the obstacle's
+    height: both lines of the face test see it. It lies 2.5 px or more across itself
+    (the pixel bar) but at only 0.7 of the raise, and is no face: the foot stays. A box's
+    face across the line of sight (two edges, crossing the raise at right angles) moves
+    it; and without the fraction the single edge would have moved it too."""
+    import copy
+    from asmonc_vision.core import gpod
+    det, _, _ = box_frame
+    ctx = copy.copy(det._ctx)
+    ctx._ground_xy = np.zeros((0, 2))           # no visible ground for the faces to hide
+    foot, h = np.array([2.5, -0.5]), 0.04
+    args = (np.array([foot]), np.zeros(1, np.int64), 1, np.array([foot]), np.array([h]),
+            np.zeros(1, bool), 4.0)
+    steep = math.radians(190.0)                 # 21 deg off the line of sight, towards us
+    ctx._left = _face_image(ctx, foot, steep, h, face_band=False)
+    _, ev, sep, shift = ctx.outline_evidence(foot, h, np.array([steep]))
+    reach = slice(0, 15)                        # 0.3 m along it
+    assert np.median(ev[0, reach]) > 10.0 and np.median(sep[0, reach]) >= 2.5
+    assert np.median(sep[0, reach] / shift[0, reach]) < 0.75
+    assert np.isnan(gpod.lone_face_points(ctx, *args)).all()
+    with monkeypatch.context() as m:
+        m.setattr(gpod, '_LONE_MIN_SEP_FRACTION', 0.0)
+        moved = gpod.lone_face_points(ctx, *args)[0]
+    assert np.hypot(*moved) < np.hypot(*foot) - 0.1
+    across = math.radians(100.0)
+    ctx._left = _face_image(ctx, foot, across, h, face_band=True)
+    _, _, sep, shift = ctx.outline_evidence(foot, h, np.array([across]))
+    assert np.median(sep[0, reach] / shift[0, reach]) > 0.95
+    q = gpod.lone_face_points(ctx, *args)[0]
+    assert np.hypot(*q) < np.hypot(*foot) - 0.05
+    assert abs(math.atan2(q[1] - foot[1], q[0] - foot[0]) - across) < math.radians(10.0)
 
 def test_silhouette_owners_compiled_equals_numpy(monkeypatch):
     """The compiled `silhouette_owners` (nearest matching obstacle, outermost candidate

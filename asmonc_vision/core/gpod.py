@@ -210,9 +210,15 @@ _GAP_MIN_SPAN_M = 1.0
 #: _LONE_FLOOR_SIGMAS times the gradient noise.
 #: It must be _LONE_MIN_M long or more; its two lines at least _LONE_MIN_SEP_PX apart
 #: across their direction (a line along the line of sight is its own raised copy), and
-#: no visible ground may lie where it would be hidden (`_face_hides_kernel`). Of the
-#: faces that bring the obstacle's nearest point nearer by _LONE_MIN_GAIN_M or more, the
-#: best supported gives it.
+#: that separation at least _LONE_MIN_SEP_FRACTION of the raise itself (the image
+#: distance between a contact point and the same point raised by the height), so that the
+#: line crosses the raise at 53 degrees or more: a line nearer the raise's direction is
+#: mostly its own raised copy slid along itself, however long the raise (a paving joint
+#: leading from a box's corner towards the camera once passed the pixel bar at 2.7-3.5
+#: px, 0.7 of a raise of 4-5 px, where the box's own face gave 0.96-1, and placed the box
+#: 0.3 m nearer than it stood); and no visible ground may lie where it would be hidden
+#: (`_face_hides_kernel`). Of the faces that bring the obstacle's nearest point nearer by
+#: _LONE_MIN_GAIN_M or more, the best supported gives it.
 _LONE_MAX_HEIGHT_M = 0.3
 _LONE_SPREAD_M = 0.15
 _LONE_DIRECTIONS = 72
@@ -222,6 +228,7 @@ _LONE_MIN_M = 0.1
 _LONE_BAR = 2.0
 _LONE_FLOOR_SIGMAS = 4.0
 _LONE_MIN_SEP_PX = 2.5
+_LONE_MIN_SEP_FRACTION = 0.8
 _LONE_MIN_GAIN_M = 0.05
 #: The directions searched (radians from the ground's x axis towards y) and the steps
 #: along each (metres from the foot).
@@ -2025,7 +2032,7 @@ class _FrameContext:
         return self._ground_xy
 
     def outline_evidence(self, foot: np.ndarray, height: float, phi: np.ndarray
-                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The image's evidence for a face of ``height`` (m) starting at the ground point
         ``foot`` (2,) in each direction ``phi`` (D,) on the ground (radians from the
         ground's x axis towards y).
@@ -2038,7 +2045,9 @@ class _FrameContext:
                 ``height``), grey levels per pixel (the largest within one pixel across
                 the line; 0 outside the image);
             separation: (D, S) the distance between the two lines across their
-                direction, pixels.
+                direction, pixels;
+            shift: (D, S) the distance between each sample and its raised copy in the
+                image, pixels (the separation is its part across the line).
         """
         img_h, img_w = self._left.shape
         dirs = np.stack([np.cos(phi), np.sin(phi)], axis=-1)
@@ -2059,11 +2068,11 @@ class _FrameContext:
         gx = cv2.Sobel(patch, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
         gy = cv2.Sobel(patch, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
         if _nb_outline is not None:
-            ev, sep = _nb_outline(points, self.origin, self.fwd, self.lft,
-                                  self.metric.normal_up, float(height), float(self.cam.f),
-                                  float(self.cam.cx), float(self.cam.cy), gx, gy, x0, y0,
-                                  img_w, img_h)
-            return points, ev, sep
+            ev, sep, shift = _nb_outline(points, self.origin, self.fwd, self.lft,
+                                         self.metric.normal_up, float(height),
+                                         float(self.cam.f), float(self.cam.cx),
+                                         float(self.cam.cy), gx, gy, x0, y0, img_w, img_h)
+            return points, ev, sep, shift
         p3 = (self.origin[None, None, :] + points[..., :1] * self.fwd
               + points[..., 1:] * self.lft)
         lines = []
@@ -2086,7 +2095,7 @@ class _FrameContext:
             lines.append((np.where(inside, best, 0.0), u, v, nu, nv))
         (g_c, uc, vc, nuc, nvc), (g_t, ut, vt, _, _) = lines
         separation = np.abs((ut - uc) * nuc + (vt - vc) * nvc)
-        return points, np.minimum(g_c, g_t), separation
+        return points, np.minimum(g_c, g_t), separation, np.hypot(ut - uc, vt - vc)
 
     def contact_edge_score(self, a: np.ndarray, n: np.ndarray, b: np.ndarray) -> np.ndarray:
         """How well the left image's intensity edges follow the ground polylines
@@ -2183,7 +2192,7 @@ def _outline_kernel(points, origin, fwd, lft, nup, height, f, cx, cy, gx, gy, x0
                     img_w, img_h):
     """`_FrameContext.outline_evidence` after the sample points (for numba): the same
     arithmetic in the same order; gx, gy the gradient patch at (x0, y0) of the img_w x
-    img_h image; returns (evidence, separation), (D, S) each."""
+    img_h image; returns (evidence, separation, shift), (D, S) each."""
     n_d, n_s = points.shape[0], points.shape[1]
     grad = np.zeros((2, n_d, n_s))
     uu = np.empty((2, n_d, n_s))
@@ -2219,12 +2228,14 @@ def _outline_kernel(points, origin, fwd, lft, nup, height, f, cx, cy, gx, gy, x0
                 grad[line, d, k] = best
     ev = np.empty((n_d, n_s))
     sep = np.empty((n_d, n_s))
+    shift = np.empty((n_d, n_s))
     for d in range(n_d):
         for k in range(n_s):
             ev[d, k] = min(grad[0, d, k], grad[1, d, k])
             sep[d, k] = abs((uu[1, d, k] - uu[0, d, k]) * nus[0, d]
                             + (vv[1, d, k] - vv[0, d, k]) * nvs[0, d])
-    return ev, sep
+            shift[d, k] = math.hypot(uu[1, d, k] - uu[0, d, k], vv[1, d, k] - vv[0, d, k])
+    return ev, sep, shift
 
 
 _nb_outline = _jit(_outline_kernel)
@@ -3324,14 +3335,16 @@ def lone_face_points(ctx: _FrameContext, xy: np.ndarray, group: np.ndarray, n_gr
         phi = _LONE_PHI[np.cos(_LONE_PHI) * foot[0] + np.sin(_LONE_PHI) * foot[1] < 0.0]
         if phi.size == 0:
             continue
-        points, ev, sep = ctx.outline_evidence(foot, h, phi)
+        points, ev, sep, shift = ctx.outline_evidence(foot, h, phi)
         bar = max(_LONE_BAR * float(np.median(ev.mean(axis=1))), noise_floor)
         gain = np.cumsum(ev - bar, axis=1)
         end = np.argmax(gain, axis=1)
         rows = np.arange(ev.shape[0])
         support = gain[rows, end]
         ok = ((support > 0.0) & ((end + 1) * _LONE_STEP_M >= _LONE_MIN_M)
-              & (np.median(sep, axis=1) >= _LONE_MIN_SEP_PX))
+              & (np.median(sep, axis=1) >= _LONE_MIN_SEP_PX)
+              & (np.median(sep / np.maximum(shift, 1e-9), axis=1)
+                 >= _LONE_MIN_SEP_FRACTION))
         # each face's nearest point to the camera (the foot, its end, or between)
         ends = points[rows, end]
         d = ends - foot
