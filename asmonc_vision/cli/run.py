@@ -488,13 +488,17 @@ def run(args) -> int:
                 time.sleep(0.1)
             raise RuntimeError('the nodes did not connect within 60 s')
 
-        # The alarm and gait nodes last: their start-up graces (the alarm's FAULT "not
-        # started", the gait node's "inclinometer silent since the node started") run
-        # from their own start, and the detector may take seconds to be ready (compiling
-        # its kernels on a first run).
-        late = ('alarm', 'gait')
+        # The gait and alarm nodes last, in that order: their start-up graces (the
+        # alarm's FAULT "not started", the gait node's "inclinometer silent since the
+        # node started") run from their own start, and the detector may take seconds to
+        # be ready (compiling its kernels on a first run); so may the gait filter (about
+        # 15 s on a first run, before its own grace starts), which would use up the
+        # alarm's if the two started together.
+        late = ('gait', 'alarm')
         start([n for n in nodes if n not in late])
-        start([n for n in nodes if n in late])
+        for name in late:
+            if name in nodes:
+                start([name])
 
         # The player itself must also see every reader of the bag's inputs (images and
         # their camera_info, the inclinometer) before the first message: a message sent
