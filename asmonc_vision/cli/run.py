@@ -537,7 +537,13 @@ def run(args) -> int:
 
         # Until every pair has its result (or, with no cameras, the bag has been played),
         # or the player has ended and nothing more comes.
-        alarm_quiet = 0.5 * _alarm_timeout(args.params_file)
+        # A third of the alarm node's timeout: the silence it measures runs from the last
+        # /obstacles it received, which is the last result this monitor saw (`last_change`),
+        # and the node must be stopped well before it ends (stopping it takes a signal and
+        # a shutdown; half the timeout, counted from the end of the replay instead, left
+        # 0.3 s once and the wearer heard a FAULT). A result's latency is far below it
+        # (the detector waits at most `egomotion_wait`, 0.1 s, for a motion).
+        alarm_quiet = _alarm_timeout(args.params_file) / 3.0
         n_infos = topics.get(bagio.TOPICS['left_info'][0], ('', 0))[1]
         last, last_change = monitor.frames, time.monotonic()
         player_end = played_at = None
@@ -558,7 +564,7 @@ def run(args) -> int:
                                       or (n_infos and monitor.played >= n_infos)):
                 played_at = now
             if (played_at is not None and 'alarm' in children and 'alarm' not in stopped
-                    and now - max(last_change, played_at) > alarm_quiet):
+                    and now - last_change > alarm_quiet):
                 # Every frame has been played and the results have stopped short of the
                 # pairs: some pairs give none (a right image missing from the recording,
                 # an image the detector refused). The replay is over: stop the alarm node
