@@ -146,7 +146,7 @@ def test_missing_right_images_are_not_announced_as_a_fault(tmp_path):
 
 
 def test_the_alarm_timeout_comes_from_the_params_files(tmp_path):
-    """`asmonc run` stops the alarm node after a third of its timeout of silence at the end:
+    """`asmonc run` stops the alarm node after half its timeout of silence at the end:
     the timeout is the alarm node's own (default, or the last params file setting it)."""
     from asmonc_vision.cli.run import _alarm_timeout
     from asmonc_vision.core.alarm import AlarmConfig

@@ -537,13 +537,13 @@ def run(args) -> int:
 
         # Until every pair has its result (or, with no cameras, the bag has been played),
         # or the player has ended and nothing more comes.
-        # A third of the alarm node's timeout: the silence it measures runs from the last
-        # /obstacles it received, which is the last result this monitor saw (`last_change`),
-        # and the node must be stopped well before it ends (stopping it takes a signal and
-        # a shutdown; half the timeout, counted from the end of the replay instead, left
-        # 0.3 s once and the wearer heard a FAULT). A result's latency is far below it
-        # (the detector waits at most `egomotion_wait`, 0.1 s, for a motion).
-        alarm_quiet = _alarm_timeout(args.params_file) / 3.0
+        # Half the alarm node's timeout, counted from the last result this monitor saw
+        # (`last_change`): the silence the alarm node measures runs from the same
+        # /obstacles message, and it must be stopped well before that silence reaches
+        # its timeout (stopping it takes a signal and a shutdown). Counted from the end
+        # of the replay instead, which comes after the last result when the last pairs
+        # give none, it once left 0.3 s, and a FAULT was announced.
+        alarm_quiet = 0.5 * _alarm_timeout(args.params_file)
         n_infos = topics.get(bagio.TOPICS['left_info'][0], ('', 0))[1]
         last, last_change = monitor.frames, time.monotonic()
         player_end = played_at = None
