@@ -535,8 +535,6 @@ def run(args) -> int:
                 if name not in stopped and not children[name].alive():
                     raise RuntimeError(f'{name} node died; see {children[name].log_path}')
 
-        # Until every pair has its result (or, with no cameras, the bag has been played),
-        # or the player has ended and nothing more comes.
         # Half the alarm node's timeout, counted from the last result this monitor saw
         # (`last_change`): the silence the alarm node measures runs from the same
         # /obstacles message, and it must be stopped well before that silence reaches
@@ -547,6 +545,8 @@ def run(args) -> int:
         n_infos = topics.get(bagio.TOPICS['left_info'][0], ('', 0))[1]
         last, last_change = monitor.frames, time.monotonic()
         player_end = played_at = None
+        # Until every pair has its result (or, with no cameras, the bag has been played),
+        # or the player has ended and nothing more comes.
         while (monitor.frames < n_pairs) if n_pairs else children['player'].alive():
             show_alarms()
             console.bar(monitor.frames)
