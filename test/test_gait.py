@@ -152,6 +152,38 @@ def test_scoring_helpers():
     assert scoring.phase_error_percent(0.1, 2 * np.pi + 0.1) == pytest.approx(0.0, abs=1e-9)
 
 
+def test_heading_references_of_a_constant_rate_turn():
+    # heading 0 until t = 1 s, then turning at 0.5 rad/s
+    class Walker:
+        def heading(self, t):
+            return 0.5 * np.maximum(np.asarray(t, float) - 1.0, 0.0)
+
+    t = np.array([0.2, 0.8, 1.05, 1.2, 3.0])
+    ref = ev.heading_references(Walker(), t, horizon=0.5, delays=(0.0, 0.1, 0.3))
+    assert ref.shape == (5, 5)
+    d = math.degrees
+    # the rate: before the turn nothing is turning, so every predictor misses the part of
+    # the turn inside the horizon (t = 0.8: 0.3 s of it); once turning it is exact
+    assert ref[:, 0] == pytest.approx([0.0, d(0.15), 0.0, 0.0, 0.0], abs=1e-6)
+    # once turning, the acceleration is that of the ramp (none)
+    assert ref[2:, 1] == pytest.approx([0.0, 0.0, 0.0], abs=1e-6)
+    # the turn known 0 / 0.1 / 0.3 s after it begins (at t = 1.0), perfect afterwards
+    assert ref[:, 2] == pytest.approx([0.0, d(0.15), 0.0, 0.0, 0.0], abs=1e-6)
+    assert ref[:, 3] == pytest.approx([0.0, d(0.15), d(0.25), 0.0, 0.0], abs=1e-6)
+    assert ref[:, 4] == pytest.approx([0.0, d(0.15), d(0.25), d(0.25), 0.0], abs=1e-6)
+    # no turn at all: no errors; no heading: None
+    class Straight:
+        def heading(self, t):
+            return np.full(np.shape(t), 0.3)
+    assert not np.any(ev.heading_references(Straight(), t))
+    assert ev.heading_references(object(), t) is None
+    # the simulated turns: each later knowledge costs more
+    case = ev.make_case('turn', 0)
+    r = ev.heading_references(case.walker, np.arange(1.0, 24.0, 0.0625))
+    rms = np.sqrt(np.mean(r ** 2, axis=0))
+    assert rms[0] > rms[1] > 0.5 and np.all(np.diff(rms[2:]) > 0) and rms[2] > 0.1, rms
+
+
 # ---------------------------------------------------------------- the simulated walker
 
 def _run(name, seed, config=None, **kw):

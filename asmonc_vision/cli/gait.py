@@ -326,6 +326,7 @@ def score_sim(case: SimCase, run: TrackerRun, horizon: float = HORIZON) -> dict:
     # the predicted change of attitude over the horizon (what DGPR needs) against the
     # true change: (pred - est. now) - (truth(t + h) - truth(t))
     rel_err = scoring.angle_errors_deg(motion_increments(run), truth_h - truth_now)
+    heading_ref = heading_references(w, t, horizon)
     return {
         'pred_err': pred_err[valid], 'hold_err': hold_err[valid],
         'pred_err_walk': pred_err[steady], 'hold_err_walk': hold_err[steady],
@@ -336,9 +337,72 @@ def score_sim(case: SimCase, run: TrackerRun, horizon: float = HORIZON) -> dict:
         'false': starts.false + stops.false,
         'acquisition': acquisition,
         'n_true_events': int(up_true.size + down_true.size),
+        'heading_ref_walk': heading_ref[steady] if heading_ref is not None
+        else np.zeros((0, 2 + len(ONSET_DELAYS))),
         'step_cpu': run.step_cpu, 'frequency_err_walk': run.frequency[steady]
         - w.step_freq * np.power(np.maximum(w.speed(t[steady]), 1e-3) / 1.2, 0.3),
     }
+
+
+def _heading_function(walker):
+    """The walker's heading(t) (rad, unwrapped), or None (unwrapping the scenario
+    wrappers down to ``sim.motion.Trajectory``)."""
+    w = walker
+    for _ in range(4):
+        if w is None or hasattr(w, 'heading'):
+            break
+        w = getattr(w, 'a', None) or getattr(w, 'traj', None)
+    return getattr(w, 'heading', None)
+
+
+#: detection delays of the turn-onset references (``heading_references``), s
+ONSET_DELAYS = (0.0, 0.1, 0.2, 0.3)
+
+
+def heading_references(walker, t, horizon: float = HORIZON,
+                       delays=ONSET_DELAYS) -> np.ndarray | None:
+    """Errors (deg) of oracle yaw predictors at `horizon`, which know the simulated stride
+    sway exactly and see no noise or lag, so that only the walking direction's change is
+    left: (N, 2 + len(delays)) columns
+
+    * *rate*: the heading's true current rate extrapolated (the "yaw drift" state with a
+      perfect estimate);
+    * *rate and acceleration*: its true rate and acceleration extrapolated (the turning
+      model's states, perfect);
+    * *turn known d s after its start*, one column per d in `delays`: perfect — the
+      turn's whole future course known — from d s after a turn begins, and no turn
+      predicted before (the latest turn begun by the target time is not yet known).
+      With d = 0 only the samples predicted before a turn begins err.
+
+    A turn begins where the heading starts to change after standing still. The first two
+    are not bounds of causal prediction in general: a predictor that knew the simulated
+    turns' shape (a smoothstep: a constant third derivative) could beat them. The others
+    show how soon a turn would have to be detected. None if the walker has no heading."""
+    heading = _heading_function(walker)
+    if heading is None:
+        return None
+    t = np.asarray(t, float)
+    dt = 1e-3
+    h0, h1 = heading(t), heading(t + horizon)
+    hm, hp = heading(t - dt), heading(t + dt)
+    rate = (hp - hm) / (2 * dt)
+    acc = (hp - 2 * h0 + hm) / (dt * dt)
+    e_rate = h1 - (h0 + horizon * rate)
+    e_acc = e_rate - 0.5 * horizon * horizon * acc
+    cols = [e_rate, e_acc]
+    if t.size:
+        grid = np.arange(min(t.min(), 0.0), t.max() + horizon + 2 * dt, dt)
+        moving = np.abs(np.diff(heading(grid))) > 1e-9 * dt
+        onsets = grid[1:-1][moving[1:] & ~moving[:-1]]
+    else:
+        onsets = np.zeros(0)
+    since = np.full(t.size, np.inf)          # since the latest turn's start, s
+    if onsets.size:
+        k = np.searchsorted(onsets, t + horizon, side='right') - 1
+        since = np.where(k >= 0, t - onsets[np.maximum(k, 0)], np.inf)
+    for d in delays:
+        cols.append(np.where(since < d, h1 - h0, 0.0))
+    return np.degrees(np.column_stack(cols))
 
 
 def _held(t, flags, span: float) -> np.ndarray:
@@ -376,6 +440,7 @@ def summarise_sim(results: list[dict]) -> dict:
         'pred_rms_deg': r3('pred_err'), 'hold_rms_deg': r3('hold_err'),
         'pred_rms_walking_deg': r3('pred_err_walk'), 'hold_rms_walking_deg': r3('hold_err_walk'),
         'motion_rms_deg': r3('motion_err'),
+        'yaw_reference_rms_walking_deg': _pooled_rms(results, 'heading_ref_walk'),
         'phase_rms_pct': r3('phase_err_walk'),
         'start_delay_s': _stats(sd), 'stop_delay_s': _stats(st),
         'missed_events': int(sum(r['missed'] for r in results)),
@@ -386,6 +451,14 @@ def summarise_sim(results: list[dict]) -> dict:
         'step_ms': {'median': float(np.median(cpu)), 'p90': float(np.percentile(cpu, 90)),
                     'p99': float(np.percentile(cpu, 99)), 'max': float(cpu.max())},
     }
+
+
+def _pooled_rms(results: list[dict], key: str) -> list | None:
+    """Column RMS of (N, k) arrays pooled over runs, or None if there are no rows."""
+    a = _pool(results, key)
+    if not a.size:
+        return None
+    return [float(v) for v in np.sqrt(np.mean(np.square(a.reshape(len(a), -1)), axis=0))]
 
 
 def _floats(v) -> list[float]:
@@ -496,6 +569,18 @@ def print_sim(summary: dict, file=sys.stdout) -> None:
                     f'({x["within_0.5s"]}/{x["n"]} within 0.5 s)')
         p(f'{name:9} phase {_fmt3(s["phase_rms_pct"])}   start {d(sd)}   stop {d(st)}   '
           f'missed {s["missed_events"]}/{s["true_events"]}, false {s["false_events"]}')
+    p()
+    delays = ' / '.join(f'{d:g}' for d in ONSET_DELAYS)
+    p('yaw references, steady walking, RMS degrees: oracles that know the stride sway and '
+      'see no noise or lag, predicting the walking direction by its true rate | true rate '
+      'and acceleration | its whole course, but a turn only once it is known, '
+      f'{delays} s after it begins (see heading_references)')
+    for name, s in summary.items():
+        ref = s.get('yaw_reference_rms_walking_deg')
+        if ref and s['pred_rms_walking_deg'][2] is not None:
+            known = ' / '.join(f'{v:.2f}' for v in ref[2:])
+            p(f'{name:9} {ref[0]:5.2f} | {ref[1]:5.2f} | {known}   '
+              f'(walk model yaw {s["pred_rms_walking_deg"][2]:.2f})')
     p()
     allcpu = [s['step_ms'] for s in summary.values()]
     p('filter step (thread CPU time per inclinometer sample), ms: ' + ', '.join(
