@@ -3,6 +3,7 @@
     asmonc gait sim    [--scenarios walk stop turn uphill bend] [--seeds N] [--json F]
     asmonc gait fusion [--seeds N] [--egomotion-sigma DEG] [--json F]
     asmonc gait real   [--data DIR] [--json F]
+    asmonc gait bags   [BAG ...] [--cache DIR] [--json F]
     asmonc gait figs   [--out DIR] [--data DIR]
 
 sim: the simulator's walker (``sim.motion.Trajectory``) and 16 Hz inclinometer
@@ -618,6 +619,10 @@ def add_arguments(p) -> None:
     r = sub.add_parser('real', help='Mobilise-D lower-back IMU walks')
     r.add_argument('--data', type=Path, default=DEFAULT_DATA)
     r.add_argument('--json', type=Path, default=None)
+    b = sub.add_parser('bags', help='walking bags: inclinometer + the egomotion '
+                       "estimator's visual motion, fused, against the ground truth")
+    from asmonc_vision.cli import gait_bags
+    gait_bags.add_arguments(b)
     g = sub.add_parser('figs', help="the paper's Figs. 13-15 as PNGs")
     g.add_argument('--out', type=Path, default=REPO / 'docs')
     g.add_argument('--data', type=Path, default=DEFAULT_DATA)
@@ -659,6 +664,9 @@ def run(args) -> int:
         if args.json:
             args.json.write_text(json.dumps(json_ready(res), indent=1, allow_nan=False))
         return 0
+    if cmd == 'bags':
+        from asmonc_vision.cli import gait_bags
+        return gait_bags.run(args)
     if cmd == 'figs':
         for path in draw_figures(args.out, args.data):
             print(f'figure: {path}')
