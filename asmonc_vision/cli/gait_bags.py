@@ -239,7 +239,7 @@ def add_arguments(s) -> None:
                         'walk_stop_turn, 30 s, seeds 1-3)')
     s.add_argument('--cache', type=Path, default=DEFAULT_CACHE,
                    help=f'where the default bags are rendered (default {DEFAULT_CACHE})')
-    s.add_argument('--json', type=Path, default=None)
+    s.add_argument('--json', type=Path, default=None, help='also write the numbers as JSON')
 
 
 def run(args) -> int:
