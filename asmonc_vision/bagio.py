@@ -256,3 +256,23 @@ def header_stamp_ns(msg) -> int:
     """Integer ns of a rosbags message's header stamp."""
     s = msg.header.stamp
     return int(s.sec) * 1_000_000_000 + int(s.nanosec)
+
+
+def imu_to_rpy_var(msg) -> tuple[np.ndarray, np.ndarray | None]:
+    """(roll, pitch, yaw) rad and the diagonal variances (rad^2, None if not given) of a
+    sensor_msgs/Imu (an rclpy or a rosbags message).
+
+    Raises:
+        ValueError: no orientation (covariance[0] = -1) or a degenerate quaternion.
+    """
+    from asmonc_vision.core.rotations import quaternion_to_rpy
+
+    cov = np.asarray(msg.orientation_covariance, float)
+    if cov.size and cov[0] == -1.0:
+        raise ValueError('Imu has no orientation (orientation_covariance[0] = -1)')
+    q = msg.orientation
+    rpy = quaternion_to_rpy(np.array([q.x, q.y, q.z, q.w], float))
+    var = cov[[0, 4, 8]] if cov.size == 9 else None
+    if var is not None and not np.all(np.isfinite(var) & (var > 0)):
+        var = None
+    return rpy, var

@@ -1848,7 +1848,6 @@ def test_outline_evidence_compiled_equals_numpy(box_frame, monkeypatch):
     assert all(np.all(sep <= shift + 1e-9) for sep, shift in zip(fast[1::3], fast[2::3]))
 
 
-
 def _face_image(ctx, foot, phi, height, face_band):
     """A flat grey left image (100) with one bright (160) region in the frame's view:
     with ``face_band``, the band between the ground line from ``foot`` along ``phi``
@@ -1904,6 +1903,7 @@ def test_a_lone_face_must_cross_its_raise(box_frame, monkeypatch):
     q = gpod.lone_face_points(ctx, *args)[0]
     assert np.hypot(*q) < np.hypot(*foot) - 0.05
     assert abs(math.atan2(q[1] - foot[1], q[0] - foot[0]) - across) < math.radians(10.0)
+
 
 def test_silhouette_owners_compiled_equals_numpy(monkeypatch):
     """The compiled `silhouette_owners` (nearest matching obstacle, outermost candidate

@@ -431,8 +431,7 @@ def _pool(results: list[dict], key: str) -> np.ndarray:
 def summarise_sim(results: list[dict]) -> dict:
     """Pool the per-run errors of one scenario (RMS over all samples of all seeds)."""
     def r3(key):
-        a = _pool(results, key)
-        return [float(v) for v in scoring.rms(a.reshape(-1, 3))] if a.size else [None] * 3
+        return _pooled_rms(results, key) or [None] * 3
 
     sd, st = _pool(results, 'start_delays'), _pool(results, 'stop_delays')
     cpu = _pool(results, 'step_cpu') * 1e3

@@ -44,6 +44,8 @@ DEFAULT_SCENARIOS = (('clear_walk', 30.0, (1, 2, 3)), ('walk_stop_turn', 30.0, (
 DEFAULT_CACHE = Path('/tmp/asmonc_gait_bags')
 #: the dropout window's length, s (centred in the bag)
 DROPOUT = 4.0
+#: variance of an inclinometer reading that gives none (the gait node's default), rad^2
+DEFAULT_VARIANCE = math.radians(0.5) ** 2
 MODES = ('inclinometer', 'egomotion', 'fused', 'fused_drop_egomotion',
          'fused_drop_inclinometer')
 
@@ -75,8 +77,7 @@ def load_bag(bag: Path) -> BagStreams:
     from asmonc_vision import bagio
     from asmonc_vision.cli.motion import load_sequence
     from asmonc_vision.core.motion import EgomotionEstimator
-    from asmonc_vision.core.rotations import (R_BODY_OPTICAL, matrix_to_rpy,
-                                              quaternion_to_rpy)
+    from asmonc_vision.core.rotations import R_BODY_OPTICAL, matrix_to_rpy
 
     frames = load_sequence(bag)
     if not frames or any(f['pose'] is None for f in frames):
@@ -84,12 +85,13 @@ def load_bag(bag: Path) -> BagStreams:
     t0 = frames[0]['stamp_ns']
     imu_t, imu_rpy, imu_var = [], [], []
     for _, _, msg in bagio.read_messages(bag, [bagio.TOPICS['imu'][0]]):
-        q = msg.orientation
-        cov = np.asarray(msg.orientation_covariance, float)
+        try:
+            rpy, var = bagio.imu_to_rpy_var(msg)
+        except ValueError:
+            continue                        # no orientation in this message
         imu_t.append((bagio.header_stamp_ns(msg) - t0) * 1e-9)
-        imu_rpy.append(quaternion_to_rpy(np.array([q.x, q.y, q.z, q.w], float)))
-        var = cov[[0, 4, 8]] if cov.size == 9 else np.full(3, -1.0)
-        imu_var.append(np.where(np.isfinite(var) & (var > 0), var, (0.5 * math.pi / 180) ** 2))
+        imu_rpy.append(rpy)
+        imu_var.append(var if var is not None else np.full(3, DEFAULT_VARIANCE))
     if not imu_t:
         raise ValueError(f"bag '{bag}' has no /inclinometer/imu")
     order = np.argsort(imu_t, kind='stable')
@@ -155,8 +157,6 @@ def evaluate_bag(streams: BagStreams, config=None, horizon: float = 0.5) -> dict
                           drop_egomotion=o.get('drop_ego'))
         t = run.times
         inside = (t >= streams.frame_times[0]) & (t + horizon <= t_end)
-        tc = np.clip(t, streams.frame_times[0], t_end)
-        th = np.clip(t + horizon, streams.frame_times[0], t_end)
         def moving(u):
             return speed(u) >= WALK_SPEED        # (speed clamps u to the recording)
 
@@ -165,7 +165,7 @@ def evaluate_bag(streams: BagStreams, config=None, horizon: float = 0.5) -> dict
                & _held(t, run.walking, STEADY_AFTER))
         if 'drop_inc' in o or 'drop_ego' in o:
             sel &= (t >= window[0]) & (t <= window[1])
-        truth_h, truth_now = att(th), att(tc)
+        truth_h, truth_now = att(t + horizon), att(t)     # (only `inside` is scored)
         out[mode] = {
             'attitude_err': scoring.angle_errors_deg(run.predicted, truth_h)[sel],
             'motion_err': scoring.angle_errors_deg(motion_increments(run),
@@ -207,12 +207,13 @@ def render_default_bags(cache: Path, progress=print) -> list[Path]:
     return out
 
 
-def _fmt(v) -> str:
-    return ' / '.join('  -  ' if x is None else f'{x:5.2f}' for x in (v or [None] * 3))
-
-
 def print_summary(per_bag: dict, summary: dict, file=None) -> None:
     file = sys.stdout if file is None else file
+    from asmonc_vision.cli.gait import _fmt3
+
+    def _fmt(v):
+        return _fmt3(v or [None] * 3)
+
     p = lambda s='': print(s, file=file)  # noqa: E731
     p('walk model on walking bags: the inclinometer as recorded, visual motion from the '
       'egomotion estimator; 0.5 s-ahead RMS in steady walking, degrees, roll / pitch / yaw '

@@ -44,8 +44,9 @@ from sensor_msgs.msg import Imu
 
 from asmonc_vision.core.config import check_fields, param
 from asmonc_vision.core.gait import GaitConfig, GaitEstimate, GaitTracker
+from asmonc_vision.bagio import imu_to_rpy_var
 from asmonc_vision.core.gait.rotations import (matrix_to_quaternion, quaternion_to_matrix,
-                                               quaternion_to_rpy, wrap_angle)
+                                               wrap_angle)
 from asmonc_vision.nodes.common import (RESULT_QOS, SENSOR_QOS, Diagnostics, declare_config,
                                         run_node)
 from asmonc_vision.nodes.conversions import ns_to_stamp, stamp_to_ns
@@ -78,23 +79,6 @@ class GaitNodeConfig:
 
     def __post_init__(self) -> None:
         check_fields(self)
-
-
-def imu_to_rpy_var(msg: Imu) -> tuple[np.ndarray, np.ndarray | None]:
-    """(roll, pitch, yaw) rad and the diagonal variances (None if not given) of an Imu.
-
-    Raises:
-        ValueError: no orientation (covariance[0] = -1) or a degenerate quaternion.
-    """
-    cov = np.asarray(msg.orientation_covariance, float)
-    if cov.size and cov[0] == -1.0:
-        raise ValueError('Imu has no orientation (orientation_covariance[0] = -1)')
-    q = msg.orientation
-    rpy = quaternion_to_rpy(np.array([q.x, q.y, q.z, q.w], float))
-    var = cov[[0, 4, 8]] if cov.size == 9 else None
-    if var is not None and not np.all(np.isfinite(var) & (var > 0)):
-        var = None
-    return rpy, var
 
 
 def gait_state_msg(est: GaitEstimate, stamp, frame_id: str) -> GaitState:
