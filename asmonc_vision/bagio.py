@@ -243,6 +243,8 @@ def read_messages(path, topics):
         return
     try:
         conns = [c for c in reader.connections if c.topic in set(topics)]
+        if not conns:
+            return                  # rosbags reads every connection when given none
         try:
             for conn, t, raw in reader.messages(connections=conns):
                 yield conn.topic, t, store.deserialize_cdr(raw, conn.msgtype)

@@ -53,8 +53,37 @@ def test_fusion_on_the_bag(walk):
     assert summary['fused']['samples'] == n
 
 
-def test_a_bag_without_ground_truth_or_inclinometer_is_refused(tmp_path):
-    with pytest.raises(Exception):
+def _copy_without(src, dst, drop):
+    """A copy of the bag `src` at `dst` without the topics whose names start with `drop`."""
+    from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+
+    from asmonc_vision import bagio
+
+    ts = bagio.typestore()
+    with Reader(src) as r, Writer(dst, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        keep = [c for c in r.connections if not c.topic.startswith(drop)]
+        out = {c.id: w.add_connection(c.topic, c.msgtype, typestore=ts) for c in keep}
+        for c, t, raw in r.messages(connections=keep):
+            w.write(out[c.id], t, raw)
+    return dst
+
+
+def test_a_bag_without_ground_truth_is_refused(tmp_path):
+    bag = _copy_without(BAGS / 'clear_static', tmp_path / 'no_truth', '/ground_truth/')
+    with pytest.raises(ValueError, match='no /ground_truth/camera_pose'):
+        gait_bags.load_bag(bag)
+
+
+def test_a_bag_without_inclinometer_is_refused(tmp_path):
+    bag = _copy_without(BAGS / 'clear_static', tmp_path / 'no_imu', '/inclinometer/')
+    with pytest.raises(ValueError, match='no /inclinometer/imu'):
+        gait_bags.load_bag(bag)
+
+
+def test_a_missing_bag_is_refused(tmp_path):
+    from asmonc_vision import bagio
+
+    with pytest.raises(bagio.BagError):
         gait_bags.load_bag(tmp_path / 'nothing_here')
 
 
