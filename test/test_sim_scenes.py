@@ -112,7 +112,7 @@ def test_a_kerb_ramp_is_ground_and_its_kerbs_are_beside_the_path():
     # along the path the ground rises from 0 to the kerb's height with no step
     x = np.linspace(0.0, 20.0, 4001)
     z = world.ground_height(x, np.zeros_like(x))
-    assert np.max(np.abs(np.diff(z))) < 0.01 * 0.005 / 0.06 + 1e-9
+    assert np.max(np.abs(np.diff(z))) <= 0.10 * 0.005 + 1e-9   # grade <= 1:10, no step
     assert z[0] == 0.0 and z[-1] == pytest.approx(kerbs[0].rise)
     # beside the ramp there is a step (the kerb)
     s0 = kerbs[0].polygon[0][0]
@@ -336,8 +336,6 @@ def test_a_scene_class_writes_a_contract_bag(tmp_path, capsys):
                  '--width', '160', '--height', '120', '--focal', '150', '--quiet',
                  '--realism', 'on']) == 0
     assert '2 stereo frames 160x120' in capsys.readouterr().out
-    topics = {t for t, *_ in bagio.read_messages(out, None)} if False else None
-    del topics
     from rosbags.rosbag2 import Reader
     with Reader(out) as reader:
         names = {c.topic for c in reader.connections}

@@ -42,12 +42,12 @@ import zlib
 import numpy as np
 
 from asmonc_vision.sim.motion import GaitSettings, Leg, Trajectory
-from asmonc_vision.sim.people import walker
+from asmonc_vision.sim.people import Person, walker
 from asmonc_vision.sim.relief import GroundProfile
 from asmonc_vision.sim.rig import RigSettings
 from asmonc_vision.sim.scenarios import Scenario, _box, _obstacle_albedo, random_pavement
 from asmonc_vision.sim.surfaces import Marking
-from asmonc_vision.sim.world import (Ground, Obstacle, PavementSettings, Terrace, World,
+from asmonc_vision.sim.world import (Box, Ground, Obstacle, PavementSettings, Terrace, World,
                                      bollard, kerb_up, post, step_down, wall)
 
 SCENE_CLASSES: tuple[str, ...] = (
@@ -554,6 +554,27 @@ _BUILDERS = {
 }
 
 
+def _seated(parts: _Parts) -> list[Obstacle]:
+    """The obstacles, boxes seated on a sloping ground: their bottom at the lowest ground
+    under their footprint (so no gap shows under the downhill side)."""
+    bare = World(parts.ground, [], profile=parts.profile)
+    out = []
+    for o in parts.obstacles:
+        if isinstance(o, Box) and not isinstance(o, Person) and o.base_z is None:
+            xy = _footprint(o)
+            o = dataclasses.replace(o, base_z=float(np.min(bare.ground_height(xy[:, 0],
+                                                                                xy[:, 1]))))
+        out.append(o)
+    return out
+
+
+def _footprint(o: Box) -> np.ndarray:
+    """(4, 2) world corners of a box's footprint."""
+    c, s = math.cos(math.radians(o.yaw_deg)), math.sin(math.radians(o.yaw_deg))
+    loc = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * [o.length / 2, o.width / 2]
+    return loc @ np.array([[c, s], [-s, c]]) + [o.x, o.y]
+
+
 def scene_description(scene_class: str) -> str:
     """One line describing a scene class (its bullet in this module's doc)."""
     bullets, cur = [], None
@@ -595,12 +616,12 @@ def build_scene(scene_class: str, seed: int, duration: float, rig: RigSettings,
     if on:
         rig = with_realism(rig, camera_rng)
     parts = _BUILDERS[scene_class](rng, rig, float(duration))
-    world = World(parts.ground, parts.obstacles, seed=int(seed), profile=parts.profile,
+    world = World(parts.ground, _seated(parts), seed=int(seed), profile=parts.profile,
                   markings=parts.markings)
     traj = Trajectory(parts.legs, rig, world, gait=gait, start_speed=parts.start_speed,
                       rng=walker_rng)
-    return Scenario(scene_class, scene_description(scene_class), int(seed), float(duration), rig, world,
-                    traj)
+    return Scenario(scene_class, scene_description(scene_class), int(seed), float(duration),
+                    rig, world, traj)
 
 
 def make_scene(scene_class: str, seed: int, *, duration: float = 20.0,
