@@ -136,18 +136,6 @@ class Marking:
                 and self.factor >= 0 and self.edge >= 0):
             raise ValueError(f'Marking: bad sizes {self}')
 
-    def reach(self) -> float:
-        """Radius (m) of a circle about (x, y) containing the mark."""
-        return 0.5 * math.hypot(self.length, self.width) * (1.0 + self.wobble) + self.edge
-
-    def local(self, h) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(a, b, footprint along a, along b) of the samples, float32, metres."""
-        c, s = math.cos(math.radians(self.yaw_deg)), math.sin(math.radians(self.yaw_deg))
-        dx = (h.px - _F(self.x)).astype(_F)
-        dy = (h.py - _F(self.y)).astype(_F)
-        return dx * _F(c) + dy * _F(s), dy * _F(c) - dx * _F(s), h.foot_h(c, s), \
-            h.foot_h(-s, c)
-
     def coverage(self, noise: ValueNoise, a, b, fa, fb) -> np.ndarray:
         """Share (float32 (N,), 0-1) of each sample's footprint inside the shape."""
         ha, hb = _F(self.length / 2), _F(self.width / 2)
@@ -224,6 +212,9 @@ def apply_markings(markings: Sequence[Marking], noise: ValueNoise, h, albedo: np
                    ) -> np.ndarray:
     """Draw the markings, in order, over the ground albedo of samples ``h``.
 
+    Each mark touches only the samples inside its (rotated) bounding rectangle plus a
+    margin for the footprint, so long thin lines and small marks cost little.
+
     Args:
         markings: the marks; noise: the world's value noise; h: ground samples (Hits).
         albedo: (N,) float32 pavement albedo of the samples (changed in place).
@@ -231,19 +222,32 @@ def apply_markings(markings: Sequence[Marking], noise: ValueNoise, h, albedo: np
         (N,) float32 albedo.
     """
     for m in markings:
-        r = _F(m.reach() + 0.05)
+        c, s = math.cos(math.radians(m.yaw_deg)), math.sin(math.radians(m.yaw_deg))
+        grow = 1.0 + m.wobble
+        ha = m.length / 2 * grow + m.edge + 0.05
+        hb = m.width / 2 * grow + m.edge + 0.05
+        ex, ey = abs(c) * ha + abs(s) * hb, abs(s) * ha + abs(c) * hb
         dx = h.px - _F(m.x)
-        dy = h.py - _F(m.y)
-        sel = np.flatnonzero((np.abs(dx) < r) & (np.abs(dy) < r))
+        sel = np.flatnonzero(np.abs(dx) < _F(ex))
         if sel.size == 0:
             continue
-        hs = h.subset(sel)
-        a, b, fa, fb = m.local(hs)
+        dy = h.py[sel] - _F(m.y)
+        keep = np.abs(dy) < _F(ey)
+        sel, dx, dy = sel[keep], dx[sel[keep]], dy[keep]
+        a = dx * _F(c) + dy * _F(s)
+        b = dy * _F(c) - dx * _F(s)
+        keep = (np.abs(a) < _F(ha)) & (np.abs(b) < _F(hb))
+        if not keep.any():
+            continue
+        idx, a, b = sel[keep], a[keep], b[keep]
+        dux, duy, dvx, dvy = h.dux[idx], h.duy[idx], h.dvx[idx], h.dvy[idx]
+        fa = np.abs(dux * _F(c) + duy * _F(s)) + np.abs(dvx * _F(c) + dvy * _F(s))
+        fb = np.abs(duy * _F(c) - dux * _F(s)) + np.abs(dvy * _F(c) - dvx * _F(s))
         cov = m.coverage(noise, a, b, fa, fb)
         inside = cov > 0
         if not inside.any():
             continue
-        idx = sel[inside]
-        albedo[idx] = FILLS[m.fill](m, noise, a[inside], b[inside], fa[inside], fb[inside],
-                                    cov[inside], albedo[idx])
+        j = idx[inside]
+        albedo[j] = FILLS[m.fill](m, noise, a[inside], b[inside], fa[inside], fb[inside],
+                                  cov[inside], albedo[j])
     return albedo
