@@ -89,6 +89,33 @@ def test_a_profiled_ground_renders_at_the_depth_its_surface_implies(profile):
     assert far.size and not np.allclose(depth[10], z_plane, rtol=1e-3)
 
 
+def test_the_images_of_a_slope_ahead_show_its_disparity():
+    """Beyond the break the right image is the left shifted by the disparity the slope
+    implies (f B / depth), not by the disparity of the plane under the wearer."""
+    rig = RigSettings(noise_sigma=0.0, blur_sigma=0.0, vignetting=0.0, right_gain=1.0,
+                      right_offset=0.0)
+    world = World(Ground(pavement=PavementSettings(kind='asphalt')), [], seed=3,
+                  profile=slope_change(0.0, 0.0, 0.0, 3.5, 0.0, 8.0))
+    pose = _pose()
+    img = StereoRenderer(rig, threads=1).render(world, 0.0, pose, rng=0)
+    left, _ = camera_poses(pose, rig.baseline)
+    plane = ground_plane_truth(world, 0.0, pose, left)
+    rows = slice(20, 90)                       # the slope, 4.4-8 m ahead
+    v, u = np.mgrid[0:rig.height, 0:rig.width].astype(np.float32)
+    d_true = (rig.focal * rig.baseline / img.depth).astype(np.float32)
+    rays = np.stack([(u - rig.cx) / rig.focal, (v - rig.cy) / rig.focal, np.ones_like(u)])
+    d_plane = (-rig.focal * rig.baseline * np.tensordot(plane.normal_up, rays, 1)
+               / plane.height).astype(np.float32)
+    assert np.all(np.abs(d_true[rows] - d_plane[rows]) > 1.0)
+
+    def residual(d):   # the right image moved back by the disparity d, minus the left
+        warped = cv2.remap(img.right.astype(np.float32), u - d, v, cv2.INTER_LINEAR)
+        diff = np.abs(warped - img.left.astype(np.float32))[rows, 60:-60]
+        return float(diff.mean())
+
+    assert residual(d_true) < 2.0 and residual(d_plane) > 2.0 * residual(d_true)
+
+
 def test_the_ground_plane_truth_is_the_piece_under_the_wearer():
     profile = slope_change(0.0, 0.0, 0.0, 3.0, 0.0, 6.0)
     world = World(Ground(), [], seed=0, profile=profile)
