@@ -3,6 +3,11 @@
     python -m asmonc_vision.sim SCENARIO OUT_DIR [--seed N] [--duration S] [--fps F]
         [--width W --height H --focal F] [--rig FIELD=VALUE ...]
         [--gait extreme|FIELD=VALUE ...] [--force] [--list]
+        [--scene] [--preset backpack|chest] [--realism on|off]
+
+SCENARIO is a scenario (``scenarios.SCENARIOS``) or a scene class of the campaign
+(``scenes.SCENE_CLASSES``, drawn from the seed as ``scenes.make_scene``); a name that
+is both (clear_walk, step_down) is the scenario unless ``--scene`` is given.
 
 (console script ``asmonc-sim``). Exit status 0 on success, 2 on a usage error (unknown
 scenario, existing non-empty OUT_DIR without --force, bad settings).
@@ -19,6 +24,8 @@ from pathlib import Path
 from asmonc_vision.sim.motion import GaitSettings
 from asmonc_vision.sim.rig import RigSettings
 from asmonc_vision.sim.scenarios import DEFAULT_DURATIONS, SCENARIOS, make_scenario
+from asmonc_vision.sim.scenes import (CLEAR_CLASSES, SCENE_CLASSES, build_scene, drawn_rig,
+                                      scene_description)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -45,6 +52,16 @@ def _parser() -> argparse.ArgumentParser:
                         'sway, 10 cm bob) and/or any gait setting, e.g. pitch_amp_deg=3.5, '
                         'bob_amp=0.05 (repeatable, applied in order; fields and ranges: '
                         'asmonc_vision.sim.motion.GaitSettings)')
+    p.add_argument('--scene', action='store_true',
+                   help='SCENARIO names a scene class (scenes.SCENE_CLASSES) even where a '
+                        'scenario has the same name')
+    p.add_argument('--preset', choices=('backpack', 'chest'), default=None,
+                   help="scene classes: the rig ('backpack' default, or 'chest'; its "
+                        'mounting drawn from the seed); scenarios: the chest rig instead of '
+                        "the paper's; --width etc. and --rig change it further")
+    p.add_argument('--realism', choices=('on', 'off'), default=None,
+                   help='scene classes: the camera realism effects on or off (default: '
+                        'drawn from the seed, on for about 60 %% of seeds)')
     p.add_argument('--force', action='store_true',
                    help='replace OUT_DIR if it is an existing rosbag2 directory')
     p.add_argument('--quiet', action='store_true', help='no progress output')
@@ -108,15 +125,22 @@ def main(argv: list[str] | None = None) -> int:
         for name, fn in SCENARIOS.items():
             doc = ' '.join((fn.__doc__ or '').split())
             print(f'{name:18s} {DEFAULT_DURATIONS[name]:5.1f} s  {doc}')
+        print('scene classes (--scene where the name is also a scenario above):')
+        for name in SCENE_CLASSES:
+            clear = ' (clear)' if name in CLEAR_CLASSES else ''
+            print(f'{name:18s} {20.0:5.1f} s  {scene_description(name)}{clear}')
         return 0
     if not args.scenario or not args.out_dir:
         parser.print_usage(sys.stderr)
         print('asmonc-sim: error: SCENARIO and OUT_DIR are required (or --list)',
               file=sys.stderr)
         return 2
-    if args.scenario not in SCENARIOS:
+    scene = args.scene or (args.scenario not in SCENARIOS and args.scenario in SCENE_CLASSES)
+    if scene and args.scenario not in SCENE_CLASSES or (
+            not scene and args.scenario not in SCENARIOS):
         print(f"asmonc-sim: error: unknown scenario '{args.scenario}'; known: "
-              f"{', '.join(SCENARIOS)}", file=sys.stderr)
+              f"{', '.join(SCENARIOS)}; scene classes: {', '.join(SCENE_CLASSES)}",
+              file=sys.stderr)
         return 2
     out = Path(args.out_dir)
     if out.exists():
@@ -140,11 +164,20 @@ def main(argv: list[str] | None = None) -> int:
         changes.update({k: v for k, v in (('fps', args.fps), ('width', args.width),
                                           ('height', args.height), ('focal', args.focal))
                         if v is not None})
-        rig = dataclasses.replace(RigSettings(), **changes)
         if args.duration is not None and not args.duration > 0:
             raise ValueError(f'--duration must be > 0 s, got {args.duration}')
-        scenario = make_scenario(args.scenario, seed=args.seed, duration=args.duration,
-                                 rig=rig, gait=_gait(args.gait))
+        if scene:
+            base = drawn_rig(args.scenario, args.seed, args.preset or 'backpack')
+            realism = None if args.realism is None else args.realism == 'on'
+            scenario = build_scene(args.scenario, args.seed,
+                                   args.duration if args.duration is not None else 20.0,
+                                   dataclasses.replace(base, **changes), realism,
+                                   gait=_gait(args.gait))
+        else:
+            base = RigSettings.chest() if args.preset == 'chest' else RigSettings()
+            rig = dataclasses.replace(base, **changes)
+            scenario = make_scenario(args.scenario, seed=args.seed, duration=args.duration,
+                                     rig=rig, gait=_gait(args.gait))
     except (ValueError, TypeError) as exc:
         print(f'asmonc-sim: error: {exc}', file=sys.stderr)
         return 2

@@ -102,7 +102,8 @@ class Trajectory:
         legs: the plan; after its end the walker keeps the final speed and heading.
         rig: camera height and nominal pitch.
         world: for the ground height and slope (anything with ``ground_height(x, y)``
-            and ``ground.gradient``); None = flat ground at z = 0.
+            and ``ground_gradient(x, y)`` or ``ground.gradient``); None = flat ground at
+            z = 0.
         gait: gait settings.
         start: (x, y) world position at t = 0, metres.
         heading_deg: initial walking direction, degrees from world x (left positive).
@@ -215,7 +216,10 @@ class Trajectory:
         py = xy[:, 1] + s * fwd + c * lat
         if self.world is not None:
             ground = np.asarray(self.world.ground_height(px, py), float)
-            gx, gy = (float(v) for v in self.world.ground.gradient)
+            if hasattr(self.world, 'ground_gradient'):   # the local slope
+                gx, gy = self.world.ground_gradient(px, py)
+            else:
+                gx, gy = (float(v) for v in self.world.ground.gradient)
         else:
             ground = np.zeros_like(px)
             gx = gy = 0.0

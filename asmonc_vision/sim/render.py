@@ -6,6 +6,11 @@ hit surface, pre-filtered by the sample footprint, times Lambert lighting), aver
 pixel, then passed through the camera model: vignetting, Gaussian optical blur, gain and
 offset (different for the right camera), Gaussian noise, rounding to mono8.
 
+Optional camera realism (``RigSettings``, off by default): motion blur (the mean of
+several renders over the exposure time), a slow auto-exposure gain drift per camera
+(``exposure_gains``) and a rectification residual applied to the rendered right image.
+The ground truth is always that of the frame time through the unshifted left camera.
+
 Ground truth comes from one extra ray through each left pixel *centre*: depth z along
 the left optical axis (the ray direction has optical z = 1, so the ray parameter *is*
 the depth) and the id of the surface hit.
@@ -15,6 +20,7 @@ from __future__ import annotations
 import math
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from typing import Callable
 
 import cv2
 import numpy as np
@@ -159,12 +165,17 @@ class StereoRenderer:
         rays = tuple((d[0] * rot[k][0] + d[1] * rot[k][1] + rot[k][2]).reshape(h, w)
                      for k in range(3))
         rx, ry, rz = rays
-        n, off = world.ground.plane
-        nx, ny, nz = (float(v) for v in n)
-        with np.errstate(divide='ignore', invalid='ignore'):
-            t_best = (float(off - o @ n)) / (rx * nx + ry * ny + rz * nz)
-        t_best[~(t_best > 1e-6)] = np.inf
-        code = np.where(np.isfinite(t_best), 0, SKY).astype(np.int32)
+        if world.profile is None:
+            n, off = world.ground.plane
+            nx, ny, nz = (float(v) for v in n)
+            with np.errstate(divide='ignore', invalid='ignore'):
+                t_best = (float(off - o @ n)) / (rx * nx + ry * ny + rz * nz)
+            t_best[~(t_best > 1e-6)] = np.inf
+            code = np.where(np.isfinite(t_best), 0, SKY).astype(np.int32)
+        else:   # the profile's planar pieces; the face index is the piece
+            t_best, piece = world.profile.intersect(world.ground.gradient, world.ground.z0,
+                                                    o, rx, ry, rz)
+            code = np.where(np.isfinite(t_best), piece, SKY).astype(np.int32)
         prims: list = [None]
         regions: list = [(0, h, 0, w)]
         active = world.active(t)
@@ -183,7 +194,7 @@ class StereoRenderer:
             if isinstance(ob, Terrace):
                 # the base plane inside the polygon is not there (raised or sunk)
                 inside = ob.contains(float(o[0]) + tb * rx[sub],
-                                     float(o[1]) + tb * ry[sub]) & (cb == 0)
+                                     float(o[1]) + tb * ry[sub]) & (cb >= 0) & (cb < FACES)
                 tb[inside] = np.inf
                 cb[inside] = SKY
                 edges = [i for i in range(len(ob.polygon)) if self._cull(
@@ -229,7 +240,7 @@ class StereoRenderer:
         for idx, (ob, region) in enumerate(zip(res.prims, res.regions)):
             v0, v1, u0, u1 = region
             if idx == 0:
-                sel = np.flatnonzero(code == 0)
+                sel = np.flatnonzero((code >= 0) & (code < FACES))
             else:
                 sub = res.code[v0:v1, u0:u1]
                 rows, cols = np.nonzero((sub >= idx * FACES) & (sub < (idx + 1) * FACES))
@@ -241,7 +252,10 @@ class StereoRenderer:
             px, py, pz = (float(o[0]) + tt * sx, float(o[1]) + tt * sy,
                           float(o[2]) + tt * sz)
             face = code[sel] % FACES
-            if ob is None:
+            if ob is None and world.profile is not None:
+                n = world.profile.normals(world.ground.gradient)[face].astype(f32)
+                nx, ny, nz = n[:, 0], n[:, 1], n[:, 2]
+            elif ob is None:
                 nx, ny, nz = (f32(c) for c in world.ground.plane[0])
             else:
                 nx, ny, nz = (np.asarray(c, f32) for c in ob.normal(world, px, py, pz, face))
@@ -256,7 +270,7 @@ class StereoRenderer:
                         tt * r_v[0] - kv * sx, tt * r_v[1] - kv * sy, tt * r_v[2] - kv * sz,
                         face, o)
             if ob is None:
-                alb = world.ground.surface_albedo(world.noise, hits)
+                alb = world.ground_albedo(hits)
             else:
                 alb = ob.surface_albedo(world, hits)
             lam = (AMBIENT + (1 - AMBIENT) * np.clip(nx * SUN[0] + ny * SUN[1] + nz * SUN[2],
@@ -306,31 +320,90 @@ class StereoRenderer:
         faces = np.where(hit, res.code % FACES, -1).astype(np.int32)
         return res.t.copy(), labels, faces
 
+    def exposed_radiance(self, world: World, t: float, pose: RigPose, right: bool,
+                         pose_at: Callable[[float], RigPose] | None = None) -> np.ndarray:
+        """One camera's radiance over the exposure: the radiance at ``t`` when
+        ``exposure_time`` is 0 (or ``pose_at`` is None), else the mean of
+        ``exposure_samples`` renders at times spread evenly over the exposure centred on
+        ``t`` (rig poses from ``pose_at``, people where they are at each time). The
+        right camera's rectification residual (``right_shift_px``,
+        ``right_rotation_deg``) is applied to its radiance image.
+
+        Returns:
+            (H, W) float32 grey levels.
+        """
+        rig = self.rig
+        if rig.exposure_time > 0 and pose_at is not None:
+            n = int(rig.exposure_samples)
+            acc = None
+            for k in range(n):
+                tk = t + rig.exposure_time * ((k + 0.5) / n - 0.5)
+                cams = camera_poses(pose_at(tk), rig.baseline, rig.right_misalignment)
+                r = self.radiance(world, tk, cams[1 if right else 0])
+                acc = r if acc is None else acc + r
+            rad = acc * np.float32(1.0 / n)
+        else:
+            cams = camera_poses(pose, rig.baseline, rig.right_misalignment)
+            rad = self.radiance(world, t, cams[1 if right else 0])
+        if right and (rig.right_shift_px or rig.right_rotation_deg):
+            m = cv2.getRotationMatrix2D((rig.cx, rig.cy), rig.right_rotation_deg, 1.0)
+            m[1, 2] += rig.right_shift_px
+            rad = cv2.warpAffine(rad, m, (rig.width, rig.height), flags=cv2.INTER_LINEAR,
+                                 borderMode=cv2.BORDER_REFLECT)
+        return rad
+
     def render(self, world: World, t: float, pose: RigPose,
-               rng: np.random.Generator | int | None = None) -> StereoImages:
+               rng: np.random.Generator | int | None = None,
+               pose_at: Callable[[float], RigPose] | None = None,
+               exposure: tuple[float, float] = (1.0, 1.0)) -> StereoImages:
         """Render the stereo pair seen from ``pose`` at time ``t`` (s).
 
         Args:
             world: the scene.
-            t: seconds; selects the obstacles that exist.
-            pose: the rig (body frame) pose in the world.
+            t: seconds; selects the obstacles that exist (and where people are).
+            pose: the rig (body frame) pose in the world at ``t``.
             rng: seed or Generator for the camera noise.
+            pose_at: the rig pose at any time (s), for motion blur (``exposure_time``).
+            exposure: (left, right) gain factors of the auto-exposure (``exposure_gains``).
         Returns:
-            StereoImages (mono8 pair, left depth/labels/faces, camera poses).
+            StereoImages (mono8 pair, left depth/labels/faces at ``t``, camera poses).
         """
         rng = np.random.default_rng(rng)
         left_cam, right_cam = camera_poses(pose, self.rig.baseline,
                                            self.rig.right_misalignment)
-        if self._pool is not None:
-            jobs = [self._pool.submit(self.radiance, world, t, left_cam),
-                    self._pool.submit(self.radiance, world, t, right_cam),
-                    self._pool.submit(self.truth, world, t, left_cam)]
-            rad_l, rad_r, (depth, labels, faces) = (j.result() for j in jobs)
+        plain = not self.rig.realism
+        if plain:   # the original path, kept for identical output
+            jobs = ((self.radiance, world, t, left_cam), (self.radiance, world, t, right_cam))
         else:
-            rad_l = self.radiance(world, t, left_cam)
-            rad_r = self.radiance(world, t, right_cam)
+            jobs = ((self.exposed_radiance, world, t, pose, False, pose_at),
+                    (self.exposed_radiance, world, t, pose, True, pose_at))
+        if self._pool is not None:
+            fut = [self._pool.submit(*j) for j in jobs]
+            fut.append(self._pool.submit(self.truth, world, t, left_cam))
+            rad_l, rad_r, (depth, labels, faces) = (j.result() for j in fut)
+        else:
+            rad_l = jobs[0][0](*jobs[0][1:])
+            rad_r = jobs[1][0](*jobs[1][1:])
             depth, labels, faces = self.truth(world, t, left_cam)
-        left = self.sensor(rad_l, self.rig.left_gain, self.rig.left_offset, rng)
-        right = self.sensor(rad_r, self.rig.right_gain, self.rig.right_offset, rng)
+        gl, gr = (float(g) for g in exposure)
+        left = self.sensor(rad_l, self.rig.left_gain * gl, self.rig.left_offset, rng)
+        right = self.sensor(rad_r, self.rig.right_gain * gr, self.rig.right_offset, rng)
         return StereoImages(left=left, right=right, depth=depth, labels=labels, faces=faces,
                             left_pose=left_cam, right_pose=right_cam)
+
+
+def exposure_gains(rig: RigSettings, seed: int, t: float) -> tuple[float, float]:
+    """Auto-exposure gain factors (left, right) at time t (s) for ``rig.gain_drift``.
+
+    ``1 + A (c(t) + e(t) / 4)``: ``c`` shared by both cameras, ``e`` each camera's own,
+    each a sum of three sines of periods 0.6-1.6 x ``gain_drift_period`` with phases
+    drawn from ``seed``, normalised to unit amplitude. (1, 1) when the drift is off.
+    """
+    if rig.gain_drift <= 0:
+        return 1.0, 1.0
+    g = np.random.default_rng([int(seed), 0xE4905])
+    per = rig.gain_drift_period * g.uniform(0.6, 1.6, (3, 3))
+    ph = g.uniform(0.0, 2 * np.pi, (3, 3))
+    wave = np.sum(np.sin(2 * np.pi * t / per + ph), axis=1) / 3.0
+    return (1.0 + rig.gain_drift * (wave[0] + wave[1] / 4.0),
+            1.0 + rig.gain_drift * (wave[0] + wave[2] / 4.0))

@@ -65,9 +65,44 @@ class RigSettings:
                               range=(0.1, 10.0))
     right_offset: float = param(4.0, 'right camera offset, grey levels',
                                 range=(-100.0, 100.0))
+    # camera realism, all off by default (see docs/sim.md)
+    exposure_time: float = param(0.0, 'exposure time, seconds: motion blur from the '
+                                 'rig and people moving during it, rendered as the mean '
+                                 'of exposure_samples renders spread over it, centred on '
+                                 'the frame time (0 = off)', range=(0.0, 0.05))
+    exposure_samples: int = param(4, 'sub-exposure renders averaged when exposure_time '
+                                  '> 0', range=(2, 16))
+    gain_drift: float = param(0.0, 'auto-exposure drift: relative amplitude of a slowly '
+                              'varying gain, shared by both cameras with a quarter of it '
+                              'independent per camera (0 = off)', range=(0.0, 0.3))
+    gain_drift_period: float = param(6.0, 'typical period of the auto-exposure drift, '
+                                     'seconds', range=(0.5, 120.0))
+    right_shift_px: float = param(0.0, 'rectification residual applied after rendering: '
+                                  'the right image moved down by this many pixels '
+                                  '(CameraInfo still claims a perfect rectification)',
+                                  range=(-3.0, 3.0))
+    right_rotation_deg: float = param(0.0, 'rectification residual applied after '
+                                      'rendering: the right image turned about its '
+                                      'principal point, degrees (counter-clockwise as '
+                                      'displayed)', range=(-2.0, 2.0))
 
     def __post_init__(self) -> None:
         check_fields(self)
+
+    @classmethod
+    def chest(cls, **changes) -> 'RigSettings':
+        """A level chest rig: 640 x 480, f = 560 px (57 degrees across), baseline 0.12 m,
+        cameras 1.3 m high looking 5 degrees down (``changes`` override any field)."""
+        base = dict(width=640, height=480, focal=560.0, baseline=0.12, camera_height=1.3,
+                    camera_pitch_deg=5.0)
+        base.update(changes)
+        return cls(**base)
+
+    @property
+    def realism(self) -> bool:
+        """Whether any of the camera realism effects is on."""
+        return bool(self.exposure_time > 0 or self.gain_drift > 0 or self.right_shift_px
+                    or self.right_rotation_deg)
 
     @property
     def cx(self) -> float:

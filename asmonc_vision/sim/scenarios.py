@@ -23,7 +23,7 @@ from asmonc_vision.core.camera import MetricPlane
 from asmonc_vision.sim.geometry import CameraPose, RigPose
 from asmonc_vision.sim.inclinometer import InclinometerSettings
 from asmonc_vision.sim.motion import GaitSettings, Leg, Trajectory
-from asmonc_vision.sim.render import StereoRenderer
+from asmonc_vision.sim.render import StereoRenderer, exposure_gains
 from asmonc_vision.sim.rig import RigSettings
 from asmonc_vision.sim.truth import ObstacleTruth, ground_plane_truth, obstacle_truth
 from asmonc_vision.sim.world import (Box, Ground, Obstacle, PavementSettings, Terrace, World,
@@ -116,7 +116,9 @@ def simulate_frame(scenario: Scenario, k: int, renderer: StereoRenderer | None =
     t = scenario.frame_time(k)
     pose = scenario.trajectory.pose(t)
     img = r.render(scenario.world, t, pose,
-                   rng=np.random.default_rng([scenario.seed, 0xCA3E7A, k]))
+                   rng=np.random.default_rng([scenario.seed, 0xCA3E7A, k]),
+                   pose_at=scenario.trajectory.pose,
+                   exposure=exposure_gains(scenario.rig, scenario.seed, t))
     under = scenario.world.terrace_at(float(pose.position[0]), float(pose.position[1]), t)
     labels = img.labels
     if under is not None:   # the terrace the rig stands on is its ground

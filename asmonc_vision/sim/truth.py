@@ -2,8 +2,11 @@
 
 Definitions (CONVENTIONS.md, bags/README.md):
 
-* The ground plane is the plane of the ground under the rig (the base plane, or the
-  terrace the rig stands on), in the left optical frame.
+* The ground plane is the plane of the ground under the rig (the base plane, the
+  terrace the rig stands on, or the piece of a profiled ground there: slopes, crests,
+  dips and ramps are ground, never obstacles), in the left optical frame.
+* Obstacles are taken as they are at the frame time (``World.active``): a walking
+  person is where it is then.
 * An obstacle is reported when at least ``MIN_PIXELS`` left-image pixel centres see it
   (the renderer's label map at the rendered resolution); fewer means it is not in view.
 * Its place is the **nearest visible part** of it. Each of its pixels gives a 3-D point
@@ -57,7 +60,7 @@ class ObstacleTruth:
 
     Attributes:
         id: stable obstacle id (>= 1).
-        kind: 'box', 'post', 'bollard', 'door', 'wall', 'kerb', 'drop'.
+        kind: 'box', 'post', 'bollard', 'door', 'wall', 'kerb', 'drop', 'person'.
         position: (3,) float64 metres, the top point above the nearest visible foot
             (see module doc).
         height: metres above the ground plane (negative for a drop).

@@ -24,6 +24,8 @@ from typing import Sequence
 import numpy as np
 
 from asmonc_vision.core.config import check_fields, param
+from asmonc_vision.sim.relief import GroundProfile
+from asmonc_vision.sim.surfaces import PAVEMENT_KINDS, Marking, apply_markings
 from asmonc_vision.sim.texture import ValueNoise, detail_gain, line_coverage
 
 _EPS_T = 1e-6
@@ -82,8 +84,14 @@ def _smoothstep(x) -> np.ndarray:
 
 @dataclass(frozen=True)
 class PavementSettings:
-    """The tiled pavement covering the ground. Frozen; validated on construction."""
+    """The pavement covering the ground. Frozen; validated on construction.
 
+    ``kind`` 'tiles' (the default) uses every field; 'asphalt' (fine grain, no joints)
+    uses brightness, texture_contrast and the fade; 'concrete' (large slabs with thin
+    joints and a brushed finish) uses the tile fields as slab sizes and joints.
+    """
+
+    kind: str = param('tiles', 'pavement kind', choices=('tiles', 'asphalt', 'concrete'))
     tile_length: float = param(0.45, 'tile size along the pavement a axis, metres',
                                range=(0.05, 3.0))
     tile_width: float = param(0.45, 'tile size along the pavement b axis, metres',
@@ -114,6 +122,8 @@ class PavementSettings:
     @property
     def mean_albedo(self) -> float:
         """Average albedo over many tiles (grout included), grey levels."""
+        if self.kind == 'asphalt':
+            return self.brightness
         g = 1.0 - (1.0 - self.grout_width / self.tile_length) * (
             1.0 - self.grout_width / self.tile_width)
         return (1.0 - g) * self.brightness + g * self.grout_brightness
@@ -164,6 +174,9 @@ class Ground:
     def surface_albedo(self, noise: ValueNoise, h: Hits) -> np.ndarray:
         """Pavement albedo (grey levels, float32 (N,)) of ground samples ``h``."""
         pv = self.pavement
+        if pv.kind != 'tiles':
+            out = PAVEMENT_KINDS[pv.kind](pv, noise, h)
+            return _fade(pv, h, out)
         c, s = math.cos(math.radians(pv.yaw_deg)), math.sin(math.radians(pv.yaw_deg))
         a = (h.px * c + h.py * s).astype(_F)
         b = (h.py * c - h.px * s).astype(_F)
@@ -186,16 +199,22 @@ class Ground:
         cb = line_coverage(b + half, pv.tile_width, pv.grout_width, fb)
         keep = (_F(1.0) - ca) * (_F(1.0) - cb)   # 1 - grout coverage
         out = keep * (tile - _F(pv.grout_brightness)) + _F(pv.grout_brightness)
-        dx = h.px - _F(h.origin[0])
-        dy = h.py - _F(h.origin[1])
-        dist2 = dx * dx
-        dist2 += dy * dy
-        far = np.flatnonzero(dist2 > _F(pv.fade_start ** 2))
-        if far.size:
-            w = _smoothstep((np.sqrt(dist2[far]) - pv.fade_start)
-                            / (pv.fade_end - pv.fade_start)).astype(_F)
-            out[far] += w * (_F(pv.mean_albedo) - out[far])
-        return out
+        return _fade(pv, h, out)
+
+
+def _fade(pv: PavementSettings, h: Hits, out: np.ndarray) -> np.ndarray:
+    """Fade the albedo ``out`` (float32 (N,), changed in place) of ground samples to the
+    pavement's mean beyond ``fade_start`` m from the camera."""
+    dx = h.px - _F(h.origin[0])
+    dy = h.py - _F(h.origin[1])
+    dist2 = dx * dx
+    dist2 += dy * dy
+    far = np.flatnonzero(dist2 > _F(pv.fade_start ** 2))
+    if far.size:
+        w = _smoothstep((np.sqrt(dist2[far]) - pv.fade_start)
+                        / (pv.fade_end - pv.fade_start)).astype(_F)
+        out[far] += w * (_F(pv.mean_albedo) - out[far])
+    return out
 
 
 # --------------------------------------------------------------------------- obstacles
@@ -230,6 +249,10 @@ class Obstacle:
     def active(self, t: float) -> bool:
         """Whether the obstacle exists at time t (s)."""
         return self.appear <= t < self.vanish
+
+    def at(self, t: float, world: 'World') -> 'Obstacle':
+        """The obstacle as it is at time t (s): itself, unless it moves (``Person``)."""
+        return self
 
     @property
     def finite(self) -> bool:
@@ -567,7 +590,7 @@ class Terrace(Obstacle):
         out = np.empty(h.px.shape, _F)
         top = h.face == 0
         if top.any():
-            out[top] = world.ground.surface_albedo(world.noise, h.subset(top))
+            out[top] = world.ground_albedo(h.subset(top))
         for i in np.unique(h.face[~top]):
             m = h.face == i
             hm = h.subset(m)
@@ -660,14 +683,24 @@ class World:
 
     Args:
         ground: the base ground.
-        obstacles: Box / Cylinder / Terrace instances; ``id`` and ``base_z`` are filled.
+        obstacles: Box / Cylinder / Terrace / Person instances; ``id`` and ``base_z`` are
+            filled.
         seed: texture seed (the value-noise lattice).
+        profile: an optional height profile added to the base plane (slopes that start
+            or end ahead, crests, dips, a kerb ramp; ``relief.GroundProfile``). Terraces
+            keep their tops at ``rise`` above the base plane.
+        markings: flat marks drawn on the ground (``surfaces.Marking``): paint, zebra
+            stripes, manhole covers, grates, stains, shadows. They change the ground's
+            albedo only: never obstacles.
     """
 
     def __init__(self, ground: Ground | None = None, obstacles: Sequence[Obstacle] = (),
-                 seed: int = 0) -> None:
+                 seed: int = 0, profile: GroundProfile | None = None,
+                 markings: Sequence[Marking] = ()) -> None:
         self.ground = ground if ground is not None else Ground()
         self.seed = int(seed)
+        self.profile = profile
+        self.markings = tuple(markings)
         lattice_seed = np.random.SeedSequence([self.seed, 0x7E47]).generate_state(1)[0]
         self.noise = ValueNoise(seed=int(lattice_seed))
         obs = [dataclasses.replace(o, id=i + 1) for i, o in enumerate(obstacles)]
@@ -680,8 +713,8 @@ class World:
         self.obstacles: list[Obstacle] = resolved
 
     def active(self, t: float) -> list[Obstacle]:
-        """Obstacles that exist at time t (s), in id order."""
-        return [o for o in self.obstacles if o.active(t)]
+        """Obstacles that exist at time t (s), in id order, placed where they are at t."""
+        return [o.at(t, self) for o in self.obstacles if o.active(t)]
 
     def terrace_at(self, x: float, y: float, t: float = 0.0) -> Terrace | None:
         """The terrace containing world (x, y) at time t, if any."""
@@ -691,17 +724,48 @@ class World:
         return None
 
     def ground_height(self, x, y, t: float = 0.0) -> np.ndarray:
-        """Ground surface z (m) at world x, y (arrays), terraces included."""
-        z = self.ground.height(x, y)
+        """Ground surface z (m) at world x, y (arrays), profile and terraces included."""
+        base = self.ground.height(x, y)
+        if self.profile is None:
+            z = base
+            for o in self.terraces:
+                if o.active(t):
+                    z = z + np.where(o.contains(x, y), o.rise, 0.0)
+            return z
+        z = base + self.profile.offset(x, y)
         for o in self.terraces:
             if o.active(t):
-                z = z + np.where(o.contains(x, y), o.rise, 0.0)
+                z = np.where(o.contains(x, y), base + o.rise, z)
         return z
 
+    def ground_gradient(self, x, y, t: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """(dz/dx, dz/dy) of the ground at world x, y (arrays of one shape, float64)."""
+        shape = np.broadcast(np.asarray(x), np.asarray(y)).shape
+        gx, gy = (float(v) for v in self.ground.gradient)
+        if self.profile is None:
+            return np.full(shape, gx), np.full(shape, gy)
+        ax, ay = self.profile.gradient(x, y, (gx, gy))
+        inside = np.zeros(shape, bool)
+        for o in self.terraces:
+            if o.active(t):
+                inside |= o.contains(x, y)
+        return np.where(inside, gx, ax), np.where(inside, gy, ay)
+
     def ground_plane(self, x: float, y: float, t: float = 0.0) -> tuple[np.ndarray, float]:
-        """World plane of the ground at (x, y): (N (3,) unit up, offset), N . X = offset."""
+        """World plane of the ground at (x, y): (N (3,) unit up, offset), N . X = offset
+        (the base plane, the terrace top, or the profile piece there)."""
         n, off = self.ground.plane
         ter = self.terrace_at(x, y, t)
         if ter is not None:
             off = off + ter.rise * n[2]
+        elif self.profile is not None:
+            k = int(self.profile.segment(self.profile.s(x, y)))
+            n, off, _, _ = self.profile.pieces(self.ground.gradient, self.ground.z0)[k]
         return n, off
+
+    def ground_albedo(self, h: Hits) -> np.ndarray:
+        """Albedo (float32 (N,)) of ground samples: the pavement, then the markings."""
+        out = self.ground.surface_albedo(self.noise, h)
+        if self.markings:
+            out = apply_markings(self.markings, self.noise, h, out)
+        return out
