@@ -188,7 +188,8 @@ def frame_from_obstacle_array(msg) -> FrameObstacles:
         range=np.array([o.range for o in obs], float),
         bearing=np.array([o.bearing for o in obs], float),
         roi=np.array([[o.roi.x_offset, o.roi.y_offset, o.roi.width, o.roi.height]
-                      for o in obs], int))
+                      for o in obs], int),
+        confidence=np.array([o.confidence for o in obs], float))
 
 
 # --- child processes ----------------------------------------------------------------------
