@@ -156,3 +156,29 @@ def truth_from_bag(bag: Path, frames=None, visible: dict | None = None) -> Safet
     fp = meta.get('footprints') if meta else None
     return truth_from_frames(frames, fp, int(meta.get('epoch_ns', 0)) if meta else 0,
                              visible)
+
+
+def render_scene(scenario) -> tuple[list, SafetyTruth]:
+    """Render a scenario in memory: its frames (`cli.bench.Frame`, with images, truth and
+    true pose) and its `SafetyTruth` (the world's footprints, pixels seen in both images).
+
+    Args:
+        scenario: a `sim.scenarios.Scenario` (e.g. from `sim.scenes.make_scene`).
+    """
+    from asmonc_vision.cli.bench import Frame
+    from asmonc_vision.core.evaluation import frame_from_detections
+    from asmonc_vision.sim.bagwriter import EPOCH_NS, stamp_ns
+    from asmonc_vision.sim.footprints import world_footprints
+    from asmonc_vision.sim.render import StereoRenderer
+    from asmonc_vision.sim.scenarios import simulate
+
+    cam = scenario.rig.camera()
+    frames, tf = [], []
+    for f in simulate(scenario, StereoRenderer(scenario.rig)):
+        ns = stamp_ns(f.time)
+        pose = (np.asarray(f.left_pose.rotation, float), np.asarray(f.left_pose.centre, float))
+        frames.append(Frame(ns, f.left, f.right, cam, frame_from_detections(ns, f.obstacles),
+                            f.plane, pose))
+        tf.append(TruthFrame(ns, pose[0], pose[1], visible_pixels(f.labels, f.depth, cam.fb)))
+    return frames, SafetyTruth(obstacles_from_footprints(world_footprints(scenario.world),
+                                                         EPOCH_NS), tf)
