@@ -121,17 +121,17 @@ def cache_key(w: Walk, version: str) -> str:
     return hashlib.sha1(doc.encode()).hexdigest()[:16]
 
 
-def render_walk(w: Walk, entry: Path) -> float:
+def render_walk(w: Walk, entry: Path) -> tuple[float, float]:
     """Render ``w`` into the cache directory ``entry`` (bag/ and truth.json) unless it is
-    there; returns the seconds spent rendering (0 when cached). Written to a temporary
+    there; returns the wall and CPU seconds spent rendering (0 when cached). Written to a temporary
     directory and renamed, so parallel or interrupted runs never see half an entry."""
     from asmonc_vision.eval.truth import visible_pixels
     from asmonc_vision.sim.bagwriter import stamp_ns, write_bag
     from asmonc_vision.sim.scenes import make_scene
 
     if (entry / 'truth.json').is_file():
-        return 0.0
-    t0 = time.perf_counter()
+        return 0.0, 0.0
+    t0, c0 = time.perf_counter(), time.process_time()
     sc = make_scene(w.scene_class, w.seed, duration=w.duration, rig=w.rig)
     fb = sc.rig.camera().fb
     tmp = entry.with_name(f'{entry.name}.tmp{os.getpid()}')
@@ -150,15 +150,16 @@ def render_walk(w: Walk, entry: Path) -> float:
         tmp.rename(entry)
     except OSError:                 # another process finished it first
         shutil.rmtree(tmp, ignore_errors=True)
-    return time.perf_counter() - t0
+    return time.perf_counter() - t0, time.process_time() - c0
 
 
 def score_walk(w: Walk, cache: Path, methods: list[str], version: str) -> dict:
     """Render (or reuse) a walk, run each method with the alarm logic, score it.
 
     Returns:
-        {'walk': Walk, 'render_s': float, 'frames': int, 'scores': {method: SafetyScore},
-         'detect_s': {method: seconds}}.
+        {'walk': Walk, 'render_s', 'render_cpu_s': wall and CPU seconds of rendering (0
+         when cached), 'frames': int, 'scores': {method: SafetyScore},
+         'detect_s', 'detect_cpu_s': {method: wall and CPU seconds}}.
     """
     from asmonc_vision.cli.bench import load_frames, run_method
     from asmonc_vision.eval.alarm_replay import replay_alarms
@@ -166,19 +167,21 @@ def score_walk(w: Walk, cache: Path, methods: list[str], version: str) -> dict:
     from asmonc_vision.eval.truth import truth_from_bag
 
     entry = cache / cache_key(w, version)
-    render_s = render_walk(w, entry)
+    render_s, render_cpu_s = render_walk(w, entry)
     frames = load_frames(entry / 'bag')
     vis = json.loads((entry / 'truth.json').read_text())['visible']
     truth = truth_from_bag(entry / 'bag', frames, {int(k): v for k, v in vis.items()})
-    scores, detect_s = {}, {}
+    scores, detect_s, detect_cpu_s = {}, {}, {}
     for m in methods:
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         runs = run_method(frames, m)
         detect_s[m] = time.perf_counter() - t0
+        detect_cpu_s[m] = time.process_time() - c0
         alarms = replay_alarms([(r.stamp_ns, r.status, r.obstacles) for r in runs])
         scores[m] = score_safety(truth, alarms, {r.stamp_ns: r.obstacles for r in runs})
-    return {'walk': w, 'render_s': render_s, 'frames': len(frames), 'scores': scores,
-            'detect_s': detect_s}
+    return {'walk': w, 'render_s': render_s, 'render_cpu_s': render_cpu_s,
+            'frames': len(frames), 'scores': scores, 'detect_s': detect_s,
+            'detect_cpu_s': detect_cpu_s}
 
 
 def _score_walk_job(args):
@@ -231,7 +234,8 @@ def summary_json(results: list[dict], methods: list[str]) -> dict:
     doc = {'walks': [{'seed_set': r['walk'].seed_set, 'class': r['walk'].scene_class,
                       'seed': r['walk'].seed, 'rig': r['walk'].rig,
                       'duration_s': r['walk'].duration, 'frames': r['frames'],
-                      'render_s': r['render_s'], 'detect_s': r['detect_s'],
+                      'render_s': r['render_s'], 'render_cpu_s': r['render_cpu_s'],
+                      'detect_s': r['detect_s'], 'detect_cpu_s': r['detect_cpu_s'],
                       'safety': {m: r['scores'][m].as_dict() for m in methods}}
                      for r in results]}
     for seed_set in sorted({r['walk'].seed_set for r in results}):
@@ -245,21 +249,35 @@ def summary_json(results: list[dict], methods: list[str]) -> dict:
 
 
 def timing_lines(results: list[dict], methods: list[str]) -> list[str]:
-    """Seconds per walk-minute: rendering (walks rendered in this run) and detection."""
-    out = ['time per walk-minute (wall clock, per worker):']
+    """Seconds per walk-minute, wall clock / CPU: rendering (walks rendered in this run)
+    and each detector (with its alarm logic and scoring, which take little)."""
+    out = ['time per walk-minute, wall / CPU seconds (per worker; wall includes waiting for a '
+           'shared core):']
     for rig in sorted({r['walk'].rig for r in results}):
         rs = [r for r in results if r['walk'].rig == rig]
         rendered = [r for r in rs if r['render_s'] > 0]
         parts = []
         if rendered:
-            parts.append(f"render {sum(r['render_s'] for r in rendered) / sum(r['walk'].duration for r in rendered) * 60:.0f} s")
+            mins = sum(r['walk'].duration for r in rendered) / 60.0
+            parts.append(f"render {sum(r['render_s'] for r in rendered) / mins:.0f} / "
+                         f"{sum(r['render_cpu_s'] for r in rendered) / mins:.0f} s")
         else:
             parts.append('render - (all cached)')
         minutes = sum(r['walk'].duration for r in rs) / 60.0
         for m in methods:
-            parts.append(f"{m} {sum(r['detect_s'][m] for r in rs) / minutes:.0f} s")
+            parts.append(f"{m} {sum(r['detect_s'][m] for r in rs) / minutes:.0f} / "
+                         f"{sum(r['detect_cpu_s'][m] for r in rs) / minutes:.0f} s")
         out.append(f'  {rig}: ' + ', '.join(parts))
     return out
+
+
+def walk_line(r: dict, methods: list[str]) -> str:
+    """One line per finished walk: its scores per method."""
+    w = r['walk']
+    cells = '; '.join(f"{m} " + ' '.join(_cell(r['scores'][m])) for m in methods)
+    return (f"  {w.seed_set:6s} {w.scene_class:15s} {w.seed:6d} {w.rig:8s}: {cells}  "
+            f"(render {r['render_s']:.0f} s, detect "
+            + ' + '.join(f"{r['detect_s'][m]:.0f}" for m in methods) + ' s)')
 
 
 class _Bar:
@@ -280,6 +298,11 @@ class _Bar:
                          f'{done}/{self.total} {el / 60:5.1f} min, ~{eta / 60:.1f} min left '
                          f'{note[:30]:30s}' + ('' if self.tty else '\n'))
         sys.stderr.flush()
+
+    def clear(self) -> None:
+        if self.on and self.tty:
+            sys.stderr.write('\r' + ' ' * 100 + '\r')
+            sys.stderr.flush()
 
     def end(self) -> None:
         if self.on and self.tty:
@@ -310,17 +333,24 @@ def run(args) -> int:
     results = []
     jobs = [(w, cache, list(args.methods), version) for w in walks]
     t0 = time.monotonic()
+    print('per walk: warned, false alarm events per 10 min walking, false reports per frame, '
+          'recall', flush=True)
+
+    def done(r: dict) -> None:
+        results.append(r)
+        w = r['walk']
+        bar.clear()
+        print(walk_line(r, list(args.methods)), flush=True)
+        bar.show(len(results), f'{w.scene_class} {w.seed} {w.rig}')
+
     if args.workers == 1:
         for j in jobs:
-            results.append(score_walk(*j))
-            bar.show(len(results), f'{j[0].scene_class} {j[0].seed} {j[0].rig}')
+            done(score_walk(*j))
     else:
         with ProcessPoolExecutor(max_workers=args.workers) as ex:
             futs = [ex.submit(_score_walk_job, j) for j in jobs]
             for f in as_completed(futs):
-                results.append(f.result())
-                w = results[-1]['walk']
-                bar.show(len(results), f'{w.scene_class} {w.seed} {w.rig}')
+                done(f.result())
     bar.end()
     order = {w: i for i, w in enumerate(walks)}
     results.sort(key=lambda r: order[r['walk']])

@@ -165,6 +165,8 @@ def score_outputs(frames, outputs: Path, evaluation) -> dict | None:
 def read_alarms(outputs: Path) -> list[dict]:
     """The /alarms of a recorded outputs bag, in recorded order (as `asmonc run` logs them)."""
     t_alarm = bagio.TOPICS['alarms'][0]
+    if t_alarm not in bagio.bag_topics(outputs):
+        return []
     return [{'stamp_ns': bagio.header_stamp_ns(m), 'level': int(m.level),
              'obstacle_id': int(m.obstacle_id), 'range': float(m.range),
              'bearing': float(m.bearing), 'text': m.text}
