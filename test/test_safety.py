@@ -217,3 +217,36 @@ def test_replay_alarms_as_the_node():
     fault = [a for a in al[3:] if a['level'] == AlarmLevel.FAULT]
     assert fault and (fault[0]['stamp_ns'] - S0) / 1e9 == pytest.approx(1.6, abs=0.11)
     assert al[-1]['level'] == AlarmLevel.CLEAR and al[-1]['stamp_ns'] == S0 + 25 * DT
+
+
+def test_run_summary_has_the_safety_score():
+    """`asmonc run`'s summary scores the recorded /alarms and /obstacles: here the
+    static bag's truth reported back as the detections (nothing false), and a WARNING
+    about the post from the first frame it is on the path."""
+    import threading
+    from types import SimpleNamespace
+
+    from asmonc_vision.cli.run import read_truth, summarise
+    from asmonc_vision.eval.truth import truth_from_bag
+    from conftest import BAGS
+
+    bag = BAGS / 'static_obstacles'
+    truth = read_truth(bag)
+    st = truth_from_bag(bag)
+    assert st is not None and st.obstacles and all(o.points for o in st.obstacles)
+    first = min(truth)
+    on = score_safety(st, [alarm(0, AlarmLevel.CLEAR)]).path_obstacles
+    assert len(on) == 1
+    t_on = first + int(round(on[0]['first_t_s'] * 1e9))
+    alarms = [{'stamp_ns': first, 'level': 0, 'obstacle_id': 0, 'range': 0.0, 'bearing': 0.0},
+              {'stamp_ns': t_on, 'level': 2, 'obstacle_id': on[0]['id'],
+               'range': on[0]['first_range_m'], 'bearing': 0.0}]
+    mon = SimpleNamespace(lock=threading.Lock(), detections=dict(truth), alarms=alarms,
+                          gait_states=0, gait_walking=0)
+    args = SimpleNamespace(bag=bag, rate=1.0, match_radius=0.3, min_height=0.1, max_range=5.0,
+                           params_file=[])
+    s = summarise(mon, truth, len(truth), args, None, st)['safety']
+    assert s['warned_in_time']['warned'] == 1 and s['warned_in_time']['on_path'] == 1
+    assert s['false_reports']['total'] == 0 and s['false_reports']['frames_scored'] == len(truth)
+    assert s['false_alarms']['events'] == 0
+    assert s['recall']['recall'] == 1.0
