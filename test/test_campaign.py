@@ -69,3 +69,31 @@ def test_one_walk_end_to_end_and_cached(tmp_path, capsys):
     assert main(argv) == 0                                    # rendered once, reused
     assert json.loads(js.read_text())['walks'][0]['render_s'] == 0.0
     assert 'render - (all cached)' in capsys.readouterr().out
+
+
+def test_sim_bags_carry_the_footprints(tmp_path):
+    """The bag writer stores every obstacle's footprint; the safety truth uses them."""
+    import dataclasses
+
+    import numpy as np
+
+    from asmonc_vision.eval.truth import sim_metadata, truth_from_bag
+    from asmonc_vision.sim.bagwriter import write_bag
+    from asmonc_vision.sim.rig import RigSettings
+    from asmonc_vision.sim.scenarios import make_scenario
+
+    rig = dataclasses.replace(RigSettings(), width=80, height=60, focal=75.0)
+    sc = make_scenario('walk_obstacles', seed=3, duration=0.1, rig=rig)
+    seen = []
+    write_bag(sc, tmp_path / 'bag', on_frame=seen.append)
+    assert len(seen) == sc.n_frames
+    fp = sim_metadata(tmp_path / 'bag')['footprints']
+    assert [d['id'] for d in fp] == [ob.id for ob in sc.world.obstacles]
+    kerb = [d for d in fp if d['kind'] == 'kerb']
+    assert len(kerb) == 1 and kerb[0]['ground_region'] and kerb[0]['height'] == 0.12
+    wall = next(d for d in fp if d['kind'] == 'wall')
+    assert len(wall['polygon']) == 4 and not wall['ground_region'] and wall['height'] == 2.4
+    truth = truth_from_bag(tmp_path / 'bag')
+    assert len(truth.obstacles) == len(fp) and not any(o.points for o in truth.obstacles)
+    assert len(truth.frames) == sc.n_frames
+    np.testing.assert_allclose(truth.frames[0].heading, [1.0, 0.0], atol=0.05)
