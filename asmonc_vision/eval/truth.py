@@ -18,7 +18,6 @@ from pathlib import Path
 
 import numpy as np
 
-from asmonc_vision import bagio
 from asmonc_vision.eval.safety import SafetyTruth, TrueObstacle, TruthFrame
 
 
