@@ -124,6 +124,11 @@ def test_eval_on_the_static_bag(tmp_path, capsys):
         assert r['ground_plane']['height_median_abs_mm'] < 50
     gp = doc['runs'][0]
     assert gp['status_counts'].get('initialising', 0) >= 1    # GPOD calibrates first
+    for r in doc['runs']:                  # the safety score, alarm logic replayed
+        sf = r['safety']
+        assert sf['frames'] == 25 and sf['false_reports']['frames_scored'] == 25
+        assert sf['walking_s'] == 0.0      # standing still
+        assert sf['false_alarms']['per_minute_walking'] is None
     pngs = sorted(p.name for p in (tmp_path / 'plots').iterdir())
     assert pngs == ['eval_range_error_static_obstacles_gpod.png',
                     'eval_range_error_static_obstacles_sgbm.png',
@@ -245,14 +250,17 @@ def test_eval_of_recorded_outputs_scores_the_alarms(tmp_path, capsys):
         js = tmp_path / 'eval.json'
         assert main(['eval', str(STATIC), '--outputs', str(path), '--json', str(js),
                      '--no-progress']) == 0
-        return json.loads(js.read_text())['runs'][0]['path_warnings']
+        run = json.loads(js.read_text())['runs'][0]
+        return run['path_warnings'], run['safety']['warned_in_time']
 
     t0 = frames[0].stamp_ns
-    pw = score([(t0, 0), (on_path[0], 2)])
+    pw, sw = score([(t0, 0), (on_path[0], 2)])
     assert (pw['on_path'], pw['warned_in_time'], pw['frames_unwarned']) == (1, 1, 0)
+    assert (sw['on_path'], sw['warned']) == (1, 1)      # the safety score agrees
     assert 'warned in time 1' in capsys.readouterr().out
-    pw = score([(t0, 0), (on_path[10], 2)])
+    pw, sw = score([(t0, 0), (on_path[10], 2)])
     assert (pw['warned_in_time'], pw['warned_late'], pw['frames_unwarned']) == (0, 1, 10)
+    assert (sw['warned'], sw['late']) == (0, 1)
 
 
 def test_eval_refuses_bad_input(tmp_path, capsys):

@@ -27,6 +27,12 @@ summary of `asmonc run`). Both paths are scored by the same code (core.evaluatio
 * ground-plane error against /ground_truth/ground_plane: the angle between the normals
   (deg) and the camera-height difference (mm), over the frames with a plane;
 * latency of process() per frame (median, p90 ms; OpenCV on one thread; not for --outputs).
+* the safety score of EVALUATION.md (`eval.safety`: obstacles on the path warned in
+  time, false alarm events per minute of walking, false reports per frame, recall), of
+  the alarms the alarm node's logic (default settings) gives over the detector's outputs
+  replayed in bag time (`eval.alarm_replay`), or of the recorded /alarms and /obstacles;
+  needs /ground_truth/camera_pose (footprints from the simulator's metadata, else from the
+  listed obstacles, `eval.truth`).
 
 Prints a table per run (and pooled over the bags when there are several), writes all of
 it as JSON with --json and PNG plots (recall heat map, range error vs range) with
@@ -154,6 +160,45 @@ def score_outputs(frames, outputs: Path, evaluation) -> dict | None:
     truth = {f.stamp_ns: f.truth for f in frames if f.truth is not None}
     return path_warnings_summary(path_warnings(truth, alarms, away),
                                  path_criteria(AlarmConfig()))
+
+
+def read_alarms(outputs: Path) -> list[dict]:
+    """The /alarms of a recorded outputs bag, in recorded order (as `asmonc run` logs them)."""
+    t_alarm = bagio.TOPICS['alarms'][0]
+    if t_alarm not in bagio.bag_topics(outputs):
+        return []
+    return [{'stamp_ns': bagio.header_stamp_ns(m), 'level': int(m.level),
+             'obstacle_id': int(m.obstacle_id), 'range': float(m.range),
+             'bearing': float(m.bearing), 'text': m.text}
+            for _, _, m in bagio.read_messages(outputs, [t_alarm])]
+
+
+def outputs_safety(bag: Path, frames, outputs: Path) -> dict | None:
+    """The safety score (`eval.safety`) of the /alarms and /obstacles recorded by
+    `asmonc run BAG --out DIR`, against BAG's truth; None when BAG has no true poses."""
+    from asmonc_vision.cli.run import frame_from_obstacle_array
+    from asmonc_vision.eval.safety import score_safety
+    from asmonc_vision.eval.truth import truth_from_bag
+
+    truth = truth_from_bag(bag, frames)
+    if truth is None:
+        return None
+    dets = {bagio.header_stamp_ns(m): frame_from_obstacle_array(m) for _, _, m in
+            bagio.read_messages(outputs, [bagio.TOPICS['obstacles'][0]])}
+    return score_safety(truth, read_alarms(outputs), dets).as_dict()
+
+
+def method_safety(truth, runs) -> dict | None:
+    """The safety score of an offline detector run (`cli.bench.run_method`): the alarm
+    node's logic with its default settings replayed over its outputs in bag time
+    (`eval.alarm_replay`), scored by `eval.safety`; None without truth."""
+    from asmonc_vision.eval.alarm_replay import replay_alarms
+    from asmonc_vision.eval.safety import score_safety
+
+    if truth is None:
+        return None
+    alarms = replay_alarms([(r.stamp_ns, r.status, r.obstacles) for r in runs])
+    return score_safety(truth, alarms, {r.stamp_ns: r.obstacles for r in runs}).as_dict()
 
 
 def egomotion_scores(bag: Path, outputs: Path | None, frames: int = 0) -> dict | None:
@@ -369,9 +414,13 @@ def run(args) -> int:
             key = ('outputs', None)
             runs.append({'bag': str(bag), 'name': name, 'method': 'outputs',
                          'source': 'recorded', 'outputs': str(args.outputs[bi]),
-                         'threshold_px': None, 'path_warnings': warned, 'evaluation': ev})
+                         'threshold_px': None, 'path_warnings': warned,
+                         'safety': outputs_safety(bag, frames, args.outputs[bi]),
+                         'evaluation': ev})
             groups.setdefault(key, []).append(ev)
             continue
+        from asmonc_vision.eval.truth import truth_from_bag
+        truth = truth_from_bag(bag, frames)
         for method in args.method:
             for thr in thresholds:
                 label = f'{name} {method}' + (f' {thr:g}px' if thr is not None else '')
@@ -381,7 +430,8 @@ def run(args) -> int:
                 cfg = make_method(method, thr).config
                 runs.append({'bag': str(bag), 'name': name, 'method': method,
                              'source': 'in-process', 'threshold_px': cfg.threshold_px,
-                             'config': to_dict(cfg), 'evaluation': ev})
+                             'config': to_dict(cfg), 'safety': method_safety(truth, rs),
+                             'evaluation': ev})
                 groups.setdefault((method, cfg.threshold_px), []).append(ev)
 
     pooled = []
@@ -403,12 +453,18 @@ def run(args) -> int:
         return _slug(f"{'all' if pooled_ else r['name']}_{r['method']}{thr}")
 
     from asmonc_vision.cli.run import path_warning_lines
+    from asmonc_vision.eval.safety import format_safety
 
     for r in runs:
         print('\n'.join(format_summary(title(r), r['evaluation'].summary())))
         if r['method'] == 'outputs':
             print('\n'.join(f'  {line}' for line in path_warning_lines(r['path_warnings'])
                             or ['no /alarms recorded']))
+        if r.get('safety'):
+            print('safety (EVALUATION.md; ' + ('the recorded /alarms' if r['method'] == 'outputs'
+                                               else 'the alarm logic replayed in bag time')
+                  + '):')
+            print('\n'.join(format_safety(r['safety'], '  ')))
         print()
     for r in pooled:
         print('\n'.join(format_summary(title(r, True), r['evaluation'].summary())))
@@ -416,7 +472,8 @@ def run(args) -> int:
     if len(runs) > 1:
         print('=== overview ===')
         print(f"  {'bag':20s} {'method':8s} {'thr px':>6s} {'recall':>14s} {'false/frame':>11s} "
-              f"{'range |e| m':>11s} {'plane deg':>9s} {'plane mm':>8s} {'median ms':>9s}")
+              f"{'range |e| m':>11s} {'plane deg':>9s} {'plane mm':>8s} {'median ms':>9s} "
+              f"{'warned':>7s} {'FA/min':>6s}")
         for r in runs + pooled:
             s = r['evaluation'].summary()
             rc = s['recall']
@@ -428,7 +485,10 @@ def run(args) -> int:
                   f"{_f(s['range_error']['median_abs_m'], '.3f'):>11s} "
                   f"{_f(s['ground_plane']['angle_median_deg'], '.2f'):>9s} "
                   f"{_f(s['ground_plane']['height_median_abs_mm'], '.1f'):>8s} "
-                  f"{_f(s['latency_ms']['median'], '.1f'):>9s}")
+                  f"{_f(s['latency_ms']['median'], '.1f'):>9s} "
+                  + (f"{sf['warned_in_time']['warned']}/{sf['warned_in_time']['on_path']:<3d} "
+                     f"{_f(sf['false_alarms']['per_minute_walking'], '.2f'):>6s}"
+                     if (sf := r.get('safety')) else f"{'-':>7s} {'-':>6s}"))
     for name, m in motion_results.items():
         print('\n'.join(format_motion(name, m)))
     if args.plots is not None:

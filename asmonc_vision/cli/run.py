@@ -188,7 +188,8 @@ def frame_from_obstacle_array(msg) -> FrameObstacles:
         range=np.array([o.range for o in obs], float),
         bearing=np.array([o.bearing for o in obs], float),
         roi=np.array([[o.roi.x_offset, o.roi.y_offset, o.roi.width, o.roi.height]
-                      for o in obs], int))
+                      for o in obs], int),
+        confidence=np.array([o.confidence for o in obs], float))
 
 
 # --- child processes ----------------------------------------------------------------------
@@ -418,12 +419,14 @@ def run(args) -> int:
     if domain != preferred:
         console.line(f'asmonc run: ROS domain {preferred} is in use by another asmonc run; '
                      f'this one uses domain {domain} (ROS_DOMAIN_ID={domain} to watch it)')
-    t0, truth, out_of_view = 0, {}, None
+    t0, truth, out_of_view, safety_truth = 0, {}, None, None
     try:
         t0 = first_image_stamp(bag) or 0
         truth = read_truth(bag) if bagio.TOPICS['gt_obstacles'][0] in topics else {}
         if truth and bagio.TOPICS['gt_camera_pose'][0] in topics:
             out_of_view = read_out_of_view_truth(bag, truth)
+            from asmonc_vision.eval.truth import truth_from_bag
+            safety_truth = truth_from_bag(bag)
     except bagio.BagError as exc:
         truth = getattr(exc, 'partial', truth)
         if not damage:
@@ -619,7 +622,7 @@ def run(args) -> int:
         monitor.node.destroy_node()
         rclpy.try_shutdown(context=ctx)
 
-    summary = summarise(monitor, truth, n_pairs, args, out_of_view)
+    summary = summarise(monitor, truth, n_pairs, args, out_of_view, safety_truth)
     summary['player_exit_code'] = player_rc
     summary['replay'] = _pacing(children.get('player'), paced)
     summary['errors'] = failed
@@ -781,10 +784,12 @@ def _bag_time(stamp_ns: int, t0: int) -> str:
 
 
 def summarise(monitor: _Monitor, truth: dict, n_pairs: int, args,
-              out_of_view: dict | None = None) -> dict:
+              out_of_view: dict | None = None, safety_truth=None) -> dict:
     """Counts, alarms and the score against ground truth, as a JSON-ready dict.
     ``out_of_view``: stamp_ns -> true obstacles out of view (`read_out_of_view_truth`):
-    reports of them are counted as remembered, not false."""
+    reports of them are counted as remembered, not false. ``safety_truth``
+    (`eval.truth.truth_from_bag`): the recorded /alarms and /obstacles get the safety
+    score of EVALUATION.md (`eval.safety`), key ``safety``."""
     with monitor.lock:
         detections = dict(monitor.detections)
         alarms = list(monitor.alarms)
@@ -806,6 +811,9 @@ def summarise(monitor: _Monitor, truth: dict, n_pairs: int, args,
         cfg = _alarm_config(args.params_file)
         out['path_warnings'] = path_warnings_summary(
             path_warnings(truth, alarms, out_of_view, cfg), path_criteria(cfg))
+    if safety_truth is not None:
+        from asmonc_vision.eval.safety import score_safety
+        out['safety'] = score_safety(safety_truth, alarms, detections).as_dict()
     return out
 
 
@@ -874,6 +882,11 @@ def print_summary(s: dict, console: _Console) -> None:
               f"median |bearing error| {gt['bearing_error_median_deg']:.2f} deg")
         for line in path_warning_lines(s.get('path_warnings')):
             p(line)
+        if s.get('safety'):
+            from asmonc_vision.eval.safety import format_safety
+            p('safety (EVALUATION.md):')
+            for line in format_safety(s['safety'], '  '):
+                p(line)
     else:
         p('no ground truth in this bag: no score')
     for e in s.get('errors', []):

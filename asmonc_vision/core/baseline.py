@@ -93,6 +93,11 @@ class SgbmConfig(PlausiblePlaneConfig):
         1, 'SGBM disp12MaxDiff: left-right consistency tolerance, pixels (-1 = off)',
         range=(-1, 100))
     pre_filter_cap: int = param(63, 'SGBM preFilterCap (x-derivative clip)', range=(1, 63))
+    texture_threshold: float = param(
+        0.0, 'Texture threshold (as StereoBM\'s textureThreshold, which StereoSGBM lacks): '
+        'pixels whose block (block_size square) has a mean |horizontal Sobel derivative| of '
+        'the left image below this get no disparity, grey levels per pixel (0 = off)',
+        range=(0.0, 255.0))
     mode: str = param('sgbm', "SGBM mode: 'sgbm' (5 paths), 'hh' (8 paths, full-image "
                       "memory), '3way' (faster), 'hh4'", choices=SGBM_MODES)
     pad_left: bool = param(
@@ -300,6 +305,7 @@ class SgbmBaseline:
         nd = self.config.num_disparities(cam)
         matcher = self._sgbm(nd)
         pad = nd if self.config.pad_left else 0
+        weak = self.weak_texture(left)
         if pad:
             left = cv2.copyMakeBorder(left, 0, 0, pad, 0, cv2.BORDER_REPLICATE)
             right = cv2.copyMakeBorder(right, 0, 0, pad, 0, cv2.BORDER_REPLICATE)
@@ -308,8 +314,22 @@ class SgbmBaseline:
         # valid: inside the search range, and the match inside the real right image
         uu = np.arange(disp.shape[1], dtype=np.float32)[None, :]
         bad = (raw < 0) | (disp <= 0) | (uu - disp < -0.5)
+        if weak is not None:
+            bad |= weak
         disp[bad] = np.nan
         return disp, nd
+
+    def weak_texture(self, left: np.ndarray) -> np.ndarray | None:
+        """(H, W) bool: pixels whose block has too little texture (``texture_threshold``),
+        or None when the threshold is off."""
+        import cv2
+
+        t = self.config.texture_threshold
+        if t <= 0:
+            return None
+        gx = np.abs(cv2.Sobel(left, cv2.CV_32F, 1, 0, ksize=3)) / 4.0   # grey levels / px
+        bs = self.config.block_size
+        return cv2.blur(gx, (bs, bs), borderType=cv2.BORDER_REPLICATE) < t
 
     def process(self, left: np.ndarray, right: np.ndarray, cam: StereoCamera) -> SgbmResult:
         """Detect obstacles in one rectified stereo pair.

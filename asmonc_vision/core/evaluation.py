@@ -42,6 +42,7 @@ class FrameObstacles:
         range: (N,) metres along the ground.
         bearing: (N,) radians, positive left.
         roi: (N, 4) int (x, y, w, h) in the left image.
+        confidence: (N,) float 0..1, or None when not known (taken as 1).
     """
 
     stamp_ns: int
@@ -51,6 +52,7 @@ class FrameObstacles:
     range: np.ndarray
     bearing: np.ndarray
     roi: np.ndarray
+    confidence: np.ndarray | None = None
 
     @classmethod
     def empty(cls, stamp_ns: int) -> 'FrameObstacles':
@@ -494,18 +496,20 @@ RANGE_BINS_M = (1.0, 2.0, 3.0, 4.0, 5.0, 8.0)
 
 def frame_from_detections(stamp_ns: int, obstacles) -> FrameObstacles:
     """FrameObstacles from detector obstacles (GpodObstacle, SgbmObstacle, sim ObstacleTruth:
-    anything with position, height, range, bearing, roi and optionally id)."""
+    anything with position, height, range, bearing, roi and optionally id or track_id,
+    and confidence)."""
     obs = list(obstacles)
     if not obs:
         return FrameObstacles.empty(int(stamp_ns))
     return FrameObstacles(
         stamp_ns=int(stamp_ns),
-        ids=np.array([int(getattr(o, 'id', 0)) for o in obs], int),
+        ids=np.array([int(getattr(o, 'id', getattr(o, 'track_id', 0))) for o in obs], int),
         position=np.array([np.asarray(o.position, float).reshape(3) for o in obs]),
         height=np.array([o.height for o in obs], float),
         range=np.array([o.range for o in obs], float),
         bearing=np.array([o.bearing for o in obs], float),
-        roi=np.array([tuple(int(x) for x in o.roi) for o in obs], int).reshape(-1, 4))
+        roi=np.array([tuple(int(x) for x in o.roi) for o in obs], int).reshape(-1, 4),
+        confidence=np.array([float(getattr(o, 'confidence', 1.0)) for o in obs], float))
 
 
 def plane_error(estimate: MetricPlane, truth: MetricPlane) -> tuple[float, float]:

@@ -6,7 +6,7 @@ right Image (mono8), then /ground_truth/obstacles, /ground_truth/camera_pose and
 clock) are interleaved by time. Bag timestamps equal header stamps, which start at
 ``EPOCH_NS`` (a realistic wall-clock time). Topic names and types come from
 ``bagio.TOPICS``; frame ids from ``sim.rig``. The bag's metadata ``custom_data`` records
-the scenario, seed, duration, rig and gait.
+the scenario, seed, duration, rig, gait and the obstacles' footprints (`sim.footprints`).
 """
 from __future__ import annotations
 
@@ -20,6 +20,7 @@ import numpy as np
 
 from asmonc_vision import bagio
 from asmonc_vision.core.camera import plane_from_metric
+from asmonc_vision.sim.footprints import world_footprints
 from asmonc_vision.sim.geometry import matrix_to_quaternion, quaternion_from_rpy
 from asmonc_vision.sim.inclinometer import simulate_inclinometer
 from asmonc_vision.sim.render import StereoRenderer
@@ -153,13 +154,16 @@ def _dir_size(path: Path) -> int:
 
 
 def write_bag(scenario: Scenario, out_dir: str | Path,
-              progress: Callable[[int, int], None] | None = None) -> BagSummary:
+              progress: Callable[[int, int], None] | None = None,
+              on_frame: Callable[[SimFrame], None] | None = None) -> BagSummary:
     """Simulate ``scenario`` and write it as a rosbag2 directory.
 
     Args:
         scenario: what to simulate.
         out_dir: the bag directory to create (must not exist; rosbags creates it).
         progress: optional callback(frame_index, n_frames) after each frame.
+        on_frame: optional callback(SimFrame) after each frame is written (e.g. to keep
+            truth the messages do not carry).
     Returns:
         BagSummary.
     Raises:
@@ -181,7 +185,8 @@ def write_bag(scenario: Scenario, out_dir: str | Path,
                 'rig': dataclasses.asdict(scenario.rig),
                 'gait': dataclasses.asdict(scenario.trajectory.gait),
                 'inclinometer': dataclasses.asdict(scenario.inclinometer),
-                'epoch_ns': EPOCH_NS, 'generator': 'asmonc_vision.sim'}
+                'epoch_ns': EPOCH_NS, 'generator': 'asmonc_vision.sim',
+                'footprints': world_footprints(scenario.world)}
         writer.set_custom_data('asmonc_vision.sim', json.dumps(meta, sort_keys=True))
         conns = {}
         for key in FRAME_TOPICS + ('imu',):
@@ -210,6 +215,8 @@ def write_bag(scenario: Scenario, out_dir: str | Path,
             put('gt_obstacles', ns, msgs.obstacles(ns, frame))
             put('gt_camera_pose', ns, msgs.camera_pose(ns, frame))
             put('gt_ground_plane', ns, msgs.ground_plane(ns, frame))
+            if on_frame is not None:
+                on_frame(frame)
             if progress is not None:
                 progress(frame.index, n)
         while j < imu.times.size:

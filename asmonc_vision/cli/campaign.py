@@ -1,0 +1,379 @@
+"""A campaign of random simulated walks, scored for the wearer's safety: ours and the peer.
+
+    asmonc campaign [--minutes 20] [--workers 2] [--blind | --tuning]
+                    [--classes CLASS ...] [--rigs backpack chest] [--duration 20]
+                    [--methods gpod sgbm] [--cache DIR] [--json FILE] [--no-progress]
+
+Picks walks (scene class, seed, rig) from `sim.scenes` until the minutes are covered,
+cycling through the classes with the rigs alternating (`plan_walks`), seeds counting up
+from the start of their range, so the same arguments give the same walks. Each walk is rendered once
+into a cache outside the repository (default ~/.cache/asmonc_vision/campaign/<key>, the
+key a hash of the scene class, seed, rig, duration and the simulator's source code) as
+a rosbag2 bag with the pixels that see each obstacle in both images beside it
+(`truth.json`), and reused when present. On every walk, offline (no ROS), our detector
+(GPOD, default settings) and the SGBM peer (`core.baseline`, as `asmonc eval --method
+sgbm`) each run over the stereo pairs in order, the alarm node's logic (`core.alarm`,
+default settings) is replayed over their outputs in bag time (`eval.alarm_replay`), and
+the safety score is taken (`eval.safety`, the definitions of EVALUATION.md).
+
+Seeds: TUNING walks use seeds 1000-1999, BLIND walks 900000-900999. Tune only on the
+tuning seeds and quote the blind ones, which no tuning has looked at. By default both
+sets are run, half the minutes each, and reported apart; --blind or --tuning runs one.
+
+Prints per set a table per scene class and per rig, ours and the peer side by side:
+warned in time (warned/on the path), false alarm events per 10 minutes of walking,
+false reports per frame, recall; then the set's totals; and the time per walk-minute
+(rendering, each detector). A progress bar goes to stderr. `--workers N` runs N walks
+at once (one process each, one OpenCV thread each). Exit status 0; 2 on bad arguments.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import shutil
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+
+#: seed ranges (inclusive start, exclusive end)
+TUNING_SEEDS = (1000, 2000)
+BLIND_SEEDS = (900000, 901000)
+METHOD_NAMES = {'gpod': 'ours (GPOD)', 'sgbm': 'peer (SGBM)'}
+
+
+def default_cache() -> Path:
+    return Path(os.environ.get('XDG_CACHE_HOME', Path.home() / '.cache')) / \
+        'asmonc_vision' / 'campaign'
+
+
+def add_arguments(p) -> None:
+    from asmonc_vision.sim.scenes import RIGS, SCENE_CLASSES
+
+    p.add_argument('--minutes', type=float, default=20.0,
+                   help='minutes of walks in all (default 20; split evenly between the '
+                        'tuning and the blind seeds unless --blind or --tuning)')
+    p.add_argument('--workers', type=int, default=1, help='walks processed at once (default 1)')
+    which = p.add_mutually_exclusive_group()
+    which.add_argument('--blind', action='store_true',
+                       help=f'only the BLIND seeds {BLIND_SEEDS[0]}-{BLIND_SEEDS[1] - 1} '
+                            '(never tuned on)')
+    which.add_argument('--tuning', action='store_true',
+                       help=f'only the TUNING seeds {TUNING_SEEDS[0]}-{TUNING_SEEDS[1] - 1}')
+    p.add_argument('--classes', nargs='+', choices=SCENE_CLASSES, default=list(SCENE_CLASSES),
+                   help='scene classes (default all)')
+    p.add_argument('--rigs', nargs='+', choices=RIGS, default=list(RIGS),
+                   help='rigs (default all)')
+    p.add_argument('--duration', type=float, default=20.0, help='seconds per walk (default 20)')
+    p.add_argument('--methods', nargs='+', choices=tuple(METHOD_NAMES), default=['gpod', 'sgbm'],
+                   help='detectors to run (default ours and the SGBM peer)')
+    p.add_argument('--cache', type=Path, default=None,
+                   help='rendered walks are kept here (default ~/.cache/asmonc_vision/campaign)')
+    p.add_argument('--json', type=Path, default=None, help='write every number here as JSON')
+    p.add_argument('--no-progress', action='store_true', help='no progress bar')
+    p.set_defaults(func=run)
+
+
+# --- walks and the cache ------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Walk:
+    """One walk of a campaign."""
+
+    seed_set: str
+    scene_class: str
+    seed: int
+    rig: str
+    duration: float
+
+
+def plan_walks(seed_set: str, minutes: float, classes: list[str], rigs: list[str],
+               duration: float) -> list[Walk]:
+    """Walks covering ``minutes``: the i-th has class i mod C, rig (i mod C + i div C) mod
+    R (so the rigs alternate along the classes, and each class meets every rig within
+    C x R walks) and seed start + i of the set's range."""
+    start, stop = TUNING_SEEDS if seed_set == 'tuning' else BLIND_SEEDS
+    n = max(1, math.ceil(minutes * 60.0 / duration - 1e-9))
+    if n > stop - start:
+        raise ValueError(f'{n} walks exceed the {stop - start} seeds of the {seed_set} set')
+    nc = len(classes)
+    return [Walk(seed_set, classes[i % nc], start + i, rigs[(i % nc + i // nc) % len(rigs)],
+                 float(duration)) for i in range(n)]
+
+
+def sim_code_version() -> str:
+    """A hash of the simulator's source files (the cache is invalid when they change)."""
+    import asmonc_vision.sim as sim
+
+    h = hashlib.sha1()
+    for p in sorted(Path(sim.__file__).parent.glob('*.py')):
+        h.update(p.name.encode())
+        h.update(p.read_bytes())
+    return h.hexdigest()[:12]
+
+
+def cache_key(w: Walk, version: str) -> str:
+    doc = json.dumps({'class': w.scene_class, 'seed': w.seed, 'rig': w.rig,
+                      'duration': w.duration, 'sim': version}, sort_keys=True)
+    return hashlib.sha1(doc.encode()).hexdigest()[:16]
+
+
+def render_walk(w: Walk, entry: Path) -> tuple[float, float]:
+    """Render ``w`` into the cache directory ``entry`` (bag/ and truth.json) unless it is
+    there; returns the wall and CPU seconds spent rendering (0 when cached). Written to a temporary
+    directory and renamed, so parallel or interrupted runs never see half an entry."""
+    from asmonc_vision.eval.truth import visible_pixels
+    from asmonc_vision.sim.bagwriter import stamp_ns, write_bag
+    from asmonc_vision.sim.scenes import make_scene
+
+    if (entry / 'truth.json').is_file():
+        return 0.0, 0.0
+    t0, c0 = time.perf_counter(), time.process_time()
+    sc = make_scene(w.scene_class, w.seed, duration=w.duration, rig=w.rig)
+    fb = sc.rig.camera().fb
+    tmp = entry.with_name(f'{entry.name}.tmp{os.getpid()}')
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    visible: dict[int, dict] = {}
+
+    def keep(frame) -> None:
+        visible[stamp_ns(frame.time)] = visible_pixels(frame.labels, frame.depth, fb)
+
+    write_bag(sc, tmp / 'bag', on_frame=keep)
+    doc = {'walk': {'class': w.scene_class, 'seed': w.seed, 'rig': w.rig,
+                    'duration': w.duration}, 'visible': {str(k): v for k, v in visible.items()}}
+    (tmp / 'truth.json').write_text(json.dumps(doc))
+    try:
+        tmp.rename(entry)
+    except OSError:                 # another process finished it first
+        shutil.rmtree(tmp, ignore_errors=True)
+    return time.perf_counter() - t0, time.process_time() - c0
+
+
+def score_walk(w: Walk, cache: Path, methods: list[str], version: str) -> dict:
+    """Render (or reuse) a walk, run each method with the alarm logic, score it.
+
+    Returns:
+        {'walk': Walk, 'render_s', 'render_cpu_s': wall and CPU seconds of rendering (0
+         when cached), 'frames': int, 'scores': {method: SafetyScore},
+         'detect_s', 'detect_cpu_s': {method: wall and CPU seconds}}.
+    """
+    from asmonc_vision.cli.bench import load_frames, run_method
+    from asmonc_vision.eval.alarm_replay import replay_alarms
+    from asmonc_vision.eval.safety import score_safety
+    from asmonc_vision.eval.truth import truth_from_bag
+
+    entry = cache / cache_key(w, version)
+    render_s, render_cpu_s = render_walk(w, entry)
+    frames = load_frames(entry / 'bag')
+    vis = json.loads((entry / 'truth.json').read_text())['visible']
+    truth = truth_from_bag(entry / 'bag', frames, {int(k): v for k, v in vis.items()})
+    scores, detect_s, detect_cpu_s = {}, {}, {}
+    for m in methods:
+        t0, c0 = time.perf_counter(), time.process_time()
+        runs = run_method(frames, m)
+        detect_s[m] = time.perf_counter() - t0
+        detect_cpu_s[m] = time.process_time() - c0
+        alarms = replay_alarms([(r.stamp_ns, r.status, r.obstacles) for r in runs])
+        scores[m] = score_safety(truth, alarms, {r.stamp_ns: r.obstacles for r in runs})
+    return {'walk': w, 'render_s': render_s, 'render_cpu_s': render_cpu_s,
+            'frames': len(frames), 'scores': scores, 'detect_s': detect_s,
+            'detect_cpu_s': detect_cpu_s}
+
+
+def _score_walk_job(args):
+    return score_walk(*args)
+
+
+# --- report -------------------------------------------------------------------------------
+
+def _cell(s) -> list[str]:
+    """warned x/y, false alarm events per 10 min walking, false reports per frame, recall."""
+    fa = (f'{len(s.false_alarm_events) / s.walking_s * 600:.1f}' if s.walking_s > 0 else '-')
+    fr = f'{s.false_reports_per_frame:.3f}' if s.false_reports_per_frame is not None else '-'
+    rc = f'{s.recall:.0%}' if s.recall is not None else '-'
+    return [f'{s.warned}/{s.on_path}', fa, fr, rc]
+
+
+def table(results: list[dict], methods: list[str], title: str) -> list[str]:
+    """The printed table of one seed set: per class, per rig, totals."""
+    from asmonc_vision.eval.safety import SafetyScore
+
+    heads = ['warned', 'FA/10min', 'FR/frame', 'recall']
+    w0 = 22
+    line1 = f'{"":{w0}s} {"walks":>5s} {"min":>5s} ' + ''.join(
+        f'| {METHOD_NAMES[m]:<38s}' for m in methods)
+    line2 = f'{"":{w0}s} {"":5s} {"":5s} ' + ''.join(
+        '| ' + ''.join(f'{h:>9s}' for h in heads) + '  ' for _ in methods)
+    out = [f'=== {title} ===', line1, line2]
+
+    def row(label: str, rs: list[dict]) -> str:
+        walk_min = sum(r['walk'].duration for r in rs) / 60.0
+        cells = ''
+        for m in methods:
+            s = SafetyScore.merge([r['scores'][m] for r in rs])
+            cells += '| ' + ''.join(f'{c:>9s}' for c in _cell(s)) + '  '
+        return f'{label:<{w0}s} {len(rs):5d} {walk_min:5.1f} {cells}'
+
+    for key, name in (('scene_class', 'class'), ('rig', 'rig')):
+        for v in sorted({getattr(r['walk'], key) for r in results}):
+            out.append(row(f'{name} {v}', [r for r in results if getattr(r['walk'], key) == v]))
+    out.append(row('all', results))
+    return out
+
+
+def summary_json(results: list[dict], methods: list[str]) -> dict:
+    from asmonc_vision.eval.safety import SafetyScore
+
+    def merged(rs):
+        return {m: SafetyScore.merge([r['scores'][m] for r in rs]).as_dict() for m in methods}
+
+    doc = {'walks': [{'seed_set': r['walk'].seed_set, 'class': r['walk'].scene_class,
+                      'seed': r['walk'].seed, 'rig': r['walk'].rig,
+                      'duration_s': r['walk'].duration, 'frames': r['frames'],
+                      'render_s': r['render_s'], 'render_cpu_s': r['render_cpu_s'],
+                      'detect_s': r['detect_s'], 'detect_cpu_s': r['detect_cpu_s'],
+                      'safety': {m: r['scores'][m].as_dict() for m in methods}}
+                     for r in results]}
+    for seed_set in sorted({r['walk'].seed_set for r in results}):
+        rs = [r for r in results if r['walk'].seed_set == seed_set]
+        doc[seed_set] = {'all': merged(rs)}
+        for key in ('scene_class', 'rig'):
+            for v in sorted({getattr(r['walk'], key) for r in rs}):
+                doc[seed_set][f'{key}={v}'] = merged(
+                    [r for r in rs if getattr(r['walk'], key) == v])
+    return doc
+
+
+def timing_lines(results: list[dict], methods: list[str]) -> list[str]:
+    """Seconds per walk-minute, wall clock / CPU: rendering (walks rendered in this run)
+    and each detector (with its alarm logic and scoring, which take little)."""
+    out = ['time per walk-minute, wall / CPU seconds (per worker; wall includes waiting for a '
+           'shared core):']
+    for rig in sorted({r['walk'].rig for r in results}):
+        rs = [r for r in results if r['walk'].rig == rig]
+        rendered = [r for r in rs if r['render_s'] > 0]
+        parts = []
+        if rendered:
+            mins = sum(r['walk'].duration for r in rendered) / 60.0
+            parts.append(f"render {sum(r['render_s'] for r in rendered) / mins:.0f} / "
+                         f"{sum(r['render_cpu_s'] for r in rendered) / mins:.0f} s")
+        else:
+            parts.append('render - (all cached)')
+        minutes = sum(r['walk'].duration for r in rs) / 60.0
+        for m in methods:
+            parts.append(f"{m} {sum(r['detect_s'][m] for r in rs) / minutes:.0f} / "
+                         f"{sum(r['detect_cpu_s'][m] for r in rs) / minutes:.0f} s")
+        out.append(f'  {rig}: ' + ', '.join(parts))
+    return out
+
+
+def walk_line(r: dict, methods: list[str]) -> str:
+    """One line per finished walk: its scores per method."""
+    w = r['walk']
+    cells = '; '.join(f"{m} " + ' '.join(_cell(r['scores'][m])) for m in methods)
+    return (f"  {w.seed_set:6s} {w.scene_class:15s} {w.seed:6d} {w.rig:8s}: {cells}  "
+            f"(render {r['render_s']:.0f} s, detect "
+            + ' + '.join(f"{r['detect_s'][m]:.0f}" for m in methods) + ' s)')
+
+
+class _Bar:
+    """Progress on stderr: a bar redrawn in place on a terminal, else a line per walk."""
+
+    def __init__(self, total: int, on: bool):
+        self.total, self.on, self.t0 = total, on, time.monotonic()
+        self.tty = sys.stderr.isatty()
+
+    def show(self, done: int, note: str = '') -> None:
+        if not self.on:
+            return
+        w = 30
+        k = int(w * done / max(self.total, 1))
+        el = time.monotonic() - self.t0
+        eta = el / done * (self.total - done) if done else 0.0
+        sys.stderr.write(f'{chr(13) if self.tty else ""}  walks [{"#" * k}{"." * (w - k)}] '
+                         f'{done}/{self.total} {el / 60:5.1f} min, ~{eta / 60:.1f} min left '
+                         f'{note[:30]:30s}' + ('' if self.tty else '\n'))
+        sys.stderr.flush()
+
+    def clear(self) -> None:
+        if self.on and self.tty:
+            sys.stderr.write('\r' + ' ' * 100 + '\r')
+            sys.stderr.flush()
+
+    def end(self) -> None:
+        if self.on and self.tty:
+            sys.stderr.write('\n')
+            sys.stderr.flush()
+
+
+def run(args) -> int:
+    err = lambda s: print(f'asmonc campaign: {s}', file=sys.stderr)  # noqa: E731
+    if not args.minutes > 0 or args.workers < 1 or not 1.0 <= args.duration <= 600.0:
+        err('--minutes must be > 0, --workers >= 1, --duration in [1, 600] s')
+        return 2
+    sets = ['blind'] if args.blind else ['tuning'] if args.tuning else ['tuning', 'blind']
+    try:
+        walks = [w for s in sets for w in plan_walks(s, args.minutes / len(sets), args.classes,
+                                                      args.rigs, args.duration)]
+    except ValueError as exc:
+        err(str(exc))
+        return 2
+    cache = args.cache or default_cache()
+    cache.mkdir(parents=True, exist_ok=True)
+    version = sim_code_version()
+    print(f'asmonc campaign: {len(walks)} walks of {args.duration:g} s ({", ".join(sets)} '
+          f'seeds), classes {", ".join(args.classes)}, rigs {", ".join(args.rigs)}; '
+          f'{args.workers} worker(s); cache {cache} (simulator {version})', flush=True)
+    bar = _Bar(len(walks), not args.no_progress)
+    bar.show(0)
+    results = []
+    jobs = [(w, cache, list(args.methods), version) for w in walks]
+    t0 = time.monotonic()
+    print('per walk: warned, false alarm events per 10 min walking, false reports per frame, '
+          'recall', flush=True)
+
+    def done(r: dict) -> None:
+        results.append(r)
+        w = r['walk']
+        bar.clear()
+        print(walk_line(r, list(args.methods)), flush=True)
+        bar.show(len(results), f'{w.scene_class} {w.seed} {w.rig}')
+
+    if args.workers == 1:
+        for j in jobs:
+            done(score_walk(*j))
+    else:
+        with ProcessPoolExecutor(max_workers=args.workers) as ex:
+            futs = [ex.submit(_score_walk_job, j) for j in jobs]
+            for f in as_completed(futs):
+                done(f.result())
+    bar.end()
+    order = {w: i for i, w in enumerate(walks)}
+    results.sort(key=lambda r: order[r['walk']])
+    print('warned = obstacles on the path warned in time / on the path; FA/10min = false '
+          'alarm events per 10 minutes of walking; FR/frame = false reports per frame; '
+          'recall = (obstacle, frame) pairs found (EVALUATION.md)')
+    for s in sets:
+        rs = [r for r in results if r['walk'].seed_set == s]
+        lo, hi = TUNING_SEEDS if s == 'tuning' else BLIND_SEEDS
+        print()
+        print('\n'.join(table(rs, list(args.methods),
+                              f'{s.upper()} seeds {lo}-{hi - 1}: {len(rs)} walks')))
+    print()
+    print('\n'.join(timing_lines(results, list(args.methods))))
+    print(f'campaign wall time {(time.monotonic() - t0) / 60:.1f} min')
+    if args.json is not None:
+        from asmonc_vision.core.evaluation import json_ready
+        doc = summary_json(results, list(args.methods))
+        doc['arguments'] = {'minutes': args.minutes, 'workers': args.workers, 'sets': sets,
+                            'classes': args.classes, 'rigs': args.rigs,
+                            'duration': args.duration, 'methods': args.methods,
+                            'simulator': version}
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(json_ready(doc), indent=1, allow_nan=False) + '\n')
+        print(f'json: {args.json}')
+    return 0

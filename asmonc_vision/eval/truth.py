@@ -1,0 +1,183 @@
+"""The truth the safety score needs (`eval.safety.SafetyTruth`), from a bag or a scene.
+
+* Footprints: a simulated bag's metadata lists every obstacle's footprint
+  (`sim.footprints`, written by the bag writer). A bag without them (recorded elsewhere,
+  or by an older simulator) gets footprints from its /ground_truth/obstacles: each
+  obstacle's listed feet (its top lowered along the true ground normal), put into the
+  world with /ground_truth/camera_pose, as a set of points, present from the first frame
+  that lists it. That only knows the parts of an obstacle that were nearest when seen.
+* Frames: the true pose of the left optical frame per stereo pair
+  (/ground_truth/camera_pose); the obstacles in view are those /ground_truth/obstacles
+  lists, with the pixels that see them in both images when known (`visible_pixels` at
+  render time, kept by `asmonc campaign` beside its bags), else unknown (all count).
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from asmonc_vision.eval.safety import SafetyTruth, TrueObstacle, TruthFrame
+
+
+def visible_pixels(labels: np.ndarray, depth: np.ndarray, fb: float, cx_shift: float = 0.0
+                   ) -> dict[int, int]:
+    """Pixels per obstacle seen in both images of a rendered pair.
+
+    A left pixel of obstacle k counts when its match in the right image, at
+    u - f B / z, falls inside the right image (the same width). Occlusion in the right
+    image alone is not modelled.
+
+    Args:
+        labels: (H, W) int left-pixel labels (k > 0 obstacle id).
+        depth: (H, W) float left-pixel depth z, metres.
+        fb: focal length x baseline, pixel metres.
+        cx_shift: right principal point minus left, pixels (0 for a rectified rig).
+    Returns:
+        id -> pixel count (ids with no such pixel left out).
+    """
+    v, u = np.nonzero(labels > 0)
+    if not u.size:
+        return {}
+    z = depth[v, u]
+    ur = u - fb / np.maximum(z, 1e-6) + cx_shift
+    ok = np.isfinite(ur) & (ur >= -0.5) & (ur <= labels.shape[1] - 0.5)
+    ids, counts = np.unique(labels[v[ok], u[ok]], return_counts=True)
+    return {int(i): int(n) for i, n in zip(ids, counts)}
+
+
+def obstacles_from_footprints(footprints: list[dict], epoch_ns: int) -> list[TrueObstacle]:
+    """`TrueObstacle`s from `sim.footprints.world_footprints` dicts (times in seconds
+    after ``epoch_ns``, the stamp of simulation time 0)."""
+    out = []
+    for d in footprints:
+        out.append(TrueObstacle(
+            id=int(d['id']), height=float(d['height']),
+            footprint=np.asarray(d['polygon'], float).reshape(-1, 2),
+            appear_ns=None if d.get('appear_s') is None
+            else epoch_ns + int(round(d['appear_s'] * 1e9)),
+            vanish_ns=None if d.get('vanish_s') is None
+            else epoch_ns + int(round(d['vanish_s'] * 1e9)),
+            ground_region=bool(d.get('ground_region', False)), kind=str(d.get('kind', ''))))
+    return out
+
+
+def sim_metadata(bag: Path) -> dict | None:
+    """The simulator's metadata of a rosbag2 directory (`sim.bagwriter`), or None."""
+    import yaml
+
+    p = Path(bag) / 'metadata.yaml'
+    if not p.is_file():
+        return None
+    try:
+        info = yaml.safe_load(p.read_text())['rosbag2_bagfile_information']
+        raw = (info.get('custom_data') or {}).get('asmonc_vision.sim')
+        return json.loads(raw) if raw else None
+    except (KeyError, TypeError, ValueError, yaml.YAMLError):
+        return None
+
+
+def obstacles_from_listings(truth: dict, poses: dict, planes: dict) -> list[TrueObstacle]:
+    """Point-set footprints from the listed obstacles (see the module doc).
+
+    Args:
+        truth: stamp_ns -> `core.evaluation.FrameObstacles` (left optical frame).
+        poses: stamp_ns -> (R, t) of the left optical frame in the world.
+        planes: stamp_ns -> the true ground plane (`core.camera.MetricPlane`).
+    """
+    feet: dict[int, list] = {}
+    heights: dict[int, list] = {}
+    first: dict[int, int] = {}
+    for stamp in sorted(truth):
+        T, pose, plane = truth[stamp], poses.get(stamp), planes.get(stamp)
+        if pose is None or plane is None:
+            continue
+        R, t = (np.asarray(x, float) for x in pose)
+        n = np.asarray(plane.normal_up, float)
+        for k in range(len(T)):
+            i = int(T.ids[k])
+            foot = np.asarray(T.position[k], float) - float(T.height[k]) * n
+            feet.setdefault(i, []).append((R @ foot + t)[:2])
+            heights.setdefault(i, []).append(float(T.height[k]))
+            first.setdefault(i, int(stamp))
+    return [TrueObstacle(id=i, height=float(np.median(heights[i])),
+                         footprint=np.array(feet[i]), points=True, appear_ns=first[i])
+            for i in sorted(feet)]
+
+
+def truth_from_frames(frames, footprints: list[dict] | None = None, epoch_ns: int = 0,
+                      visible: dict | None = None) -> SafetyTruth:
+    """SafetyTruth of loaded frames (`cli.bench.Frame`: stamp, truth, truth_plane, pose).
+
+    Args:
+        frames: the bag's frames; those without a true pose are left out.
+        footprints: `sim.footprints` dicts (None: from the listings, see the module doc).
+        epoch_ns: the stamp of simulation time 0 (for the footprints' times).
+        visible: stamp_ns -> {id: pixels in both images} (None: the listed ids, unknown
+            counts).
+    """
+    have = [f for f in frames if f.pose is not None]
+    if footprints is not None:
+        obstacles = obstacles_from_footprints(footprints, epoch_ns)
+    else:
+        obstacles = obstacles_from_listings(
+            {f.stamp_ns: f.truth for f in have if f.truth is not None},
+            {f.stamp_ns: f.pose for f in have},
+            {f.stamp_ns: f.truth_plane for f in have if f.truth_plane is not None})
+    out = []
+    for f in have:
+        if visible is not None and f.stamp_ns in visible:
+            vis = {int(k): v for k, v in visible[f.stamp_ns].items()}
+        else:
+            vis = ({int(i): None for i in f.truth.ids} if f.truth is not None else {})
+        out.append(TruthFrame(f.stamp_ns, np.asarray(f.pose[0], float),
+                              np.asarray(f.pose[1], float), vis))
+    return SafetyTruth(obstacles, out)
+
+
+def truth_from_bag(bag: Path, frames=None, visible: dict | None = None) -> SafetyTruth | None:
+    """SafetyTruth of a bag with /ground_truth/camera_pose (None without poses).
+
+    Args:
+        bag: the bag; frames: its frames if already loaded (`cli.bench.load_frames`,
+            images not needed); visible: as `truth_from_frames`.
+    Raises:
+        bagio.BagError: unreadable bag.
+    """
+    from asmonc_vision.cli.bench import load_frames
+
+    if frames is None:
+        frames = load_frames(bag, images=False)
+    if not any(f.pose is not None for f in frames):
+        return None
+    meta = sim_metadata(bag)
+    fp = meta.get('footprints') if meta else None
+    return truth_from_frames(frames, fp, int(meta.get('epoch_ns', 0)) if meta else 0,
+                             visible)
+
+
+def render_scene(scenario) -> tuple[list, SafetyTruth]:
+    """Render a scenario in memory: its frames (`cli.bench.Frame`, with images, truth and
+    true pose) and its `SafetyTruth` (the world's footprints, pixels seen in both images).
+
+    Args:
+        scenario: a `sim.scenarios.Scenario` (e.g. from `sim.scenes.make_scene`).
+    """
+    from asmonc_vision.cli.bench import Frame
+    from asmonc_vision.core.evaluation import frame_from_detections
+    from asmonc_vision.sim.bagwriter import EPOCH_NS, stamp_ns
+    from asmonc_vision.sim.footprints import world_footprints
+    from asmonc_vision.sim.render import StereoRenderer
+    from asmonc_vision.sim.scenarios import simulate
+
+    cam = scenario.rig.camera()
+    frames, tf = [], []
+    for f in simulate(scenario, StereoRenderer(scenario.rig)):
+        ns = stamp_ns(f.time)
+        pose = (np.asarray(f.left_pose.rotation, float), np.asarray(f.left_pose.centre, float))
+        frames.append(Frame(ns, f.left, f.right, cam, frame_from_detections(ns, f.obstacles),
+                            f.plane, pose))
+        tf.append(TruthFrame(ns, pose[0], pose[1], visible_pixels(f.labels, f.depth, cam.fb)))
+    return frames, SafetyTruth(obstacles_from_footprints(world_footprints(scenario.world),
+                                                         EPOCH_NS), tf)

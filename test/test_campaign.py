@@ -1,0 +1,99 @@
+"""`asmonc campaign`: the walk plan, the cache, one tiny walk end to end; sim.scenes."""
+import json
+
+import pytest
+
+from asmonc_vision.cli import campaign as C
+from asmonc_vision.sim.scenes import RIGS, SCENE_CLASSES, make_scene
+
+
+def test_scenes_api():
+    """Only the API another sim.scenes must keep: classes, rigs, make_scene."""
+    assert RIGS == ('backpack', 'chest') and SCENE_CLASSES
+    a = make_scene(SCENE_CLASSES[0], 1000, duration=2.0, rig='chest')
+    chest = a.rig
+    assert (chest.width, chest.height, chest.baseline, chest.camera_height) == (640, 480, 0.12,
+                                                                               1.3)
+    assert chest.focal == pytest.approx(520.0, rel=0.05)
+    assert a.n_frames == 20
+    b = make_scene(SCENE_CLASSES[0], 1000, duration=2.0)
+    assert (b.rig.width, b.rig.height) == (320, 240)
+    with pytest.raises(KeyError):
+        make_scene('nowhere', 1)
+
+
+def test_plan_walks_seed_ranges_and_rigs():
+    w = C.plan_walks('tuning', 2.0, list(SCENE_CLASSES), list(RIGS), 20.0)
+    assert len(w) == 6
+    assert [x.seed for x in w] == list(range(1000, 1006))
+    assert [x.scene_class for x in w[:5]] == list(SCENE_CLASSES)
+    assert {x.rig for x in w} == set(RIGS)
+    b = C.plan_walks('blind', 0.1, list(SCENE_CLASSES), list(RIGS), 20.0)
+    assert [x.seed for x in b] == [900000]
+    # every class meets every rig within classes x rigs walks
+    ten = C.plan_walks('tuning', 10 * 20 / 60, list(SCENE_CLASSES), list(RIGS), 20.0)
+    assert {(x.scene_class, x.rig) for x in ten} == {(c, r) for c in SCENE_CLASSES
+                                                    for r in RIGS}
+    with pytest.raises(ValueError):
+        C.plan_walks('tuning', 1e6, list(SCENE_CLASSES), list(RIGS), 20.0)
+
+
+def test_cache_key_depends_on_everything():
+    w = C.Walk('tuning', 'clear_walk', 1000, 'backpack', 20.0)
+    k = C.cache_key(w, 'v1')
+    assert k == C.cache_key(w, 'v1')
+    assert len({k, C.cache_key(w, 'v2'),
+                C.cache_key(C.Walk('blind', 'clear_walk', 1001, 'backpack', 20.0), 'v1'),
+                C.cache_key(C.Walk('tuning', 'clear_walk', 1000, 'chest', 20.0), 'v1'),
+                C.cache_key(C.Walk('tuning', 'clear_walk', 1000, 'backpack', 10.0), 'v1')}) == 5
+
+
+def test_one_walk_end_to_end_and_cached(tmp_path, capsys):
+    js = tmp_path / 'c.json'
+    argv = ['campaign', '--minutes', '0.01', '--duration', '1.5', '--tuning', '--classes',
+            SCENE_CLASSES[0], '--rigs', 'backpack', '--cache', str(tmp_path / 'cache'),
+            '--json', str(js), '--no-progress']
+    from asmonc_vision.cli.main import main
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert 'TUNING seeds 1000-1999: 1 walks' in out and 'ours (GPOD)' in out
+    assert 'peer (SGBM)' in out and f'class {SCENE_CLASSES[0]}' in out
+    doc = json.loads(js.read_text())
+    (walk,) = doc['walks']
+    assert walk['seed'] == 1000 and walk['frames'] == 15 and walk['render_s'] > 0
+    for m in ('gpod', 'sgbm'):
+        s = walk['safety'][m]
+        assert s['frames'] == 15 and s['false_reports']['frames_scored'] == 15
+    entries = list((tmp_path / 'cache').iterdir())
+    assert len(entries) == 1 and (entries[0] / 'truth.json').is_file()
+    assert main(argv) == 0                                    # rendered once, reused
+    assert json.loads(js.read_text())['walks'][0]['render_s'] == 0.0
+    assert 'render - (all cached)' in capsys.readouterr().out
+
+
+def test_sim_bags_carry_the_footprints(tmp_path):
+    """The bag writer stores every obstacle's footprint; the safety truth uses them."""
+    import dataclasses
+
+    import numpy as np
+
+    from asmonc_vision.eval.truth import sim_metadata, truth_from_bag
+    from asmonc_vision.sim.bagwriter import write_bag
+    from asmonc_vision.sim.rig import RigSettings
+    from asmonc_vision.sim.scenarios import make_scenario
+
+    rig = dataclasses.replace(RigSettings(), width=80, height=60, focal=75.0)
+    sc = make_scenario('walk_obstacles', seed=3, duration=0.1, rig=rig)
+    seen = []
+    write_bag(sc, tmp_path / 'bag', on_frame=seen.append)
+    assert len(seen) == sc.n_frames
+    fp = sim_metadata(tmp_path / 'bag')['footprints']
+    assert [d['id'] for d in fp] == [ob.id for ob in sc.world.obstacles]
+    kerb = [d for d in fp if d['kind'] == 'kerb']
+    assert len(kerb) == 1 and kerb[0]['ground_region'] and kerb[0]['height'] == 0.12
+    wall = next(d for d in fp if d['kind'] == 'wall')
+    assert len(wall['polygon']) == 4 and not wall['ground_region'] and wall['height'] == 2.4
+    truth = truth_from_bag(tmp_path / 'bag')
+    assert len(truth.obstacles) == len(fp) and not any(o.points for o in truth.obstacles)
+    assert len(truth.frames) == sc.n_frames
+    np.testing.assert_allclose(truth.frames[0].heading, [1.0, 0.0], atol=0.05)

@@ -1,0 +1,54 @@
+"""Our detector, with the alarm node's logic replayed in bag time, scored for safety on a
+few fixed short walks (sim.scenes, the backpack rig, 320x240; tuning seeds).
+
+Measured (GPOD default settings, AlarmConfig defaults): WALKS below, per walk the
+obstacles on the path warned in time and on the path, the false alarm events and the
+false reports per frame; the asserts allow a little slack (one more false alarm event
+per walk, one obstacle fewer warned over all, false reports per frame 1.5 x + 0.05).
+About 40 s on an idle core (150 frames rendered, then detected).
+"""
+import pytest
+
+from asmonc_vision.cli.bench import run_method
+from asmonc_vision.eval.alarm_replay import replay_alarms
+from asmonc_vision.eval.safety import SafetyScore, score_safety
+from asmonc_vision.eval.truth import render_scene
+from asmonc_vision.sim.scenes import make_scene
+
+#: (scene class, seed, duration s) -> measured (warned, on the path, false alarm events,
+#: false reports per frame)
+WALKS = {
+    ('step_down', 1004, 5.0): (1, 1, 0, 5.92),       # positive reports on the lower ground
+    ('walk_stop_turn', 1006, 6.0): (1, 1, 0, 0.60),
+    ('clear_walk', 1005, 4.0): (0, 0, 0, 0.00),
+}
+
+
+@pytest.fixture(scope='module')
+def scores():
+    out = {}
+    for (cls, seed, dur) in WALKS:
+        frames, truth = render_scene(make_scene(cls, seed, duration=dur, rig='backpack'))
+        runs = run_method(frames, 'gpod')
+        alarms = replay_alarms([(r.stamp_ns, r.status, r.obstacles) for r in runs])
+        out[(cls, seed, dur)] = score_safety(truth, alarms,
+                                             {r.stamp_ns: r.obstacles for r in runs})
+    return out
+
+
+@pytest.mark.parametrize('walk', list(WALKS))
+def test_walk_false_alarms_and_reports(scores, walk):
+    s = scores[walk]
+    _, on_path, events, fr = WALKS[walk]
+    assert s.on_path == on_path
+    assert len(s.false_alarm_events) <= events + 1, s.false_alarm_events
+    assert s.false_reports_per_frame <= 1.5 * fr + 0.05
+
+
+def test_walks_warned_in_time(scores):
+    total = SafetyScore.merge(list(scores.values()))
+    warned = sum(v[0] for v in WALKS.values())
+    on_path = sum(v[1] for v in WALKS.values())
+    assert total.on_path == on_path
+    assert total.warned >= warned - 1
+    assert total.never == 0
