@@ -7,6 +7,7 @@
     asmonc motion {tables,eval,corners}        visual egomotion: Tables 2-3, bag errors
     asmonc gait {sim,fusion,real,figs}         the walk model: errors, real walking, Figs. 13-15
     asmonc smallbox [--heights ..] [--ranges ..]  small boxes standing still: GPOD vs SGBM
+    asmonc images-bag FOLDER OUT [--repeat N]   a contract bag from a folder of stereo pairs
 """
 from __future__ import annotations
 
@@ -44,6 +45,10 @@ def build_parser() -> argparse.ArgumentParser:
     smallbox.add_arguments(sub.add_parser(
         'smallbox', help='small boxes seen standing still: GPOD against the SGBM baseline',
         description=smallbox.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
+    from asmonc_vision.cli import images_bag
+    images_bag.add_arguments(sub.add_parser(
+        'images-bag', help='a contract bag from a folder of stereo image pairs (e.g. KITTI)',
+        description=images_bag.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
     return parser
 
 
