@@ -319,7 +319,18 @@ class GpodConfig(PlausiblePlaneConfig):
     threshold_floor_px: float = param(
         0.5, "'sigma': least obstacle threshold, pixels", range=(0.05, 50.0))
     threshold_ceiling_px: float = param(
-        1.7, "'sigma': largest obstacle threshold, pixels", range=(0.05, 50.0))
+        1.7, "'sigma': largest obstacle threshold, pixels (or the disparity excess of "
+        'threshold_ceiling_height_m at threshold_ceiling_depth_m, if larger)',
+        range=(0.05, 50.0))
+    threshold_ceiling_height_m: float = param(
+        0.1, "'sigma': the largest obstacle threshold is at least the disparity excess "
+        'f*B*h/(H*z) of an obstacle this high (h, metres) at threshold_ceiling_depth_m (z) '
+        'for the camera height H of the calibrated plane: on a rig with a longer baseline '
+        'or focal length than the paper\'s, the ground\'s unevenness spreads over more '
+        'pixels, and so does the obstacle the ceiling keeps in view; 0 = '
+        'threshold_ceiling_px alone', range=(0.0, 1.0))
+    threshold_ceiling_depth_m: float = param(
+        5.0, "'sigma': the depth of threshold_ceiling_height_m, metres", range=(0.5, 100.0))
     sigma_per_edge: bool = param(
         True, "'sigma': take sigma per edge pixel rather than one for all: the residual "
         'spread of the initial fit in bins of the precision of the edges (gradient '
@@ -3935,8 +3946,9 @@ class GpodDetector:
                 raise ValueError(f'{name} image shape {img.shape} differs from the camera '
                                  f'size (height {cam.height}, width {cam.width})')
 
-    def _fit(self, u, v, d, cam: StereoCamera) -> PlaneFit | None:
-        """Robust, plausibility-checked plane fit of features (u, v, d) with the settings."""
+    def _fit(self, u, v, d, cam: StereoCamera, min_support: float = 0.0) -> PlaneFit | None:
+        """Robust, plausibility-checked plane fit of features (u, v, d) with the settings
+        (``min_support``: least fraction of the features on a RANSAC hypothesis)."""
         c = self.config
         # Weighted by disparity cubed: of two competing surfaces (the ground here and the
         # ground beyond a step), the nearer one is the one the wearer stands on; far
@@ -3945,7 +3957,7 @@ class GpodDetector:
             u, v, d, cam=cam, method=c.plane_method, inlier_threshold_px=c.plane_inlier_px,
             iterations=c.ransac_iterations, weights=np.maximum(d, 0.0) ** 3,
             min_features=c.min_plane_features, min_spread_px=c.plane_min_spread_px,
-            rng=self._rng, **c.plausibility())
+            min_support_fraction=min_support, rng=self._rng, **c.plausibility())
 
     def _near_calibration(self, fit: PlaneFit) -> bool:
         """Whether an ungated refit is close enough to the calibrated plane to trust."""
@@ -4093,8 +4105,8 @@ class GpodDetector:
         k = precision.shape[0]
         if c.threshold_mode == 'fixed' or not np.isfinite(self._sigma):
             return np.full(k, c.threshold_px), c.threshold_px
-        glob = float(np.clip(c.threshold_k * self._sigma, c.threshold_floor_px,
-                             c.threshold_ceiling_px))
+        ceiling = self.threshold_ceiling()
+        glob = float(np.clip(c.threshold_k * self._sigma, c.threshold_floor_px, ceiling))
         if not c.sigma_per_edge or self._sigma_bins is None:
             return np.full(k, glob), glob
         log_s, sig_b, v_b, f_b = self._sigma_bins
@@ -4104,8 +4116,23 @@ class GpodDetector:
         sig *= np.exp(np.maximum(log_s[0] - log_p, 0.0))
         if v is not None:
             sig = sig * np.interp(v, v_b, f_b)
-        thr = np.clip(c.threshold_k * sig, c.threshold_floor_px, c.threshold_ceiling_px)
+        thr = np.clip(c.threshold_k * sig, c.threshold_floor_px, ceiling)
         return thr, glob
+
+    def threshold_ceiling(self) -> float:
+        """The largest obstacle threshold of the 'sigma' mode, pixels: the larger of
+        ``threshold_ceiling_px`` and the disparity excess ``f*B*h/(H*z)`` of an obstacle
+        ``threshold_ceiling_height_m`` high at depth ``threshold_ceiling_depth_m`` for the
+        calibrated camera height H (the paper's rig: 1.7 px and 1.68 px; the KITTI car's:
+        4.7 px). ``threshold_ceiling_px`` alone before the calibration."""
+        c = self.config
+        cal = self._calib.metric if self._calib is not None else None
+        if (c.threshold_ceiling_height_m <= 0.0 or cal is None or self._cam is None
+                or not cal.height > 0.0):
+            return c.threshold_ceiling_px
+        excess = (self._cam.fb * c.threshold_ceiling_height_m
+                  / (cal.height * c.threshold_ceiling_depth_m))
+        return max(c.threshold_ceiling_px, float(excess))
 
     def _update_plane(self, u, v, d, s, cam: StereoCamera, still: bool = False,
                       motion: tuple | None = None) -> tuple[str, bool]:
@@ -4119,7 +4146,12 @@ class GpodDetector:
             if len(self._init_window) < c.init_frames:
                 return 'initialising', False
             uu, vv, dd, ss = (np.concatenate(x) for x in zip(*self._init_window))
-            fit = self._fit(uu, vv, dd, cam)
+            # No plane is known yet: the ground must hold init_min_inlier_fraction of the
+            # features to be a candidate at all (not only the winner checked below), so
+            # that the disparity weighting cannot crown a few wrong matches at large
+            # disparity, which a long baseline searched from min_range_m gives.
+            support = c.init_min_inlier_fraction
+            fit = self._fit(uu, vv, dd, cam, support)
             if fit is None:
                 return 'initialising', False
             if len(self._init_window) > 1:
@@ -4133,7 +4165,7 @@ class GpodDetector:
                 # than the joint fit (the near ground before a kerb down, where the joint
                 # took the lower ground beyond it), which a least-squares refit started
                 # from the joint plane does not.
-                last = self._fit(u, v, d, cam)
+                last = self._fit(u, v, d, cam, support)
                 if last is not None and (
                         not _planes_agree(fit.abc, last.abc, cam, c.plane_inlier_px)
                         or not self._window_shares_plane(fit, cam)):
