@@ -162,3 +162,38 @@ def test_settings_are_checked():
         GroundSurfaceConfig(near_m=9.0, far_m=8.0)
     with pytest.raises(ValueError, match='knot_spacing_m'):
         GroundSurfaceConfig(knot_spacing_m=0.0)
+
+
+def test_steps_and_slopes_over_many_seeds():
+    """10 cm steps up and down at 2.6-6 m (10 seeds) are never bent into; 3-5 degree
+    slopes up and down starting 2.5-5 m ahead (10 seeds) are followed within 5 cm."""
+    bent = []
+    for seed in range(10):
+        for at in (2.6, 3.0, 3.3, 3.5, 3.8, 4.2, 5.0, 6.0):
+            for rise in (0.1, -0.1):
+                pts = ground_points(step_at(at, rise), np.random.default_rng(100 + seed))
+                surf = fit_ground_surface(pts, PLANE)
+                beyond = surf.coordinates(pts)[0] > at + 0.2
+                if (np.max(np.abs(surf.profile(np.linspace(0, 10, 101)))) > 0.03
+                        or abs(np.median(surf.height_above(pts[beyond])) - rise) > 0.03):
+                    bent.append((seed, at, rise))
+    assert not bent
+    missed = []
+    s = np.linspace(2.5, 8.0, 12)
+    for seed in range(10):
+        for start in (2.5, 3.0, 4.0, 5.0):
+            for deg in (5.0, -5.0, 3.0):
+                prof = slope_from(start, deg)
+                surf = fit_ground_surface(ground_points(prof, np.random.default_rng(200 + seed)),
+                                          PLANE)
+                if surf.known_until_m < 8.0 or np.max(np.abs(surf.profile(s) - prof(s))) >= 0.05:
+                    missed.append((seed, start, deg))
+    assert not missed
+
+
+def test_a_plane_that_is_off_is_not_bent_for():
+    """rule_anchor: the near ground 3 cm below the plane (the plane off, as in a frame of
+    a vigorous walk): no profile, the plane alone."""
+    rng = np.random.default_rng(6)
+    surf = fit_ground_surface(ground_points(lambda s: 0.0 * s - 0.03, rng), PLANE)
+    assert surf.checks[0].refused_by == 'rule_anchor' and not surf.bends

@@ -23,10 +23,16 @@ taken only if it is ground, not an obstacle or a step:
   post is narrow; the ground is wide);
 * ``rule_grade``: the grade changes by at most ``max_grade_change`` from the previous
   segment (a ramp or a slope's start, not a wall);
-* ``rule_step``: the features of the segment's near and far halves both lie on the
-  segment's line (their median residuals differ by at most ``max_step_m``): a kerb of
-  10 cm inside a segment leaves a step in the residuals that a slope does not;
+* ``rule_step``: no step of more than ``max_step_m`` inside the segment: the features
+  are fitted by a line plus a step at each of 9 places along the segment, and the best
+  of these, if it cuts the line's residual sum by a quarter, must have a step of at most
+  ``max_step_m`` (a kerb of 10 cm is a line plus a step; a slope is a line);
 * ``rule_spread``: the residuals' robust spread is at most ``max_spread_m``.
+
+Before any segment, ``rule_anchor``: the features of the last ``knot_spacing_m`` before
+the first knot (when there are ``min_features`` of them) must lie on the plane (median
+height within ``anchor_max_m``); if not, the plane itself is off and no profile is fitted
+(it would bend to make up for the plane, not for the ground).
 
 The first segment that fails ends the known surface: beyond ``known_until_m`` the ground
 is *unknown* (the profile is held level at its last knot for the obstacle test, and the
@@ -58,8 +64,10 @@ class GroundSurfaceConfig:
         'by a height profile along the walking direction) rather than against the plane '
         'alone')
     near_m: float = param(
-        2.0, 'The plane alone is the ground up to this distance along the ground, metres '
-        '(the first knot of the profile)', range=(0.0, 50.0))
+        2.0, 'The plane alone is the ground up to this distance along the ground, or up '
+        'to where the ground is first seen if that is farther (the 5th percentile of the '
+        'distances of the features on the plane), metres: the first knot of the profile',
+        range=(0.0, 50.0))
     far_m: float = param(
         10.0, 'The profile is fitted out to this distance along the ground, metres',
         range=(0.5, 100.0))
@@ -80,8 +88,9 @@ class GroundSurfaceConfig:
         0.12, 'Largest change of the grade (rise per metre) from one segment to the next '
         '(0.12: about 7 degrees)', range=(0.0, 2.0))
     max_step_m: float = param(
-        0.04, "Largest difference of the median residuals of a segment's near and far "
-        'halves, metres: a step (a kerb) inside a segment, not a slope', range=(0.001, 1.0))
+        0.04, 'Largest step inside a segment (the best line-plus-step fit of its '
+        'features, when it cuts the residuals of the line alone by a quarter), metres: a step (a '
+        'kerb) is not a slope', range=(0.001, 1.0))
     max_spread_m: float = param(
         0.05, "Largest robust spread (1.4826 MAD) of a segment's residuals, metres",
         range=(0.001, 1.0))
@@ -91,6 +100,9 @@ class GroundSurfaceConfig:
         0.05, 'The profile is used only if it leaves the plane by more than this somewhere, '
         'metres: within it the plane alone (a profile fitted to flat ground wanders by a '
         'few cm, which would shift the obstacle test)', range=(0.0, 1.0))
+    anchor_max_m: float = param(
+        0.02, 'rule_anchor: largest median height of the ground just before the first '
+        'knot above (or below) the plane, metres', range=(0.001, 1.0))
     min_width_m: float = param(
         0.8, "Least width (10th to 90th percentile across the path) of a segment's "
         'features, metres: the ground is wide, an obstacle narrow', range=(0.0, 50.0))
@@ -105,7 +117,8 @@ class GroundSurfaceConfig:
 @dataclass(frozen=True)
 class SegmentCheck:
     """Why a segment was taken or not: the rule that refused it ('' = taken) and its
-    numbers (features, width m, grade change, step m, spread m)."""
+    numbers (features, width m, grade change, step m, spread m; for 'rule_anchor' the
+    near ground's median height above the plane as step_m)."""
 
     refused_by: str
     features: int
@@ -125,8 +138,8 @@ class GroundSurface:
         knots_z: (K,) float64 surface height above the plane at the knots, metres
             (knots_z[0] = 0).
         known_until_m: the surface is known (supported by features) up to this distance
-            along the ground; knots_s[-1] when all segments were taken, knots_s[0] when
-            none.
+            along the ground; knots_s[-1] when all segments were taken, knots_s[0] (the
+            first knot: near_m, or where the ground is first seen) when none.
         checks: one SegmentCheck per segment tried, near to far.
     """
 
@@ -233,6 +246,34 @@ def _fit_segment(s: np.ndarray, h: np.ndarray, s_a: float, z_a: float, length: f
     return z_b
 
 
+def _best_step(t: np.ndarray, h: np.ndarray, length: float, splits: int = 9) -> float:
+    """The height (m) of the step that best explains a segment's features beside a
+    line: for each split t* at 1/(splits+1) .. splits/(splits+1) of the segment,
+    least squares of h = c + g t + delta [t > t*] over the features (t: (N,) m from the
+    segment's start, h: (N,) m); the |delta| of the split whose residual sum is least
+    if it is at most 3/4 of the line's alone, else 0 (a slope has no step). NaN with
+    fewer than 3 features on either side of every split."""
+    if t.size < 6:
+        return math.nan
+    line = np.stack([np.ones_like(t), t], axis=1)
+    _, rss_line, *_ = np.linalg.lstsq(line, h, rcond=None)
+    rss_line = float(rss_line[0]) if rss_line.size else float(np.sum(
+        (h - line @ np.linalg.lstsq(line, h, rcond=None)[0]) ** 2))
+    best_rss, best_delta = math.inf, math.nan
+    for k in range(1, splits + 1):
+        after = t > length * k / (splits + 1)
+        if min(int(after.sum()), int((~after).sum())) < 3:
+            continue
+        a = np.column_stack([line, after.astype(float)])
+        coef, *_ = np.linalg.lstsq(a, h, rcond=None)
+        rss = float(np.sum((h - a @ coef) ** 2))
+        if rss < best_rss:
+            best_rss, best_delta = rss, abs(float(coef[2]))
+    if not math.isfinite(best_rss):
+        return math.nan
+    return best_delta if best_rss <= 0.75 * rss_line else 0.0
+
+
 def fit_ground_surface(points: np.ndarray, plane: MetricPlane,
                        config: GroundSurfaceConfig | None = None) -> GroundSurface:
     """Fit the surface ahead to matched features.
@@ -252,13 +293,32 @@ def fit_ground_surface(points: np.ndarray, plane: MetricPlane,
     s, l, h = surface.coordinates(points)
     use = np.abs(l) <= c.half_width_m
     s, l, h = s[use], l[use], h[use]
-    n_seg = max(int(math.ceil((c.far_m - c.near_m) / c.knot_spacing_m - 1e-9)), 1)
-    knots_s = c.near_m + c.knot_spacing_m * np.arange(n_seg + 1)
+    # The profile starts at near_m, or where the ground is first seen if that is
+    # farther (a car's cameras see the road from 5 m): the 5th percentile of the
+    # distances of the features on the plane.
+    on_plane = np.abs(h) <= c.gate_m
+    first = c.near_m
+    if np.count_nonzero(on_plane) >= c.min_features:
+        first = max(c.near_m, float(np.percentile(s[on_plane], 5)))
+    if first >= c.far_m - 0.5 * c.knot_spacing_m:
+        return GroundSurface.flat(plane, first)
+    n_seg = max(int(math.ceil((c.far_m - first) / c.knot_spacing_m - 1e-9)), 1)
+    knots_s = first + c.knot_spacing_m * np.arange(n_seg + 1)
     knots_s[-1] = min(knots_s[-1], c.far_m)
     knots_z = np.zeros(n_seg + 1)
     grade = 0.0                       # the previous segment's rise per metre
-    known = c.near_m
+    known = first
     checks: list[SegmentCheck] = []
+    # rule_anchor: the profile starts on the plane, so the ground just before its first
+    # knot must lie on the plane; if it does not, the plane is off (a frame of a
+    # vigorous walk) and a profile would bend to make up for it, not for the ground.
+    anchor = (s >= first - c.knot_spacing_m) & (s < first) & on_plane
+    if np.count_nonzero(anchor) >= c.min_features:
+        offset = float(np.median(h[anchor]))
+        if abs(offset) > c.anchor_max_m:
+            checks.append(SegmentCheck('rule_anchor', int(np.count_nonzero(anchor)),
+                                       math.nan, math.nan, offset, math.nan))
+            return GroundSurface(plane, knots_s, knots_z, known, tuple(checks))
     for k in range(n_seg):
         s_a, s_b = knots_s[k], knots_s[k + 1]
         length = s_b - s_a
@@ -282,10 +342,7 @@ def fit_ground_surface(points: np.ndarray, plane: MetricPlane,
             change = abs(new_grade - grade)
             res = hh - (z_a + (z_b - z_a) * (ss - s_a) / length)
             on = np.abs(res) <= c.gate_m
-            near_half = on & (ss < s_a + 0.5 * length)
-            far_half = on & ~near_half
-            if near_half.sum() >= 3 and far_half.sum() >= 3:
-                step = abs(float(np.median(res[far_half]) - np.median(res[near_half])))
+            step = _best_step(ss[on] - s_a, hh[on], length)
             spread = _mad(res[on])
             for name, bad in (('rule_grade', change > c.max_grade_change),
                               ('rule_step', not step <= c.max_step_m),
