@@ -696,7 +696,7 @@ class GpodConfig(PlausiblePlaneConfig):
         range=(1e-4, 10.0))
     # --- the ground surface ahead (core/ground_surface.py) -------------------------
     surface_enabled: bool = param(
-        False, 'Judge obstacles against the ground surface ahead -- the plane continued by '
+        True, 'Judge obstacles against the ground surface ahead -- the plane continued by '
         'a piecewise-linear height profile along the walking direction, where features '
         'support it (a slope, ramp or crest ahead is ground; a step is not) -- rather than '
         'against the plane alone')

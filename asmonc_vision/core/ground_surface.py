@@ -60,7 +60,7 @@ class GroundSurfaceConfig:
     """Settings of the ground surface ahead (``GpodConfig.surface_*``)."""
 
     enabled: bool = param(
-        False, 'Judge obstacles against the ground surface ahead (the near plane continued '
+        True, 'Judge obstacles against the ground surface ahead (the near plane continued '
         'by a height profile along the walking direction) rather than against the plane '
         'alone')
     near_m: float = param(
