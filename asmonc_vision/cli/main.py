@@ -8,6 +8,7 @@
     asmonc gait {sim,fusion,real,figs}         the walk model: errors, real walking, Figs. 13-15
     asmonc smallbox [--heights ..] [--ranges ..]  small boxes standing still: GPOD vs SGBM
     asmonc campaign [--minutes M] [--workers N]   random walks scored for safety: ours vs SGBM
+    asmonc images-bag FOLDER OUT [--repeat N]   a contract bag from a folder of stereo pairs
 """
 from __future__ import annotations
 
@@ -49,6 +50,10 @@ def build_parser() -> argparse.ArgumentParser:
     campaign.add_arguments(sub.add_parser(
         'campaign', help='random simulated walks scored for safety: ours against the SGBM peer',
         description=campaign.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
+    from asmonc_vision.cli import images_bag
+    images_bag.add_arguments(sub.add_parser(
+        'images-bag', help='a contract bag from a folder of stereo image pairs (e.g. KITTI)',
+        description=images_bag.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
     return parser
 
 

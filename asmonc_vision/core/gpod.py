@@ -98,6 +98,7 @@ from .edges import warm_up as edges_warm_up
 from .motion.geometry import so3_log
 from .obstacle_tracks import ObstacleTracker
 from .unseen_ground import UnseenGroundMonitor
+from .ground_surface import GroundSurface, GroundSurfaceConfig, fit_ground_surface
 from .ground_plane import (PlaneFit, PlausiblePlaneConfig, fit_ground_plane, lsq_plane,
                            plane_is_plausible, predict_plane)
 from .ground_plane import _median
@@ -319,7 +320,18 @@ class GpodConfig(PlausiblePlaneConfig):
     threshold_floor_px: float = param(
         0.5, "'sigma': least obstacle threshold, pixels", range=(0.05, 50.0))
     threshold_ceiling_px: float = param(
-        1.7, "'sigma': largest obstacle threshold, pixels", range=(0.05, 50.0))
+        1.7, "'sigma': largest obstacle threshold, pixels (or the disparity excess of "
+        'threshold_ceiling_height_m at threshold_ceiling_depth_m, if larger)',
+        range=(0.05, 50.0))
+    threshold_ceiling_height_m: float = param(
+        0.1, "'sigma': the largest obstacle threshold is at least the disparity excess "
+        'f*B*h/(H*z) of an obstacle this high (h, metres) at threshold_ceiling_depth_m (z) '
+        'for the camera height H of the calibrated plane: on a rig with a longer baseline '
+        'or focal length than the paper\'s, the ground\'s unevenness spreads over more '
+        'pixels, and so does the obstacle the ceiling keeps in view; 0 = '
+        'threshold_ceiling_px alone', range=(0.0, 1.0))
+    threshold_ceiling_depth_m: float = param(
+        5.0, "'sigma': the depth of threshold_ceiling_height_m, metres", range=(0.5, 100.0))
     sigma_per_edge: bool = param(
         True, "'sigma': take sigma per edge pixel rather than one for all: the residual "
         'spread of the initial fit in bins of the precision of the edges (gradient '
@@ -547,6 +559,10 @@ class GpodConfig(PlausiblePlaneConfig):
         2, 'Obstacle pixels an edge string needs to be an obstacle; 1 is the rule of '
         'Molton et al. (any pixel), 2 rejects single-pixel excursions of far ground',
         range=(1, 100000))
+    min_obstacle_pixels_focal_px: float = param(
+        300.0, 'The focal length min_obstacle_pixels is for, pixels (the paper\'s rig): a '
+        'camera with a longer one needs as many more pixels, the same angle (KITTI\'s '
+        'f = 719 px: 5); 0 = min_obstacle_pixels on any camera', range=(0.0, 100000.0))
     max_floating_height_m: float = param(
         0.5, 'An obstacle edge string must come down to within this height above the ground '
         '(its lowest reliably matched pixel); obstacles stand on the ground, a string '
@@ -678,6 +694,31 @@ class GpodConfig(PlausiblePlaneConfig):
     track_frame_period_s: float = param(
         0.1, 'Time between frames assumed when process() is given no stamp, s',
         range=(1e-4, 10.0))
+    # --- the ground surface ahead (core/ground_surface.py) -------------------------
+    surface_enabled: bool = param(
+        True, 'Judge obstacles against the ground surface ahead -- the plane continued by '
+        'a piecewise-linear height profile along the walking direction, where features '
+        'support it (a slope, ramp or crest ahead is ground; a step is not) -- rather than '
+        'against the plane alone')
+    surface_near_m: float = param(
+        2.0, 'surface: the plane alone is the ground up to this distance along the ground, '
+        'metres', range=(0.0, 50.0))
+    surface_far_m: float = param(
+        10.0, 'surface: the profile is fitted out to this distance along the ground, metres',
+        range=(0.5, 100.0))
+    surface_knot_spacing_m: float = param(
+        1.0, 'surface: distance between the knots of the profile, metres',
+        range=(0.1, 20.0))
+    surface_max_grade_change: float = param(
+        0.12, 'surface: largest change of the grade (rise per metre) from one segment to '
+        'the next', range=(0.0, 2.0))
+    surface_max_step_m: float = param(
+        0.04, "surface: largest difference of the median residuals of a segment's near "
+        'and far halves, metres (a step inside a segment is not a slope)',
+        range=(0.001, 1.0))
+    surface_min_width_m: float = param(
+        0.8, "surface: least width across the path of a segment's features, metres",
+        range=(0.0, 50.0))
     align_vertical: bool = param(
         True, 'Measure the vertical misalignment of the rectified pair from corners matched '
         'between its images (core.alignment) and, where it reaches align_apply_px, resample '
@@ -705,6 +746,9 @@ class GpodConfig(PlausiblePlaneConfig):
         if self.max_range_m > self.search_max_range_m:
             raise ValueError(f'GpodConfig.max_range_m = {self.max_range_m} must not exceed '
                              f'search_max_range_m = {self.search_max_range_m}')
+        if self.surface_near_m >= self.surface_far_m:
+            raise ValueError(f'GpodConfig.surface_near_m = {self.surface_near_m} must be less '
+                             f'than surface_far_m = {self.surface_far_m}')
         if self.threshold_floor_px > self.threshold_ceiling_px:
             raise ValueError(
                 f'GpodConfig.threshold_floor_px = {self.threshold_floor_px} must not exceed '
@@ -713,6 +757,15 @@ class GpodConfig(PlausiblePlaneConfig):
             raise ValueError(
                 f'GpodConfig.edge_target_density = {self.edge_target_density} must be at '
                 f'least edge_min_density = {self.edge_min_density}')
+
+
+def surface_config(c: 'GpodConfig') -> GroundSurfaceConfig:
+    """The ground surface settings of a GpodConfig (its ``surface_*`` fields)."""
+    return GroundSurfaceConfig(enabled=c.surface_enabled, near_m=c.surface_near_m,
+                               far_m=c.surface_far_m, knot_spacing_m=c.surface_knot_spacing_m,
+                               max_grade_change=c.surface_max_grade_change,
+                               max_step_m=c.surface_max_step_m,
+                               min_width_m=c.surface_min_width_m)
 
 
 @dataclass(frozen=True)
@@ -860,6 +913,9 @@ class GpodResult:
         misalignment_corrected: True when the right image was resampled to remove it.
         edge_threshold: the edge threshold used for this pair, grey levels per pixel
             (``edge_threshold``, or lower on weakly textured ground: ``edge_min_density``).
+        surface: the ground surface ahead the obstacles were judged against
+            (``surface_enabled``; its ``known_until_m``: how far the ground is known),
+            or None.
     """
 
     status: str
@@ -881,6 +937,7 @@ class GpodResult:
     misalignment_px: float = float('nan')
     misalignment_corrected: bool = False
     edge_threshold: float = float('nan')
+    surface: GroundSurface | None = None
 
     @property
     def plane(self) -> GpodPlane | None:
@@ -3890,6 +3947,8 @@ class GpodDetector:
         #: the current left image and the current frame's context for describing obstacles
         self._left: np.ndarray | None = None
         self._ctx: _FrameContext | None = None
+        #: the ground surface ahead of the latest pair (surface_enabled), or None
+        self._surface: GroundSurface | None = None
         c = self.config
         self._tracker = ObstacleTracker(coast_s=c.track_coast_s, gate_chi2=c.track_gate_chi2,
                                         process_noise_m=c.track_process_noise_m,
@@ -3935,8 +3994,9 @@ class GpodDetector:
                 raise ValueError(f'{name} image shape {img.shape} differs from the camera '
                                  f'size (height {cam.height}, width {cam.width})')
 
-    def _fit(self, u, v, d, cam: StereoCamera) -> PlaneFit | None:
-        """Robust, plausibility-checked plane fit of features (u, v, d) with the settings."""
+    def _fit(self, u, v, d, cam: StereoCamera, min_support: float = 0.0) -> PlaneFit | None:
+        """Robust, plausibility-checked plane fit of features (u, v, d) with the settings
+        (``min_support``: least fraction of the features on a RANSAC hypothesis)."""
         c = self.config
         # Weighted by disparity cubed: of two competing surfaces (the ground here and the
         # ground beyond a step), the nearer one is the one the wearer stands on; far
@@ -3945,7 +4005,7 @@ class GpodDetector:
             u, v, d, cam=cam, method=c.plane_method, inlier_threshold_px=c.plane_inlier_px,
             iterations=c.ransac_iterations, weights=np.maximum(d, 0.0) ** 3,
             min_features=c.min_plane_features, min_spread_px=c.plane_min_spread_px,
-            rng=self._rng, **c.plausibility())
+            min_support_fraction=min_support, rng=self._rng, **c.plausibility())
 
     def _near_calibration(self, fit: PlaneFit) -> bool:
         """Whether an ungated refit is close enough to the calibrated plane to trust."""
@@ -4093,8 +4153,8 @@ class GpodDetector:
         k = precision.shape[0]
         if c.threshold_mode == 'fixed' or not np.isfinite(self._sigma):
             return np.full(k, c.threshold_px), c.threshold_px
-        glob = float(np.clip(c.threshold_k * self._sigma, c.threshold_floor_px,
-                             c.threshold_ceiling_px))
+        ceiling = self.threshold_ceiling()
+        glob = float(np.clip(c.threshold_k * self._sigma, c.threshold_floor_px, ceiling))
         if not c.sigma_per_edge or self._sigma_bins is None:
             return np.full(k, glob), glob
         log_s, sig_b, v_b, f_b = self._sigma_bins
@@ -4104,8 +4164,33 @@ class GpodDetector:
         sig *= np.exp(np.maximum(log_s[0] - log_p, 0.0))
         if v is not None:
             sig = sig * np.interp(v, v_b, f_b)
-        thr = np.clip(c.threshold_k * sig, c.threshold_floor_px, c.threshold_ceiling_px)
+        thr = np.clip(c.threshold_k * sig, c.threshold_floor_px, ceiling)
         return thr, glob
+
+    def min_obstacle_pixels(self, cam: StereoCamera) -> float:
+        """Obstacle pixels an edge string needs on this camera: ``min_obstacle_pixels``
+        times f / ``min_obstacle_pixels_focal_px`` (rounded), at least
+        ``min_obstacle_pixels``: the same angle of evidence on any rig."""
+        c = self.config
+        if c.min_obstacle_pixels_focal_px <= 0.0:
+            return float(c.min_obstacle_pixels)
+        return float(max(c.min_obstacle_pixels,
+                         round(c.min_obstacle_pixels * cam.f / c.min_obstacle_pixels_focal_px)))
+
+    def threshold_ceiling(self) -> float:
+        """The largest obstacle threshold of the 'sigma' mode, pixels: the larger of
+        ``threshold_ceiling_px`` and the disparity excess ``f*B*h/(H*z)`` of an obstacle
+        ``threshold_ceiling_height_m`` high at depth ``threshold_ceiling_depth_m`` for the
+        calibrated camera height H (the paper's rig: 1.7 px and 1.68 px; the KITTI car's:
+        4.7 px). ``threshold_ceiling_px`` alone before the calibration."""
+        c = self.config
+        cal = self._calib.metric if self._calib is not None else None
+        if (c.threshold_ceiling_height_m <= 0.0 or cal is None or self._cam is None
+                or not cal.height > 0.0):
+            return c.threshold_ceiling_px
+        excess = (self._cam.fb * c.threshold_ceiling_height_m
+                  / (cal.height * c.threshold_ceiling_depth_m))
+        return max(c.threshold_ceiling_px, float(excess))
 
     def _update_plane(self, u, v, d, s, cam: StereoCamera, still: bool = False,
                       motion: tuple | None = None) -> tuple[str, bool]:
@@ -4119,7 +4204,12 @@ class GpodDetector:
             if len(self._init_window) < c.init_frames:
                 return 'initialising', False
             uu, vv, dd, ss = (np.concatenate(x) for x in zip(*self._init_window))
-            fit = self._fit(uu, vv, dd, cam)
+            # No plane is known yet: the ground must hold init_min_inlier_fraction of the
+            # features to be a candidate at all (not only the winner checked below), so
+            # that the disparity weighting cannot crown a few wrong matches at large
+            # disparity, which a long baseline searched from min_range_m gives.
+            support = c.init_min_inlier_fraction
+            fit = self._fit(uu, vv, dd, cam, support)
             if fit is None:
                 return 'initialising', False
             if len(self._init_window) > 1:
@@ -4133,7 +4223,7 @@ class GpodDetector:
                 # than the joint fit (the near ground before a kerb down, where the joint
                 # took the lower ground beyond it), which a least-squares refit started
                 # from the joint plane does not.
-                last = self._fit(u, v, d, cam)
+                last = self._fit(u, v, d, cam, support)
                 if last is not None and (
                         not _planes_agree(fit.abc, last.abc, cam, c.plane_inlier_px)
                         or not self._window_shares_plane(fit, cam)):
@@ -4386,7 +4476,8 @@ class GpodDetector:
             num_edges=(len(p.el), len(p.er)), timings_ms=timings, sigma_px=self._sigma,
             still=p.still, detections=detections,
             misalignment_px=al.max_px if al.measurements else float('nan'),
-            misalignment_corrected=al.applied, edge_threshold=p.el.threshold)
+            misalignment_corrected=al.applied, edge_threshold=p.el.threshold,
+            surface=self._surface if have_plane else None)
 
     def _begin(self, left: np.ndarray, right: np.ndarray, cam: StereoCamera) -> None:
         """Check a pair against its camera (ValueError, `_check_images`); a camera
@@ -4705,9 +4796,19 @@ class GpodDetector:
                 still: bool) -> tuple[GpodFeatures, tuple[GpodObstacle, ...]]:
         c = self.config
         pd = plane_disparity(self._abc, u, v)
-        excess = d - pd
         pts = cam.triangulate(u, v, d)
         h = metric.signed_height(pts)
+        self._surface = None
+        if c.surface_enabled:
+            # The reference of the obstacle test: the plane continued by the profile
+            # ahead where features support it (core/ground_surface.py).
+            surf = fit_ground_surface(pts, metric, surface_config(c))
+            self._surface = surf
+            if surf.bends:
+                pd_surf = surf.disparity(cam, u, v)
+                pd = np.where(np.isfinite(pd_surf), pd_surf, pd)
+                h = surf.height_above(pts)
+        excess = d - pd
         feet = pts - h[:, None] * metric.normal_up[None, :]
         ground_range = np.linalg.norm(feet + metric.height * metric.normal_up[None, :], axis=1)
         tol = c.string_disparity_tolerance_px
@@ -4765,6 +4866,7 @@ class GpodDetector:
         sid = m.string_id
         n_s = max(el.num_strings, int(sid.max()) + 1 if sid.size else 0)
         weight = self._evidence_weight(m.strength)
+        min_px = self.min_obstacle_pixels(cam)
         if obst.any():
             # The edge-string rule holds for each piece of a string between stretches of
             # it on the ground (`string_pieces`): a noisy pixel far below a post, on the
@@ -4778,10 +4880,10 @@ class GpodDetector:
             o_sel = obst[sel]
             n_piece = np.bincount(piece[o_sel], weights=weight[sel][o_sel],
                                   minlength=int(piece.max()) + 1)
-            obst[sel] &= n_piece[piece] + 1e-9 >= c.min_obstacle_pixels
+            obst[sel] &= n_piece[piece] + 1e-9 >= min_px
         n_obst = np.bincount(sid[obst], weights=weight[obst], minlength=n_s) + 1e-9
         n_drop = np.bincount(sid[drop], weights=weight[drop], minlength=n_s) + 1e-9
-        obst_string = n_obst >= c.min_obstacle_pixels
+        obst_string = n_obst >= min_px
         if obst_string.any():
             # Obstacles stand on the ground: a string whose matched pixels all float
             # higher than max_floating_height_m above it is a mismatch (a distant pole
@@ -4803,7 +4905,7 @@ class GpodDetector:
             if occluded.any():
                 seen = obst & ~occluded
                 n_seen = np.bincount(sid[seen], weights=weight[seen], minlength=n_s)
-                obst_string &= n_seen + 1e-9 >= c.min_obstacle_pixels
+                obst_string &= n_seen + 1e-9 >= min_px
                 seen = drop & ~occluded
                 n_drop = np.bincount(sid[seen], weights=weight[seen], minlength=n_s) + 1e-9
         drop_string = ~obst_string & (n_drop >= c.min_drop_pixels)
@@ -4827,7 +4929,7 @@ class GpodDetector:
             # _WEAK_MIN_PIXELS, whose mean excess is _WEAK_SIGMAS standard errors above
             # the plane (sum of z > K sqrt(n _WEAK_CORR)).
             weak = (usable & (ex_mean > _WEAK_FRACTION * thr) & (h <= c.max_obstacle_height_m)
-                    & ~(obst_string | drop_string | (n_obst >= c.min_obstacle_pixels))[sid])
+                    & ~(obst_string | drop_string | (n_obst >= min_px))[sid])
             wi = np.flatnonzero(weak)
             if wi.size:
                 z = ex_mean[wi] * (c.threshold_k / thr[wi])

@@ -146,7 +146,8 @@ def _ransac_best(u: np.ndarray, v: np.ndarray, d: np.ndarray, threshold: float,
                  iterations: int, rng: np.random.Generator, cam: StereoCamera | None = None,
                  bounds: tuple[float, float, float] = (0.1, 10.0, 75.0),
                  weights: np.ndarray | None = None, confidence: float = 0.99,
-                 batch: int = 16, max_score_points: int = 1000) -> np.ndarray | None:
+                 batch: int = 16, max_score_points: int = 1000,
+                 min_support_fraction: float = 0.0) -> np.ndarray | None:
     """Best minimal-sample plane by MSAC score (truncated squared residual, optionally
     weighted per point by ``weights``).
 
@@ -154,7 +155,10 @@ def _ransac_best(u: np.ndarray, v: np.ndarray, d: np.ndarray, threshold: float,
     usual adaptive bound ``log(1 - confidence) / log(1 - w^3)`` (w the inlier fraction of
     the best hypothesis so far), or ``iterations``. With ``cam``, only hypotheses that
     are a plausible ground (``bounds`` = min height, max height, max tilt) are scored,
-    so that a dominant non-ground plane (a wall, a car) cannot win.
+    so that a dominant non-ground plane (a wall, a car) cannot win. A hypothesis within
+    ``threshold`` of fewer than ``min_support_fraction`` of the (scored) points is not a
+    candidate: weighted by a power of the disparity, a few dozen wrong matches at large
+    disparity (a long baseline searched from 1 m) outweigh thousands on the ground.
 
     Returns:
         (3,) abc of the best hypothesis, or None if no usable sample was drawn.
@@ -196,8 +200,10 @@ def _ransac_best(u: np.ndarray, v: np.ndarray, d: np.ndarray, threshold: float,
         np.multiply(sq, sq, out=sq)
         trunc = np.minimum(sq, t2)
         score = trunc.sum(axis=1) if ws is None else trunc @ ws
+        if min_support_fraction > 0.0:
+            score[np.mean(sq <= t2, axis=1) < min_support_fraction] = np.inf
         j = int(np.argmin(score))
-        if score[j] < best_score:
+        if np.isfinite(score[j]) and score[j] < best_score:
             best_score = float(score[j])
             best = np.array([a[j], b[j], c[j]])
             w = float(np.mean(sq[j] <= t2))
@@ -249,7 +255,8 @@ def fit_ground_plane(u, v, d, *, cam: StereoCamera | None = None, method: str = 
                      refine_iterations: int = 3, trim_fraction: float = 0.2,
                      min_features: int = 10, min_height_m: float = 0.1,
                      max_height_m: float = 10.0, max_tilt_deg: float = 75.0,
-                     min_spread_px: float = 0.0, rng=None) -> PlaneFit | None:
+                     min_spread_px: float = 0.0, min_support_fraction: float = 0.0,
+                     rng=None) -> PlaneFit | None:
     """Robust least-squares ground plane ``d = a*u + b*v + c`` from matched features.
 
     ``'ransac'``: the best of at most ``iterations`` random minimal triples (MSAC score
@@ -283,6 +290,11 @@ def fit_ground_plane(u, v, d, *, cam: StereoCamera | None = None, method: str = 
             smooth slabs -- leave the plane free to turn about that line: fitted to
             them it is off by pixels everywhere else, with residuals as small as a
             good fit's.
+        min_support_fraction: 'ransac': least fraction of the features (unweighted)
+            within ``inlier_threshold_px`` of a hypothesis for it to be scored, in
+            [0, 1] (0: any). With ``weights`` growing with the disparity, the
+            best-scored plane can otherwise be a chance consensus of a few wrong matches
+            at large disparity.
         rng: int seed or numpy Generator (RANSAC sampling).
     Returns:
         The PlaneFit, or None when the fit fails (too few points, degenerate, or not a
@@ -320,7 +332,8 @@ def fit_ground_plane(u, v, d, *, cam: StereoCamera | None = None, method: str = 
     if method == 'ransac':
         gen = np.random.default_rng(rng)
         abc = _ransac_best(uf, vf, df, thr, max(int(iterations), 1), gen, cam=cam,
-                           bounds=(min_height_m, max_height_m, max_tilt_deg), weights=wf)
+                           bounds=(min_height_m, max_height_m, max_tilt_deg), weights=wf,
+                           min_support_fraction=float(min_support_fraction))
         if abc is None:
             return None
         inl = np.abs(df - (abc[0] * uf + abc[1] * vf + abc[2])) <= thr

@@ -1,0 +1,199 @@
+"""The ground surface ahead (core/ground_surface.py) on synthetic ground features.
+
+Features are points of a ground whose height above the near plane is a known profile of
+the distance ahead (a slope that starts 3 m ahead, a crest, a ramp), triangulated as a
+stereo rig sees them (the disparity rounded with noise), plus boxes and kerbs that must
+stay obstacles: the profile must not bend into a 10 cm step.
+"""
+import numpy as np
+import pytest
+
+from asmonc_vision.core.camera import MetricPlane, StereoCamera, ground_axes
+from asmonc_vision.core.ground_surface import (GroundSurface, GroundSurfaceConfig,
+                                               fit_ground_surface)
+
+CAM = StereoCamera(f=300.0, cx=159.5, cy=119.5, baseline=0.35, width=320, height=240)
+PITCH = np.radians(20.0)
+H = 1.25
+# the plane 1.25 m below the camera pitched 20 degrees down: normal (up) in the optical frame
+PLANE = MetricPlane(normal_up=np.array([0.0, -np.cos(PITCH), -np.sin(PITCH)]), height=H)
+
+
+def ground_points(profile, rng, n=4000, s_max=9.0, half_width=2.0, sigma_d=0.15):
+    """(N, 3) points of the ground z = profile(s) above PLANE, seen through CAM with
+    disparity noise sigma_d px (the points outside the image dropped)."""
+    origin, fwd, left = ground_axes(PLANE)
+    s = rng.uniform(1.5, s_max, n)
+    lat = rng.uniform(-half_width, half_width, n)
+    p = origin + s[:, None] * fwd + lat[:, None] * left + profile(s)[:, None] * PLANE.normal_up
+    return _through_camera(p, rng, sigma_d)
+
+
+def _through_camera(p, rng, sigma_d):
+    u, v, d = CAM.project(p)
+    ok = (u >= 0) & (u < CAM.width) & (v >= 0) & (v < CAM.height) & (d > 0)
+    d = d[ok] + rng.normal(0.0, sigma_d, ok.sum())
+    return CAM.triangulate(u[ok], v[ok], d)
+
+
+def box_points(s_foot, lateral, height, width, rng, n=150, sigma_d=0.15, base=None):
+    """Points of the front face of a box standing on the ground at s_foot (m)."""
+    origin, fwd, left = ground_axes(PLANE)
+    z0 = 0.0 if base is None else base
+    lat = lateral + rng.uniform(-width / 2, width / 2, n)
+    up = z0 + rng.uniform(0.0, height, n)
+    p = origin + s_foot * fwd + lat[:, None] * left + up[:, None] * PLANE.normal_up
+    return _through_camera(p, rng, sigma_d)
+
+
+def slope_from(start, deg):
+    g = np.tan(np.radians(deg))
+    return lambda s: g * np.maximum(np.asarray(s) - start, 0.0)
+
+
+def step_at(at, rise):
+    return lambda s: np.where(np.asarray(s) >= at, rise, 0.0)
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_a_slope_starting_ahead_becomes_ground(seed):
+    rng = np.random.default_rng(seed)
+    prof = slope_from(3.0, 5.0)
+    pts = ground_points(prof, rng)
+    surf = fit_ground_surface(pts, PLANE)
+    assert surf.known_until_m >= 8.0, surf.checks
+    s = np.linspace(2.0, 8.0, 13)
+    assert np.max(np.abs(surf.profile(s) - prof(s))) < 0.05
+    # the ground points stand less than 5 cm above it; above the plane by up to 44 cm
+    s_pts, _, h_plane = surf.coordinates(pts)
+    inside = s_pts <= 8.0
+    assert np.percentile(np.abs(surf.height_above(pts[inside])), 99) < 0.08
+    assert h_plane[inside].max() > 0.35
+
+
+@pytest.mark.parametrize('profile', [
+    slope_from(2.5, -5.0),                                   # a slope down starting ahead
+    lambda s: 0.08 * np.clip(np.asarray(s) - 3.0, 0, 1.5),  # a kerb ramp (8 %) to 12 cm
+    lambda s: slope_from(2.0, 3.0)(s) - slope_from(5.0, 6.0)(s),   # a crest at 5 m
+])
+def test_ramps_and_crests_are_ground(profile):
+    rng = np.random.default_rng(5)
+    pts = ground_points(profile, rng)
+    surf = fit_ground_surface(pts, PLANE)
+    assert surf.known_until_m >= 7.0, surf.checks
+    s = np.linspace(2.0, surf.known_until_m, 11)
+    assert np.max(np.abs(surf.profile(s) - profile(s))) < 0.05
+
+
+def test_flat_ground_keeps_the_plane():
+    rng = np.random.default_rng(3)
+    surf = fit_ground_surface(ground_points(lambda s: 0.0 * s, rng), PLANE)
+    assert surf.known_until_m >= 8.0
+    assert np.max(np.abs(surf.knots_z)) < 0.02
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+@pytest.mark.parametrize('at', [3.0, 3.5, 4.2])
+@pytest.mark.parametrize('rise', [0.10, -0.10])
+def test_a_step_of_10cm_is_not_a_slope(seed, at, rise):
+    """A kerb up (or a drop) of 10 cm across the path: the profile does not bend into
+    it; the ground beyond it is unknown, and the step stays 10 cm above (below) what the
+    surface says."""
+    rng = np.random.default_rng(seed)
+    pts = ground_points(step_at(at, rise), rng)
+    surf = fit_ground_surface(pts, PLANE)
+    assert surf.known_until_m <= at + 1e-9, surf.checks
+    assert np.max(np.abs(surf.profile(np.linspace(0, 9, 50)))) < 0.03
+    beyond = surf.coordinates(pts)[0] > at + 0.2
+    assert np.median(surf.height_above(pts[beyond])) == pytest.approx(rise, abs=0.03)
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+@pytest.mark.parametrize('height', [0.05, 0.10])
+@pytest.mark.parametrize('at', [2.5, 4.0])
+def test_boxes_stay_obstacles(seed, height, at):
+    """A box of 5-10 cm at 2-5 m on flat ground: the surface stays the plane under it."""
+    rng = np.random.default_rng(seed)
+    pts = np.vstack([ground_points(lambda s: 0.0 * s, rng),
+                     box_points(at, 0.2, height, 0.3, rng)])
+    surf = fit_ground_surface(pts, PLANE)
+    assert abs(float(surf.profile(np.array([at]))[0])) < 0.02
+    top = box_points(at, 0.2, 0.0, 0.3, rng, base=height)
+    assert np.median(surf.height_above(top)) == pytest.approx(height, abs=0.02)
+
+
+def test_box_on_a_slope_stays_an_obstacle():
+    rng = np.random.default_rng(11)
+    prof = slope_from(3.0, 5.0)
+    origin, fwd, left = ground_axes(PLANE)
+    pts = np.vstack([ground_points(prof, rng),
+                     box_points(5.0, 0.0, 0.10, 0.3, rng, base=float(prof(5.0)))])
+    surf = fit_ground_surface(pts, PLANE)
+    top = box_points(5.0, 0.0, 0.0, 0.3, rng, base=float(prof(5.0)) + 0.10)
+    assert np.median(surf.height_above(top)) == pytest.approx(0.10, abs=0.03)
+
+
+def test_no_ground_ahead_is_unknown():
+    rng = np.random.default_rng(4)
+    near = ground_points(lambda s: 0.0 * s, rng, s_max=2.2)
+    surf = fit_ground_surface(near, PLANE)
+    assert surf.known_until_m == pytest.approx(2.0)
+    assert surf.checks[0].refused_by == 'rule_support'
+    empty = fit_ground_surface(np.zeros((0, 3)), PLANE)
+    assert empty.known_until_m == pytest.approx(2.0) and not empty.bends
+
+
+def test_surface_disparity_matches_the_ground():
+    """The surface's disparity at a ground point's pixel is the point's disparity."""
+    rng = np.random.default_rng(8)
+    prof = slope_from(3.0, 5.0)
+    surf = GroundSurface(PLANE, np.arange(2.0, 9.0), prof(np.arange(2.0, 9.0)), 8.0)
+    pts = ground_points(prof, rng, s_max=8.0, sigma_d=0.0)
+    u_c, v, d = CAM.project(pts)                  # cyclopean pixels
+    assert np.allclose(surf.disparity(CAM, u_c, v), d, atol=1e-6)
+    flat = GroundSurface.flat(PLANE, 2.0)
+    from asmonc_vision.core.camera import plane_disparity, plane_from_metric
+    assert np.allclose(flat.disparity(CAM, u_c, v),
+                       plane_disparity(plane_from_metric(CAM, PLANE), u_c, v))
+
+
+def test_settings_are_checked():
+    with pytest.raises(ValueError, match='near_m'):
+        GroundSurfaceConfig(near_m=9.0, far_m=8.0)
+    with pytest.raises(ValueError, match='knot_spacing_m'):
+        GroundSurfaceConfig(knot_spacing_m=0.0)
+
+
+def test_steps_and_slopes_over_many_seeds():
+    """10 cm steps up and down at 2.6-6 m (10 seeds) are never bent into; 3-5 degree
+    slopes up and down starting 2.5-5 m ahead (10 seeds) are followed within 5 cm."""
+    bent = []
+    for seed in range(10):
+        for at in (2.6, 3.0, 3.3, 3.5, 3.8, 4.2, 5.0, 6.0):
+            for rise in (0.1, -0.1):
+                pts = ground_points(step_at(at, rise), np.random.default_rng(100 + seed))
+                surf = fit_ground_surface(pts, PLANE)
+                beyond = surf.coordinates(pts)[0] > at + 0.2
+                if (np.max(np.abs(surf.profile(np.linspace(0, 10, 101)))) > 0.03
+                        or abs(np.median(surf.height_above(pts[beyond])) - rise) > 0.03):
+                    bent.append((seed, at, rise))
+    assert not bent
+    missed = []
+    s = np.linspace(2.5, 8.0, 12)
+    for seed in range(10):
+        for start in (2.5, 3.0, 4.0, 5.0):
+            for deg in (5.0, -5.0, 3.0):
+                prof = slope_from(start, deg)
+                surf = fit_ground_surface(ground_points(prof, np.random.default_rng(200 + seed)),
+                                          PLANE)
+                if surf.known_until_m < 8.0 or np.max(np.abs(surf.profile(s) - prof(s))) >= 0.05:
+                    missed.append((seed, start, deg))
+    assert not missed
+
+
+def test_a_plane_that_is_off_is_not_bent_for():
+    """rule_anchor: the near ground 3 cm below the plane (the plane off, as in a frame of
+    a vigorous walk): no profile, the plane alone."""
+    rng = np.random.default_rng(6)
+    surf = fit_ground_surface(ground_points(lambda s: 0.0 * s - 0.03, rng), PLANE)
+    assert surf.checks[0].refused_by == 'rule_anchor' and not surf.bends
