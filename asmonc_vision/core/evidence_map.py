@@ -97,7 +97,7 @@ class EvidenceMapConfig:
                                 'no raised evidence (the clearing is faster than the '
                                 'filling)', range=(0.0, 10.0))
     still_hit_factor: float = param(
-        0.5, 'raised or drop evidence of a pair taken while the rig stands still counts '
+        1.0, 'raised or drop evidence of a pair taken while the rig stands still counts '
         'this much (its frames repeat the same matches and their errors)', range=(0.0, 1.0))
     min_ground_pixels: int = param(2, 'ground-matched edge pixels in a cell that clear '
                                    'it', range=(1, 1000))
@@ -116,8 +116,12 @@ class EvidenceMapConfig:
         'began has two views, m (a mismatch of a repetitive pattern moves in the world '
         'by a fraction of this)', range=(0.0, 10.0))
     still_min_frames: int = param(
-        3, 'pairs with evidence at a cell while the rig stands still that count as two '
+        2, 'pairs with evidence at a cell while the rig stands still that count as two '
         'views (no parallax while still)', range=(1, 1000))
+    stationary_step_m: float = param(
+        0.03, 'a pair whose camera moved less than this along the ground since the '
+        'previous one (turning on the spot) counts as still for still_min_frames, m',
+        range=(0.0, 1.0))
     height_process_noise: float = param(
         0.05, 'process noise q of a cell height, m/sqrt(s)', range=(0.0, 10.0))
     join_cells: int = param(2, 'confirmed cells this many cells apart belong to one '
@@ -126,10 +130,10 @@ class EvidenceMapConfig:
         0.15, "a region's nearest point is taken among its cells within this of its "
         'nearest range, at their median bearing, m', range=(0.0, 2.0))
     attach_m: float = param(
-        0.3, "a region is reported at the detector's report of its kind whose foot lies "
-        "within this of one of its cells (the detector's placement from the whole "
-        "silhouette), else at its own nearest point, m (0: always its own)",
-        range=(0.0, 5.0))
+        0.3, "a detector report whose foot lies within this of a confirmed cell of its kind "
+        "is confirmed and reported as the detector placed it (from the whole silhouette); "
+        "a region that confirms none is reported at its own nearest point, m (0: the "
+        "map's placement only)", range=(0.0, 5.0))
     min_region_cells: int = param(1, 'least confirmed cells in a reported region',
                                   range=(1, 10000))
     motion_gap_frames: int = param(
@@ -334,8 +338,12 @@ class EvidenceMap:
         c = self.config
         dt = 0.0 if self._stamp_s is None else max(stamp_s - self._stamp_s, 0.0)
         self._stamp_s = stamp_s
-        if not self._move(plane, motion, still):
+        moved = self._move(plane, motion, still)
+        if moved is None:
             return self.objects
+        # in place: still, or a step shorter than stationary_step_m (turning on the spot);
+        # no parallax, so only separate frames can count as separate looks
+        still = still or moved < c.stationary_step_m
         # decay towards the prior: L = L exp(-dt / τ)
         if dt > 0:
             k = np.float32(math.exp(-dt / c.decay_s))
@@ -349,8 +357,9 @@ class EvidenceMap:
         self.objects = self._regions(stamp_s, cam)
         return self.objects
 
-    def _move(self, plane: MetricPlane | None, motion, still: bool) -> bool:
-        """Carry the wearer's pose by the motion; False when the pair cannot be entered."""
+    def _move(self, plane: MetricPlane | None, motion, still: bool) -> float | None:
+        """Carry the wearer's pose by the motion; the step's length (m; inf when unknown),
+        or None when the pair cannot be entered (no plane)."""
         c = self.config
         if plane is None:
             # no plane: nothing entered; the pose is carried by the motion over the
@@ -365,7 +374,8 @@ class EvidenceMap:
                 if self._gap > c.motion_gap_frames:
                     self.reset()
             self.objects = ()
-            return False
+            return None
+        step = math.inf
         if self._plane is not None:
             if motion is None and still:
                 motion = (np.eye(3), np.zeros(3))
@@ -373,17 +383,16 @@ class EvidenceMap:
                 self._gap += 1
                 if self._gap > c.motion_gap_frames:
                     self.reset()
-                    self._plane = plane
-                    return True
-                # the previous pose held: the evidence stays where it was
+                # else the previous pose is held: the evidence stays where it was
                 self._plane = plane
-                return True
+                return step
             self._gap = 0
             dx, dy, dyaw = ground_motion(self._plane, plane, motion[0], motion[1])
             self.pose = _compose(self.pose, dx, dy, dyaw)
+            step = math.hypot(dx, dy)
             self._scroll()
         self._plane = plane
-        return True
+        return step
 
     def to_world(self, xy: np.ndarray) -> np.ndarray:
         """(N, 2) points of the current G to W, m."""
@@ -603,6 +612,14 @@ class EvidenceMap:
         return tuple(out)
 
     # ------------------------------------------------------------------ views
+    def occupancy(self) -> np.ndarray:
+        """(n, n) int8 occupancy of the cells, [iy, ix]: P(raised) in percent (0-100),
+        -1 where the cell holds no evidence (|L_r| and |L_d| below 0.05)."""
+        p = np.rint(100.0 * self.probability()).astype(np.int8)
+        unknown = (np.abs(self.L_r) < 0.05) & (np.abs(self.L_d) < 0.05)
+        p[unknown] = -1
+        return p
+
     def grid_in_camera(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The grid's placement in the current left optical frame: (R (3, 3), p (3,)),
         the rotation of W's axes and the position of the grid's corner (cell (0, 0)'s
