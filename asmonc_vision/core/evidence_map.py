@@ -104,6 +104,23 @@ class EvidenceMapConfig:
     clear_guard_cells: int = param(
         1, 'ground seen within this many cells of raised or drop evidence of the same pair '
         'does not clear (an obstacle is seen with the ground at its foot)', range=(0, 10))
+    ray_logodds: float = param(
+        1.2, 'log-odds taken from a raised cell seen through: ground seen behind it along '
+        'sight lines passing lower than its top (0: off)', range=(0.0, 10.0))
+    ray_min_pixels: int = param(3, 'sight lines through a raised cell below its top, on '
+                                'each side of its evidence point, that clear it in a pair',
+                                range=(1, 10000))
+    ray_lateral_m: float = param(0.03, 'a sight line passes through a raised cell when '
+                                 'it passes this near its evidence point, m',
+                                 range=(0.001, 1.0))
+    ray_margin_m: float = param(0.05, 'a sight line must pass this far below a cell top '
+                                '(at least 2 standard deviations of it) to count, m',
+                                range=(0.0, 2.0))
+    ray_stop_m: float = param(0.2, 'sight lines are followed up to this short of their '
+                              'ground point, m', range=(0.0, 2.0))
+    ray_max_points: int = param(600, 'ground matches of a pair whose sight lines are '
+                                'followed (evenly picked when there are more)',
+                                range=(1, 100000))
     min_logodds: float = param(-2.0, 'least log-odds of a cell', range=(-20.0, 0.0))
     max_logodds: float = param(3.5, 'largest log-odds of a cell', range=(0.0, 20.0))
     report_logodds: float = param(1.5, 'a cell is reported (with two views) from this '
@@ -127,8 +144,8 @@ class EvidenceMapConfig:
     join_cells: int = param(2, 'confirmed cells this many cells apart belong to one '
                             'region (0: touching cells only)', range=(0, 20))
     near_tolerance_m: float = param(
-        0.15, "a region's nearest point is taken among its cells within this of its "
-        'nearest range, at their median bearing, m', range=(0.0, 2.0))
+        0.15, "a region's nearest point is at its nearest range, at the median bearing of "
+        'its cells within this of that range, m', range=(0.0, 2.0))
     attach_m: float = param(
         0.3, "a detector report whose foot lies within this of a confirmed cell of its kind "
         "is confirmed and reported as the detector placed it (from the whole silhouette); "
@@ -314,7 +331,7 @@ class EvidenceMap:
                  (self.pt_xy, 0), (self.first_xy, np.nan), (self.still_hits, 0),
                  (self.two_views, False), (self.last_hit_s, -np.inf), (self.ids, 0))
         for a, fill in fills:
-            _shift(a, -k[1], -k[0], fill)
+            _shift(a, int(k[1]), int(k[0]), fill)
 
     # ------------------------------------------------------------------ update
     def update(self, stamp_s: float, plane: MetricPlane | None, ev: PairEvidence | None,
@@ -425,6 +442,9 @@ class EvidenceMap:
         n_g = np.bincount(flat[kind == GROUND], minlength=n2)
         self._pair_count = n_r + n_d
         Lr, Ld = self.L_r.reshape(-1), self.L_d.reshape(-1)
+        # a cell seen through by this pair's sight lines takes none of its raised evidence
+        seen_through = self._rays(ev.xy[ev.kind == GROUND], n_r)
+        n_r[seen_through] = 0
         raised = np.flatnonzero(n_r)
         dropc = np.flatnonzero(n_d & (n_r == 0))
         free = (n_g >= c.min_ground_pixels) & (n_g > n_r + n_d)
@@ -442,6 +462,10 @@ class EvidenceMap:
         Ld[free] -= c.free_logodds
         np.clip(Lr, c.min_logodds, c.max_logodds, out=Lr)
         np.clip(Ld, c.min_logodds, c.max_logodds, out=Ld)
+        if seen_through.size:
+            Lr[seen_through] -= c.ray_logodds
+            np.clip(Lr, c.min_logodds, c.max_logodds, out=Lr)
+            free = np.union1d(free, seen_through)
         # cells whose evidence is gone forget their height and views
         gone = free[(Lr[free] <= 0) & (Ld[free] <= 0)]
         self._forget(gone)
@@ -485,6 +509,46 @@ class EvidenceMap:
             if still:
                 sh_[seen] = np.minimum(sh_[seen] + 1, 30000)
             tv[seen] |= (moved >= c.min_baseline_m) | (sh_[seen] >= c.still_min_frames)
+
+    def _rays(self, ground_xy: np.ndarray, n_r: np.ndarray) -> np.ndarray:
+        """Flat indices of raised cells seen through by this pair's ground matches.
+
+        The sight line from the camera (``H`` = the plane's camera height above the
+        wearer's foot) to a ground point at range R passes over the ground at range r
+        at ``h_ray = H (1 - r / R)``. A sight line passing within ``ray_lateral_m`` of a
+        raised cell's evidence point (its mean matched point), lower than its top (the
+        height estimate x less ``ray_margin_m`` and 2 sqrt(P)), went through where the
+        thing was said to stand. A real thing hides the ground behind it; its silhouette
+        edge (where its evidence is) is passed on its outer side only, and a thin post
+        hides the sight lines through its middle. A mismatch floating above the ground
+        (a repetitive pattern matched a period off) is seen through on both sides: at
+        least ``ray_min_pixels`` sight lines on each side in a pair, more in all than
+        the cell's own raised pixels, clear it. The sight lines stop ``ray_stop_m``
+        short of their ground point."""
+        c = self.config
+        none = np.zeros(0, np.int64)
+        if c.ray_logodds <= 0 or ground_xy.shape[0] == 0 or self._plane is None:
+            return none
+        Lr, hx, hP = self.L_r.reshape(-1), self.h_x.reshape(-1), self.h_P.reshape(-1)
+        cells = np.flatnonzero((Lr > 0) & np.isfinite(hP))
+        if not cells.size:
+            return none
+        if ground_xy.shape[0] > c.ray_max_points:
+            pick = np.linspace(0, ground_xy.shape[0] - 1, c.ray_max_points).astype(np.int64)
+            ground_xy = ground_xy[pick]
+        R = np.hypot(ground_xy[:, 0], ground_xy[:, 1])                 # (n,)
+        gh = ground_xy / np.maximum(R, 1e-6)[:, None]                   # sight line directions
+        p = self.to_ground(self.pt_xy.reshape(-1, 2)[cells].astype(np.float64))   # (m, 2)
+        top = hx[cells] - np.maximum(c.ray_margin_m, 2.0 * np.sqrt(hP[cells]))
+        # (m, n): each evidence point against each sight line
+        along = p[:, 0:1] * gh[None, :, 0] + p[:, 1:2] * gh[None, :, 1]
+        lateral = gh[None, :, 0] * p[:, 1:2] - gh[None, :, 1] * p[:, 0:1]
+        h_ray = self._plane.height * (1.0 - along / R[None, :])
+        through = ((np.abs(lateral) <= c.ray_lateral_m) & (along > 0.3)
+                   & (along < R[None, :] - c.ray_stop_m) & (h_ray < top[:, None]))
+        left = np.count_nonzero(through & (lateral > 0), axis=1)
+        right = np.count_nonzero(through & (lateral <= 0), axis=1)
+        return cells[(np.minimum(left, right) >= c.ray_min_pixels) & (left + right > n_r[cells])]
 
     def _forget(self, cells: np.ndarray) -> None:
         if not cells.size:
@@ -583,9 +647,10 @@ class EvidenceMap:
                 # sight is nearest where the sight line meets it, not at its noisiest cell)
                 near_set = np.flatnonzero(r <= float(r.min()) + c.near_tolerance_m)
                 b = np.arctan2(g[near_set, 1], g[near_set, 0])
-                i0 = int(near_set[np.argsort(b)[(near_set.size - 1) // 2]])
-                near = g[i0]
-                across = np.array([-near[1], near[0]]) / max(float(r[i0]), 1e-6)
+                b_med = float(b[np.argsort(b)[(near_set.size - 1) // 2]])
+                r0 = float(r.min())
+                near = r0 * np.array([math.cos(b_med), math.sin(b_med)])
+                across = np.array([-near[1], near[0]]) / max(r0, 1e-6)
                 lat = g @ across
                 hx = self.h_x.reshape(-1)[cs]
                 height = float(hx.min()) if drop else float(hx.max())
@@ -636,7 +701,8 @@ class EvidenceMap:
 
 
 def _shift(a: np.ndarray, dy: int, dx: int, fill) -> None:
-    """Shift array ``a`` (first two axes [y, x]) in place by (dy, dx) cells, filling the
+    """Shift array ``a`` (first two axes [y, x]) in place so that new[i, j] = old[i + dy,
+    j + dx] (the grid's origin moved by (dy, dx) cells), filling the
     cells shifted in with ``fill``."""
     n0, n1 = a.shape[0], a.shape[1]
     out = np.full_like(a, fill)
