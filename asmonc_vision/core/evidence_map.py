@@ -147,7 +147,7 @@ class EvidenceMapConfig:
         0.15, "a region's nearest point is at its nearest range, at the median bearing of "
         'its cells within this of that range, m', range=(0.0, 2.0))
     attach_m: float = param(
-        0.3, "a detector report whose foot lies within this of a confirmed cell of its kind "
+        0.5, "a detector report whose foot lies within this of a confirmed cell of its kind "
         "is confirmed and reported as the detector placed it (from the whole silhouette); "
         "a region that confirms none is reported at its own nearest point, m (0: the "
         "map's placement only)", range=(0.0, 5.0))
@@ -456,8 +456,10 @@ class EvidenceMap:
                               np.ones((k, k), np.uint8))
             free &= near.reshape(-1) == 0
         free = np.flatnonzero(free)
-        Lr[raised] += hit
-        Ld[dropc] += hit
+        # a thing seen now is not held back by the ground seen there before (a thing
+        # that appears, a passer-by stepping in): L = max(L, 0) + hit
+        Lr[raised] = np.maximum(Lr[raised], 0.0) + hit
+        Ld[dropc] = np.maximum(Ld[dropc], 0.0) + hit
         Lr[free] -= c.free_logodds
         Ld[free] -= c.free_logodds
         np.clip(Lr, c.min_logodds, c.max_logodds, out=Lr)
