@@ -205,6 +205,7 @@ def test_moving_without_a_motion_clears_the_map():
         assert emap.objects
     emap.update(0.6, PLANE, None, None, False)
     assert not emap.objects and not (emap.L_r > 0).any()
+    assert emap.placed_pairs == 1       # the Perception stage passes the detector's reports
 
 
 # ------------------------------------------------------------------ mismatches

@@ -156,6 +156,10 @@ class EvidenceMapConfig:
     motion_gap_frames: int = param(
         2, 'pairs in a row the rig may move with no motion known (the previous pose held) '
         'before the map is cleared', range=(0, 100))
+    min_placed_pairs: int = param(
+        5, "until the map has placed this many pairs in a row (after a start, or after it "
+        "was cleared for want of a motion) the detector's reports are published unfiltered",
+        range=(0, 1000))
     default_sigma_px: float = param(0.4, 'σ_d of a match when the detector gives '
                                     'neither a per-pixel threshold nor a sigma, px', range=(0.01, 10.0))
 
@@ -310,6 +314,8 @@ class EvidenceMap:
         self._plane: MetricPlane | None = None
         self._stamp_s: float | None = None
         self._gap = 0
+        #: pairs entered since the last reset (the map's evidence is continuous over them)
+        self.placed_pairs = 0
         self._pair_count: np.ndarray | None = None
         self.objects: tuple[MapObject, ...] = ()
 
@@ -358,6 +364,7 @@ class EvidenceMap:
         moved = self._move(plane, motion, still)
         if moved is None:
             return self.objects
+        self.placed_pairs += 1
         # in place: still, or a step shorter than stationary_step_m (turning on the spot);
         # no parallax, so only separate frames can count as separate looks
         still = still or moved < c.stationary_step_m

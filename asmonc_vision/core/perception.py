@@ -53,9 +53,11 @@ class Perception:
                 stamp_ns: int | None = None,
                 motion: tuple | Callable[[], tuple | None] | None = None) -> GpodResult:
         """One stereo pair: arguments and result as `GpodDetector.process`; with the map
-        enabled, the result's ``obstacles`` are the map's confirmed objects (track ids
-        are the map's region ids) and ``timings_ms['map']`` is the map's time, ms
-        (included in 'total')."""
+        enabled, the result's ``obstacles`` are those the map confirms
+        (`objects_to_obstacles`), or the detector's own while the map has placed fewer
+        than ``min_placed_pairs`` pairs in a row (it needs the camera motion while the
+        rig moves: without it the map is cleared and the detector's reports pass), and
+        ``timings_ms['map']`` is the map's time, ms (included in 'total')."""
         got: list = []
         if callable(motion):
             fn = motion
@@ -76,9 +78,14 @@ class Perception:
         plane = result.metric_plane if result.status == 'tracking' else None
         ev = self.evidence(result, cam) if plane is not None else None
         objects = self.map.update(stamp_s, plane, ev, m, result.still, cam)
-        obstacles = (tuple(objects_to_obstacles(objects, cam, plane, result.obstacles,
-                                                self.map_config.attach_m))
-                     if plane is not None else ())
+        if self.map.placed_pairs < self.map_config.min_placed_pairs:
+            # the map has not seen enough pairs in a row to confirm anything (a start, or
+            # no motion while walking): the detector's reports go out as they are
+            obstacles = result.obstacles
+        else:
+            obstacles = (tuple(objects_to_obstacles(objects, cam, plane, result.obstacles,
+                                                    self.map_config.attach_m))
+                         if plane is not None else ())
         ms = (time.perf_counter() - t0) * 1e3
         timings = dict(result.timings_ms)
         timings['map'] = ms
