@@ -630,7 +630,7 @@ class EvidenceMap:
             if c.join_cells > 0:
                 k = 2 * c.join_cells + 1
                 m8 = cv2.dilate(m8, np.ones((k, k), np.uint8))
-            n_lab, lab = cv2.connectedComponents(m8, connectivity=8)
+            _, lab = cv2.connectedComponents(m8, connectivity=8)
             lab = np.where(mask, lab, 0)
             flat = lab.reshape(-1)
             cells = np.flatnonzero(flat)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -62,7 +62,7 @@ class Perception:
         if callable(motion):
             fn = motion
 
-            def motion():      # noqa: F811 - the same callable, its answer kept
+            def motion():      # the same callable, its answer kept
                 m = fn()
                 got.append(m)
                 return m
