@@ -14,7 +14,8 @@ CONFIG = Path(__file__).resolve().parent.parent / 'config'
 # yaml file -> (node name, [(parameter prefix, 'module:Class'), ...])
 NODE_CONFIGS = {
     'detector.yaml': ('detector_node', [('', 'asmonc_vision.nodes.detector_node:DetectorNodeConfig'),
-                                        ('gpod.', 'asmonc_vision.core.gpod:GpodConfig')]),
+                                        ('gpod.', 'asmonc_vision.core.gpod:GpodConfig'),
+                                        ('map.', 'asmonc_vision.core.evidence_map:EvidenceMapConfig')]),
     'alarm.yaml': ('alarm_node', [('', 'asmonc_vision.core.alarm:AlarmConfig')]),
     'stereo_capture.yaml': ('stereo_capture_node', [('', 'asmonc_vision.core.capture:CaptureConfig')]),
     'bag_player.yaml': ('bag_player_node', [('', 'asmonc_vision.nodes.player_node:PlayerConfig')]),

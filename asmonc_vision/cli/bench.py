@@ -231,15 +231,21 @@ class FrameRun:
     cpu_ms: float = float('nan')
 
 
-def make_method(method: str, threshold_px: float | None = None):
-    """A fresh detector: 'gpod' (GpodDetector, default GpodConfig) or 'sgbm' (SgbmBaseline,
-    default SgbmConfig); threshold_px overrides the obstacle threshold of either (for GPOD
-    it selects the fixed threshold, instead of the default k*sigma one)."""
+def make_method(method: str, threshold_px: float | None = None, map_enabled: bool | None = None):
+    """A fresh detector: 'gpod' (`core.perception.Perception`: GpodDetector, default
+    GpodConfig, then the evidence map when ``map_enabled`` (None: its default), as the
+    detector node runs them) or 'sgbm' (SgbmBaseline, default SgbmConfig); threshold_px
+    overrides the obstacle threshold of either (for GPOD it selects the fixed threshold,
+    instead of the default k*sigma one)."""
     if method == 'gpod':
-        from asmonc_vision.core.gpod import GpodConfig, GpodDetector
+        from asmonc_vision.core.evidence_map import EvidenceMapConfig
+        from asmonc_vision.core.gpod import GpodConfig
+        from asmonc_vision.core.perception import Perception
         cfg = GpodConfig() if threshold_px is None else GpodConfig(
             threshold_px=threshold_px, threshold_mode='fixed')
-        return GpodDetector(cfg)
+        mcfg = (EvidenceMapConfig() if map_enabled is None
+                else EvidenceMapConfig(enabled=map_enabled))
+        return Perception(cfg, mcfg)
     if method == 'sgbm':
         from asmonc_vision.core.baseline import SgbmBaseline, SgbmConfig
         cfg = SgbmConfig() if threshold_px is None else SgbmConfig(threshold_px=threshold_px)
@@ -248,26 +254,43 @@ def make_method(method: str, threshold_px: float | None = None):
 
 
 def run_method(frames: list[Frame], method: str = 'gpod', threshold_px: float | None = None,
-               progress=None) -> list[FrameRun]:
+               progress=None, map_enabled: bool | None = None,
+               egomotion: bool = False) -> list[FrameRun]:
     """Run a fresh detector over the frames in order, on one OpenCV thread.
 
     Args:
         frames: with images.
         method: 'gpod' or 'sgbm'; threshold_px: obstacle threshold override.
         progress: optional callback(done, total) after each frame.
+        map_enabled: GPOD's evidence map on or off (None: its default).
+        egomotion: GPOD is given each pair's motion from the egomotion estimator
+            (`core.motion.EgomotionEstimator`, default settings, run here as the egomotion
+            node runs it; its time is not counted), as the node graph gives it; without
+            it, no motion (the tracks and the map are carried only while still).
     """
     import cv2
 
     from asmonc_vision.core.evaluation import frame_from_detections
 
     cv2.setNumThreads(1)
-    det = make_method(method, threshold_px)
+    det = make_method(method, threshold_px, map_enabled)
+    est = None
+    if egomotion and method == 'gpod':
+        from asmonc_vision.core.motion import EgomotionEstimator
+        est = EgomotionEstimator()
     out = []
+    prev_stamp = None
     for i, f in enumerate(frames):
+        motion = None
+        if est is not None:
+            er = est.process(f.left, f.right, f.cam, f.stamp_ns)
+            if er.ok and er.reference_stamp_ns == prev_stamp:
+                motion = (er.motion.R, er.motion.t)
+            prev_stamp = f.stamp_ns
         c = time.thread_time()
         t = time.perf_counter()
         if method == 'gpod':
-            res = det.process(f.left, f.right, f.cam, stamp_ns=f.stamp_ns)
+            res = det.process(f.left, f.right, f.cam, stamp_ns=f.stamp_ns, motion=motion)
         else:
             res = det.process(f.left, f.right, f.cam)
         ms = (time.perf_counter() - t) * 1e3

@@ -4,10 +4,13 @@
                 [--outputs DIR ...] [--json OUT.json] [--plots DIR] [--frames N]
                 [--match-radius 0.3] [--min-height 0.10] [--max-range 5]
 
-By default runs our detector (GPOD, default settings) in this process, without ROS, over
-each bag's stereo pairs in order (with no motion input: its obstacle tracks are carried
-only while the rig stands still; the node graph feeds them the egomotion node's motion,
-so score a graph run with `asmonc run BAG --out DIR` and `--outputs DIR`); `--method sgbm` runs the OpenCV StereoSGBM baseline
+By default runs our detector (GPOD, default settings, then the evidence map when it is
+enabled: `core.perception.Perception`, as the detector node runs them) in this process,
+without ROS, over each bag's stereo pairs in order (with no motion input: its obstacle
+tracks and map are carried only while the rig stands still; `--egomotion` runs the
+egomotion estimator here and feeds its motion as the node graph does; `--map on|off`
+sets the evidence map; or score a graph run with `asmonc run BAG --out DIR` and
+`--outputs DIR`); `--method sgbm` runs the OpenCV StereoSGBM baseline
 (core.baseline) instead, and several methods or `--threshold-px` values give one run
 each. With `--outputs DIR` (one per BAG) nothing is run: the /obstacles and
 /ground_plane recorded by `asmonc run BAG --out DIR` are scored against BAG's truth,
@@ -68,6 +71,12 @@ def add_arguments(p) -> None:
     p.add_argument('--motion', action='store_true',
                    help='also score visual egomotion against /ground_truth/camera_pose: run '
                         'the estimator offline (or, with --outputs, the recorded /egomotion)')
+    p.add_argument('--map', choices=('default', 'on', 'off'), default='default',
+                   help="GPOD's evidence map (core.evidence_map, `map.enabled`): its default, "
+                        'on or off')
+    p.add_argument('--egomotion', action='store_true',
+                   help="feed GPOD each pair's motion from the egomotion estimator run here "
+                        '(as the node graph does; its time is not counted), instead of none')
     p.add_argument('--frames', type=int, default=0, help='only the first N pairs per bag (0: all)')
     p.add_argument('--match-radius', type=float, default=0.3,
                    help='a report within this distance (m) on the ground finds a true obstacle')
@@ -376,6 +385,7 @@ def run(args) -> int:
     if args.frames < 0 or args.match_radius <= 0 or args.max_range <= 0 or args.min_height < 0:
         err('--frames must be >= 0, --match-radius and --max-range > 0, --min-height >= 0')
         return 2
+    map_enabled = {'default': None, 'on': True, 'off': False}[args.map]
     thresholds = args.threshold_px or [None]
     for t in thresholds:
         if t is not None and not (0.05 <= t <= 50):
@@ -424,14 +434,20 @@ def run(args) -> int:
         for method in args.method:
             for thr in thresholds:
                 label = f'{name} {method}' + (f' {thr:g}px' if thr is not None else '')
-                rs = run_method(frames, method, thr, progress=progress(label))
+                rs = run_method(frames, method, thr, progress=progress(label),
+                                map_enabled=map_enabled, egomotion=args.egomotion)
                 progress.clear()
                 ev = score_runs(frames, rs, **criteria)
-                cfg = make_method(method, thr).config
-                runs.append({'bag': str(bag), 'name': name, 'method': method,
-                             'source': 'in-process', 'threshold_px': cfg.threshold_px,
-                             'config': to_dict(cfg), 'safety': method_safety(truth, rs),
-                             'evaluation': ev})
+                det = make_method(method, thr, map_enabled)
+                cfg = det.config
+                run = {'bag': str(bag), 'name': name, 'method': method,
+                       'source': 'in-process', 'threshold_px': cfg.threshold_px,
+                       'config': to_dict(cfg), 'safety': method_safety(truth, rs),
+                       'evaluation': ev}
+                if method == 'gpod':
+                    run['map_config'] = to_dict(det.map_config)
+                    run['egomotion'] = bool(args.egomotion)
+                runs.append(run)
                 groups.setdefault((method, cfg.threshold_px), []).append(ev)
 
     pooled = []

@@ -185,12 +185,17 @@ def summarise(t: dict) -> dict:
                 cpu_ms_per_frame=t['cpu_ms'] / max(t['frames'], 1))
 
 
-def make_detector(method: str, gpod_config=None):
-    """A fresh detector: 'gpod' (GpodDetector, ``gpod_config`` or the defaults) or 'sgbm'
-    (SgbmBaseline, default SgbmConfig)."""
+def make_detector(method: str, gpod_config=None, map_enabled: bool | None = None):
+    """A fresh detector: 'gpod' (`core.perception.Perception`: GpodDetector with
+    ``gpod_config`` or the defaults, then the evidence map when ``map_enabled``, None: its
+    default) or 'sgbm' (SgbmBaseline, default SgbmConfig)."""
     if method == 'gpod':
-        from asmonc_vision.core.gpod import GpodConfig, GpodDetector
-        return GpodDetector(gpod_config or GpodConfig())
+        from asmonc_vision.core.evidence_map import EvidenceMapConfig
+        from asmonc_vision.core.gpod import GpodConfig
+        from asmonc_vision.core.perception import Perception
+        return Perception(gpod_config or GpodConfig(),
+                          EvidenceMapConfig() if map_enabled is None
+                          else EvidenceMapConfig(enabled=map_enabled))
     if method == 'sgbm':
         from asmonc_vision.core.baseline import SgbmBaseline, SgbmConfig
         return SgbmBaseline(SgbmConfig())
@@ -210,7 +215,8 @@ def rows(methods) -> tuple[str, ...]:
 
 def run_scene(height: float, range_m: float, seed: int, box_frames: int = 20,
               clear_frames: int = 5, methods=METHODS, match_radius: float = 0.3,
-              gpod_config=None, cache: Path | None = None) -> dict:
+              gpod_config=None, cache: Path | None = None,
+              map_enabled: bool | None = None) -> dict:
     """Render one scene and run each method, fresh, on its frames in order.
 
     Returns:
@@ -225,7 +231,7 @@ def run_scene(height: float, range_m: float, seed: int, box_frames: int = 20,
     rig_fps = RigSettings().fps        # the rig of small_box_scene
     out = {}
     for method in methods:
-        det = make_detector(method, gpod_config)
+        det = make_detector(method, gpod_config, map_enabled)
         tally, per_frame = new_tally(), new_tally()
         period_ns = int(round(1e9 / rig_fps))
         for k, (left, right, truths) in enumerate(frames):
@@ -252,14 +258,15 @@ def _run_scene_job(job):
 
 def measure(heights, ranges, seeds, box_frames: int = 20, clear_frames: int = 5,
             methods=METHODS, match_radius: float = 0.3, gpod_config=None, workers: int = 1,
-            cache: Path | None = None, progress=None) -> dict:
+            cache: Path | None = None, progress=None, map_enabled: bool | None = None) -> dict:
     """Run every (height, range) cell over the seeds.
 
     Returns:
         {(height, range): {row: tally}} (rows: see `rows`).
     """
     kw = dict(box_frames=box_frames, clear_frames=clear_frames, methods=tuple(methods),
-              match_radius=match_radius, gpod_config=gpod_config, cache=cache)
+              match_radius=match_radius, gpod_config=gpod_config, cache=cache,
+              map_enabled=map_enabled)
     jobs = [(h, r, s, kw) for h in heights for r in ranges for s in seeds]
     cells: dict = {}
     total = len(jobs)
@@ -312,6 +319,9 @@ def add_arguments(p) -> None:
                    help='scenes run in parallel (default 1)')
     p.add_argument('--cache', type=Path, default=None,
                    help='keep the rendered frames in this directory for later runs')
+    p.add_argument('--map', choices=('default', 'on', 'off'), default='default',
+                   help="GPOD's evidence map (core.evidence_map): its default, on or off "
+                        '(standing still, no motion is needed)')
     p.add_argument('--json', type=Path, default=None, help='also write the numbers as JSON')
     p.add_argument('--quiet', action='store_true', help='no progress')
     p.set_defaults(func=run)
@@ -354,7 +364,8 @@ def run(args) -> int:
     for h, r in pairs:
         res = measure([h], [r], seeds, args.frames, args.clear_frames, args.method,
                       args.match_radius, workers=args.workers, cache=args.cache,
-                      progress=lambda d, _t, base=done: progress(base + d, total))
+                      progress=lambda d, _t, base=done: progress(base + d, total),
+                      map_enabled={'default': None, 'on': True, 'off': False}[args.map])
         done += len(seeds)
         cells.update(res)
     if not args.quiet:

@@ -11,7 +11,15 @@ callbacks that receive images stay fast. Publishes, per processed pair:
   its tracked place (`core.obstacle_tracks`; moved by `/egomotion`, below).
 * `/ground_plane` (asmonc_vision_msgs/GroundPlane)
 * `/obstacles/markers` (visualization_msgs/MarkerArray), `/detector/debug_image` (bgr8)
+* `/obstacle_map` (nav_msgs/OccupancyGrid, RELIABLE, depth 1), with the evidence map
+  enabled (``map.enabled``) and someone subscribed: the map around the wearer, in the
+  pair's left optical frame (the grid's origin pose places its horizontal world-fixed
+  axes there), cell value P(raised) in percent, -1 where it holds no evidence
 * `/diagnostics`
+
+With ``map.enabled`` the obstacles reported are those the evidence map confirms
+(`core.perception.Perception`, `core.evidence_map`): seen from two viewpoints, not
+cleared by ground seen where they stood.
 
 Subscribes to `/egomotion` (geometry_msgs/TransformStamped, the visual egomotion node's
 motion of the left camera from the previous pair to this one) as the motion input of the
@@ -28,6 +36,7 @@ ground plane from the images: the node works on any rectified rig and image size
 """
 from __future__ import annotations
 
+import array
 import collections
 import threading
 import time
@@ -35,7 +44,9 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from geometry_msgs.msg import Point, TransformStamped
+from geometry_msgs.msg import Point, Pose, TransformStamped
+from nav_msgs.msg import MapMetaData, OccupancyGrid
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Image
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
@@ -45,8 +56,10 @@ from asmonc_vision_msgs.msg import GroundPlane, Obstacle, ObstacleArray
 from asmonc_vision.core.camera import StereoCamera, metric_from_plane
 from asmonc_vision.core.config import param
 from asmonc_vision.core.draw import draw_debug
-from asmonc_vision.core.gpod import GpodConfig, GpodDetector, GpodResult
-from asmonc_vision.core.rotations import quaternion_to_matrix
+from asmonc_vision.core.evidence_map import EvidenceMap, EvidenceMapConfig
+from asmonc_vision.core.gpod import GpodConfig, GpodResult
+from asmonc_vision.core.perception import Perception
+from asmonc_vision.core.rotations import matrix_to_quaternion, quaternion_to_matrix
 from asmonc_vision.nodes.common import (IMAGE_QOS, RESULT_QOS, Diagnostics, declare_config,
                                         run_node)
 from asmonc_vision.nodes.conversions import array_to_image_msg, stamp_to_ns
@@ -54,6 +67,10 @@ from asmonc_vision.nodes.stereo_input import StereoInputConfig, StereoInputNode,
 
 #: A rectified pair's rows this far apart (pixels) is reported: the rig needs recalibrating.
 _MISALIGNMENT_WARN_PX = 1.0
+#: /obstacle_map: a large message each pair, only the newest of interest
+MAP_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                     reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.VOLATILE)
 _STATUS = {'initialising': GroundPlane.INITIALISING, 'tracking': GroundPlane.TRACKING,
            'lost': GroundPlane.LOST}
 
@@ -89,7 +106,10 @@ class DetectorNode(StereoInputNode):
         super().__init__('detector_node', 'detector', **kwargs)
         self.node_config = declare_config(self, DetectorNodeConfig)
         self.gpod_config = declare_config(self, GpodConfig, prefix='gpod.')
-        self.detector = GpodDetector(self.gpod_config)
+        self.map_config = declare_config(self, EvidenceMapConfig, prefix='map.')
+        self.perception = Perception(self.gpod_config, self.map_config)
+        self.detector = self.perception.detector
+        self.pub_map = self.create_publisher(OccupancyGrid, '/obstacle_map', MAP_QOS)
         self.pub_obstacles = self.create_publisher(ObstacleArray, '/obstacles', RESULT_QOS)
         self.pub_plane = self.create_publisher(GroundPlane, '/ground_plane', RESULT_QOS)
         self.pub_markers = self.create_publisher(MarkerArray, '/obstacles/markers', RESULT_QOS)
@@ -120,7 +140,7 @@ class DetectorNode(StereoInputNode):
         self.get_logger().info('detector ready: waiting for /stereo/{left,right}/image_rect')
 
     def restart(self) -> None:
-        self.detector.reset()
+        self.perception.reset()
         self._prev_seq = None
 
     def _debug_work(self) -> None:
@@ -198,11 +218,16 @@ class DetectorNode(StereoInputNode):
                      cam: StereoCamera) -> None:
         follows = self._prev_seq is not None and pair.seq == self._prev_seq + 1
         self._prev_seq = pair.seq
-        result = self.detector.process(
+        result = self.perception.process(
             left, right, cam, stamp_ns=pair.stamp_ns,
             motion=lambda: self._motion_for(pair.stamp_ns, follows))
         header = pair.left.header
         self.pub_obstacles.publish(obstacles_to_msg(result, header))
+        emap = self.perception.map
+        if emap is not None and self.pub_map.get_subscription_count() > 0:
+            grid = map_msg(emap, header)
+            if grid is not None:
+                self.pub_map.publish(grid)
         self.pub_plane.publish(plane_to_msg(result, cam, header))
         if self.node_config.publish_markers and self.pub_markers.get_subscription_count() > 0:
             self.pub_markers.publish(markers_msg(result, header))
@@ -254,6 +279,25 @@ def obstacles_to_msg(result: GpodResult, header) -> ObstacleArray:
             max(x, 0), max(y, 0), max(w, 0), max(h, 0))
         out.obstacles.append(m)
     return out
+
+
+def map_msg(emap: EvidenceMap, header) -> OccupancyGrid | None:
+    """The evidence map as an OccupancyGrid in the pair's frame (None before a pair with
+    a ground plane placed the wearer)."""
+    placed = emap.grid_in_camera()
+    if placed is None:
+        return None
+    R, corner = placed
+    q = matrix_to_quaternion(R)
+    origin = Pose()
+    origin.position.x, origin.position.y, origin.position.z = (float(v) for v in corner)
+    (origin.orientation.x, origin.orientation.y, origin.orientation.z,
+     origin.orientation.w) = (float(v) for v in q)
+    info = MapMetaData(map_load_time=header.stamp, resolution=float(emap.config.cell_m),
+                       width=int(emap.n), height=int(emap.n), origin=origin)
+    msg = OccupancyGrid(header=header, info=info)
+    msg.data = array.array('b', emap.occupancy().tobytes())
+    return msg
 
 
 def plane_to_msg(result: GpodResult, cam: StereoCamera, header) -> GroundPlane:

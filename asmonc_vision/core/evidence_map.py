@@ -1,0 +1,799 @@
+"""Evidence over time in the world: an egocentric 2.5-D map of raised, dropped and free ground.
+
+A detection in one stereo pair can be a mismatch: a repetitive pattern (a drainage grate,
+paving joints, a painted line) matched one period off stands above or below the ground
+plane in that pair. What tells it from an obstacle is that it is not *where* an obstacle
+would be: as the viewpoint moves, a mismatch moves in the world (its false depth follows
+the pattern's period in the image, not a surface), while a real obstacle stays where it
+is. This module keeps the matched evidence in a grid fixed in the world and reports only
+what stays.
+
+Frames (REP 103):
+
+* the ground frame G of a pair: origin on the ground plane below the left camera, x the
+  walking direction (the optical axis projected onto the plane), y left, z up along the
+  plane's normal (`core.camera.ground_axes`);
+* the map frame W: a horizontal frame fixed in the world (the first ground frame, moved
+  by the camera motion since). The grid's axes are W's; the wearer's pose in W is an
+  SE(2) pose (x, y, yaw) of the current G. The grid is re-centred on the wearer by whole
+  cells (the evidence does not blur).
+
+Each pair, `EvidenceMap.update`:
+
+1. moves the wearer: the camera motion ``T_prev_curr`` (``X_prev = R X_curr + t``,
+   left optical frames, `/egomotion`'s convention) gives ``T_Gprev_Gcurr =
+   T_Gprev_cam · T_prev_curr · T_cam_Gcurr``, whose horizontal part (x, y, yaw) is
+   composed onto the pose. With no motion the identity is used while the rig stands
+   still; while it moves with no motion for more than ``motion_gap_frames`` pairs the
+   map is cleared (its evidence can no longer be placed).
+2. decays every cell's log-odds towards the prior: ``L = L exp(-dt / decay_s)``.
+3. places each matched edge pixel of the pair: its 3-D point from (u, v, d), its height
+   above the plane h and that height's standard deviation from the pixel's disparity
+   noise, ``σ_h = |h(d + σ_d) - h(d)|``, σ_d the detector's per-pixel threshold over
+   ``threshold_k``; a pixel the detector counted as an obstacle is *raised* evidence at
+   the cell below it, one counted as a drop is *drop* evidence, a reliably matched
+   pixel on the plane is *ground* evidence (free space) at its cell.
+4. updates the cells: raised evidence in a cell adds ``hit_logodds`` to its raised
+   log-odds ``L_r`` (once per pair: the pixels of one pair share their errors), ground
+   evidence with no raised evidence there subtracts ``free_logodds`` from ``L_r`` and the
+   drop log-odds ``L_d`` (a thing said to be there is cleared by the ground seen where it
+   stood); log-odds stay within [``min_logodds``, ``max_logodds``]. The top of a raised
+   cell is a scalar Kalman filter per cell (batched):
+
+       predict:  x = F x,          F = 1 (a thing stays as tall as it is)
+                 P = F P Fᵀ + Q,   Q = q² dt
+       update:   y = z - H x,      H = 1, z the pair's highest raised point in the cell
+                 S = H P Hᵀ + R,   R = σ_h² of that point
+                 K = P Hᵀ S⁻¹
+                 x = x + K y
+                 P = (1 - K H) P
+
+5. counts viewpoints: a cell remembers where the wearer was when its evidence began;
+   it has *two views* once it is seen raised (or dropped) again from at least
+   ``min_baseline_m`` away, or while the rig stands still in ``still_min_frames``
+   pairs (a still rig has no parallax; its frames are separate looks only in time).
+6. reports: cells with ``L ≥ report_logodds`` and two views are *confirmed*; connected
+   regions of them (8-connected, gaps of ``join_cells`` bridged) are obstacles
+   (drop regions: drop-offs) with the nearest point to the wearer, the top height, the
+   width across the line of sight, a confidence (the largest P of its cells) and an id
+   kept from the region of the previous pair it overlaps most.
+
+A cleared cell (``L_r ≤ 0`` and ``L_d ≤ 0``) forgets its height and its views, so a
+passer-by's cells, cleared by the ground seen behind them, leave no trail.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from asmonc_vision.core.camera import (MetricPlane, StereoCamera, ground_axes,
+                                       ground_range_bearing, plane_disparity, plane_from_metric)
+from asmonc_vision.core.config import check_fields, param
+
+
+@dataclass(frozen=True)
+class EvidenceMapConfig:
+    """Settings of the evidence map (`EvidenceMap`)."""
+
+    enabled: bool = param(
+        False, 'report obstacles and drop-offs from the evidence map (a thing confirmed '
+        'from two viewpoints, cleared by ground seen where it stood) instead of each '
+        "pair's detections and their tracks")
+    cell_m: float = param(0.1, 'side of a map cell, m', range=(0.02, 0.5))
+    radius_m: float = param(
+        9.0, 'half side of the square map around the wearer, m (evidence farther away is '
+        'not kept)', range=(1.0, 50.0))
+    max_range_m: float = param(8.0, 'evidence farther than this along the ground is not '
+                               'entered, m', range=(0.5, 50.0))
+    recentre_m: float = param(1.0, 'the grid is re-centred on the wearer (by whole cells) '
+                              'once the wearer is this far from its centre, m',
+                              range=(0.1, 10.0))
+    hit_logodds: float = param(0.85, 'log-odds added to a cell with raised (or drop) '
+                               'evidence in a pair', range=(0.01, 10.0))
+    free_logodds: float = param(1.2, 'log-odds taken from a cell where ground is seen and '
+                                'no raised evidence (the clearing is faster than the '
+                                'filling)', range=(0.0, 10.0))
+    still_hit_factor: float = param(
+        1.0, 'raised or drop evidence of a pair taken while the rig stands still counts '
+        'this much (its frames repeat the same matches and their errors)', range=(0.0, 1.0))
+    min_ground_pixels: int = param(2, 'ground-matched edge pixels in a cell that clear '
+                                   'it', range=(1, 1000))
+    clear_guard_cells: int = param(
+        1, 'ground seen within this many cells of raised or drop evidence of the same pair '
+        'does not clear (an obstacle is seen with the ground at its foot)', range=(0, 10))
+    ray_logodds: float = param(
+        1.2, 'log-odds taken from a raised cell seen through: ground seen behind it along '
+        'sight lines passing lower than its top (0: off)', range=(0.0, 10.0))
+    ray_min_pixels: int = param(3, 'sight lines through a raised cell below its top, on '
+                                'each side of its evidence point, that clear it in a pair',
+                                range=(1, 10000))
+    ray_lateral_m: float = param(0.03, 'a sight line passes through a raised cell when '
+                                 'it passes this near its evidence point, m',
+                                 range=(0.001, 1.0))
+    ray_margin_m: float = param(0.05, 'a sight line must pass this far below a cell top '
+                                '(at least 2 standard deviations of it) to count, m',
+                                range=(0.0, 2.0))
+    ray_stop_m: float = param(0.2, 'sight lines are followed up to this short of their '
+                              'ground point, m', range=(0.0, 2.0))
+    ray_max_points: int = param(600, 'ground matches of a pair whose sight lines are '
+                                'followed (evenly picked when there are more)',
+                                range=(1, 100000))
+    min_logodds: float = param(-2.0, 'least log-odds of a cell', range=(-20.0, 0.0))
+    max_logodds: float = param(3.5, 'largest log-odds of a cell', range=(0.0, 20.0))
+    report_logodds: float = param(1.5, 'a cell is reported (with two views) from this '
+                                  'log-odds on', range=(0.0, 20.0))
+    decay_s: float = param(4.0, 'time constant of the decay of the log-odds towards the '
+                           'prior, s (cells out of view are remembered about this long)',
+                           range=(0.1, 600.0))
+    min_baseline_m: float = param(
+        0.3, 'a cell seen raised or dropped again from this far from where its evidence '
+        'began has two views, m (a mismatch of a repetitive pattern moves in the world '
+        'by a fraction of this)', range=(0.0, 10.0))
+    still_min_frames: int = param(
+        2, 'pairs with evidence at a cell while the rig stands still that count as two '
+        'views (no parallax while still)', range=(1, 1000))
+    stationary_step_m: float = param(
+        0.03, 'a pair whose camera moved less than this along the ground since the '
+        'previous one (turning on the spot) counts as still for still_min_frames, m',
+        range=(0.0, 1.0))
+    height_process_noise: float = param(
+        0.05, 'process noise q of a cell height, m/sqrt(s)', range=(0.0, 10.0))
+    join_cells: int = param(2, 'confirmed cells this many cells apart belong to one '
+                            'region (0: touching cells only)', range=(0, 20))
+    near_tolerance_m: float = param(
+        0.15, "a region's nearest point is at its nearest range, at the median bearing of "
+        'its cells within this of that range, m', range=(0.0, 2.0))
+    attach_m: float = param(
+        0.5, "a detector report whose foot lies within this of a confirmed cell of its kind "
+        "is confirmed and reported as the detector placed it (from the whole silhouette); "
+        "a region that confirms none is reported at its own nearest point, m (0: the "
+        "map's placement only)", range=(0.0, 5.0))
+    min_region_cells: int = param(1, 'least confirmed cells in a reported region',
+                                  range=(1, 10000))
+    motion_gap_frames: int = param(
+        2, 'pairs in a row the rig may move with no motion known (the previous pose held) '
+        'before the map is cleared', range=(0, 100))
+    min_placed_pairs: int = param(
+        5, "until the map has placed this many pairs in a row (after a start, or after it "
+        "was cleared for want of a motion) the detector's reports are published unfiltered",
+        range=(0, 1000))
+    default_sigma_px: float = param(0.4, 'σ_d of a match when the detector gives '
+                                    'neither a per-pixel threshold nor a sigma, px', range=(0.01, 10.0))
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+        if self.min_logodds >= self.report_logodds or self.report_logodds > self.max_logodds:
+            raise ValueError('EvidenceMapConfig: min_logodds < report_logodds <= max_logodds '
+                             f'is required, got {self.min_logodds}, {self.report_logodds}, '
+                             f'{self.max_logodds}')
+
+
+@dataclass(frozen=True)
+class MapObject:
+    """A connected region of confirmed cells, as seen from the current pair.
+
+    Attributes:
+        object_id: stable id (> 0) of the region, kept while it overlaps its previous cells.
+        is_drop: True for a drop-off region.
+        nearest_xy: (2,) float64 nearest point of the region to the wearer, m, ground frame G
+            of the current pair (x forward, y left).
+        far_xy: (2,) float64 the region's cells' points, (k, 2) in G, m.
+        height: m, the highest cell top (drop: the lowest, negative).
+        width: m, extent across the line of sight to the nearest point.
+        confidence: 0..1, the largest P(raised) (drop: P(drop)) of its cells.
+        cells: number of confirmed cells.
+        fresh_pixels: matched edge pixels of this pair that fell in the region's cells.
+        age_s: s since a cell of the region last had evidence of its kind.
+    """
+
+    object_id: int
+    is_drop: bool
+    nearest_xy: np.ndarray
+    far_xy: np.ndarray
+    height: float
+    width: float
+    confidence: float
+    cells: int
+    fresh_pixels: int
+    age_s: float
+
+
+@dataclass(frozen=True)
+class PairEvidence:
+    """The matched edge pixels of one pair, placed on the ground (`pair_evidence`).
+
+    Attributes:
+        xy: (N, 2) float64 foot of each pixel's 3-D point, m, ground frame G.
+        height: (N,) float64 height above the plane, m (negative below).
+        sigma_h: (N,) float64 standard deviation of the height from the disparity noise, m.
+        kind: (N,) int8 1 raised, -1 drop, 0 ground (free), 2 none (unreliable; not used).
+    """
+
+    xy: np.ndarray
+    height: np.ndarray
+    sigma_h: np.ndarray
+    kind: np.ndarray
+
+
+RAISED, DROP, GROUND, NONE = 1, -1, 0, 2
+
+
+def pair_evidence(cam: StereoCamera, plane: MetricPlane, u: np.ndarray, v: np.ndarray,
+                  d: np.ndarray, sigma_d: np.ndarray, kind: np.ndarray,
+                  max_range_m: float) -> PairEvidence:
+    """Measurement model: matched edge pixels to points on the ground with a height and σ.
+
+    Args:
+        cam: the rectified stereo camera.
+        plane: the pair's ground plane, left optical frame.
+        u, v, d: (N,) cyclopean column, row and disparity of each match, px.
+        sigma_d: (N,) disparity noise of each match, px.
+        kind: (N,) int8 RAISED, DROP, GROUND or NONE per match.
+        max_range_m: matches whose foot is farther along the ground are dropped.
+    Returns:
+        PairEvidence of the matches kept (finite, d > 0, within range, ahead).
+    """
+    u = np.asarray(u, float)
+    v = np.asarray(v, float)
+    d = np.asarray(d, float)
+    ok = np.isfinite(d) & (d > 0.05) & np.isfinite(u) & np.isfinite(v)
+    u, v, d = u[ok], v[ok], d[ok]
+    sd = np.asarray(sigma_d, float)[ok]
+    kind = np.asarray(kind, np.int8)[ok]
+    origin, fwd, left = ground_axes(plane)
+    pts = cam.triangulate(u, v, d)
+    h = plane.signed_height(pts)
+    # σ_h: the height's change over one σ_d of disparity (first order)
+    h2 = plane.signed_height(cam.triangulate(u, v, d + sd))
+    sigma_h = np.abs(h2 - h) + 1e-4
+    g = pts - origin[None, :]
+    xy = np.stack([g @ fwd, g @ left], axis=1)
+    keep = (xy[:, 0] > 0) & (np.hypot(xy[:, 0], xy[:, 1]) <= max_range_m)
+    return PairEvidence(xy=xy[keep], height=h[keep], sigma_h=sigma_h[keep], kind=kind[keep])
+
+
+def ground_frame(plane: MetricPlane) -> tuple[np.ndarray, np.ndarray]:
+    """(R_cam_G (3, 3), o (3,)): the ground frame G in the left optical frame,
+    ``X_cam = R_cam_G g + o`` (columns: forward, left, up)."""
+    origin, fwd, left = ground_axes(plane)
+    return np.stack([fwd, left, np.asarray(plane.normal_up, float)], axis=1), origin
+
+
+def ground_motion(prev: MetricPlane, curr: MetricPlane, R: np.ndarray, t: np.ndarray
+                  ) -> tuple[float, float, float]:
+    """The horizontal motion (dx, dy m, dyaw rad) of the ground frame from the previous
+    pair to this one, ``T_Gprev_Gcurr = T_Gprev_cam · T_prev_curr · T_cam_Gcurr``, given
+    the camera motion ``X_prev = R X_curr + t`` (left optical frames, metres)."""
+    Rp, op = ground_frame(prev)
+    Rc, oc = ground_frame(curr)
+    A = Rp.T @ np.asarray(R, float) @ Rc
+    b = Rp.T @ (np.asarray(R, float) @ oc + np.asarray(t, float) - op)
+    return float(b[0]), float(b[1]), math.atan2(A[1, 0], A[0, 0])
+
+
+def _compose(pose: np.ndarray, dx: float, dy: float, dyaw: float) -> np.ndarray:
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    return np.array([pose[0] + c * dx - s * dy, pose[1] + s * dx + c * dy,
+                     math.atan2(math.sin(pose[2] + dyaw), math.cos(pose[2] + dyaw))])
+
+
+class EvidenceMap:
+    """The egocentric evidence map; see the module docstring.
+
+    Arrays are (n, n) indexed [iy, ix] (row along W's y, column along W's x, as
+    nav_msgs/OccupancyGrid lays them out), cell (iy, ix) covering
+    ``origin + cell * ([ix, ix + 1), [iy, iy + 1))`` in W.
+    """
+
+    def __init__(self, config: EvidenceMapConfig | None = None) -> None:
+        self.config = config or EvidenceMapConfig()
+        c = self.config
+        self.n = int(math.ceil(2 * c.radius_m / c.cell_m))
+        self._next_id = 1
+        self.reset()
+
+    # ------------------------------------------------------------------ state
+    def reset(self) -> None:
+        """Forget all evidence and the wearer's pose."""
+        n = self.n
+        self.L_r = np.zeros((n, n), np.float32)        # log-odds raised
+        self.L_d = np.zeros((n, n), np.float32)        # log-odds drop
+        self.h_x = np.zeros((n, n), np.float32)        # height estimate x, m
+        self.h_P = np.full((n, n), np.inf, np.float32)  # its variance P, m² (inf: none)
+        self.pt_xy = np.zeros((n, n, 2), np.float32)   # mean evidence point in W, m
+        self.first_xy = np.full((n, n, 2), np.nan, np.float32)  # wearer when evidence began
+        self.still_hits = np.zeros((n, n), np.int16)
+        self.two_views = np.zeros((n, n), bool)
+        self.last_hit_s = np.full((n, n), -np.inf)
+        self.ids = np.zeros((n, n), np.int32)          # region id of the previous pair
+        self.pose = np.zeros(3)                        # G in W: x, y, yaw
+        self.origin = np.array([-self.config.radius_m, -self.config.radius_m])
+        self._plane: MetricPlane | None = None
+        self._stamp_s: float | None = None
+        self._gap = 0
+        #: pairs entered since the last reset (the map's evidence is continuous over them)
+        self.placed_pairs = 0
+        self._pair_count: np.ndarray | None = None
+        self.objects: tuple[MapObject, ...] = ()
+
+    @property
+    def has_pose(self) -> bool:
+        """True once a pair with a ground plane has placed the wearer."""
+        return self._plane is not None
+
+    def _scroll(self) -> None:
+        """Re-centre the grid on the wearer by whole cells, once it is ``recentre_m`` off."""
+        c = self.config
+        centre = self.origin + c.radius_m
+        off = self.pose[:2] - centre
+        if np.max(np.abs(off)) < c.recentre_m:
+            return
+        k = np.round(off / c.cell_m).astype(int)      # cells to shift, (x, y)
+        self.origin = self.origin + k * c.cell_m
+        fills = ((self.L_r, 0), (self.L_d, 0), (self.h_x, 0), (self.h_P, np.inf),
+                 (self.pt_xy, 0), (self.first_xy, np.nan), (self.still_hits, 0),
+                 (self.two_views, False), (self.last_hit_s, -np.inf), (self.ids, 0))
+        for a, fill in fills:
+            _shift(a, int(k[1]), int(k[0]), fill)
+
+    # ------------------------------------------------------------------ update
+    def update(self, stamp_s: float, plane: MetricPlane | None, ev: PairEvidence | None,
+               motion: tuple | None, still: bool, cam: StereoCamera | None = None
+               ) -> tuple[MapObject, ...]:
+        """Enter one pair and return the map's objects (see the module docstring).
+
+        Args:
+            stamp_s: the pair's time, s.
+            plane: the pair's ground plane (None: no plane; nothing is entered).
+            ev: the pair's evidence (`pair_evidence`, in this pair's G), or None.
+            motion: camera motion from the previous pair, (R (3, 3), t (3,)[, cov]),
+                ``X_prev = R X_curr + t``, left optical frames, m; None if unknown.
+            still: the rig stood still since the previous pair.
+            cam: the stereo camera; given, a region's cells in the image and those out of
+                it (walked past, below or beside the view) are reported apart, each at
+                its own nearest point (the part in view is what can be seen now).
+        Returns:
+            The confirmed objects, nearest first (also kept as ``self.objects``).
+        """
+        c = self.config
+        dt = 0.0 if self._stamp_s is None else max(stamp_s - self._stamp_s, 0.0)
+        self._stamp_s = stamp_s
+        moved = self._move(plane, motion, still)
+        if moved is None:
+            return self.objects
+        self.placed_pairs += 1
+        # in place: still, or a step shorter than stationary_step_m (turning on the spot);
+        # no parallax, so only separate frames can count as separate looks
+        still = still or moved < c.stationary_step_m
+        # decay towards the prior: L = L exp(-dt / τ)
+        if dt > 0:
+            k = np.float32(math.exp(-dt / c.decay_s))
+            self.L_r *= k
+            self.L_d *= k
+            # height predict: x = x, P = P + q² dt
+            self.h_P += np.float32(c.height_process_noise ** 2 * dt)
+        self._pair_count = None
+        if ev is not None and ev.xy.shape[0]:
+            self._enter(stamp_s, ev, still)
+        self.objects = self._regions(stamp_s, cam)
+        return self.objects
+
+    def _move(self, plane: MetricPlane | None, motion, still: bool) -> float | None:
+        """Carry the wearer's pose by the motion; the step's length (m; inf when unknown),
+        or None when the pair cannot be entered (no plane)."""
+        c = self.config
+        if plane is None:
+            # no plane: nothing entered; the pose is carried by the motion over the
+            # previous plane (the ground taken as unchanged)
+            if self._plane is not None and motion is not None:
+                self._gap = 0
+                dx, dy, dyaw = ground_motion(self._plane, self._plane, motion[0], motion[1])
+                self.pose = _compose(self.pose, dx, dy, dyaw)
+                self._scroll()
+            elif not still:
+                self._gap += 1
+                if self._gap > c.motion_gap_frames:
+                    self.reset()
+            self.objects = ()
+            return None
+        step = math.inf
+        if self._plane is not None:
+            if motion is None and still:
+                motion = (np.eye(3), np.zeros(3))
+            if motion is None:
+                self._gap += 1
+                if self._gap > c.motion_gap_frames:
+                    self.reset()
+                # else the previous pose is held: the evidence stays where it was
+                self._plane = plane
+                return step
+            self._gap = 0
+            dx, dy, dyaw = ground_motion(self._plane, plane, motion[0], motion[1])
+            self.pose = _compose(self.pose, dx, dy, dyaw)
+            step = math.hypot(dx, dy)
+            self._scroll()
+        self._plane = plane
+        return step
+
+    def to_world(self, xy: np.ndarray) -> np.ndarray:
+        """(N, 2) points of the current G to W, m."""
+        cy, sy = math.cos(self.pose[2]), math.sin(self.pose[2])
+        x, y = xy[:, 0], xy[:, 1]
+        return np.stack([self.pose[0] + cy * x - sy * y, self.pose[1] + sy * x + cy * y], 1)
+
+    def to_ground(self, w: np.ndarray) -> np.ndarray:
+        """(N, 2) points of W to the current G, m."""
+        cy, sy = math.cos(self.pose[2]), math.sin(self.pose[2])
+        x, y = w[:, 0] - self.pose[0], w[:, 1] - self.pose[1]
+        return np.stack([cy * x + sy * y, -sy * x + cy * y], 1)
+
+    def _cells(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Flat cell index of W points (N, 2) and a mask of those inside the grid."""
+        ij = np.floor((w - self.origin[None, :]) / self.config.cell_m).astype(np.int64)
+        inside = (ij >= 0).all(1) & (ij < self.n).all(1)
+        return ij[:, 1] * self.n + ij[:, 0], inside
+
+    def _enter(self, stamp_s: float, ev: PairEvidence, still: bool) -> None:
+        c = self.config
+        n2 = self.n * self.n
+        w = self.to_world(ev.xy)
+        flat, inside = self._cells(w)
+        flat, w, kind = flat[inside], w[inside], ev.kind[inside]
+        h, sh = ev.height[inside], ev.sigma_h[inside]
+        hit = c.hit_logodds * (c.still_hit_factor if still else 1.0)
+        n_r = np.bincount(flat[kind == RAISED], minlength=n2)
+        n_d = np.bincount(flat[kind == DROP], minlength=n2)
+        n_g = np.bincount(flat[kind == GROUND], minlength=n2)
+        self._pair_count = n_r + n_d
+        Lr, Ld = self.L_r.reshape(-1), self.L_d.reshape(-1)
+        # a cell seen through by this pair's sight lines takes none of its raised evidence
+        seen_through = self._rays(ev.xy[ev.kind == GROUND], n_r)
+        n_r[seen_through] = 0
+        raised = np.flatnonzero(n_r)
+        dropc = np.flatnonzero(n_d & (n_r == 0))
+        free = (n_g >= c.min_ground_pixels) & (n_g > n_r + n_d)
+        if c.clear_guard_cells > 0:
+            # ground seen beside a thing seen in this pair (its foot, the ground in front
+            # of its face in the same cell) does not clear it
+            k = 2 * c.clear_guard_cells + 1
+            near = cv2.dilate(((n_r + n_d) > 0).astype(np.uint8).reshape(self.n, self.n),
+                              np.ones((k, k), np.uint8))
+            free &= near.reshape(-1) == 0
+        free = np.flatnonzero(free)
+        # a thing seen now is not held back by the ground seen there before (a thing
+        # that appears, a passer-by stepping in): L = max(L, 0) + hit
+        Lr[raised] = np.maximum(Lr[raised], 0.0) + hit
+        Ld[dropc] = np.maximum(Ld[dropc], 0.0) + hit
+        Lr[free] -= c.free_logodds
+        Ld[free] -= c.free_logodds
+        np.clip(Lr, c.min_logodds, c.max_logodds, out=Lr)
+        np.clip(Ld, c.min_logodds, c.max_logodds, out=Ld)
+        if seen_through.size:
+            Lr[seen_through] -= c.ray_logodds
+            np.clip(Lr, c.min_logodds, c.max_logodds, out=Lr)
+            free = np.union1d(free, seen_through)
+        # cells whose evidence is gone forget their height and views
+        gone = free[(Lr[free] <= 0) & (Ld[free] <= 0)]
+        self._forget(gone)
+        # height: per cell, the pair's highest raised point (drop: lowest) is z, R = σ_h²
+        for cells, sel, sign in ((raised, kind == RAISED, 1.0), (dropc, kind == DROP, -1.0)):
+            if not cells.size:
+                continue
+            fi, hi, si, wi = flat[sel], h[sel] * sign, sh[sel], w[sel]
+            o = np.lexsort((-hi, fi))
+            head = np.concatenate(([True], fi[o][1:] != fi[o][:-1]))
+            top = o[head]
+            cell = fi[top]
+            keep = np.isin(cell, cells)
+            cell, z, R = cell[keep], sign * hi[top][keep], si[top][keep] ** 2
+            x, P = self.h_x.reshape(-1), self.h_P.reshape(-1)
+            P0 = P[cell]
+            new = ~np.isfinite(P0)
+            # y = z - H x; S = H P Hᵀ + R; K = P Hᵀ S⁻¹; x = x + K y; P = (1 - K H) P
+            with np.errstate(invalid='ignore'):
+                Kg = np.where(new, 1.0, P0 / (P0 + R))
+            x[cell] = np.where(new, z, x[cell] + Kg * (z - x[cell]))
+            P[cell] = np.where(new, R, (1.0 - Kg) * np.where(new, 0.0, P0))
+            # the cell's evidence point: mean of the pair's points there, smoothed
+            cnt = np.bincount(fi, minlength=n2)[cell]
+            mx = np.bincount(fi, weights=wi[:, 0], minlength=n2)[cell] / cnt
+            my = np.bincount(fi, weights=wi[:, 1], minlength=n2)[cell] / cnt
+            pts = self.pt_xy.reshape(-1, 2)
+            a = np.where(new, 1.0, 0.3)
+            pts[cell, 0] = (1 - a) * pts[cell, 0] + a * mx
+            pts[cell, 1] = (1 - a) * pts[cell, 1] + a * my
+            self.last_hit_s.reshape(-1)[cell] = stamp_s
+        # viewpoints: where the evidence began, seen again from min_baseline_m away
+        seen = np.concatenate((raised, dropc))
+        if seen.size:
+            fx = self.first_xy.reshape(-1, 2)
+            began = ~np.isfinite(fx[seen, 0])
+            fx[seen[began]] = self.pose[:2]
+            moved = np.hypot(fx[seen, 0] - self.pose[0], fx[seen, 1] - self.pose[1])
+            tv = self.two_views.reshape(-1)
+            sh_ = self.still_hits.reshape(-1)
+            if still:
+                sh_[seen] = np.minimum(sh_[seen] + 1, 30000)
+            tv[seen] |= (moved >= c.min_baseline_m) | (sh_[seen] >= c.still_min_frames)
+
+    def _rays(self, ground_xy: np.ndarray, n_r: np.ndarray) -> np.ndarray:
+        """Flat indices of raised cells seen through by this pair's ground matches.
+
+        The sight line from the camera (``H`` = the plane's camera height above the
+        wearer's foot) to a ground point at range R passes over the ground at range r
+        at ``h_ray = H (1 - r / R)``. A sight line passing within ``ray_lateral_m`` of a
+        raised cell's evidence point (its mean matched point), lower than its top (the
+        height estimate x less ``ray_margin_m`` and 2 sqrt(P)), went through where the
+        thing was said to stand. A real thing hides the ground behind it; its silhouette
+        edge (where its evidence is) is passed on its outer side only, and a thin post
+        hides the sight lines through its middle. A mismatch floating above the ground
+        (a repetitive pattern matched a period off) is seen through on both sides: at
+        least ``ray_min_pixels`` sight lines on each side in a pair, more in all than
+        the cell's own raised pixels, clear it. The sight lines stop ``ray_stop_m``
+        short of their ground point."""
+        c = self.config
+        none = np.zeros(0, np.int64)
+        if c.ray_logodds <= 0 or ground_xy.shape[0] == 0 or self._plane is None:
+            return none
+        Lr, hx, hP = self.L_r.reshape(-1), self.h_x.reshape(-1), self.h_P.reshape(-1)
+        cells = np.flatnonzero((Lr > 0) & np.isfinite(hP))
+        if not cells.size:
+            return none
+        if ground_xy.shape[0] > c.ray_max_points:
+            pick = np.linspace(0, ground_xy.shape[0] - 1, c.ray_max_points).astype(np.int64)
+            ground_xy = ground_xy[pick]
+        R = np.hypot(ground_xy[:, 0], ground_xy[:, 1])                 # (n,)
+        gh = ground_xy / np.maximum(R, 1e-6)[:, None]                   # sight line directions
+        p = self.to_ground(self.pt_xy.reshape(-1, 2)[cells].astype(np.float64))   # (m, 2)
+        top = hx[cells] - np.maximum(c.ray_margin_m, 2.0 * np.sqrt(hP[cells]))
+        # (m, n): each evidence point against each sight line
+        along = p[:, 0:1] * gh[None, :, 0] + p[:, 1:2] * gh[None, :, 1]
+        lateral = gh[None, :, 0] * p[:, 1:2] - gh[None, :, 1] * p[:, 0:1]
+        h_ray = self._plane.height * (1.0 - along / R[None, :])
+        through = ((np.abs(lateral) <= c.ray_lateral_m) & (along > 0.3)
+                   & (along < R[None, :] - c.ray_stop_m) & (h_ray < top[:, None]))
+        left = np.count_nonzero(through & (lateral > 0), axis=1)
+        right = np.count_nonzero(through & (lateral <= 0), axis=1)
+        return cells[(np.minimum(left, right) >= c.ray_min_pixels) & (left + right > n_r[cells])]
+
+    def _forget(self, cells: np.ndarray) -> None:
+        if not cells.size:
+            return
+        self.h_P.reshape(-1)[cells] = np.inf
+        self.first_xy.reshape(-1, 2)[cells] = np.nan
+        self.still_hits.reshape(-1)[cells] = 0
+        self.two_views.reshape(-1)[cells] = False
+
+    # ------------------------------------------------------------------ objects
+    def confirmed(self, drop: bool = False) -> np.ndarray:
+        """(n, n) bool: the cells reported (log-odds ≥ ``report_logodds``, two views)."""
+        L = self.L_d if drop else self.L_r
+        other = self.L_r if drop else self.L_d
+        return (L >= self.config.report_logodds) & self.two_views & (L >= other)
+
+    def probability(self) -> np.ndarray:
+        """(n, n) float32 P(raised) = 1 / (1 + exp(-L_r)) of every cell."""
+        return 1.0 / (1.0 + np.exp(-self.L_r))
+
+    def in_view(self, cells: np.ndarray, cam: StereoCamera) -> tuple[np.ndarray, np.ndarray]:
+        """((k,) bool, (k,) bool): cells (flat indices) whose evidence point, at the
+        ground or at its height, projects into the left image of the current pair; and
+        those out of it below the image (in front of the wearer, walked up to)."""
+        Rcg, o = ground_frame(self._plane)
+        g = self.to_ground(self.pt_xy.reshape(-1, 2)[cells].astype(np.float64))
+        feet = g @ Rcg[:, :2].T + o[None, :]
+        tops = feet + self.h_x.reshape(-1)[cells, None] * Rcg[:, 2][None, :]
+        vis = np.zeros(cells.size, bool)
+        below = np.zeros(cells.size, bool)
+        for p in (feet, tops):
+            z = p[:, 2]
+            ok = z > 0.1
+            zz = np.where(ok, z, 1.0)
+            u = cam.f * p[:, 0] / zz + cam.cx
+            v = cam.f * p[:, 1] / zz + cam.cy
+            across = ok & (u >= 0) & (u <= cam.width - 1)
+            vis |= across & (v >= 0) & (v <= cam.height - 1)
+            below |= across & (v > cam.height - 1)
+        # below the view: ahead of the wearer within the image's columns (as the
+        # detector's tracks remember obstacles walked up to); beside it: passed
+        below |= (g[:, 0] > 0) & (np.abs(g[:, 1]) * cam.f
+                                  <= (0.5 * cam.width) * np.maximum(g[:, 0], 1e-3))
+        return vis, below & ~vis
+
+    def _regions(self, stamp_s: float, cam: StereoCamera | None = None
+                 ) -> tuple[MapObject, ...]:
+        c = self.config
+        out: list[MapObject] = []
+        new_ids = np.zeros_like(self.ids)
+        used: set[int] = set()
+        masks = []
+        for drop in (False, True):
+            mask = self.confirmed(drop)
+            if not mask.any():
+                continue
+            if cam is None:
+                masks.append((drop, mask))
+                continue
+            cells = np.flatnonzero(mask)
+            vis = np.zeros(mask.size, bool)
+            below = np.zeros(mask.size, bool)
+            vis[cells], below[cells] = self.in_view(cells, cam)
+            masks.extend([(drop, mask & vis.reshape(mask.shape)),
+                          (drop, mask & below.reshape(mask.shape))])
+        for drop, mask in masks:
+            if not mask.any():
+                continue
+            m8 = mask.astype(np.uint8)
+            if c.join_cells > 0:
+                k = 2 * c.join_cells + 1
+                m8 = cv2.dilate(m8, np.ones((k, k), np.uint8))
+            _, lab = cv2.connectedComponents(m8, connectivity=8)
+            lab = np.where(mask, lab, 0)
+            flat = lab.reshape(-1)
+            cells = np.flatnonzero(flat)
+            if not cells.size:
+                continue
+            order = np.argsort(flat[cells], kind='stable')
+            cells = cells[order]
+            labels = flat[cells]
+            starts = np.flatnonzero(np.concatenate(([True], labels[1:] != labels[:-1])))
+            L = (self.L_d if drop else self.L_r).reshape(-1)
+            for s, e in zip(starts, np.append(starts[1:], cells.size)):
+                cs = cells[s:e]
+                if cs.size < c.min_region_cells:
+                    continue
+                g = self.to_ground(self.pt_xy.reshape(-1, 2)[cs].astype(np.float64))
+                ahead = g[:, 0] > 0
+                if not ahead.any():
+                    continue            # passed: behind the wearer
+                r = np.hypot(g[:, 0], g[:, 1])
+                r[~ahead] = np.inf
+                # the nearest point: of the cells within near_tolerance_m of the nearest
+                # range, the one at their median bearing (a face square to the line of
+                # sight is nearest where the sight line meets it, not at its noisiest cell)
+                near_set = np.flatnonzero(r <= float(r.min()) + c.near_tolerance_m)
+                b = np.arctan2(g[near_set, 1], g[near_set, 0])
+                b_med = float(b[np.argsort(b)[(near_set.size - 1) // 2]])
+                r0 = float(r.min())
+                near = r0 * np.array([math.cos(b_med), math.sin(b_med)])
+                across = np.array([-near[1], near[0]]) / max(r0, 1e-6)
+                lat = g @ across
+                hx = self.h_x.reshape(-1)[cs]
+                height = float(hx.min()) if drop else float(hx.max())
+                prev = self.ids.reshape(-1)[cs]
+                prev = prev[(prev > 0) & ~np.isin(prev, list(used))] if used else prev[prev > 0]
+                if prev.size:
+                    vals, cnt = np.unique(prev, return_counts=True)
+                    oid = int(vals[np.argmax(cnt)])
+                else:
+                    oid = self._next_id
+                    self._next_id += 1
+                used.add(oid)
+                new_ids.reshape(-1)[cs] = oid
+                conf = float(1.0 / (1.0 + math.exp(-float(L[cs].max()))))
+                last = float(self.last_hit_s.reshape(-1)[cs].max())
+                out.append(MapObject(
+                    object_id=oid, is_drop=drop, nearest_xy=near, far_xy=g,
+                    height=height, width=float(lat.max() - lat.min()) + c.cell_m,
+                    confidence=conf, cells=int(cs.size),
+                    fresh_pixels=(int(self._pair_count[cs].sum())
+                                  if self._pair_count is not None else 0), age_s=max(stamp_s - last, 0.0)))
+        self.ids = new_ids
+        out.sort(key=lambda o: float(np.hypot(*o.nearest_xy)))
+        return tuple(out)
+
+    # ------------------------------------------------------------------ views
+    def occupancy(self) -> np.ndarray:
+        """(n, n) int8 occupancy of the cells, [iy, ix]: P(raised) in percent (0-100),
+        -1 where the cell holds no evidence (|L_r| and |L_d| below 0.05)."""
+        p = np.rint(100.0 * self.probability()).astype(np.int8)
+        unknown = (np.abs(self.L_r) < 0.05) & (np.abs(self.L_d) < 0.05)
+        p[unknown] = -1
+        return p
+
+    def grid_in_camera(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The grid's placement in the current left optical frame: (R (3, 3), p (3,)),
+        the rotation of W's axes and the position of the grid's corner (cell (0, 0)'s
+        outer corner), m; None before a pair with a plane."""
+        if self._plane is None:
+            return None
+        Rcg, o = ground_frame(self._plane)
+        cy, sy = math.cos(self.pose[2]), math.sin(self.pose[2])
+        Rgw = np.array([[cy, sy, 0.0], [-sy, cy, 0.0], [0.0, 0.0, 1.0]])   # W to G
+        R = Rcg @ Rgw
+        corner_g = Rgw @ np.array([self.origin[0] - self.pose[0],
+                                   self.origin[1] - self.pose[1], 0.0])
+        return R, Rcg @ corner_g + o
+
+
+def _shift(a: np.ndarray, dy: int, dx: int, fill) -> None:
+    """Shift array ``a`` (first two axes [y, x]) in place so that new[i, j] = old[i + dy,
+    j + dx] (the grid's origin moved by (dy, dx) cells), filling the
+    cells shifted in with ``fill``."""
+    n0, n1 = a.shape[0], a.shape[1]
+    out = np.full_like(a, fill)
+    ys = slice(max(dy, 0), n0 + min(dy, 0))
+    yd = slice(max(-dy, 0), n0 + min(-dy, 0))
+    xs = slice(max(dx, 0), n1 + min(dx, 0))
+    xd = slice(max(-dx, 0), n1 + min(-dx, 0))
+    if abs(dy) < n0 and abs(dx) < n1:
+        out[yd, xd] = a[ys, xs]
+    a[...] = out
+
+
+#: ids of the reports placed by the map itself are region ids offset by this (the
+#: detector's track ids of the reports it confirms stay below it)
+MAP_ID_BASE = 1_000_000
+
+
+def objects_to_obstacles(objects, cam: StereoCamera, plane: MetricPlane,
+                         detections=(), attach_m: float = 0.0) -> list:
+    """The map's objects as `core.gpod.GpodObstacle` (the detector's output form), in
+    the current left optical frame.
+
+    A detector report (``detections``, GpodObstacle: the pair's detections and tracks)
+    whose foot lies within ``attach_m`` of a cell of an object of its kind is confirmed:
+    it is reported as the detector placed it (its nearest point from the whole
+    silhouette; the map sees only matched edges), with the object's confidence and its
+    own track id (the object's id + ``MAP_ID_BASE`` when it has none). An object that
+    confirms no report is reported as the map places it, id its region id +
+    ``MAP_ID_BASE``: ``position`` the top above the nearest point (for a drop, the lowest
+    point), range and bearing along the ground, the image region of the region's feet
+    and tops (clipped to the image), disparity excess at the top. Reports on no
+    confirmed cell are not reported."""
+    import dataclasses
+
+    from asmonc_vision.core.gpod import GpodObstacle
+
+    Rcg, o = ground_frame(plane)
+    n = np.asarray(plane.normal_up, float)
+    abc = plane_from_metric(cam, plane)
+    dets = list(detections)
+    det_xy = np.array([((d.position - d.height * n) - o) @ Rcg[:, :2] for d in dets]
+                      ).reshape(-1, 2)
+    det_drop = np.array([d.is_drop for d in dets], bool)
+    taken = np.zeros(len(dets), bool)
+    out = []
+    for ob in objects:
+        if attach_m > 0 and len(dets):
+            dist = np.min(np.linalg.norm(det_xy[:, None, :] - ob.far_xy[None, :, :], axis=2),
+                          axis=1)
+            cand = np.flatnonzero((dist <= attach_m) & (det_drop == ob.is_drop))
+            if cand.size:
+                for k in cand[~taken[cand]].tolist():
+                    taken[k] = True
+                    tid = dets[k].track_id or (int(ob.object_id) + MAP_ID_BASE)
+                    out.append(dataclasses.replace(dets[k], track_id=int(tid),
+                                                   confidence=float(ob.confidence)))
+                continue
+        foot = Rcg @ np.array([ob.nearest_xy[0], ob.nearest_xy[1], 0.0]) + o
+        top = foot + ob.height * n
+        rng_, brg = ground_range_bearing(plane, foot[None, :])
+        g = ob.far_xy
+        feet = (Rcg @ np.column_stack([g, np.zeros(len(g))]).T).T + o
+        allp = np.vstack([feet, feet + max(ob.height, 0.0) * n[None, :], top[None, :]])
+        allp = allp[allp[:, 2] > 0.1]
+        roi = (0, 0, 0, 0)
+        excess = 0.0
+        if allp.shape[0]:
+            uu, vv = cam.project_left(allp)
+            x0 = int(np.clip(np.floor(uu.min()), 0, cam.width - 1))
+            x1 = int(np.clip(np.ceil(uu.max()), 0, cam.width - 1))
+            y0 = int(np.clip(np.floor(vv.min()), 0, cam.height - 1))
+            y1 = int(np.clip(np.ceil(vv.max()), 0, cam.height - 1))
+            roi = (x0, y0, max(x1 - x0, 1), max(y1 - y0, 1))
+        if top[2] > 0.1:
+            u, v, d = cam.project(top[None, :])
+            excess = float(d[0] - plane_disparity(abc, u, v)[0])
+        out.append(GpodObstacle(
+            position=top, height=float(ob.height), range=float(rng_[0]),
+            bearing=float(brg[0]), width=float(ob.width), disparity_excess=excess,
+            confidence=float(ob.confidence), roi=roi,
+            num_edge_pixels=int(ob.fresh_pixels),
+            string_ids=np.zeros(0, np.int32), track_id=int(ob.object_id) + MAP_ID_BASE,
+            age_s=float(ob.age_s)))
+    out.sort(key=lambda d: d.range)
+    return out

@@ -1,0 +1,116 @@
+"""The detector and the evidence map as one stage: what the graph reports on /obstacles.
+
+`Perception.process` runs `core.gpod.GpodDetector.process` on a stereo pair, then (with
+``EvidenceMapConfig.enabled``) enters the pair's matched edge pixels into the evidence
+map (`core.evidence_map`) and reports the map's confirmed regions instead of the
+detector's detections and tracks. The detector node and the offline evaluation
+(`asmonc eval`, `asmonc bench`'s runs) both drive the detector through this class, so
+the offline numbers are what the graph publishes.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from asmonc_vision.core.camera import StereoCamera
+from asmonc_vision.core.evidence_map import (DROP, GROUND, NONE, RAISED, EvidenceMap,
+                                             EvidenceMapConfig, objects_to_obstacles,
+                                             pair_evidence)
+from asmonc_vision.core.gpod import GpodConfig, GpodDetector, GpodResult
+
+
+class Perception:
+    """GpodDetector followed by the evidence map (when enabled).
+
+    Attributes:
+        detector: the GpodDetector.
+        map: the EvidenceMap (None when ``map_config.enabled`` is false).
+    """
+
+    def __init__(self, gpod_config: GpodConfig | None = None,
+                 map_config: EvidenceMapConfig | None = None) -> None:
+        self.gpod_config = gpod_config or GpodConfig()
+        self.map_config = map_config or EvidenceMapConfig()
+        self.detector = GpodDetector(self.gpod_config)
+        self.map = EvidenceMap(self.map_config) if self.map_config.enabled else None
+
+    @property
+    def config(self) -> GpodConfig:
+        """The detector's settings."""
+        return self.gpod_config
+
+    def reset(self) -> None:
+        """Restart the detector and forget the map."""
+        self.detector.reset()
+        if self.map is not None:
+            self.map.reset()
+
+    def process(self, left: np.ndarray, right: np.ndarray, cam: StereoCamera,
+                stamp_ns: int | None = None,
+                motion: tuple | Callable[[], tuple | None] | None = None) -> GpodResult:
+        """One stereo pair: arguments and result as `GpodDetector.process`; with the map
+        enabled, the result's ``obstacles`` are those the map confirms
+        (`objects_to_obstacles`), or the detector's own while the map has placed fewer
+        than ``min_placed_pairs`` pairs in a row (it needs the camera motion while the
+        rig moves: without it the map is cleared and the detector's reports pass), and
+        ``timings_ms['map']`` is the map's time, ms (included in 'total')."""
+        got: list = []
+        if callable(motion):
+            fn = motion
+
+            def motion():      # the same callable, its answer kept
+                m = fn()
+                got.append(m)
+                return m
+        else:
+            got.append(motion)
+        result = self.detector.process(left, right, cam, stamp_ns=stamp_ns, motion=motion)
+        if self.map is None:
+            return result
+        t0 = time.perf_counter()
+        m = got[-1] if got else None
+        stamp_s = (stamp_ns * 1e-9 if stamp_ns is not None
+                   else result.frame_index * self.gpod_config.track_frame_period_s)
+        plane = result.metric_plane if result.status == 'tracking' else None
+        ev = self.evidence(result, cam) if plane is not None else None
+        objects = self.map.update(stamp_s, plane, ev, m, result.still, cam)
+        if self.map.placed_pairs < self.map_config.min_placed_pairs:
+            # the map has not seen enough pairs in a row to confirm anything (a start, or
+            # no motion while walking): the detector's reports go out as they are
+            obstacles = result.obstacles
+        else:
+            obstacles = (tuple(objects_to_obstacles(objects, cam, plane, result.obstacles,
+                                                    self.map_config.attach_m))
+                         if plane is not None else ())
+        ms = (time.perf_counter() - t0) * 1e3
+        timings = dict(result.timings_ms)
+        timings['map'] = ms
+        timings['total'] = timings.get('total', 0.0) + ms
+        return dataclasses.replace(result, obstacles=obstacles, timings_ms=timings)
+
+    def evidence(self, result: GpodResult, cam: StereoCamera):
+        """The pair's matched edge pixels as map evidence (`pair_evidence`): the
+        detector's counted obstacle pixels raised, its drop pixels drop, the pixels on
+        the plane within their threshold (on no obstacle or drop string) ground; σ_d the
+        pixel's threshold over ``threshold_k``."""
+        f = result.features
+        k = len(f)
+        thr = (np.asarray(f.threshold, float) if f.threshold is not None
+               else np.full(k, float(result.threshold_px)))
+        tk = self.gpod_config.threshold_k
+        sigma_d = thr / tk if self.gpod_config.threshold_mode == 'sigma' else np.full(
+            k, float(result.sigma_px) if math.isfinite(result.sigma_px)
+            else self.map_config.default_sigma_px)
+        ex = f.excess_mean if f.excess_mean is not None else f.excess
+        kind = np.full(k, NONE, np.int8)
+        ground = np.isfinite(ex) & (np.abs(ex) <= thr) & (f.string_class == 0)
+        kind[ground] = GROUND
+        kind[f.is_drop] = DROP
+        kind[f.is_obstacle] = RAISED
+        u = 0.5 * (np.asarray(f.u_left, float) + np.asarray(f.u_right, float))
+        return pair_evidence(cam, result.metric_plane, u, f.v, f.d, sigma_d, kind,
+                             self.map_config.max_range_m)
