@@ -81,9 +81,19 @@ class PlayerConfig:
              '(an answer settles every image sent before it: skipped pairs cost no wait)',
         range=(0.1, 600.0))
 
+    faults: str = param(
+        '', "faults injected at bag times, 'KIND[=ARG]@START[+DURATION]; ...' "
+            "(asmonc_vision/faults.py); '' = none")
+
     def __post_init__(self) -> None:
         check_fields(self)
         self.wait_targets(())
+        if self.faults:
+            from asmonc_vision.faults import parse_faults
+            try:
+                parse_faults(self.faults)
+            except ValueError as exc:
+                raise ValueError(f'PlayerConfig.faults: {exc}') from None
         if self.pace_topic and not self.pace_type:
             raise ValueError("PlayerConfig.pace_type: needed with pace_topic "
                              f"'{self.pace_topic}' ('pkg/msg/Name')")
