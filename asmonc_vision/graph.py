@@ -83,7 +83,7 @@ GRAPH: tuple[GraphNode, ...] = (
 
 @dataclass(frozen=True)
 class SourceNode:
-    """A node that feeds the graph: the bag player or the live stereo capture."""
+    """A node that feeds the graph: the bag player, or a live sensor driver."""
 
     name: str
     executable: str
@@ -94,13 +94,18 @@ class SourceNode:
     remappings: tuple[tuple[str, str], ...] = field(default=())
 
 
-#: where the sensor data comes from: a bag (`asmonc run`, ``bag:=``) or the cameras
-SOURCES: dict[str, SourceNode] = {
-    'bag': SourceNode('player', 'bag_player_node', 'asmonc_vision.nodes.player_node',
-                      'bag_player_node', 'bag_player.yaml'),
-    'live': SourceNode('capture', 'stereo_capture_node', 'asmonc_vision.nodes.capture_node',
-                       'stereo_capture_node', 'stereo_capture.yaml', respawn=True),
+#: where the sensor data come from: a bag (`asmonc run`, ``bag:=``), or the cameras and
+#: the serial inclinometer (``live:=true``)
+SOURCES: dict[str, tuple[SourceNode, ...]] = {
+    'bag': (SourceNode('player', 'bag_player_node', 'asmonc_vision.nodes.player_node',
+                       'bag_player_node', 'bag_player.yaml'),),
+    'live': (SourceNode('capture', 'stereo_capture_node', 'asmonc_vision.nodes.capture_node',
+                        'stereo_capture_node', 'stereo_capture.yaml', respawn=True),
+             SourceNode('compass', 'compass_node', 'asmonc_vision.nodes.compass_node',
+                        'compass_node', 'compass.yaml', respawn=True)),
 }
+#: seconds a launch file waits before it restarts a node that died
+RESPAWN_DELAY = 1.0
 
 
 def nodes_for(inputs: set[str] | frozenset[str]) -> list[GraphNode]:
@@ -124,4 +129,36 @@ def by_name(name: str) -> GraphNode:
 
 def executables() -> set[str]:
     """Every console script the graph and its sources run."""
-    return {n.executable for n in GRAPH} | {s.executable for s in SOURCES.values()}
+    return {n.executable for n in GRAPH} | {s.executable for src in SOURCES.values()
+                                            for s in src}
+
+
+def launch_entries(source: str, config_dir: str, bag: str = '', rate: float = 1.0,
+                   params_files: tuple[str, ...] = ()) -> list[dict]:
+    """The nodes a launch file starts, as keyword arguments of ``launch_ros.actions.Node``
+    (``package``, ``executable``, ``name``, ``parameters``, ``remappings``, ``respawn``,
+    ``respawn_delay``, ``output``): the sources of ``source`` ('bag' or 'live'), then every
+    node of `GRAPH` (all of them: a live rig has cameras and an inclinometer).
+
+    Args:
+        source: a key of `SOURCES`.
+        config_dir: the installed config/ directory (each node's ``params_file`` in it).
+        bag: the bag to play (``source`` 'bag').
+        rate: the replay rate (``source`` 'bag').
+        params_files: more ``ros__parameters`` files for every node, applied after its own.
+    Raises:
+        ValueError: an unknown source, or 'bag' without a bag.
+    """
+    if source not in SOURCES:
+        raise ValueError(f"unknown source {source!r}; one of {', '.join(SOURCES)}")
+    if source == 'bag' and not bag:
+        raise ValueError('a bag to play is needed (bag:=PATH), or live:=true')
+    out = []
+    for n in (*SOURCES[source], *nodes_for(set(NEEDS))):
+        params: list = [f'{config_dir}/{n.params_file}', *params_files]
+        if n.executable == 'bag_player_node':
+            params.append({'bag': bag, 'rate': float(rate)})
+        out.append(dict(package='asmonc_vision', executable=n.executable, name=n.ros_name,
+                        parameters=params, remappings=list(n.remappings),
+                        respawn=n.respawn, respawn_delay=RESPAWN_DELAY, output='screen'))
+    return out
