@@ -296,6 +296,7 @@ def test_after_a_gap_the_ground_status_from_before_it_is_not_trusted(ground_firs
     # The TRACKING status from before the gap must not let an empty list say "all clear".
     logic = started(timeout=1.0)
     logic.update(0.1, [])
+    logic.ground_status(0.12, GroundStatus.TRACKING)   # the last frame's, after its list
     assert logic.check_timeout(1.2).text == TEXT_NO_DATA
     if ground_first:   # a stalled camera: the same detector, ground status first
         logic.ground_status(3.0, GroundStatus.TRACKING)

@@ -334,11 +334,12 @@ class AlarmLogic:
     def update(self, t: float, obstacles: Sequence[ObstacleInfo]) -> Decision | None:
         """A new obstacle list arrived at time t (s). Returns an announcement or None."""
         t = float(t)
-        last = self._last_obstacles_t
-        if last is not None and t - last > self._cfg.timeout and self._ground_t <= last:
+        last, timeout = self._last_obstacles_t, self._cfg.timeout
+        if last is not None and t - last > timeout and self._ground_t <= last + timeout:
             # Lists are back after a gap: the detector stalled, or died and restarted
-            # without its ground plane. The ground status from before the gap is stale:
-            # no level is announced until a fresh one has come.
+            # without its ground plane. The ground status from before the gap (which
+            # may arrive just after its frame's list) is stale: no level is announced
+            # until one has come after the silence reached the timeout.
             self._ground_fresh = False
         self._last_obstacles_t = t
         if self._first_obstacles_t is None:
