@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from asmonc_vision import bagio, graph
-from asmonc_vision.faults import MESSAGE_KINDS, PROCESS_KINDS, parse_faults
+from asmonc_vision.faults import MESSAGE_KINDS, PROCESS_KINDS, affected_pairs, parse_faults
 from asmonc_vision.graph import GraphNode
 from asmonc_vision.core.evaluation import (FrameObstacles, json_ready, path_criteria,
                                           path_warnings, path_warnings_summary, score_sequence)
@@ -681,9 +681,18 @@ def run(args) -> int:
     summary['replay'] = _pacing(children.get('player'), paced)
     summary['errors'] = failed
     summary['restarts'] = dict(restarts)
+    dropped = summary['dropped_frames']
     if faults:
         summary['faults'] = {'spec': [str(f) for f in faults],
                              'processes': injector.done if injector is not None else []}
+        if any(f.kind in MESSAGE_KINDS for f in faults):
+            # pairs the faults changed may go without a result: only good ones count
+            every, affected = affected_pairs(bag, faults)
+            with monitor.lock:
+                lost = sorted((every - affected) - set(monitor.detections))
+            dropped = len(lost)
+            summary['faults'].update(affected_pairs=len(affected),
+                                     good_pairs_without_result=len(lost))
     print_summary(summary, console)
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
@@ -691,7 +700,7 @@ def run(args) -> int:
         shutil.copytree(log_dir, args.out / 'logs', dirs_exist_ok=True)
         console.line(f'outputs recorded in {args.out}')
     shutil.rmtree(log_dir, ignore_errors=True)
-    if failed or summary['dropped_frames'] or player_rc not in (0, None):
+    if failed or dropped or player_rc not in (0, None):
         return 1
     return 0
 
@@ -937,5 +946,10 @@ def print_summary(s: dict, console: _Console) -> None:
             p(line)
     else:
         p('no ground truth in this bag: no score')
+    f = s.get('faults')
+    if f:
+        p(f"faults injected: {'; '.join(f['spec'])}"
+          + (f"; {f['affected_pairs']} pair(s) changed or left out, good pairs without a "
+             f"result: {f['good_pairs_without_result']}" if 'affected_pairs' in f else ''))
     for e in s.get('errors', []):
         p(f'error: {e}')

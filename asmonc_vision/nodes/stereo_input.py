@@ -28,6 +28,10 @@ from asmonc_vision.nodes.conversions import (ImageFormatError, image_msg_to_gray
                                              stereo_camera_from_infos)
 
 
+#: camera_infos kept per side to find the one stamped like a pair
+INFO_HISTORY = 32
+
+
 @dataclass(frozen=True)
 class StereoInputConfig:
     """Settings of the stereo input every `StereoInputNode` shares (pairing, queue,
@@ -137,6 +141,9 @@ class StereoInputNode(Node):
         self.frames_bad = 0
         self._lock = threading.Lock()
         self._info = {'left': None, 'right': None}
+        #: the newest camera_infos by stamp (ns), per side
+        self._info_by_stamp = {'left': collections.OrderedDict(),
+                               'right': collections.OrderedDict()}
         self._seq = itertools.count()
         self._pending: collections.deque[StereoPair] = collections.deque()
         self._cv = threading.Condition()
@@ -192,13 +199,25 @@ class StereoInputNode(Node):
         with self._lock:
             self._info[side] = msg
             self._info_missing = False
+            recent = self._info_by_stamp[side]
+            recent[stamp_to_ns(msg.header.stamp)] = msg
+            while len(recent) > INFO_HISTORY:
+                recent.popitem(last=False)
+
+    def _infos_for(self, stamp_ns: int) -> tuple[CameraInfo | None, CameraInfo | None]:
+        """The camera_infos stamped like a pair (each side's newest if none is): the infos
+        travel on their own topics, so the newest may already be the next frame's, or the
+        one before, whatever its content (a bad one would spoil a good pair)."""
+        with self._lock:
+            return tuple(self._info_by_stamp[side].get(stamp_ns, self._info[side])
+                         for side in ('left', 'right'))
 
     def _on_image(self, side: str, msg: Image) -> None:
         stamp = stamp_to_ns(msg.header.stamp)
         with self._lock:
             pair = self._pairer.add(side, stamp, msg)
             expired = self._pairer.expire()
-            infos = (self._info['left'], self._info['right'])
+        infos = self._infos_for(stamp)
         for s, t in expired:
             self.frames_bad += 1
             self.get_logger().warn(
@@ -250,6 +269,9 @@ class StereoInputNode(Node):
         # that wait has run out, pairs are skipped at once (no pair-per-`info_wait` crawl
         # that would overflow the queue) until a camera_info arrives.
         deadline = time.monotonic() + self._settings.info_wait
+        matched = self._infos_for(pair.stamp_ns)   # those stamped like it may be in by now
+        pair.left_info = matched[0] or pair.left_info
+        pair.right_info = matched[1] or pair.right_info
         while pair.left_info is None or pair.right_info is None:
             with self._lock:
                 pair.left_info = pair.left_info or self._info['left']
