@@ -126,9 +126,7 @@ def test_imu_jump_turns_pitch_by_the_angle():
         '/inclinometer/imu', serialize_message(m), T0) == []
 
 
-def test_stereo_input_uses_the_camera_info_stamped_like_the_pair(ros_context):
-    # camera_infos travel on their own topics: a bad info of the next frame (here a zero
-    # baseline) that arrives before a good pair is processed must not spoil that pair
+def _probe(ctx):
     import threading
 
     from asmonc_vision.nodes.stereo_input import StereoInputConfig, StereoInputNode
@@ -144,7 +142,20 @@ def test_stereo_input_uses_the_camera_info_stamped_like_the_pair(ros_context):
             self.cams.append(cam)
             self.done.set()
 
-    node = Probe(context=ros_context)
+    return Probe(context=ctx)
+
+
+def _send_pair(node, t):
+    for side, right in (('left', False), ('right', True)):
+        node._on_info(side, deserialize_message(info(at(t), right), CameraInfo))
+    node._on_image('left', deserialize_message(image(at(t)), Image))
+    node._on_image('right', deserialize_message(image(at(t)), Image))
+
+
+def test_stereo_input_uses_the_camera_info_stamped_like_the_pair(ros_context):
+    # camera_infos travel on their own topics: a bad info of the frame before (here a
+    # zero baseline) must not spoil a good pair whose own info comes after its images
+    node = _probe(ros_context)
     try:
         with node._cv:       # hold the worker until the pair's own infos are in
             bad = deserialize_message(info(at(0.1), right=True), CameraInfo)
@@ -159,5 +170,25 @@ def test_stereo_input_uses_the_camera_info_stamped_like_the_pair(ros_context):
         assert node.done.wait(5.0)
         assert node.cams[0].baseline == pytest.approx(0.12)
         assert node.frames_bad == 0
+    finally:
+        node.destroy_node()
+
+
+def test_stereo_input_reports_missing_pairs(ros_context):
+    import time
+    node = _probe(ros_context)
+    try:
+        for k in range(5):
+            _send_pair(node, 0.1 * k)
+        _send_pair(node, 0.9)            # 0.5 .. 0.8 never came
+        deadline = time.monotonic() + 5.0
+        while len(node.cams) < 6 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert len(node.cams) == 6 and node.frames_missing == 4
+        assert node.diag.level == 1 and 'missing' in node.diag._status.message
+        _send_pair(node, 1.0)            # a usual step again: nothing more missing
+        while len(node.cams) < 7 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert node.frames_missing == 4
     finally:
         node.destroy_node()

@@ -6,8 +6,10 @@ is dropped, with a warning, when the work falls behind) and hands each good pair
 `process_pair` on a worker thread, so the callbacks that receive images stay fast.
 Bad input is logged (throttled), counted and reported in /diagnostics, and the pair is
 skipped: a wrong encoding, left and right of different sizes, images that do not match
-their camera_info, stamps that do not pair or go backwards. A jump back in time (a
-replayed bag that loops) or a new camera calls `restart`.
+their camera_info, stamps that do not pair or go backwards; so are pairs that never
+came (a stamp step well beyond the usual one). A pair uses the camera_infos stamped like
+it when they have come (each side's newest otherwise). A jump back in time (a replayed
+bag that loops) or a new camera calls `restart`.
 """
 from __future__ import annotations
 
@@ -30,6 +32,10 @@ from asmonc_vision.nodes.conversions import (ImageFormatError, image_msg_to_gray
 
 #: camera_infos kept per side to find the one stamped like a pair
 INFO_HISTORY = 32
+#: a stamp step this many times the usual one means pairs are missing
+GAP_FACTOR = 1.8
+#: stamp steps kept to judge the usual one
+GAP_HISTORY = 20
 
 
 @dataclass(frozen=True)
@@ -139,6 +145,10 @@ class StereoInputNode(Node):
         self.frames_done = 0
         self.frames_dropped = 0
         self.frames_bad = 0
+        #: pairs that never came, judged by the gaps in the stamps (`_check_gap`)
+        self.frames_missing = 0
+        self._last_seen_ns: int | None = None
+        self._steps: collections.deque[float] = collections.deque(maxlen=GAP_HISTORY)
         self._lock = threading.Lock()
         self._info = {'left': None, 'right': None}
         #: the newest camera_infos by stamp (ns), per side
@@ -304,9 +314,34 @@ class StereoInputNode(Node):
                 f'camera: {cam.width}x{cam.height}, f={cam.f:.1f} px, B={cam.baseline:.3f} m')
         return self._camera
 
+    def _check_gap(self, stamp_ns: int) -> None:
+        """Report pairs that never came (dropped on the way, a stalled camera): a stamp
+        step more than `GAP_FACTOR` times the usual one (the median of the recent
+        steps) is logged (throttled), counted in ``frames_missing`` and said in
+        /diagnostics."""
+        last, self._last_seen_ns = self._last_seen_ns, stamp_ns
+        if last is None or stamp_ns <= last:
+            return
+        dt = (stamp_ns - last) / 1e9
+        if len(self._steps) >= 3:
+            usual = float(np.median(self._steps))
+            if dt > GAP_FACTOR * usual:
+                missing = max(1, int(round(dt / usual)) - 1)
+                self.frames_missing += missing
+                self.get_logger().warn(
+                    f'{missing} stereo pair(s) missing before {stamp_ns / 1e9:.3f} s: '
+                    f'{dt:.2f} s since the last pair (usually {usual:.3f} s; '
+                    f'{self.frames_missing} missing so far)', throttle_duration_sec=2.0)
+                self.diag.update(Diagnostics.WARN, f'{missing} stereo pair(s) missing',
+                                 frames_in=self.frames_in, frames_done=self.frames_done,
+                                 frames_missing=self.frames_missing)
+                return              # a gap is not a usual step
+        self._steps.append(dt)
+
     def _process(self, pair: StereoPair) -> None:
         self._last_pair_wall = time.monotonic()
         log = self.get_logger()
+        self._check_gap(pair.stamp_ns)
         if self._last_stamp_ns is not None and pair.stamp_ns <= self._last_stamp_ns:
             back = (self._last_stamp_ns - pair.stamp_ns) / 1e9
             if back > self._settings.time_jump_reset:
