@@ -246,10 +246,17 @@ def read_messages(path, topics):
         try:
             for conn, t, raw in reader.messages(connections=conns):
                 yield conn.topic, t, store.deserialize_cdr(raw, conn.msgtype)
-        except (ReaderError, OSError, ValueError, EOFError) as exc:
+        except (ReaderError, OSError, ValueError, EOFError,
+                *bagplay_read_errors()) as exc:
             raise BagError(f"bag '{path}' is truncated or corrupt: {exc}") from exc
     finally:
         reader.close()
+
+
+def bagplay_read_errors() -> tuple:
+    """What decoding a damaged bag may raise (`asmonc_vision.bagplay`'s list)."""
+    from asmonc_vision.bagplay import _read_errors
+    return _read_errors()
 
 
 def header_stamp_ns(msg) -> int:

@@ -18,6 +18,7 @@ tested without a ROS middleware:
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import struct
 import zlib
 from collections.abc import Collection, Iterator
@@ -215,11 +216,13 @@ def _read_errors() -> tuple:
     from rosbags.rosbag2 import ReaderError
 
     errors += [McapError, ReaderError]
-    try:
-        import zstandard
-        errors.append(zstandard.ZstdError)
-    except ImportError:  # pragma: no cover
-        pass
+    # zstd chunks: rosbags decompresses with backports.zstd (compression.zstd on
+    # Python >= 3.14), mcap with zstandard; their errors derive from Exception only
+    for module in ('zstandard', 'backports.zstd', 'compression.zstd'):
+        try:
+            errors.append(importlib.import_module(module).ZstdError)
+        except (ImportError, AttributeError):
+            pass
     return tuple(errors)
 
 

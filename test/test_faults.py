@@ -187,8 +187,10 @@ def test_stereo_input_reports_missing_pairs(ros_context):
         assert len(node.cams) == 6 and node.frames_missing == 4
         assert node.diag.level == 1 and 'missing' in node.diag._status.message
         _send_pair(node, 1.0)            # a usual step again: nothing more missing
-        while len(node.cams) < 7 and time.monotonic() < deadline:
+        _send_pair(node, 0.85)           # a stamp out of order (skipped) ...
+        _send_pair(node, 1.1)            # ... is no gap for the pair after it
+        while len(node.cams) < 8 and time.monotonic() < deadline:
             time.sleep(0.01)
-        assert node.frames_missing == 4
+        assert len(node.cams) == 8 and node.frames_missing == 4
     finally:
         node.destroy_node()

@@ -230,6 +230,9 @@ class StereoInputNode(Node):
         infos = self._infos_for(stamp)
         for s, t in expired:
             self.frames_bad += 1
+            self.diag.update(Diagnostics.WARN, 'images without a partner (stamps differ)',
+                             frames_in=self.frames_in, frames_done=self.frames_done,
+                             frames_bad=self.frames_bad)
             self.get_logger().warn(
                 f'{s} image at stamp {t / 1e9:.3f} s has no partner with the same stamp; '
                 'dropped (left and right must share one stamp, or differ by at most the '
@@ -319,8 +322,13 @@ class StereoInputNode(Node):
         step more than `GAP_FACTOR` times the usual one (the median of the recent
         steps) is logged (throttled), counted in ``frames_missing`` and said in
         /diagnostics."""
-        last, self._last_seen_ns = self._last_seen_ns, stamp_ns
-        if last is None or stamp_ns <= last:
+        last = self._last_seen_ns
+        if last is not None and stamp_ns <= last:
+            if (last - stamp_ns) / 1e9 > self._settings.time_jump_reset:
+                self._last_seen_ns = stamp_ns    # time went back (a bag loop)
+            return                               # else a stamp out of order: skipped
+        self._last_seen_ns = stamp_ns
+        if last is None:
             return
         dt = (stamp_ns - last) / 1e9
         if len(self._steps) >= 3:
