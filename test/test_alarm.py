@@ -382,3 +382,13 @@ def test_yaml_equals_dataclass_defaults():
     assert params == defaults
     for k, v in params.items():
         assert type(v) is type(defaults[k]), k
+
+
+def test_recovery_with_the_ground_lost_is_not_all_clear():
+    # data back while the detector reports the ground LOST: an empty list is no evidence
+    # that the path is clear, so the FAULT stays; an obstacle is still announced
+    logic = AlarmLogic(AlarmConfig(), t0=0.0)
+    logic.ground_status(0.0, GroundStatus.LOST)
+    assert logic.update(0.1, []) is None
+    assert logic.current.level == L.FAULT
+    assert logic.update(0.2, [ob(2.0)]).level == L.WARNING

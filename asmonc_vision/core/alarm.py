@@ -353,9 +353,12 @@ class AlarmLogic:
         if tgt is not None:
             self._last_target = tgt
         if cur.level == AlarmLevel.FAULT:
-            # Data are back: announce the real level at once, without memory.
+            # Data are back: announce the real level at once, without memory -- but
+            # with the ground LOST an empty path is no evidence: "all clear" waits.
             level = self.level_for(tgt.range if tgt else None)
             self._below_since = None
+            if level == AlarmLevel.CLEAR and self._ground == GroundStatus.LOST:
+                return None
             return self._announce(self._decide(t, level, tgt))
 
         level = self.level_for(tgt.range if tgt else None, cur.level)
