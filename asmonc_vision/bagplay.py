@@ -206,8 +206,9 @@ def _latched(qos_profiles) -> bool:
 # --- reading ------------------------------------------------------------------------
 
 #: what can go wrong while decoding a damaged MCAP file, besides rosbags' ReaderError
+#: (TypeError, OverflowError, MemoryError: rosbags on a damaged length or an early end)
 _READ_ERRORS = (OSError, EOFError, ValueError, KeyError, IndexError, struct.error,
-                zlib.error, MemoryError, RuntimeError)
+                zlib.error, MemoryError, RuntimeError, OverflowError, TypeError)
 
 
 def _read_errors() -> tuple:
@@ -215,7 +216,8 @@ def _read_errors() -> tuple:
     from mcap.exceptions import McapError
     from rosbags.rosbag2 import ReaderError
 
-    errors += [McapError, ReaderError]
+    from rosbags.serde import SerdeError
+    errors += [McapError, ReaderError, SerdeError]
     # zstd chunks: rosbags decompresses with backports.zstd (compression.zstd on
     # Python >= 3.14), mcap with zstandard; their errors derive from Exception only
     for module in ('zstandard', 'backports.zstd', 'compression.zstd'):

@@ -197,3 +197,16 @@ def test_line_splitter_any_bytes(chunks):
         for line in s.feed(c):
             assert line and '\n' not in line and '\r' not in line
             assert all(ord(ch) < 128 or ch == '\ufffd' for ch in line)
+
+
+@pytest.mark.parametrize('target', ['nmea', 'bag'])
+def test_fuzz_command_runs_clean_for_a_few_seconds(target, tmp_path):
+    # the bag reader once ended in MemoryError, OverflowError, TypeError and rosbags'
+    # SerdeError on damaged files instead of BagError
+    import argparse
+
+    from asmonc_vision.cli import fuzz
+    args = argparse.Namespace(target=target, seconds=4.0, engine='hypothesis',
+                              crash_dir=tmp_path, seed=0)
+    assert fuzz.run(args) == 0
+    assert not list(tmp_path.glob('fuzz-*'))

@@ -7,6 +7,7 @@
     asmonc motion {tables,eval,corners}        visual egomotion: Tables 2-3, bag errors
     asmonc gait {sim,fusion,real,figs}         the walk model: errors, real walking, Figs. 13-15
     asmonc smallbox [--heights ..] [--ranges ..]  small boxes standing still: GPOD vs SGBM
+    asmonc fuzz {nmea,bag} --seconds N         fuzz the NMEA parser or the bag reader
 """
 from __future__ import annotations
 
@@ -44,6 +45,10 @@ def build_parser() -> argparse.ArgumentParser:
     smallbox.add_arguments(sub.add_parser(
         'smallbox', help='small boxes seen standing still: GPOD against the SGBM baseline',
         description=smallbox.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
+    from asmonc_vision.cli import fuzz
+    fuzz.add_arguments(sub.add_parser(
+        'fuzz', help='fuzz the NMEA parser or the bag reader for a given time',
+        description=fuzz.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
     return parser
 
 
