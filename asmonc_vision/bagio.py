@@ -165,7 +165,8 @@ def open_reader(path):
     try:
         reader = Reader(p)
         reader.open()
-    except (ReaderError, OSError, ValueError, KeyError) as exc:
+    except (ReaderError, OSError, ValueError, KeyError, *bagplay_read_errors()) as exc:
+        # (a damaged length field once asked for exabytes: MemoryError)
         raise BagError(f"bag '{p}' cannot be read ({type(exc).__name__}: {exc}); "
                        'is it a complete rosbag2 (MCAP or sqlite3) bag?') from exc
     return reader
@@ -235,7 +236,8 @@ def read_messages(path, topics):
         wanted = {t.name: t.msgtype for t in src.info.topics.values() if t.name in set(topics)}
         try:
             for m in src.messages(wanted):
-                yield m.topic, m.timestamp, store.deserialize_cdr(m.data, m.msgtype)
+                yield m.topic, m.timestamp, _deserialize(store, path, m.topic, m.data,
+                                                         m.msgtype)
         except bagplay.BagError as cut:
             raise BagError(str(cut)) from cut
         if src.info.truncated:
@@ -247,11 +249,29 @@ def read_messages(path, topics):
             return                  # rosbags reads every connection when given none
         try:
             for conn, t, raw in reader.messages(connections=conns):
-                yield conn.topic, t, store.deserialize_cdr(raw, conn.msgtype)
-        except (ReaderError, OSError, ValueError, EOFError) as exc:
+                yield conn.topic, t, _deserialize(store, path, conn.topic, raw, conn.msgtype)
+        except BagError:
+            raise
+        except (ReaderError, OSError, ValueError, EOFError,
+                *bagplay_read_errors()) as exc:
             raise BagError(f"bag '{path}' is truncated or corrupt: {exc}") from exc
     finally:
         reader.close()
+
+
+def _deserialize(store, path, topic: str, raw, msgtype: str):
+    """One message from its CDR bytes; BagError when they are damaged."""
+    try:
+        return store.deserialize_cdr(raw, msgtype)
+    except (*bagplay_read_errors(), TypeError) as exc:
+        raise BagError(f"bag '{path}' is corrupt: a {msgtype} message on {topic} cannot be "
+                       f'decoded ({type(exc).__name__}: {exc})') from exc
+
+
+def bagplay_read_errors() -> tuple:
+    """What decoding a damaged bag may raise (`asmonc_vision.bagplay`'s list)."""
+    from asmonc_vision.bagplay import _read_errors
+    return _read_errors()
 
 
 def header_stamp_ns(msg) -> int:

@@ -18,6 +18,7 @@ tested without a ROS middleware:
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import struct
 import zlib
 from collections.abc import Collection, Iterator
@@ -81,9 +82,19 @@ class PlayerConfig:
              '(an answer settles every image sent before it: skipped pairs cost no wait)',
         range=(0.1, 600.0))
 
+    faults: str = param(
+        '', "faults injected at bag times, 'KIND[=ARG]@START[+DURATION]; ...' "
+            "(asmonc_vision/faults.py); '' = none")
+
     def __post_init__(self) -> None:
         check_fields(self)
         self.wait_targets(())
+        if self.faults:
+            from asmonc_vision.faults import parse_faults
+            try:
+                parse_faults(self.faults)
+            except ValueError as exc:
+                raise ValueError(f'PlayerConfig.faults: {exc}') from None
         if self.pace_topic and not self.pace_type:
             raise ValueError("PlayerConfig.pace_type: needed with pace_topic "
                              f"'{self.pace_topic}' ('pkg/msg/Name')")
@@ -195,8 +206,9 @@ def _latched(qos_profiles) -> bool:
 # --- reading ------------------------------------------------------------------------
 
 #: what can go wrong while decoding a damaged MCAP file, besides rosbags' ReaderError
+#: (TypeError, OverflowError, MemoryError: rosbags on a damaged length or an early end)
 _READ_ERRORS = (OSError, EOFError, ValueError, KeyError, IndexError, struct.error,
-                zlib.error, MemoryError, RuntimeError)
+                zlib.error, MemoryError, RuntimeError, OverflowError, TypeError)
 
 
 def _read_errors() -> tuple:
@@ -204,12 +216,15 @@ def _read_errors() -> tuple:
     from mcap.exceptions import McapError
     from rosbags.rosbag2 import ReaderError
 
-    errors += [McapError, ReaderError]
-    try:
-        import zstandard
-        errors.append(zstandard.ZstdError)
-    except ImportError:  # pragma: no cover
-        pass
+    from rosbags.serde import SerdeError
+    errors += [McapError, ReaderError, SerdeError]
+    # zstd chunks: rosbags decompresses with backports.zstd (compression.zstd on
+    # Python >= 3.14), mcap with zstandard; their errors derive from Exception only
+    for module in ('zstandard', 'backports.zstd', 'compression.zstd'):
+        try:
+            errors.append(importlib.import_module(module).ZstdError)
+        except (ImportError, AttributeError):
+            pass
     return tuple(errors)
 
 

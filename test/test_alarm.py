@@ -210,7 +210,7 @@ def test_chatter_with_a_large_swing_is_held_by_the_hold_time():
 
 
 def test_repeat_period_reannounces_non_clear_states_only():
-    logic = started(repeat_period=2.0)
+    logic = started(repeat_period=2.0, timeout=2.0)
     assert logic.update(0.1, [ob(2.0)]).level == L.WARNING
     assert logic.update(1.0, [ob(1.9)]) is None
     d = logic.update(2.2, [ob(1.8)])
@@ -273,19 +273,43 @@ def test_timeout_gives_fault_and_data_recovers():
     # the fault is repeated: a silent wearer would otherwise assume all is well
     d = logic.check_timeout(3.7)
     assert d.level == L.FAULT and d.repeat
-    # data back, nothing there: "all clear" once
+    # data back, nothing there, with the detector's ground status: "all clear" once
+    logic.ground_status(3.95, GroundStatus.TRACKING)
     d = logic.update(4.0, [])
     assert d.level == L.CLEAR and d.text == TEXT_CLEAR
-    assert logic.update(4.1, []) is None
-    assert logic.update(9.0, []) is None
+    for k in range(1, 51):       # lists every 0.1 s: CLEAR is not repeated
+        assert logic.update(4.0 + 0.1 * k, []) is None
 
 
 def test_recovery_goes_straight_to_the_real_level():
     logic = started(timeout=1.0)
     logic.update(0.1, [])
     assert logic.check_timeout(2.0).level == L.FAULT
+    logic.ground_status(2.05, GroundStatus.TRACKING)
     d = logic.update(2.1, [ob(2.0)])
     assert d.level == L.WARNING and d.obstacle_id == 1
+
+
+@pytest.mark.parametrize('ground_first', [False, True])
+def test_after_a_gap_the_ground_status_from_before_it_is_not_trusted(ground_first):
+    # The detector died and was restarted: its first lists come before its ground plane.
+    # The TRACKING status from before the gap must not let an empty list say "all clear".
+    logic = started(timeout=1.0)
+    logic.update(0.1, [])
+    logic.ground_status(0.12, GroundStatus.TRACKING)   # the last frame's, after its list
+    assert logic.check_timeout(1.2).text == TEXT_NO_DATA
+    if ground_first:   # a stalled camera: the same detector, ground status first
+        logic.ground_status(3.0, GroundStatus.TRACKING)
+        assert logic.update(3.0, []).level == L.CLEAR
+        return
+    assert logic.update(3.0, []) is None               # still "detection has stopped"
+    assert logic.current.level == L.FAULT and logic.current.text == TEXT_NO_DATA
+    assert logic.check_timeout(3.05) is None
+    # the restarted detector calibrates: "starting up", then the real level
+    assert logic.ground_status(3.1, GroundStatus.INITIALISING).text == TEXT_STARTING
+    assert logic.update(3.2, []) is None
+    logic.ground_status(3.3, GroundStatus.TRACKING)
+    assert logic.update(3.4, [ob(2.0)]).level == L.WARNING
 
 
 def test_ground_lost_longer_than_timeout_is_a_fault():
@@ -358,3 +382,13 @@ def test_yaml_equals_dataclass_defaults():
     assert params == defaults
     for k, v in params.items():
         assert type(v) is type(defaults[k]), k
+
+
+def test_recovery_with_the_ground_lost_is_not_all_clear():
+    # data back while the detector reports the ground LOST: an empty list is no evidence
+    # that the path is clear, so the FAULT stays; an obstacle is still announced
+    logic = AlarmLogic(AlarmConfig(), t0=0.0)
+    logic.ground_status(0.0, GroundStatus.LOST)
+    assert logic.update(0.1, []) is None
+    assert logic.current.level == L.FAULT
+    assert logic.update(0.2, [ob(2.0)]).level == L.WARNING

@@ -96,8 +96,11 @@ def test_alarms_follow_obstacles_fault_on_silence_and_latch(ros):
     assert alarms[-1].text == TEXT_NO_DATA
     spin_until(lambda: any(d.level == b'\x02' for d in diags), 'an ERROR diagnostic')
 
-    # data back, nothing in the way: all clear
-    spin_until(lambda: alarms[-1].level == Alarm.CLEAR, 'recovery', each=send([]))
+    # data back with the detector's ground status, nothing in the way: all clear
+    def send_with_ground():
+        plane_pub.publish(GroundPlane(status=GroundPlane.TRACKING))
+        send([])()
+    spin_until(lambda: alarms[-1].level == Alarm.CLEAR, 'recovery', each=send_with_ground)
     assert alarms[-1].text == TEXT_CLEAR
     assert sum(a.level == Alarm.CLEAR for a in alarms) == 1
 

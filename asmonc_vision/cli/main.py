@@ -9,6 +9,7 @@
     asmonc smallbox [--heights ..] [--ranges ..]  small boxes standing still: GPOD vs SGBM
     asmonc campaign [--minutes M] [--workers N]   random walks scored for safety: ours vs SGBM
     asmonc images-bag FOLDER OUT [--repeat N]   a contract bag from a folder of stereo pairs
+    asmonc fuzz {nmea,bag} --seconds N         fuzz the NMEA parser or the bag reader
 """
 from __future__ import annotations
 
@@ -54,6 +55,10 @@ def build_parser() -> argparse.ArgumentParser:
     images_bag.add_arguments(sub.add_parser(
         'images-bag', help='a contract bag from a folder of stereo image pairs (e.g. KITTI)',
         description=images_bag.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
+    from asmonc_vision.cli import fuzz
+    fuzz.add_arguments(sub.add_parser(
+        'fuzz', help='fuzz the NMEA parser or the bag reader for a given time',
+        description=fuzz.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
     return parser
 
 

@@ -22,12 +22,13 @@ import tempfile
 import threading
 import time
 from collections import Counter
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from asmonc_vision import bagio
+from asmonc_vision import bagio, graph
+from asmonc_vision.faults import MESSAGE_KINDS, PROCESS_KINDS, affected_pairs, parse_faults
+from asmonc_vision.graph import GraphNode
 from asmonc_vision.core.evaluation import (FrameObstacles, json_ready, path_criteria,
                                           path_warnings, path_warnings_summary, score_sequence)
 
@@ -38,29 +39,8 @@ OUTPUT_TOPICS = ('/obstacles', '/ground_plane', '/obstacles/markers', '/detector
                  '/gait/predicted_motion')
 
 
-@dataclass(frozen=True)
-class NodeSpec:
-    """A node of the graph: its module, its ROS node name, what input it needs from the
-    bag ('images' or 'imu'), and the topics that show it is connected (it publishes
-    `outputs` and subscribes `inputs`)."""
-
-    module: str
-    ros_name: str
-    needs: str
-    outputs: tuple[str, ...]
-    inputs: tuple[str, ...]
-
-
-NODES = {
-    'detector': NodeSpec('asmonc_vision.nodes.detector_node', 'detector_node', 'images',
-                         ('/obstacles',), ('/stereo/left/image_rect', '/stereo/right/image_rect')),
-    'alarm': NodeSpec('asmonc_vision.nodes.alarm_node', 'alarm_node', 'images',
-                      ('/alarms',), ('/obstacles',)),
-    'egomotion': NodeSpec('asmonc_vision.nodes.egomotion_node', 'egomotion_node', 'images',
-                          ('/egomotion',), ('/stereo/left/image_rect',)),
-    'gait': NodeSpec('asmonc_vision.nodes.gait_node', 'gait_filter_node', 'imu',
-                     ('/gait/state',), ('/inclinometer/imu',)),
-}
+#: the node graph (`asmonc_vision.graph`); a node entry there is started here too
+NodeSpec = GraphNode
 DEFAULT_BAG_NAME = 'static_obstacles'
 #: pairs the player may publish ahead of the detector's /obstacles (unless --realtime)
 PACE_LEAD = 3
@@ -94,6 +74,11 @@ def add_arguments(p) -> None:
                    help='true obstacles at least this high (m) count in the recall (default 0.10)')
     p.add_argument('--max-range', type=float, default=5.0,
                    help='true obstacles within this range (m) count in the recall (default 5)')
+    p.add_argument('--max-restarts', type=int, default=3,
+                   help='a node that dies is restarted at most this many times (default 3)')
+    p.add_argument('--inject', default='',
+                   help='faults at chosen bag times, e.g. "kill=detector@2;stall@3+1.5" '
+                        '(docs/robustness.md lists the classes)')
     p.add_argument('--no-progress', action='store_true', help='no progress bar')
     p.add_argument('--quiet', action='store_true', help='print only the summary')
     p.set_defaults(func=run)
@@ -130,12 +115,15 @@ class _Monitor:
         from rclpy.qos import qos_profile_sensor_data
         from sensor_msgs.msg import CameraInfo
         self.infos_played = 0
+        #: header stamp of the newest left camera_info played (None before the first)
+        self.last_info_stamp_ns: int | None = None
         self.node.create_subscription(CameraInfo, bagio.TOPICS['left_info'][0],
                                       self._on_info, qos_profile_sensor_data)
 
     def _on_info(self, msg) -> None:
         with self.lock:
             self.infos_played += 1
+            self.last_info_stamp_ns = bagio.header_stamp_ns(msg)
 
     def _on_gait(self, msg) -> None:
         with self.lock:
@@ -152,7 +140,8 @@ class _Monitor:
     def _on_alarm(self, msg) -> None:
         a = {'stamp_ns': msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec,
              'level': int(msg.level), 'text': msg.text, 'range': float(msg.range),
-             'bearing': float(msg.bearing), 'obstacle_id': int(msg.obstacle_id)}
+             'bearing': float(msg.bearing), 'obstacle_id': int(msg.obstacle_id),
+             'received_ns': time.time_ns()}
         with self.lock:
             self.alarms.append(a)
             self.new_alarms.append(a)
@@ -202,13 +191,14 @@ class _Child:
     """A node in its own process; its log goes to a file, warnings and errors to stderr."""
 
     def __init__(self, name: str, cmd: list[str], log_dir: Path, echo, env: dict,
-                 echo_warnings: bool = True, done_mark: str | None = None):
+                 echo_warnings: bool = True, done_mark: str | None = None,
+                 log_name: str | None = None):
         self.name = name
         self._marks = ('[ERROR]', '[FATAL]', 'Traceback') + (('[WARN]',) if echo_warnings else ())
         #: set when a log line contains ``done_mark`` (the player's end-of-bag line)
         self._done_mark = done_mark
         self.done = threading.Event()
-        self.log_path = log_dir / f'{name}.log'
+        self.log_path = log_dir / f'{log_name or name}.log'
         self._log = self.log_path.open('w')
         self._echo = echo
         self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
@@ -361,6 +351,35 @@ def claim_domain(preferred: int, lock_dir: Path | None = None):
     return None, None
 
 
+class FaultSchedule:
+    """The process faults of ``--inject`` (`asmonc_vision.faults`): SIGKILL a node when
+    the replay reaches the fault's bag time (the newest camera_info played, counted from
+    ``t0``, the bag's first image stamp). Each fault done is kept in ``done`` with the wall
+    time (ns) it was done at."""
+
+    def __init__(self, faults, children: dict, monitor: '_Monitor', console: '_Console',
+                 t0: int):
+        self.pending = [f for f in faults if f.kind in PROCESS_KINDS]
+        self.children, self.monitor, self.console, self.t0 = children, monitor, console, t0
+        self.done: list[dict] = []
+
+    def poll(self) -> None:
+        with self.monitor.lock:
+            stamp = self.monitor.last_info_stamp_ns
+        if stamp is None or not self.pending:
+            return
+        t = (stamp - self.t0) / 1e9
+        for f in [f for f in self.pending if f.start <= t]:
+            self.pending.remove(f)
+            child = self.children.get(f.arg)
+            if child is None or not child.alive():
+                self.console.line(f'asmonc run: fault {f}: no running node {f.arg!r}', err=True)
+                continue
+            os.kill(child.proc.pid, signal.SIGKILL)
+            self.done.append({'fault': str(f), 'bag_time_s': t, 'wall_ns': time.time_ns()})
+            self.console.line(f'asmonc run: fault injected at {t:.2f} s: {f}', err=True)
+
+
 def run(args) -> int:
     console_err = lambda s: print(s, file=sys.stderr, flush=True)  # noqa: E731
     bag = Path(args.bag) if args.bag is not None else default_bag()
@@ -380,8 +399,8 @@ def run(args) -> int:
     n_imu = topics.get(imu_topic, ('', 0))[1]
     inputs = {'images'} if n_pairs else set()
     inputs |= {'imu'} if n_imu else set()
-    nodes = {name: spec for name, spec in NODES.items()
-             if spec.needs in inputs and importlib.util.find_spec(spec.module) is not None}
+    nodes = {spec.name: spec for spec in graph.nodes_for(inputs)
+             if importlib.util.find_spec(spec.module) is not None}
     # the replay is paced by the detector's /obstacles unless --realtime
     paced = 'detector' in nodes and not args.realtime
     if not inputs:
@@ -391,6 +410,19 @@ def run(args) -> int:
     if not nodes:
         console_err(f"asmonc run: bag '{bag}' holds only {', '.join(sorted(inputs))}, and no node "
                     'for that is installed')
+        return 2
+    try:
+        faults = parse_faults(args.inject)
+    except ValueError as exc:
+        console_err(f'asmonc run: --inject: {exc}')
+        return 2
+    unknown = [f for f in faults if f.kind in PROCESS_KINDS and f.arg not in nodes]
+    if unknown:
+        console_err(f'asmonc run: --inject: {unknown[0]}: no node {unknown[0].arg!r} in this '
+                    f"run (nodes: {', '.join(nodes)})")
+        return 2
+    if args.max_restarts < 0:
+        console_err('asmonc run: --max-restarts must be >= 0')
         return 2
     if args.out is not None and args.out.exists() and any(args.out.iterdir()):
         console_err(f"asmonc run: --out '{args.out}' exists and is not empty")
@@ -469,18 +501,24 @@ def run(args) -> int:
     for pf in args.params_file:
         ros_params += ['--params-file', str(pf)]
     children: dict[str, _Child] = {}
+    restarts: Counter = Counter()
     failed: list[str] = []
     if damage:
         failed.append(f'bag not read to its end: {damage}')
     player_rc = None
     gait_stopper: _GaitStopper | None = None
+    injector: FaultSchedule | None = None
     try:
+        def spawn(name: str, log_name: str | None = None) -> _Child:
+            cmd = [sys.executable, '-m', nodes[name].module, '--ros-args', *ros_params,
+                   *nodes[name].ros_args()]
+            # the alarm node's warnings are its alarms, which are printed anyway
+            return _Child(name, cmd, log_dir, lambda s: console.line(s, err=True),
+                          env, echo_warnings=(name != 'alarm'), log_name=log_name)
+
         def start(names: list[str]) -> None:
             for name in names:
-                cmd = [sys.executable, '-m', nodes[name].module, '--ros-args', *ros_params]
-                # the alarm node's warnings are its alarms, which are printed anyway
-                children[name] = _Child(name, cmd, log_dir, lambda s: console.line(s, err=True),
-                                        env, echo_warnings=(name != 'alarm'))
+                children[name] = spawn(name)
             # Wait until they are connected, so no frame is lost to discovery: each node
             # publishes its outputs and subscribes its inputs, and the recorder (if any)
             # has subscribed every output.
@@ -501,10 +539,9 @@ def run(args) -> int:
         # be ready (compiling its kernels on a first run); so may the gait filter (about
         # 15 s on a first run, before its own grace starts), which would use up the
         # alarm's if the two started together.
-        late = ('gait', 'alarm')
-        start([n for n in nodes if n not in late])
-        for name in late:
-            if name in nodes:
+        start([n for n, spec in nodes.items() if not spec.start_late])
+        for name, spec in nodes.items():
+            if spec.start_late:
                 start([name])
 
         # The player itself must also see every reader of the bag's inputs (images and
@@ -514,6 +551,9 @@ def run(args) -> int:
                       '-p', f'bag:={bag.resolve()}', '-p', f'rate:={float(args.rate)}',
                       '-p', f'wait_topics:={json.dumps(_wait_topics(nodes, topics))}',
                       '-p', 'exit_when_done:=true']
+        message_faults = '; '.join(str(f) for f in faults if f.kind in MESSAGE_KINDS)
+        if message_faults:
+            player_cmd += ['-p', f'faults:={message_faults}']
         if paced:
             # one /obstacles per pair: a slow machine slows the replay, drops nothing
             player_cmd += ['-p', 'pace_topic:=/obstacles',
@@ -539,8 +579,24 @@ def run(args) -> int:
             if gait_stopper is not None and gait_stopper.stopping.is_set():
                 stopped.add('gait')
             for name in nodes:
-                if name not in stopped and not children[name].alive():
-                    raise RuntimeError(f'{name} node died; see {children[name].log_path}')
+                if name in stopped or children[name].alive():
+                    continue
+                rc = children[name].proc.returncode
+                if not nodes[name].respawn or restarts[name] >= args.max_restarts:
+                    raise RuntimeError(f'{name} node died (exit status {rc}); see '
+                                       f'{children[name].log_path}')
+                # Restart it at once: while it is down the alarm node's timeout says FAULT
+                # (or, for the alarm node itself, its successor starts with FAULT).
+                restarts[name] += 1
+                failed.append(f'{name} node died (exit status {rc}) and was restarted')
+                console.line(f'asmonc run: {name} node died (exit status {rc}); restarting '
+                             f'it ({restarts[name]} of at most {args.max_restarts})', err=True)
+                children[name].stop()
+                children[name] = spawn(name, f'{name}.restart{restarts[name]}')
+                if name == 'gait' and gait_stopper is not None:
+                    gait_stopper.child = children[name]
+
+        injector = FaultSchedule(faults, children, monitor, console, t0)
 
         # Half the alarm node's timeout, counted from the last result this monitor saw
         # (`last_change`: when it arrived, not when this loop noticed it; the loop polls
@@ -561,6 +617,7 @@ def run(args) -> int:
         while (monitor.frames < n_pairs) if n_pairs else children['player'].alive():
             show_alarms()
             console.bar(monitor.frames)
+            injector.poll()
             check_nodes()
             time.sleep(0.02 if played_at is not None and 'alarm' not in stopped else 0.1)
             now = time.monotonic()
@@ -626,6 +683,19 @@ def run(args) -> int:
     summary['player_exit_code'] = player_rc
     summary['replay'] = _pacing(children.get('player'), paced)
     summary['errors'] = failed
+    summary['restarts'] = dict(restarts)
+    dropped = summary['dropped_frames']
+    if faults:
+        summary['faults'] = {'spec': [str(f) for f in faults],
+                             'processes': injector.done if injector is not None else []}
+        if any(f.kind in MESSAGE_KINDS for f in faults):
+            # pairs the faults changed may go without a result: only good ones count
+            every, affected = affected_pairs(bag, faults)
+            with monitor.lock:
+                lost = sorted((every - affected) - set(monitor.detections))
+            dropped = len(lost)
+            summary['faults'].update(affected_pairs=len(affected),
+                                     good_pairs_without_result=len(lost))
     print_summary(summary, console)
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
@@ -633,7 +703,7 @@ def run(args) -> int:
         shutil.copytree(log_dir, args.out / 'logs', dirs_exist_ok=True)
         console.line(f'outputs recorded in {args.out}')
     shutil.rmtree(log_dir, ignore_errors=True)
-    if failed or summary['dropped_frames'] or player_rc not in (0, None):
+    if failed or dropped or player_rc not in (0, None):
         return 1
     return 0
 
@@ -889,5 +959,10 @@ def print_summary(s: dict, console: _Console) -> None:
                 p(line)
     else:
         p('no ground truth in this bag: no score')
+    f = s.get('faults')
+    if f:
+        p(f"faults injected: {'; '.join(f['spec'])}"
+          + (f"; {f['affected_pairs']} pair(s) changed or left out, good pairs without a "
+             f"result: {f['good_pairs_without_result']}" if 'affected_pairs' in f else ''))
     for e in s.get('errors', []):
         p(f'error: {e}')

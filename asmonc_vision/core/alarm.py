@@ -29,7 +29,9 @@ number of plain-speech announcements for a blind pedestrian:
   ``timeout``, or INITIALISING for longer than ``startup_grace``, gives FAULT, repeated
   every ``repeat_period``. At start, and when the detector (re)initialises its ground
   plane, FAULT "starting up, hold still" is announced once. When data return, the real
-  level is announced at once (CLEAR as "all clear").
+  level is announced at once (CLEAR as "all clear") -- after a gap in the obstacle
+  lists, only once a ground status has come after it (a detector that died and was
+  restarted has no ground plane yet; the status from before the gap is stale).
 
 All times are seconds on one monotonic clock chosen by the caller (the node uses the
 steady clock), passed in as ``t``, so the logic is deterministic under test.
@@ -252,6 +254,10 @@ class AlarmLogic:
         self._first_obstacles_t: float | None = None
         self._ground: GroundStatus | None = None
         self._ground_since = float(t0)
+        #: False from obstacle lists resuming after a gap until the next ground status
+        self._ground_fresh = True
+        #: arrival time of the newest ground status
+        self._ground_t = -math.inf
         self._fault: str | None = 'starting'
         self._below_since: float | None = None
         self._current = Decision(AlarmLevel.FAULT, TEXT_STARTING, t=float(t0))
@@ -328,6 +334,13 @@ class AlarmLogic:
     def update(self, t: float, obstacles: Sequence[ObstacleInfo]) -> Decision | None:
         """A new obstacle list arrived at time t (s). Returns an announcement or None."""
         t = float(t)
+        last, timeout = self._last_obstacles_t, self._cfg.timeout
+        if last is not None and t - last > timeout and self._ground_t <= last + timeout:
+            # Lists are back after a gap: the detector stalled, or died and restarted
+            # without its ground plane. The ground status from before the gap (which
+            # may arrive just after its frame's list) is stale: no level is announced
+            # until one has come after the silence reached the timeout.
+            self._ground_fresh = False
         self._last_obstacles_t = t
         if self._first_obstacles_t is None:
             self._first_obstacles_t = t
@@ -340,9 +353,12 @@ class AlarmLogic:
         if tgt is not None:
             self._last_target = tgt
         if cur.level == AlarmLevel.FAULT:
-            # Data are back: announce the real level at once, without memory.
+            # Data are back: announce the real level at once, without memory -- but
+            # with the ground LOST an empty path is no evidence: "all clear" waits.
             level = self.level_for(tgt.range if tgt else None)
             self._below_since = None
+            if level == AlarmLevel.CLEAR and self._ground == GroundStatus.LOST:
+                return None
             return self._announce(self._decide(t, level, tgt))
 
         level = self.level_for(tgt.range if tgt else None, cur.level)
@@ -378,6 +394,8 @@ class AlarmLogic:
         """
         t = float(t)
         status = GroundStatus(int(status))
+        self._ground_fresh = True
+        self._ground_t = t
         if status != self._ground:
             self._ground = status
             self._ground_since = t
@@ -406,6 +424,8 @@ class AlarmLogic:
             # take long to start, e.g. compiling), not from this node's start.
             since = max(self._t0, self._first_obstacles_t)
             return 'starting' if t - since <= c.startup_grace else 'ground_lost'
+        if not self._ground_fresh and c.require_ground_plane:
+            return 'no_data'      # lists after a gap, no ground status since (`update`)
         if self._ground == GroundStatus.INITIALISING:
             return 'starting' if t - self._ground_since <= c.startup_grace else 'ground_lost'
         if self._ground == GroundStatus.LOST and t - self._ground_since > c.timeout:

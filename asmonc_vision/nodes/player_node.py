@@ -192,6 +192,11 @@ class BagPlayerNode(Node):
                            f"{', '.join(sorted(info.topics)) or 'none'}; topics="
                            f'{list(cfg.topics)}, exclude_topics={list(cfg.exclude_topics)})')
         self._by_bag_topic = {p.bag_topic: p for p in self.plan}
+        from asmonc_vision.faults import FaultPlan, parse_faults
+        self._faults = FaultPlan(parse_faults(cfg.faults), info.start_ns)
+        self._faults_started: set[int] = set()
+        if self._faults:
+            log.warning('injecting faults: ' + '; '.join(map(str, self._faults.faults)))
         if cfg.pace_topic:
             self._setup_pacing()
         self._clock_pub = None
@@ -422,16 +427,29 @@ class BagPlayerNode(Node):
                 data = self._decode(p, msg.data) if p.decompress else msg.data
                 if not self._wait_until(sched, msg.timestamp):
                     return
-                if p.out_topic == self._pace_topic and data is not None:
-                    self._pace(sched)
-                    if self._stop.is_set():
-                        return
-                    self._paced_sent(data)    # before publishing: its answer may be quick
-                if data is not None:
+                for data in self._inject(p, data, msg.timestamp):
+                    if p.out_topic == self._pace_topic:
+                        self._pace(sched)
+                        if self._stop.is_set():
+                            return
+                        self._paced_sent(data)    # before publishing: its answer may be quick
                     self._publish(p, data, msg.timestamp)
         except BagError as exc:  # a cut or damage: logged once when playing ends
             if self.error is None:
                 self.error = str(exc)
+
+    def _inject(self, p: PlayTopic, data: bytes | None, t_ns: int) -> list[bytes]:
+        """``data`` as the ``faults`` setting changes it (none, one or more messages)."""
+        if data is None:
+            return []
+        if not self._faults:
+            return [data]
+        t = (t_ns - self._faults.start_ns) / 1e9
+        for i, f in enumerate(self._faults.faults):
+            if i not in self._faults_started and f.active(t):
+                self._faults_started.add(i)
+                self.get_logger().warning(f'fault injected from {t:.2f} s: {f}')
+        return self._faults.apply(p.out_topic, data, t_ns)
 
     def _wait_until(self, sched: ReplaySchedule, t_ns: int) -> bool:
         """Sleep until bag time `t_ns` is due, publishing /clock meanwhile; False on stop."""

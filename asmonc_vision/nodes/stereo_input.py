@@ -6,8 +6,10 @@ is dropped, with a warning, when the work falls behind) and hands each good pair
 `process_pair` on a worker thread, so the callbacks that receive images stay fast.
 Bad input is logged (throttled), counted and reported in /diagnostics, and the pair is
 skipped: a wrong encoding, left and right of different sizes, images that do not match
-their camera_info, stamps that do not pair or go backwards. A jump back in time (a
-replayed bag that loops) or a new camera calls `restart`.
+their camera_info, stamps that do not pair or go backwards; so are pairs that never
+came (a stamp step well beyond the usual one). A pair uses the camera_infos stamped like
+it when they have come (each side's newest otherwise). A jump back in time (a replayed
+bag that loops) or a new camera calls `restart`.
 """
 from __future__ import annotations
 
@@ -26,6 +28,14 @@ from asmonc_vision.core.config import check_fields, param
 from asmonc_vision.nodes.common import IMAGE_QOS, Diagnostics
 from asmonc_vision.nodes.conversions import (ImageFormatError, image_msg_to_gray, stamp_to_ns,
                                              stereo_camera_from_infos)
+
+
+#: camera_infos kept per side to find the one stamped like a pair
+INFO_HISTORY = 32
+#: a stamp step this many times the usual one means pairs are missing
+GAP_FACTOR = 1.8
+#: stamp steps kept to judge the usual one
+GAP_HISTORY = 20
 
 
 @dataclass(frozen=True)
@@ -135,8 +145,15 @@ class StereoInputNode(Node):
         self.frames_done = 0
         self.frames_dropped = 0
         self.frames_bad = 0
+        #: pairs that never came, judged by the gaps in the stamps (`_check_gap`)
+        self.frames_missing = 0
+        self._last_seen_ns: int | None = None
+        self._steps: collections.deque[float] = collections.deque(maxlen=GAP_HISTORY)
         self._lock = threading.Lock()
         self._info = {'left': None, 'right': None}
+        #: the newest camera_infos by stamp (ns), per side
+        self._info_by_stamp = {'left': collections.OrderedDict(),
+                               'right': collections.OrderedDict()}
         self._seq = itertools.count()
         self._pending: collections.deque[StereoPair] = collections.deque()
         self._cv = threading.Condition()
@@ -192,15 +209,30 @@ class StereoInputNode(Node):
         with self._lock:
             self._info[side] = msg
             self._info_missing = False
+            recent = self._info_by_stamp[side]
+            recent[stamp_to_ns(msg.header.stamp)] = msg
+            while len(recent) > INFO_HISTORY:
+                recent.popitem(last=False)
+
+    def _infos_for(self, stamp_ns: int) -> tuple[CameraInfo | None, CameraInfo | None]:
+        """The camera_infos stamped like a pair (each side's newest if none is): the infos
+        travel on their own topics, so the newest may already be the next frame's, or the
+        one before, whatever its content (a bad one would spoil a good pair)."""
+        with self._lock:
+            return tuple(self._info_by_stamp[side].get(stamp_ns, self._info[side])
+                         for side in ('left', 'right'))
 
     def _on_image(self, side: str, msg: Image) -> None:
         stamp = stamp_to_ns(msg.header.stamp)
         with self._lock:
             pair = self._pairer.add(side, stamp, msg)
             expired = self._pairer.expire()
-            infos = (self._info['left'], self._info['right'])
+        infos = self._infos_for(stamp)
         for s, t in expired:
             self.frames_bad += 1
+            self.diag.update(Diagnostics.WARN, 'images without a partner (stamps differ)',
+                             frames_in=self.frames_in, frames_done=self.frames_done,
+                             frames_bad=self.frames_bad)
             self.get_logger().warn(
                 f'{s} image at stamp {t / 1e9:.3f} s has no partner with the same stamp; '
                 'dropped (left and right must share one stamp, or differ by at most the '
@@ -250,6 +282,9 @@ class StereoInputNode(Node):
         # that wait has run out, pairs are skipped at once (no pair-per-`info_wait` crawl
         # that would overflow the queue) until a camera_info arrives.
         deadline = time.monotonic() + self._settings.info_wait
+        matched = self._infos_for(pair.stamp_ns)   # those stamped like it may be in by now
+        pair.left_info = matched[0] or pair.left_info
+        pair.right_info = matched[1] or pair.right_info
         while pair.left_info is None or pair.right_info is None:
             with self._lock:
                 pair.left_info = pair.left_info or self._info['left']
@@ -282,9 +317,39 @@ class StereoInputNode(Node):
                 f'camera: {cam.width}x{cam.height}, f={cam.f:.1f} px, B={cam.baseline:.3f} m')
         return self._camera
 
+    def _check_gap(self, stamp_ns: int) -> None:
+        """Report pairs that never came (dropped on the way, a stalled camera): a stamp
+        step more than `GAP_FACTOR` times the usual one (the median of the recent
+        steps) is logged (throttled), counted in ``frames_missing`` and said in
+        /diagnostics."""
+        last = self._last_seen_ns
+        if last is not None and stamp_ns <= last:
+            if (last - stamp_ns) / 1e9 > self._settings.time_jump_reset:
+                self._last_seen_ns = stamp_ns    # time went back (a bag loop)
+            return                               # else a stamp out of order: skipped
+        self._last_seen_ns = stamp_ns
+        if last is None:
+            return
+        dt = (stamp_ns - last) / 1e9
+        if len(self._steps) >= 3:
+            usual = float(np.median(self._steps))
+            if dt > GAP_FACTOR * usual:
+                missing = max(1, int(round(dt / usual)) - 1)
+                self.frames_missing += missing
+                self.get_logger().warn(
+                    f'{missing} stereo pair(s) missing before {stamp_ns / 1e9:.3f} s: '
+                    f'{dt:.2f} s since the last pair (usually {usual:.3f} s; '
+                    f'{self.frames_missing} missing so far)', throttle_duration_sec=2.0)
+                self.diag.update(Diagnostics.WARN, f'{missing} stereo pair(s) missing',
+                                 frames_in=self.frames_in, frames_done=self.frames_done,
+                                 frames_missing=self.frames_missing)
+                return              # a gap is not a usual step
+        self._steps.append(dt)
+
     def _process(self, pair: StereoPair) -> None:
         self._last_pair_wall = time.monotonic()
         log = self.get_logger()
+        self._check_gap(pair.stamp_ns)
         if self._last_stamp_ns is not None and pair.stamp_ns <= self._last_stamp_ns:
             back = (self._last_stamp_ns - pair.stamp_ns) / 1e9
             if back > self._settings.time_jump_reset:
