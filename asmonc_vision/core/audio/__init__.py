@@ -36,17 +36,24 @@ class AudioRenderer:
         #: (t, kind name or 'phrase: ...') of every event placed
         self.log: list[tuple[float, str]] = []
 
+    def cue_samples(self, kind: CueKind, bearing: float):
+        """The cue's stereo samples (n, 2) at a bearing (radians, positive left), cached
+        per milliradian."""
+        key = (kind, round(bearing, 3))
+        if key not in self._cues:
+            if len(self._cues) >= 512:
+                self._cues = {}
+            self._cues[key] = render_cue(kind, bearing, self.cfg)
+        return self._cues[key]
+
     def place(self, events: list[Event]) -> list[Event]:
         """Render events onto the time line; returns them."""
         for e in events:
             if e.kind is not None:
-                key = (e.kind, round(e.bearing, 3))
-                if key not in self._cues:
-                    self._cues = self._cues if len(self._cues) < 512 else {}
-                    self._cues[key] = render_cue(e.kind, e.bearing, self.cfg)
+                samples = self.cue_samples(e.kind, e.bearing)
                 if e.kind in URGENT:
                     self.track.duck(e.t, self.cfg.duck_fade)
-                self.track.add_tone(e.t, self._cues[key], e.kind.value)
+                self.track.add_tone(e.t, samples, e.kind.value)
                 self.log.append((e.t, e.kind.value))
             elif e.phrase:
                 samples = self.speech.render(e.phrase)

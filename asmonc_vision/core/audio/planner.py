@@ -127,7 +127,8 @@ class CuePlanner:
                     self.is_drop = text.startswith('drop') or text.startswith('stop, drop')
             self._tones_until = (math.inf if self.moving
                                  else t + self.cfg.standing_tones_for)
-        new = not repeat or self.level > prev or prev == FAULT or self._next_tone is None
+        new = (not repeat or self.level > prev or self._next_tone is None
+               or (prev == FAULT) != (self.level == FAULT))
         kind = self.cue_kind()
         if new:
             out.append(Event(t, kind, self._bearing(kind)))
