@@ -61,6 +61,9 @@ NODES = {
     'gait': NodeSpec('asmonc_vision.nodes.gait_node', 'gait_filter_node', 'imu',
                      ('/gait/state',), ('/inclinometer/imu',)),
 }
+#: started with --audio: the sound of the alarms, written to a WAV
+AUDIO_NODE = NodeSpec('asmonc_vision.nodes.audio_node', 'audio_node', 'images', (),
+                      ('/alarms', '/stereo/left/camera_info'))
 DEFAULT_BAG_NAME = 'static_obstacles'
 #: pairs the player may publish ahead of the detector's /obstacles (unless --realtime)
 PACE_LEAD = 3
@@ -94,6 +97,11 @@ def add_arguments(p) -> None:
                    help='true obstacles at least this high (m) count in the recall (default 0.10)')
     p.add_argument('--max-range', type=float, default=5.0,
                    help='true obstacles within this range (m) count in the recall (default 5)')
+    p.add_argument('--audio', type=Path, default=None, metavar='FILE.wav',
+                   help='also run the audio node and write what the wearer would have heard '
+                        'to this WAV (stereo, t = 0 the first stereo pair\'s stamp, bag time '
+                        'at any --rate), its cue log FILE.cues.json and a PNG timeline '
+                        'FILE.png (cues, alarm levels, true obstacles on the path)')
     p.add_argument('--no-progress', action='store_true', help='no progress bar')
     p.add_argument('--quiet', action='store_true', help='print only the summary')
     p.set_defaults(func=run)
@@ -381,6 +389,8 @@ def run(args) -> int:
     inputs |= {'imu'} if n_imu else set()
     nodes = {name: spec for name, spec in NODES.items()
              if spec.needs in inputs and importlib.util.find_spec(spec.module) is not None}
+    if args.audio is not None and 'images' in inputs:
+        nodes['audio'] = AUDIO_NODE
     # the replay is paced by the detector's /obstacles unless --realtime
     paced = 'detector' in nodes and not args.realtime
     if not inputs:
@@ -475,6 +485,8 @@ def run(args) -> int:
         def start(names: list[str]) -> None:
             for name in names:
                 cmd = [sys.executable, '-m', nodes[name].module, '--ros-args', *ros_params]
+                if name == 'audio':
+                    cmd += _audio_params(args, t0)
                 # the alarm node's warnings are its alarms, which are printed anyway
                 children[name] = _Child(name, cmd, log_dir, lambda s: console.line(s, err=True),
                                         env, echo_warnings=(name != 'alarm'))
@@ -620,6 +632,8 @@ def run(args) -> int:
         rclpy.try_shutdown(context=ctx)
 
     summary = summarise(monitor, truth, n_pairs, args, out_of_view)
+    if 'audio' in nodes:
+        summary['audio'] = _audio_outputs(args, monitor, t0, truth, bag, console)
     summary['player_exit_code'] = player_rc
     summary['replay'] = _pacing(children.get('player'), paced)
     summary['errors'] = failed
@@ -633,6 +647,33 @@ def run(args) -> int:
     if failed or summary['dropped_frames'] or player_rc not in (0, None):
         return 1
     return 0
+
+
+def _audio_params(args, t0: int) -> list[str]:
+    """The audio node's parameters for --audio: its WAV, t = 0 and the replay rate."""
+    wav = args.audio.resolve()
+    wav.parent.mkdir(parents=True, exist_ok=True)
+    return ['-p', f'wav_path:={wav}', '-p', f't0_ns:={int(t0)}',
+            '-p', f'rate:={float(args.rate)}',
+            '-p', f'latency_path:={wav.with_suffix(".latency.json")}']
+
+
+def _audio_outputs(args, monitor: '_Monitor', t0: int, truth: dict, bag: Path,
+                   console: '_Console') -> dict:
+    """After an --audio run: the PNG timeline, and the files written."""
+    from asmonc_vision.cli.audio_timeline import write_timeline
+    wav = args.audio.resolve()
+    out = {'wav': str(wav), 'cues': str(wav.with_suffix('.cues.json')),
+           'png': str(wav.with_suffix('.png'))}
+    if not wav.exists():
+        console.line(f'asmonc run: the audio node wrote no {wav}', err=True)
+        return out
+    with monitor.lock:
+        alarms = list(monitor.alarms)
+    write_timeline(wav.with_suffix('.png'), wav.with_suffix('.cues.json'), alarms, t0, truth,
+                   _alarm_config(args.params_file), title=f'{bag.name}: what the wearer heard')
+    console.line(f'soundtrack: {wav} (timeline {wav.with_suffix(".png")})')
+    return out
 
 
 def _node_param(params_files: list[Path], node: str, name: str, default: float,

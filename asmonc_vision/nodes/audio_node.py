@@ -69,6 +69,10 @@ class AudioNodeConfig:
                        'stereo pair; 0: the first camera_info seen', range=(0, 2 ** 63 - 1))
     rate: float = param(1.0, 'replay rate of the camera time line (1 live)',
                         range=(0.01, 100.0))
+    wav_tail: float = param(
+        1.0, 'the WAV ends this long after the newest camera_info\'s stamp (a replay\'s '
+        'end: no sound of the shutdown), seconds; without camera_info it runs to shutdown',
+        range=(0.0, 3600.0))
     latency_path: str = param('', 'write the per-cue stamp-to-onset latencies (JSON) here '
                               'at shutdown (empty: none)')
 
@@ -148,6 +152,8 @@ class AudioNode(Node):
         self.latencies: list[float] = []
         self._closed = False
         self._last_alarm: tuple | None = None
+        #: every alarm heard, where it was placed on the time line
+        self.alarm_log: list[dict] = []
 
         self._diag = Diagnostics(self, 'audio_node')
         self.create_subscription(Alarm, '/alarms', self._on_alarm, ALARM_QOS)
@@ -217,6 +223,8 @@ class AudioNode(Node):
             repeat, self._last_alarm = key == self._last_alarm, key
             events = self.renderer.alarm(t, int(msg.level), msg.text, float(msg.bearing),
                                          float(msg.range), repeat=repeat)
+            self.alarm_log.append({'t': round(t, 4), 'level': int(msg.level),
+                                   'text': msg.text, 'frame_stamped': stamped})
             self._emit(events, ns if stamped else None)
 
     def _on_contact(self, msg: DiagnosticArray) -> None:
@@ -286,12 +294,15 @@ class AudioNode(Node):
         with self._lock:
             cfg = self.node_config
             if cfg.wav_path:
-                end = self.timeline_now()
-                dur = max(end or 0.0, self.renderer.track.end / self.config.sample_rate)
+                if self._anchor is not None and self._t0_ns is not None:
+                    dur = (self._anchor[0] - self._t0_ns) * 1e-9 + cfg.wav_tail
+                else:
+                    dur = self.renderer.track.end / self.config.sample_rate
                 write_wav(cfg.wav_path, self.renderer.track.mix(dur), self.config.sample_rate)
                 log_path = Path(cfg.wav_path).with_suffix('.cues.json')
                 log_path.write_text(json.dumps(
                     {'sample_rate': self.config.sample_rate, 't0_ns': self._t0_ns,
+                     'alarms': self.alarm_log,
                      'events': [{'t': round(t, 4), 'what': k}
                                 for t, k in sorted(self.renderer.log)]}, indent=1) + '\n')
                 self.get_logger().info(f'wrote {cfg.wav_path} ({dur:.1f} s)')
