@@ -149,7 +149,11 @@ class AudioNode(Node):
         self._t0_ns = self.node_config.t0_ns or None
         self._anchor: tuple[int, float] | None = None   # (camera stamp ns, steady s)
         self._arrivals: deque = deque(maxlen=512)       # (stamp ns, steady s) of pairs
+        #: seconds from a pair's arrival to the onset of a cue it decided (+ the device's
+        #: output latency), and to the arrival of its /alarms/contact (when a cue could
+        #: start for any pair)
         self.latencies: list[float] = []
+        self.contact_latencies: list[float] = []
         self._closed = False
         self._last_alarm: tuple | None = None
         #: every alarm heard, where it was placed on the time line
@@ -232,7 +236,11 @@ class AudioNode(Node):
         if c is None:
             return
         with self._lock:
-            t = self._stamp_time(stamp_to_ns(msg.header.stamp))
+            ns = stamp_to_ns(msg.header.stamp)
+            arrived = self._arrival(ns)
+            if arrived is not None:
+                self.contact_latencies.append(self._now() - arrived + self.live.latency)
+            t = self._stamp_time(ns)
             self.renderer.contact(t or 0.0, c['level'], c['bearing'], c['range'],
                                   c['time_to_contact'], c['drop'], c['moving'])
 
@@ -266,10 +274,14 @@ class AudioNode(Node):
                 if s is not None:
                     self.live.play(s * cfg.speech_volume, True, False, cfg.duck_fade)
         if stamp_ns is not None and any(e.kind is not None for e in events):
-            arrived = next((a for ns, a in reversed(self._arrivals) if ns == stamp_ns), None)
+            arrived = self._arrival(stamp_ns)
             if arrived is not None:
                 self.latencies.append(self._now() - arrived + self.live.latency)
         self._update_diagnostics()
+
+    def _arrival(self, stamp_ns: int) -> float | None:
+        """When the stereo pair of this stamp arrived here (steady s), if known."""
+        return next((a for ns, a in reversed(self._arrivals) if ns == stamp_ns), None)
 
     def _update_diagnostics(self) -> None:
         lat = np.array(self.latencies) if self.latencies else None
@@ -309,6 +321,7 @@ class AudioNode(Node):
             if cfg.latency_path:
                 Path(cfg.latency_path).write_text(json.dumps(
                     {'latency_s': [round(x, 5) for x in self.latencies],
+                     'contact_latency_s': [round(x, 5) for x in self.contact_latencies],
                      'output_latency_s': self.live.latency}) + '\n')
 
     def destroy_node(self):
