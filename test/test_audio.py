@@ -213,3 +213,25 @@ def test_settings_are_checked():
     with pytest.raises(ValueError, match='verbosity'):
         AudioConfig(verbosity='chatty')
     assert render_cue(CueKind.FAULT, 1.0, AudioConfig()).shape[1] == 2
+
+
+def test_a_phrase_held_back_is_said_when_the_limit_allows():
+    p = CuePlanner(AudioConfig(speech_min_interval=2.0))
+    p.alarm(0.11, FAULT, 'starting up, hold still')            # a phrase at about 0.2 s
+    first = p._last_phrase_t
+    p.alarm(0.3, CLEAR, 'all clear')                              # "ready" held back
+    ev = p.alarm(2.0, WARNING, 'obstacle, 3.5 metres, ahead', 0.0, 3.5)
+    assert not [e for e in ev if e.phrase]
+    later = p.advance(first + 2.0 + 0.01)
+    assert [e.phrase for e in later if e.phrase] == ['obstacle ahead']
+    assert [e.t for e in later if e.phrase][0] == pytest.approx(first + 2.0, abs=0.1)
+
+
+def test_the_degraded_cue_is_soft_and_slow():
+    p = CuePlanner(AudioConfig(degraded_interval=5.0))
+    p.alarm(0.0, CLEAR)
+    ev = p.degraded(1.0, True) + p.advance(12.0)
+    assert [e.t for e in ev if e.kind == CueKind.DEGRADED] == [1.0, 6.0, 11.0]
+    assert p.degraded(12.0, False) == [] and not p.advance(30.0)
+    assert np.abs(render_cue(CueKind.DEGRADED, 0, AudioConfig())).max() < \
+        0.5 * np.abs(render_cue(CueKind.OBSTACLE, 0, AudioConfig())).max()

@@ -315,8 +315,10 @@ class AudioNode(Node):
                 log_path.write_text(json.dumps(
                     {'sample_rate': self.config.sample_rate, 't0_ns': self._t0_ns,
                      'alarms': self.alarm_log,
+                     'duration_s': round(dur, 4),
                      'events': [{'t': round(t, 4), 'what': k}
-                                for t, k in sorted(self.renderer.log)]}, indent=1) + '\n')
+                                for t, k in sorted(self.renderer.log) if t < dur]},
+                    indent=1) + '\n')
                 self.get_logger().info(f'wrote {cfg.wav_path} ({dur:.1f} s)')
             if cfg.latency_path:
                 Path(cfg.latency_path).write_text(json.dumps(

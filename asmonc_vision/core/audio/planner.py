@@ -207,7 +207,7 @@ class CuePlanner:
     def _phrase(self, t: float, phrase: str, t_alarm: float) -> list[Event]:
         if self.cfg.verbosity == 'tones':
             return []
-        if t - self._last_phrase_t < self.cfg.speech_min_interval:
+        if t - self._last_phrase_t < self.cfg.speech_min_interval - 1e-6:
             self._pending = (t, phrase, self.level)     # said later if still true
             return []
         self._last_phrase_t = t
