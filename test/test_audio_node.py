@@ -10,7 +10,7 @@ import pytest
 
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from sensor_msgs.msg import CameraInfo  # noqa: E402
@@ -69,11 +69,17 @@ def test_audio_node_plays_silently_without_a_device_and_writes_the_wav(ros, tmp_
     alarm(0, Alarm.CLEAR, 'all clear')
     decisions = {7: (Alarm.WARNING, 'obstacle, 2 metres, left', math.radians(40), 2.0, 1),
                  25: (Alarm.STOP, 'stop, obstacle, 1 metre, ahead', 0.0, 1.0, 1)}
+    diag_pub = probe.create_publisher(DiagnosticArray, '/diagnostics', 10)
     for k in range(1, 30):
         pair(k)
         ros.spin_for(0.02)
         if k in decisions:
             alarm(k, *decisions[k])
+        if k == 15:                       # the walk model: the inclinometer went silent
+            d = DiagnosticArray()
+            d.status = [DiagnosticStatus(name='gait_filter_node', level=bytes([1]),
+                                         message='inclinometer silent (0.6 s)')]
+            diag_pub.publish(d)
         ros.spin_for(0.08)
     node.close()
     x, rate = read_wav(wav)
@@ -86,6 +92,8 @@ def test_audio_node_plays_silently_without_a_device_and_writes_the_wav(ros, tmp_
     assert np.abs(x[a:b, 0]).max() > 1.5 * np.abs(x[a:b, 1]).max()
     cues = json.loads(wav.with_suffix('.cues.json').read_text())
     assert cues['t0_ns'] == T0 and [e for e in cues['events'] if e['what'] == 'stop']
+    degraded = [e['t'] for e in cues['events'] if e['what'] == 'degraded']
+    assert len(degraded) == 1 and 1.45 < degraded[0] < 1.8
     lat = json.loads((tmp_path / 'lat.json').read_text())['latency_s']
     assert lat and all(0 <= v < 5.0 for v in lat)
 
