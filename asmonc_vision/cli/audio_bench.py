@@ -39,7 +39,7 @@ def main(argv=None) -> int:
     bags = args.bags or sorted(d for d in BAGS.iterdir() if (d / 'metadata.yaml').exists())
     out = args.out or Path(tempfile.mkdtemp(prefix='asmonc-audio-bench-'))
     out.mkdir(parents=True, exist_ok=True)
-    all_cue, all_contact = [], []
+    all_cue, all_contact, all_det, all_alarm = [], [], [], []
     print(f'{"bag":18s} {"cues":>4s} {"phr":>3s} {"min phrase gap":>14s} {"FAULTs":>6s}  '
           f'{"cue p50/p99 ms":>15s}  {"contact p50/p99 ms":>18s}')
     for bag in bags:
@@ -62,6 +62,8 @@ def main(argv=None) -> int:
         gap = f'{np.diff(sorted(phrases)).min():.2f} s' if len(phrases) > 1 else '-'
         all_cue += lat['latency_s']
         all_contact += lat.get('contact_latency_s', [])
+        all_det += lat.get('detector_latency_s', [])
+        all_alarm += lat.get('alarm_latency_s', [])
         print(f'{bag.name:18s} {n_cues:4d} {len(phrases):3d} {gap:>14s} {len(faults):6d}  '
               f'{_pct(lat["latency_s"], 50)}/{_pct(lat["latency_s"], 99)}  '
               f'{_pct(lat.get("contact_latency_s", []), 50):>11s}/'
@@ -69,6 +71,10 @@ def main(argv=None) -> int:
     print(f'{"all":18s} {"":4s} {"":3s} {"":14s} {"":6s}  {_pct(all_cue, 50)}/{_pct(all_cue, 99)}'
           f'  {_pct(all_contact, 50):>11s}/{_pct(all_contact, 99)}   '
           f'({len(all_cue)} cues, {len(all_contact)} pairs)')
+    print(f'pair -> contact split, p50/p99 ms: pair -> its /obstacles (detector, egomotion) '
+          f'{_pct(all_det, 50).strip()}/{_pct(all_det, 99).strip()}; /obstacles -> '
+          f'/alarms/contact (alarm node) {_pct(all_alarm, 50).strip()}/'
+          f'{_pct(all_alarm, 99).strip()}')
     print(f'outputs in {out}')
     return 0
 

@@ -7,6 +7,7 @@ Subscribes:
     /stereo/left/camera_info (sensor_msgs/CameraInfo, best effort): one per stereo
         pair; its stamps tie this node's clock to the camera's time line
     /diagnostics: the walk model's "inclinometer silent" gives the degraded-mode cue
+    /obstacles (only their stamps and arrival: the latency's detector share)
 Publishes:
     /diagnostics: the output (a device, or silent), the speech engine, cues and
         phrases given, and the camera-stamp-to-onset latency (p50, p99)
@@ -46,7 +47,7 @@ from asmonc_vision.nodes.alarm_node import CONTACT_TOPIC, contact_from_msg
 from asmonc_vision.nodes.common import (ALARM_QOS, RESULT_QOS, SENSOR_QOS, Diagnostics,
                                         declare_config, run_node)
 from asmonc_vision.nodes.conversions import stamp_to_ns
-from asmonc_vision_msgs.msg import Alarm
+from asmonc_vision_msgs.msg import Alarm, ObstacleArray
 
 #: period of the cue timer on the steady clock, seconds
 TICK = 0.01
@@ -154,6 +155,11 @@ class AudioNode(Node):
         #: start for any pair)
         self.latencies: list[float] = []
         self.contact_latencies: list[float] = []
+        #: the contact latency split: pair -> its /obstacles here (detector), and
+        #: /obstacles -> /alarms/contact (alarm node)
+        self.detector_latencies: list[float] = []
+        self.alarm_latencies: list[float] = []
+        self._obstacle_arrivals: deque = deque(maxlen=512)
         self._closed = False
         self._last_alarm: tuple | None = None
         #: every alarm heard, where it was placed on the time line
@@ -165,6 +171,7 @@ class AudioNode(Node):
         self.create_subscription(CameraInfo, '/stereo/left/camera_info', self._on_info,
                                  SENSOR_QOS)
         self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
+        self.create_subscription(ObstacleArray, '/obstacles', self._on_obstacles, RESULT_QOS)
         self._timer = self.create_timer(TICK, self._on_tick, clock=self._steady)
 
         sp = self.renderer.speech
@@ -212,6 +219,10 @@ class AudioNode(Node):
             self._anchor = (ns, self._now())
             self._arrivals.append((ns, self._now()))
 
+    def _on_obstacles(self, msg: ObstacleArray) -> None:
+        with self._lock:
+            self._obstacle_arrivals.append((stamp_to_ns(msg.header.stamp), self._now()))
+
     def _on_alarm(self, msg: Alarm) -> None:
         ns = stamp_to_ns(msg.header.stamp)
         with self._lock:
@@ -238,8 +249,14 @@ class AudioNode(Node):
         with self._lock:
             ns = stamp_to_ns(msg.header.stamp)
             arrived = self._arrival(ns)
+            now = self._now()
             if arrived is not None:
-                self.contact_latencies.append(self._now() - arrived + self.live.latency)
+                self.contact_latencies.append(now - arrived + self.live.latency)
+            ob = next((a for s, a in reversed(self._obstacle_arrivals) if s == ns), None)
+            if ob is not None:
+                self.alarm_latencies.append(now - ob)
+                if arrived is not None:
+                    self.detector_latencies.append(ob - arrived)
             t = self._stamp_time(ns)
             self.renderer.contact(t or 0.0, c['level'], c['bearing'], c['range'],
                                   c['time_to_contact'], c['drop'], c['moving'])
@@ -324,6 +341,8 @@ class AudioNode(Node):
                 Path(cfg.latency_path).write_text(json.dumps(
                     {'latency_s': [round(x, 5) for x in self.latencies],
                      'contact_latency_s': [round(x, 5) for x in self.contact_latencies],
+                     'detector_latency_s': [round(x, 5) for x in self.detector_latencies],
+                     'alarm_latency_s': [round(x, 5) for x in self.alarm_latencies],
                      'output_latency_s': self.live.latency}) + '\n')
 
     def destroy_node(self):
