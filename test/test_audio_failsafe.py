@@ -106,7 +106,9 @@ def test_killing_the_detector_is_heard_as_fault_within_half_a_second(tmp_path):
                                        '/stereo/right/camera_info=1'])}, env, logs['player'])
         spin_until(lambda: seen['obstacles'] and seen['obstacles'][-1] >= t0 + KILL_AT * 1e9,
                    'the replay to reach the kill')
-        kill_ns = seen['info'][-1]               # the cameras' time when perception stops
+        # the cameras' time when perception stops: the newest pair seen (or result, when
+        # a loaded machine delivers this process's camera_info late)
+        kill_ns = max(seen['info'][-1], seen['obstacles'][-1])
         _stop(procs['detector'], signal.SIGKILL)
         end = time.monotonic() + 1.5
         while time.monotonic() < end:
@@ -134,7 +136,9 @@ def test_killing_the_detector_is_heard_as_fault_within_half_a_second(tmp_path):
     onset = (after[0] + int((kill_t - 0.2) * rate)) / rate
     print(f'killed at {kill_t:.3f} s bag time; FAULT cue onset {onset:.3f} s '
           f'(+{onset - kill_t:.3f} s)')
-    assert kill_t <= onset <= kill_t + FAULT_WITHIN, (kill_t, onset)
+    # (the audio node's and this process's views of the camera time differ by their
+    # callbacks' delays: up to about a frame on a loaded machine)
+    assert kill_t - 0.1 <= onset <= kill_t + FAULT_WITHIN, (kill_t, onset)
     # and it is the FAULT cue: a low dyad, its energy below 800 Hz
     seg = x[int(onset * rate):int((onset + 0.09) * rate)].mean(axis=1)
     spec = np.abs(np.fft.rfft(seg, 4096)) ** 2

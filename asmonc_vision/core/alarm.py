@@ -120,9 +120,9 @@ class AlarmConfig:
         0.3, 'obstacles with a lower detector confidence are ignored (0..1)',
         range=(0.0, 1.0))
     timeout: float = param(
-        0.45, 'FAULT when no obstacle list has arrived for this long, or the ground plane '
-        'has been LOST this long, seconds (with the node\'s 0.05 s check: FAULT at most '
-        '0.5 s after perception stops)', range=(0.05, 60.0))
+        0.4, 'FAULT when no obstacle list has arrived for this long, or the ground plane '
+        'has been LOST this long, seconds (with the node\'s 0.05 s check and the transport: '
+        'FAULT heard within 0.5 s of perception stopping)', range=(0.05, 60.0))
     startup_grace: float = param(
         10.0, 'at start (or while the ground plane initialises) FAULT says "starting up" '
         'for at most this long before it says the system has stopped, seconds',

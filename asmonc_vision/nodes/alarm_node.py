@@ -46,7 +46,7 @@ from asmonc_vision_msgs.msg import Alarm, GaitState, GroundPlane, ObstacleArray
 #: frame id of alarms made before any obstacle list was seen
 DEFAULT_FRAME = 'stereo_left_optical_frame'
 #: period of the timeout check on the steady clock, seconds: with the default timeout
-#: (0.45 s) a FAULT comes at most 0.5 s after the last obstacle list
+#: (0.4 s) a FAULT is published at most 0.45 s after the last obstacle list
 CHECK_PERIOD = 0.05
 #: a stamp this much older than the last one is a restarted replay, not a late
 #: message: it is accepted (and the order check starts again), seconds

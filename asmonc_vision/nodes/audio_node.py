@@ -16,8 +16,9 @@ Everything that makes samples is ``core.audio`` (deterministic). The node keeps 
 line* in the cameras' time: t = 0 is ``t0_ns`` (for a replay, the stamp of the bag's first
 stereo pair; 0: the first camera_info's stamp). An alarm made for a frame (its stamp is
 the frame's) is placed at that stamp; one made by the alarm node's own clock (start-up,
-a time-out) at the camera time now, extrapolated from the newest camera_info's stamp at
-``rate`` (the replay's rate) -- so the WAV is in bag time whatever the replay rate.
+a time-out; its stamp is system time) at the newest camera_info's stamp plus the system
+time from that pair's arrival to the alarm's stamp, times ``rate`` (the replay's rate) --
+so the WAV is in bag time whatever the replay rate.
 
 Live output: the default sound device through ``sounddevice`` (PortAudio) when
 ``output`` is 'auto' and one exists. Without PortAudio or a device the node says so in
@@ -149,6 +150,7 @@ class AudioNode(Node):
                                self.node_config.device)
         self._t0_ns = self.node_config.t0_ns or None
         self._anchor: tuple[int, float] | None = None   # (camera stamp ns, steady s)
+        self._anchor_wall_ns: int | None = None          # its arrival on the system clock
         self._arrivals: deque = deque(maxlen=512)       # (stamp ns, steady s) of pairs
         #: seconds from a pair's arrival to the onset of a cue it decided (+ the device's
         #: output latency), and to the arrival of its /alarms/contact (when a cue could
@@ -210,6 +212,18 @@ class AudioNode(Node):
             return None
         return t
 
+    def _wall_stamp_time(self, wall_ns: int) -> float | None:
+        """An alarm stamped by the alarm node's own (system) clock on the time line: the
+        newest pair's camera time plus the system time since it arrived, at ``rate`` (not
+        the arrival here: the transport's delay is not the alarm's); None before the
+        first pair."""
+        if self._anchor is None or self._t0_ns is None:
+            return None
+        since = (wall_ns - self._anchor_wall_ns) * 1e-9
+        if not -1.0 < since < LIVE_STAMP_GAP:       # another clock after all: arrival time
+            return self.timeline_now()
+        return (self._anchor[0] - self._t0_ns) * 1e-9 + since * self.node_config.rate
+
     # -- callbacks
     def _on_info(self, msg: CameraInfo) -> None:
         ns = stamp_to_ns(msg.header.stamp)
@@ -217,6 +231,7 @@ class AudioNode(Node):
             if self._t0_ns is None:
                 self._t0_ns = ns
             self._anchor = (ns, self._now())
+            self._anchor_wall_ns = time.time_ns()
             self._arrivals.append((ns, self._now()))
 
     def _on_obstacles(self, msg: ObstacleArray) -> None:
@@ -229,7 +244,7 @@ class AudioNode(Node):
             t = self._stamp_time(ns)
             stamped = t is not None
             if t is None:
-                t = self.timeline_now()
+                t = self._wall_stamp_time(ns)
             if t is None:
                 t = 0.0                  # before the first pair: the start of the WAV
             # the same level about the same obstacle (or the same fault) again: a repeat
