@@ -15,6 +15,7 @@ NODES = {
     'egomotion_node': 'asmonc_vision.nodes.egomotion_node:main',
     'compass_node': 'asmonc_vision.nodes.compass_node:main',
     'gait_filter_node': 'asmonc_vision.nodes.gait_node:main',
+    'audio_node': 'asmonc_vision.nodes.audio_node:main',
 }
 TOOLS = {
     'asmonc': 'asmonc_vision.cli.main:main',

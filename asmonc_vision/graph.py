@@ -35,6 +35,8 @@ class GraphNode:
         start_late: started after the others are connected (its start-up grace must not
             be used up while a detector compiles its kernels).
         respawn: restarted when it dies (by `asmonc run` and by the launch file).
+        on_request: `asmonc run` starts it only when asked (the audio node, with
+            ``--audio``); the launch file always starts it.
     """
 
     name: str
@@ -48,6 +50,7 @@ class GraphNode:
     remappings: tuple[tuple[str, str], ...] = ()
     start_late: bool = False
     respawn: bool = True
+    on_request: bool = False
 
     def __post_init__(self) -> None:
         if self.needs not in NEEDS:
@@ -78,6 +81,9 @@ GRAPH: tuple[GraphNode, ...] = (
               start_late=True),
     GraphNode('alarm', 'alarm_node', 'asmonc_vision.nodes.alarm_node', 'alarm_node',
               'images', ('/alarms',), ('/obstacles',), 'alarm.yaml', start_late=True),
+    GraphNode('audio', 'audio_node', 'asmonc_vision.nodes.audio_node', 'audio_node',
+              'images', (), ('/alarms', '/stereo/left/camera_info'), 'audio.yaml',
+              start_late=True, on_request=True),
 )
 
 
@@ -108,10 +114,13 @@ SOURCES: dict[str, tuple[SourceNode, ...]] = {
 RESPAWN_DELAY = 1.0
 
 
-def nodes_for(inputs: set[str] | frozenset[str]) -> list[GraphNode]:
+def nodes_for(inputs: set[str] | frozenset[str],
+              requested: set[str] | frozenset[str] = frozenset()) -> list[GraphNode]:
     """The nodes of `GRAPH` the given sensor inputs call for, in start order: those that
-    need one of ``inputs``, and those that need none when any does."""
-    chosen = [n for n in GRAPH if n.needs in inputs]
+    need one of ``inputs`` (an ``on_request`` node only when its name is in
+    ``requested``), and those that need none when any does."""
+    chosen = [n for n in GRAPH if n.needs in inputs
+              and (not n.on_request or n.name in requested)]
     if chosen:
         chosen += [n for n in GRAPH if n.needs == 'none']
     early = [n for n in GRAPH if n in chosen and not n.start_late]
@@ -154,7 +163,7 @@ def launch_entries(source: str, config_dir: str, bag: str = '', rate: float = 1.
     if source == 'bag' and not bag:
         raise ValueError('a bag to play is needed (bag:=PATH), or live:=true')
     out = []
-    for n in (*SOURCES[source], *nodes_for(set(NEEDS))):
+    for n in (*SOURCES[source], *nodes_for(set(NEEDS), {g.name for g in GRAPH})):
         params: list = [f'{config_dir}/{n.params_file}', *params_files]
         if n.executable == 'bag_player_node':
             params.append({'bag': bag, 'rate': float(rate)})

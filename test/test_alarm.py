@@ -55,7 +55,7 @@ def test_a_slow_detector_start_is_not_taken_for_a_lost_ground():
     # The detector's first list comes after the grace (it compiled for 8 s): its ground
     # plane gets the grace from then on, and the wearer hears "starting up", not "cannot
     # see the ground", while it calibrates.
-    logic = AlarmLogic(AlarmConfig(startup_grace=3.0), t0=0.0)
+    logic = AlarmLogic(AlarmConfig(startup_grace=3.0, timeout=1.0), t0=0.0)
     assert logic.check_timeout(3.1).text == TEXT_NOT_STARTED
     d = logic.update(8.0, [])
     assert d.level == L.FAULT and d.text == TEXT_STARTING

@@ -17,6 +17,8 @@ NODE_CONFIGS = {
                                         ('gpod.', 'asmonc_vision.core.gpod:GpodConfig'),
                                         ('map.', 'asmonc_vision.core.evidence_map:EvidenceMapConfig')]),
     'alarm.yaml': ('alarm_node', [('', 'asmonc_vision.core.alarm:AlarmConfig')]),
+    'audio.yaml': ('audio_node', [('', 'asmonc_vision.nodes.audio_node:AudioNodeConfig'),
+                                  ('', 'asmonc_vision.core.audio.render:AudioConfig')]),
     'stereo_capture.yaml': ('stereo_capture_node', [('', 'asmonc_vision.core.capture:CaptureConfig')]),
     'bag_player.yaml': ('bag_player_node', [('', 'asmonc_vision.nodes.player_node:PlayerConfig')]),
     'bag_recorder.yaml': ('bag_recorder_node', [('', 'asmonc_vision.nodes.recorder_node:RecorderConfig')]),

@@ -62,6 +62,10 @@ def test_nodes_for_picks_by_input_and_starts_late_nodes_last():
     both = [n.name for n in graph.nodes_for({'images', 'imu'})]
     assert both == ['detector', 'egomotion', 'gait', 'alarm']
     assert graph.nodes_for(set()) == []
+    # the audio node only when asked (asmonc run --audio), after the alarm node
+    asked = [n.name for n in graph.nodes_for({'images'}, {'audio'})]
+    assert asked == ['detector', 'egomotion', 'alarm', 'audio']
+    assert [n.name for n in graph.nodes_for({'imu'}, {'audio'})] == ['gait']
     assert graph.by_name('alarm').start_late and not graph.by_name('detector').start_late
     with pytest.raises(KeyError):
         graph.by_name('nope')

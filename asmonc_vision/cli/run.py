@@ -79,6 +79,11 @@ def add_arguments(p) -> None:
     p.add_argument('--inject', default='',
                    help='faults at chosen bag times, e.g. "kill=detector@2;stall@3+1.5" '
                         '(docs/robustness.md lists the classes)')
+    p.add_argument('--audio', type=Path, default=None, metavar='FILE.wav',
+                   help='also run the audio node and write what the wearer would have heard '
+                        'to this WAV (stereo, t = 0 the first stereo pair\'s stamp, bag time '
+                        'at any --rate), its cue log FILE.cues.json and a PNG timeline '
+                        'FILE.png (cues, alarm levels, true obstacles on the path)')
     p.add_argument('--no-progress', action='store_true', help='no progress bar')
     p.add_argument('--quiet', action='store_true', help='print only the summary')
     p.set_defaults(func=run)
@@ -399,7 +404,8 @@ def run(args) -> int:
     n_imu = topics.get(imu_topic, ('', 0))[1]
     inputs = {'images'} if n_pairs else set()
     inputs |= {'imu'} if n_imu else set()
-    nodes = {spec.name: spec for spec in graph.nodes_for(inputs)
+    nodes = {spec.name: spec for spec in graph.nodes_for(
+        inputs, requested={'audio'} if args.audio is not None else set())
              if importlib.util.find_spec(spec.module) is not None}
     # the replay is paced by the detector's /obstacles unless --realtime
     paced = 'detector' in nodes and not args.realtime
@@ -512,6 +518,8 @@ def run(args) -> int:
         def spawn(name: str, log_name: str | None = None) -> _Child:
             cmd = [sys.executable, '-m', nodes[name].module, '--ros-args', *ros_params,
                    *nodes[name].ros_args()]
+            if name == 'audio':
+                cmd += _audio_params(args, t0)
             # the alarm node's warnings are its alarms, which are printed anyway
             return _Child(name, cmd, log_dir, lambda s: console.line(s, err=True),
                           env, echo_warnings=(name != 'alarm'), log_name=log_name)
@@ -680,6 +688,8 @@ def run(args) -> int:
         rclpy.try_shutdown(context=ctx)
 
     summary = summarise(monitor, truth, n_pairs, args, out_of_view, safety_truth)
+    if 'audio' in nodes:
+        summary['audio'] = _audio_outputs(args, monitor, t0, truth, bag, console)
     summary['player_exit_code'] = player_rc
     summary['replay'] = _pacing(children.get('player'), paced)
     summary['errors'] = failed
@@ -706,6 +716,33 @@ def run(args) -> int:
     if failed or dropped or player_rc not in (0, None):
         return 1
     return 0
+
+
+def _audio_params(args, t0: int) -> list[str]:
+    """The audio node's parameters for --audio: its WAV, t = 0 and the replay rate."""
+    wav = args.audio.resolve()
+    wav.parent.mkdir(parents=True, exist_ok=True)
+    return ['-p', f'wav_path:={wav}', '-p', f't0_ns:={int(t0)}',
+            '-p', f'rate:={float(args.rate)}',
+            '-p', f'latency_path:={wav.with_suffix(".latency.json")}']
+
+
+def _audio_outputs(args, monitor: '_Monitor', t0: int, truth: dict, bag: Path,
+                   console: '_Console') -> dict:
+    """After an --audio run: the PNG timeline, and the files written."""
+    from asmonc_vision.cli.audio_timeline import write_timeline
+    wav = args.audio.resolve()
+    out = {'wav': str(wav), 'cues': str(wav.with_suffix('.cues.json')),
+           'png': str(wav.with_suffix('.png'))}
+    if not wav.exists():
+        console.line(f'asmonc run: the audio node wrote no {wav}', err=True)
+        return out
+    with monitor.lock:
+        alarms = list(monitor.alarms)
+    write_timeline(wav.with_suffix('.png'), wav.with_suffix('.cues.json'), alarms, t0, truth,
+                   _alarm_config(args.params_file), title=f'{bag.name}: what the wearer heard')
+    console.line(f'soundtrack: {wav} (timeline {wav.with_suffix(".png")})')
+    return out
 
 
 def _node_param(params_files: list[Path], node: str, name: str, default: float,

@@ -33,6 +33,23 @@ number of plain-speech announcements for a blind pedestrian:
   lists, only once a ground status has come after it (a detector that died and was
   restarted has no ground plane yet; the status from before the gap is stale).
 
+* **Time to contact** (when the wearer's motion is given; without it the levels are by
+  range only, as above). ``walk_motion`` gives the walking speed (m/s, smoothed, e.g.
+  ``WalkingSpeed`` over ``/egomotion``) and heading (the walking direction from the
+  camera's axis, radians, positive left); ``gait`` the walk model's walking/standing
+  verdict. While the wearer *moves* (the gait says walking, or no gait is known, and the
+  speed is at least ``min_walking_speed``), the corridor is laid along the walking
+  direction (an obstacle's bearing is taken from it) and each obstacle's time to contact
+  is its distance along that direction over the speed; its level is the higher of the
+  level by range (the floor that also holds for a standing wearer) and the level by time
+  to contact (STOP <= ``stop_time``, WARNING <= ``warning_time``, the lead time,
+  CAUTION <= ``caution_time``; a held level is kept up to its time plus
+  ``time_hysteresis``). Priority: the obstacles at the highest level compete; a drop
+  comes first, then the least time to contact (the nearest for a standing wearer).
+* **A standing wearer is not told again and again**: while the wearer stands, the
+  periodic repeat of an unchanged level about the same target is left out
+  (``repeat_when_standing``); any change of level or target is still announced.
+
 All times are seconds on one monotonic clock chosen by the caller (the node uses the
 steady clock), passed in as ``t``, so the logic is deterministic under test.
 """
@@ -105,8 +122,9 @@ class AlarmConfig:
         0.3, 'obstacles with a lower detector confidence are ignored (0..1)',
         range=(0.0, 1.0))
     timeout: float = param(
-        1.0, 'FAULT when no obstacle list has arrived for this long, or the ground plane '
-        'has been LOST this long, seconds', range=(0.05, 60.0))
+        0.4, 'FAULT when no obstacle list has arrived for this long, or the ground plane '
+        'has been LOST this long, seconds (with the node\'s 0.05 s check and the transport: '
+        'FAULT heard within 0.5 s of perception stopping)', range=(0.05, 60.0))
     startup_grace: float = param(
         10.0, 'at start (or while the ground plane initialises) FAULT says "starting up" '
         'for at most this long before it says the system has stopped, seconds',
@@ -120,6 +138,33 @@ class AlarmConfig:
     side_angle_deg: float = param(
         30.0, 'bearings within +-this angle (and beyond ahead_angle_deg) are spoken as '
         '"slightly left/right"; beyond as "left/right", degrees', range=(0.0, 90.0))
+    stop_time: float = param(
+        1.5, 'while walking, STOP when the time to contact (distance along the walking '
+        'direction / walking speed) is this short or shorter, seconds', range=(0.1, 20.0))
+    warning_time: float = param(
+        3.0, 'while walking, WARNING at this time to contact or less: the lead time, '
+        'seconds', range=(0.1, 30.0))
+    caution_time: float = param(
+        5.0, 'while walking, CAUTION at this time to contact or less, seconds',
+        range=(0.1, 60.0))
+    time_hysteresis: float = param(
+        0.5, 'a level already held is kept until the time to contact exceeds its time by '
+        'this much, seconds', range=(0.0, 10.0))
+    min_walking_speed: float = param(
+        0.2, 'the wearer counts as moving at this walking speed or faster (and when the '
+        'walk model, if any, says walking), m/s', range=(0.0, 3.0))
+    motion_timeout: float = param(
+        1.0, 'a walking speed or gait state older than this is not used (levels by range '
+        'only), seconds', range=(0.05, 60.0))
+    follow_walking_direction: bool = param(
+        True, 'lay the walking corridor along the walking direction (from /egomotion) '
+        'rather than the camera\'s axis while the wearer moves')
+    max_heading_deg: float = param(
+        45.0, 'a walking direction further than this from the camera\'s axis is clipped '
+        'to it, degrees', range=(0.0, 90.0))
+    repeat_when_standing: bool = param(
+        False, 'repeat an unchanged alarm every repeat_period also while the wearer stands '
+        'still (false: a standing wearer hears a known obstacle once)')
     require_ground_plane: bool = param(
         True, 'until the detector has reported a TRACKING ground plane on /ground_plane, '
         'obstacle lists count as "starting up": an empty list before the ground is seen is '
@@ -136,6 +181,10 @@ class AlarmConfig:
         if not self.caution_range <= self.max_range:
             raise ValueError(f'AlarmConfig.caution_range = {self.caution_range} must not '
                              f'exceed max_range = {self.max_range} (metres)')
+        if not self.stop_time < self.warning_time <= self.caution_time:
+            raise ValueError(f'AlarmConfig: stop_time = {self.stop_time} < warning_time = '
+                             f'{self.warning_time} <= caution_time = {self.caution_time} '
+                             '(seconds) must hold')
         if not self.ahead_angle_deg <= self.side_angle_deg:
             raise ValueError(f'AlarmConfig.ahead_angle_deg = {self.ahead_angle_deg} must not '
                              f'exceed side_angle_deg = {self.side_angle_deg} (degrees)')
@@ -186,6 +235,8 @@ class Decision:
         bearing: the target's bearing, radians, positive left (0 if none).
         t: the caller's time of the decision, seconds.
         repeat: True when this re-announces an unchanged state.
+        time_to_contact: the target's time to contact at the walking speed, seconds
+            (inf when the wearer stands or the motion is unknown, or no target).
     """
 
     level: AlarmLevel
@@ -195,6 +246,7 @@ class Decision:
     bearing: float = 0.0
     t: float = 0.0
     repeat: bool = False
+    time_to_contact: float = math.inf
 
 
 # --- wording -------------------------------------------------------------------------
@@ -236,6 +288,76 @@ def obstacle_text(level: AlarmLevel, ob: ObstacleInfo, ahead_deg: float = 10.0,
     return f'stop, {body}' if level == AlarmLevel.STOP else body
 
 
+# --- the wearer's motion ---------------------------------------------------------------
+
+class WalkingSpeed:
+    """Walking speed and direction from the camera's frame-to-frame motion, smoothed.
+
+    Each ``update`` takes one visual-egomotion step: the left camera's translation from
+    the previous pair to this one in the previous left optical frame (metres; x right,
+    y down, z forward; ``/egomotion``'s ``translation``) over ``dt`` seconds. The speed is
+    the step's length over dt (the walker's vertical bob is small beside the stride); the
+    heading is the step's direction from the optical axis about the vertical, positive
+    left: atan2(-x, hypot(y, z)). Both are smoothed by a first-order low-pass filter of
+    time constant ``tau`` (the heading as a unit vector weighted by the step length, so
+    a standing rig's jitter does not swing it).
+    """
+
+    def __init__(self, tau: float = 0.5, max_speed: float = 3.0):
+        self.tau = float(tau)
+        self.max_speed = float(max_speed)
+        self.speed: float | None = None
+        self._dir = (0.0, 0.0)
+        self.t: float | None = None
+
+    @property
+    def heading(self) -> float:
+        """Smoothed walking direction from the camera's axis, radians, positive left."""
+        fx, ly = self._dir
+        return math.atan2(ly, fx) if (fx or ly) else 0.0
+
+    def update(self, t: float, translation: Sequence[float], dt: float) -> float | None:
+        """One motion step at time t (s): translation (x, y, z) in metres, optical frame,
+        over dt > 0 seconds. Returns the smoothed speed (m/s); an implausible step (faster
+        than ``max_speed``, not finite, dt <= 0) is ignored."""
+        x, y, z = (float(v) for v in translation)
+        if not (dt > 0 and all(map(math.isfinite, (x, y, z)))):
+            return self.speed
+        step = math.sqrt(x * x + y * y + z * z)
+        v = step / dt
+        if v > self.max_speed:
+            return self.speed
+        alpha = 1.0 - math.exp(-dt / self.tau) if self.tau > 0 else 1.0
+        fwd, left = math.hypot(y, z) / dt, -x / dt          # m/s along and across
+        if self.speed is None:
+            self.speed, self._dir = v, (fwd, left)
+        else:
+            self.speed += alpha * (v - self.speed)
+            self._dir = (self._dir[0] + alpha * (fwd - self._dir[0]),
+                         self._dir[1] + alpha * (left - self._dir[1]))
+        self.t = float(t)
+        return self.speed
+
+
+@dataclass(frozen=True)
+class Contact:
+    """The most urgent obstacle of the latest obstacle list (what a sound cue tracks).
+
+    Attributes:
+        t: the caller's time of the list, seconds.
+        level: the level that obstacle alone calls for (CLEAR with no target).
+        target: the obstacle, its bearing taken from the walking direction; None if none.
+        time_to_contact: seconds at the walking speed; inf while standing or unknown.
+        moving: whether the wearer was taken to be walking.
+    """
+
+    t: float
+    level: AlarmLevel
+    target: ObstacleInfo | None
+    time_to_contact: float
+    moving: bool
+
+
 # --- the logic -----------------------------------------------------------------------
 
 class AlarmLogic:
@@ -264,6 +386,12 @@ class AlarmLogic:
         self._last_announce_t = float(t0)
         #: the newest target seen while the current (obstacle) level holds
         self._last_target: ObstacleInfo | None = None
+        self._speed: float | None = None       # m/s, smoothed, from walk_motion
+        self._heading = 0.0                    # rad from the camera's axis, positive left
+        self._speed_t: float | None = None
+        self._walking: bool | None = None      # the walk model's verdict
+        self._gait_t: float | None = None
+        self._contact = Contact(float(t0), AlarmLevel.CLEAR, None, math.inf, False)
 
     # -- accessors
     @property
@@ -285,6 +413,95 @@ class AlarmLogic:
         """Change the settings, keeping the state (used by parameter updates)."""
         self._cfg = config
 
+    @property
+    def contact(self) -> Contact:
+        """The most urgent obstacle of the latest obstacle list (see ``Contact``)."""
+        return self._contact
+
+    # -- the wearer's motion
+    def walk_motion(self, t: float, speed: float, heading: float = 0.0) -> None:
+        """The wearer's smoothed walking speed (m/s) and direction (radians from the
+        camera's axis, positive left) at time t (s), e.g. from ``WalkingSpeed``."""
+        if math.isfinite(speed) and math.isfinite(heading):
+            self._speed, self._heading, self._speed_t = max(0.0, float(speed)), float(heading), float(t)
+
+    def gait(self, t: float, walking: bool) -> None:
+        """The walk model's walking/standing verdict at time t (s)."""
+        self._walking, self._gait_t = bool(walking), float(t)
+
+    def _fresh(self, t_in: float | None, t: float) -> bool:
+        return t_in is not None and math.isfinite(t) and t - t_in <= self._cfg.motion_timeout
+
+    def moving(self, t: float) -> bool:
+        """The wearer is known to walk: a fresh speed of at least ``min_walking_speed``
+        and no fresh gait verdict of standing."""
+        if self._fresh(self._gait_t, t) and not self._walking:
+            return False
+        return (self._fresh(self._speed_t, t)
+                and self._speed >= max(self._cfg.min_walking_speed, 1e-6))
+
+    def standing(self, t: float) -> bool:
+        """The wearer is known to stand: the walk model says so, or a fresh speed is
+        below ``min_walking_speed``. (Unknown motion is neither moving nor standing.)"""
+        if self._fresh(self._gait_t, t) and not self._walking:
+            return True
+        return self._fresh(self._speed_t, t) and self._speed < self._cfg.min_walking_speed
+
+    def walking_frame(self, t: float, obstacles: Iterable[ObstacleInfo]) -> list[ObstacleInfo]:
+        """The obstacles with their bearings taken from the walking direction (while the
+        wearer moves and ``follow_walking_direction``), else unchanged."""
+        obstacles = list(obstacles)
+        if not (self._cfg.follow_walking_direction and self.moving(t)):
+            return obstacles
+        lim = math.radians(self._cfg.max_heading_deg)
+        h = min(max(self._heading, -lim), lim)
+        return [dataclasses.replace(o, bearing=math.remainder(o.bearing - h, math.tau))
+                for o in obstacles]
+
+    def time_to_contact(self, t: float, ob: ObstacleInfo | None) -> float:
+        """Seconds until the wearer reaches ob at the walking speed (its distance along
+        the walking direction over the speed); inf while standing or unknown."""
+        if ob is None or not self.moving(t):
+            return math.inf
+        return max(ob.forward, 0.0) / self._speed
+
+    def level_for_time(self, ttc: float, held: AlarmLevel = AlarmLevel.CLEAR) -> AlarmLevel:
+        """Level for a time to contact (s), given the level held (see ``level_for``)."""
+        c = self._cfg
+        held = AlarmLevel.CLEAR if held == AlarmLevel.FAULT else held
+        for level, threshold in ((AlarmLevel.STOP, c.stop_time),
+                                 (AlarmLevel.WARNING, c.warning_time),
+                                 (AlarmLevel.CAUTION, c.caution_time)):
+            margin = c.time_hysteresis if held >= level else 0.0
+            if ttc <= threshold + margin:
+                return level
+        return AlarmLevel.CLEAR
+
+    def obstacle_level(self, t: float, ob: ObstacleInfo | None,
+                       held: AlarmLevel = AlarmLevel.CLEAR) -> AlarmLevel:
+        """The level one obstacle calls for: by range (the floor), raised by its time to
+        contact while the wearer moves."""
+        if ob is None:
+            return AlarmLevel.CLEAR
+        return max(self.level_for(ob.range, held),
+                   self.level_for_time(self.time_to_contact(t, ob), held))
+
+    def select(self, t: float, obstacles: Iterable[ObstacleInfo],
+               held: AlarmLevel = AlarmLevel.CLEAR) -> tuple[ObstacleInfo | None, AlarmLevel]:
+        """The target and its level among obstacles already in the walking frame: those
+        at the highest level compete, a drop first, then the least time to contact, then
+        the nearest."""
+        margin = self._cfg.hysteresis if held not in (AlarmLevel.CLEAR, AlarmLevel.FAULT) else 0.0
+        best, best_key = None, None
+        for ob in obstacles:
+            if not self.in_corridor(ob, margin):
+                continue
+            level = self.obstacle_level(t, ob, held)
+            key = (-int(level), not ob.is_drop, self.time_to_contact(t, ob), ob.range)
+            if best_key is None or key < best_key:
+                best, best_key = ob, key
+        return best, (AlarmLevel(-best_key[0]) if best is not None else AlarmLevel.CLEAR)
+
     def last_obstacles_age(self, t: float) -> float | None:
         """Seconds since the last obstacle list, None if none yet."""
         return None if self._last_obstacles_t is None else t - self._last_obstacles_t
@@ -303,14 +520,9 @@ class AlarmLogic:
                 and ob.confidence >= c.min_confidence)
 
     def target(self, obstacles: Iterable[ObstacleInfo]) -> ObstacleInfo | None:
-        """The nearest obstacle that counts (see ``in_corridor``), or None."""
-        held = self._current.level not in (AlarmLevel.CLEAR, AlarmLevel.FAULT)
-        margin = self._cfg.hysteresis if held else 0.0
-        best = None
-        for ob in obstacles:
-            if self.in_corridor(ob, margin) and (best is None or ob.range < best.range):
-                best = ob
-        return best
+        """The obstacle that counts (see ``in_corridor``) and calls for the highest level
+        (a drop first, then the nearest), judged by range only; or None."""
+        return self.select(-math.inf, obstacles, self._current.level)[0]
 
     def level_for(self, r: float | None, held: AlarmLevel = AlarmLevel.CLEAR) -> AlarmLevel:
         """Level for a target at range r (m; None for no target), given the level held.
@@ -348,20 +560,24 @@ class AlarmLogic:
         if fault is not None:
             return self._announce_fault(t, fault)
 
-        tgt = self.target(obstacles)
         cur = self._current
-        if tgt is not None:
-            self._last_target = tgt
+        obstacles = self.walking_frame(t, obstacles)
         if cur.level == AlarmLevel.FAULT:
             # Data are back: announce the real level at once, without memory -- but
             # with the ground LOST an empty path is no evidence: "all clear" waits.
-            level = self.level_for(tgt.range if tgt else None)
+            tgt, level = self.select(t, obstacles)
+            self._set_contact(t, tgt, level)
+            if tgt is not None:
+                self._last_target = tgt
             self._below_since = None
             if level == AlarmLevel.CLEAR and self._ground == GroundStatus.LOST:
                 return None
             return self._announce(self._decide(t, level, tgt))
 
-        level = self.level_for(tgt.range if tgt else None, cur.level)
+        tgt, level = self.select(t, obstacles, cur.level)
+        self._set_contact(t, tgt, level)
+        if tgt is not None:
+            self._last_target = tgt
         if level > cur.level:
             self._below_since = None
             return self._announce(self._decide(t, level, tgt))
@@ -453,11 +669,18 @@ class AlarmLogic:
         c = self._cfg
         return Decision(level, obstacle_text(level, tgt, c.ahead_angle_deg, c.side_angle_deg),
                         obstacle_id=int(tgt.id), range=float(tgt.range),
-                        bearing=float(tgt.bearing), t=t, repeat=repeat)
+                        bearing=float(tgt.bearing), t=t, repeat=repeat,
+                        time_to_contact=self.time_to_contact(t, tgt))
+
+    def _set_contact(self, t: float, tgt: ObstacleInfo | None, level: AlarmLevel) -> None:
+        self._contact = Contact(t, level, tgt, self.time_to_contact(t, tgt), self.moving(t))
 
     def _maybe_repeat(self, t: float, tgt: ObstacleInfo | None) -> Decision | None:
         cur = self._current
         if cur.level == AlarmLevel.CLEAR or t - self._last_announce_t < self._cfg.repeat_period:
+            return None
+        if not self._cfg.repeat_when_standing and self.standing(t):
+            # A standing wearer has been told about this obstacle: not again and again.
             return None
         if tgt is None:
             tgt = self._last_target          # the newest seen: nearer than when announced

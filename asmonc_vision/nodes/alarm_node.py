@@ -3,9 +3,19 @@
 Subscribes:
     /obstacles (asmonc_vision_msgs/ObstacleArray, RELIABLE)
     /ground_plane (asmonc_vision_msgs/GroundPlane, RELIABLE)
+    /egomotion (geometry_msgs/TransformStamped, best effort): the walking speed and
+        direction (``core.alarm.WalkingSpeed``), for the levels by time to contact
+    /gait/state (asmonc_vision_msgs/GaitState, best effort): walking or standing
 Publishes:
     /alarms (asmonc_vision_msgs/Alarm, RELIABLE + TRANSIENT_LOCAL: a late subscriber
         hears the current state at once)
+    /alarms/contact (diagnostic_msgs/DiagnosticArray, RELIABLE): per obstacle list, the
+        most urgent obstacle, what the sound cue tracks between announcements; header =
+        the list's header, one status named ``contact`` with the values ``level``
+        (0..3), ``obstacle_id``, ``range`` (m), ``bearing`` (rad from the walking
+        direction, positive left), ``time_to_contact`` (s, ``inf`` while standing or
+        unknown), ``drop`` and ``moving`` (``true``/``false``), ``speed`` (m/s, ``nan``
+        unknown). Level 0: no obstacle on the path.
     /diagnostics
 
 The decisions are made by ``core.alarm.AlarmLogic`` on the node's *steady* clock (time
@@ -18,23 +28,68 @@ from __future__ import annotations
 
 import threading
 
+import math
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import TransformStamped
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from std_msgs.msg import Header
 
-from asmonc_vision.core.alarm import AlarmConfig, AlarmLevel, AlarmLogic, Decision, ObstacleInfo
-from asmonc_vision.nodes.common import (ALARM_QOS, RESULT_QOS, Diagnostics, declare_config,
-                                        run_node)
+from asmonc_vision.core.alarm import (AlarmConfig, AlarmLevel, AlarmLogic, Contact, Decision,
+                                      ObstacleInfo, WalkingSpeed)
+from asmonc_vision.nodes.common import (ALARM_QOS, RESULT_QOS, SENSOR_QOS, Diagnostics,
+                                        declare_config, run_node)
 from asmonc_vision.nodes.conversions import stamp_to_ns
-from asmonc_vision_msgs.msg import Alarm, GroundPlane, ObstacleArray
+from asmonc_vision_msgs.msg import Alarm, GaitState, GroundPlane, ObstacleArray
 
 #: frame id of alarms made before any obstacle list was seen
 DEFAULT_FRAME = 'stereo_left_optical_frame'
-#: period of the timeout check on the steady clock, seconds
-CHECK_PERIOD = 0.1
+#: period of the timeout check on the steady clock, seconds: with the default timeout
+#: (0.4 s) a FAULT is published at most 0.45 s after the last obstacle list
+CHECK_PERIOD = 0.05
 #: a stamp this much older than the last one is a restarted replay, not a late
 #: message: it is accepted (and the order check starts again), seconds
 CLOCK_RESET_JUMP = 5.0
+
+
+#: time constant of the walking speed's smoothing, seconds
+SPEED_TAU = 0.5
+#: topic of the per-list contact (see module doc)
+CONTACT_TOPIC = '/alarms/contact'
+
+
+def contact_msg(c: Contact, header: Header, speed: float | None) -> DiagnosticArray:
+    """The /alarms/contact message of a contact (see module doc)."""
+    msg = DiagnosticArray()
+    msg.header = header
+    ob = c.target
+    values = dict(level=int(c.level), obstacle_id=ob.id if ob else 0,
+                  range=f'{ob.range:.3f}' if ob else 'nan',
+                  bearing=f'{ob.bearing:.4f}' if ob else 'nan',
+                  time_to_contact=f'{c.time_to_contact:.3f}',
+                  drop=str(bool(ob and ob.is_drop)).lower(), moving=str(c.moving).lower(),
+                  speed='nan' if speed is None else f'{speed:.3f}')
+    msg.status = [DiagnosticStatus(name='contact', message=AlarmLevel(c.level).name,
+                                   values=[KeyValue(key=k, value=str(v))
+                                           for k, v in values.items()])]
+    return msg
+
+
+def contact_from_msg(msg: DiagnosticArray) -> dict | None:
+    """The values of an /alarms/contact message as numbers and booleans, or None."""
+    for st in msg.status:
+        if st.name == 'contact':
+            v = {kv.key: kv.value for kv in st.values}
+            try:
+                return dict(level=int(v['level']), obstacle_id=int(v['obstacle_id']),
+                            range=float(v['range']), bearing=float(v['bearing']),
+                            time_to_contact=float(v['time_to_contact']),
+                            drop=v['drop'] == 'true', moving=v['moving'] == 'true',
+                            speed=float(v['speed']))
+            except (KeyError, ValueError):
+                return None
+    return None
 
 
 def obstacles_from_msg(msg: ObstacleArray) -> list[ObstacleInfo]:
@@ -76,11 +131,16 @@ class AlarmNode(Node):
         self._obstacle_order = _StampOrder()
         self._ground_order = _StampOrder()
         self._messages = 0
+        self._walk = WalkingSpeed(SPEED_TAU)
+        self._ego_prev_ns: int | None = None
 
         self._pub = self.create_publisher(Alarm, '/alarms', ALARM_QOS)
+        self._contact_pub = self.create_publisher(DiagnosticArray, CONTACT_TOPIC, RESULT_QOS)
         self._diag = Diagnostics(self, 'alarm_node')
         self.create_subscription(ObstacleArray, '/obstacles', self._on_obstacles, RESULT_QOS)
         self.create_subscription(GroundPlane, '/ground_plane', self._on_ground, RESULT_QOS)
+        self.create_subscription(TransformStamped, '/egomotion', self._on_egomotion, SENSOR_QOS)
+        self.create_subscription(GaitState, '/gait/state', self._on_gait, SENSOR_QOS)
         self._timer = self.create_timer(CHECK_PERIOD, self._on_timer, clock=self._steady)
 
         # Silence at start must not mean "all clear".
@@ -161,8 +221,25 @@ class AlarmNode(Node):
             if msg.header.frame_id:
                 self._frame_id = msg.header.frame_id
             d = self._logic.update(self._now(), obstacles)
+            self._contact_pub.publish(contact_msg(self._logic.contact, msg.header,
+                                                  self._walk.speed))
             if d is not None:
                 self._publish(d, msg.header)
+
+    def _on_egomotion(self, msg: TransformStamped) -> None:
+        ns = stamp_to_ns(msg.header.stamp)
+        prev, self._ego_prev_ns = self._ego_prev_ns, ns
+        if prev is None or not 0 < ns - prev < 1e9:
+            return                      # the first motion, or a gap: no interval to use
+        tr = msg.transform.translation
+        with self._lock:
+            speed = self._walk.update(self._now(), (tr.x, tr.y, tr.z), (ns - prev) * 1e-9)
+            if speed is not None and math.isfinite(speed):
+                self._logic.walk_motion(self._now(), speed, self._walk.heading)
+
+    def _on_gait(self, msg: GaitState) -> None:
+        with self._lock:
+            self._logic.gait(self._now(), bool(msg.walking))
 
     def _on_ground(self, msg: GroundPlane) -> None:
         ok, _ = self._ground_order.accept(stamp_to_ns(msg.header.stamp))
