@@ -36,7 +36,7 @@ LEVEL_NAMES = {0: 'CLEAR', 1: 'CAUTION', 2: 'WARNING', 3: 'STOP', 4: 'FAULT'}
 #: every topic a node of the graph publishes (recorded with --out)
 OUTPUT_TOPICS = ('/obstacles', '/ground_plane', '/obstacles/markers', '/detector/debug_image',
                  '/alarms', '/diagnostics', '/egomotion', '/egomotion/odometry', '/gait/state',
-                 '/gait/predicted_motion')
+                 '/gait/predicted_motion', '/obstacle_map', '/alarms/contact')
 
 
 #: the node graph (`asmonc_vision.graph`); a node entry there is started here too
