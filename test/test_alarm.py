@@ -24,7 +24,9 @@ def ob(rng, bearing_deg=0.0, id=1, height=0.5, conf=1.0):
 
 def started(**cfg) -> AlarmLogic:
     """A logic that has seen a tracked ground and one empty frame at t=0 (so it is
-    CLEAR, not starting)."""
+    CLEAR, not starting). Its timeout is 1 s unless given: these tests feed lists up to
+    0.9 s apart (the default 0.45 s timeout has its own tests)."""
+    cfg.setdefault('timeout', 1.0)
     logic = AlarmLogic(AlarmConfig(**cfg), t0=0.0)
     logic.ground_status(0.0, GroundStatus.TRACKING)
     d = logic.update(0.0, [])

@@ -8,6 +8,9 @@ from asmonc_vision.core.alarm import (AlarmConfig, AlarmLevel, AlarmLogic, Groun
 
 
 def started(**cfg) -> AlarmLogic:
+    """A CLEAR logic on a tracked ground; timeout 1 s unless given (some tests leave up to
+    0.7 s between lists)."""
+    cfg.setdefault('timeout', 1.0)
     logic = AlarmLogic(AlarmConfig(**cfg), t0=0.0)
     logic.ground_status(0.0, GroundStatus.TRACKING)
     logic.update(0.0, [])
@@ -78,7 +81,7 @@ def test_a_standing_wearer_is_not_told_again_and_again():
     d = logic.update(6.1, [box(2.0)])
     assert d is not None and d.repeat
     # unknown motion (no walk model, no egomotion) keeps the periodic repeat
-    plain = started(repeat_period=2.0)
+    plain = started(repeat_period=2.0, timeout=3.0)
     plain.update(0.1, [box(2.0)])
     assert plain.update(2.2, [box(2.0)]).repeat
 

@@ -82,7 +82,7 @@ def test_launch_entries_bag_and_live():
                                params_files=('/over.yaml',))
     names = [e['name'] for e in bag]
     assert names == ['bag_player_node', 'detector_node', 'egomotion_node',
-                     'gait_filter_node', 'alarm_node']
+                     'gait_filter_node', 'alarm_node', 'audio_node']
     player = bag[0]
     assert player['parameters'] == ['/cfg/bag_player.yaml', '/over.yaml',
                                     {'bag': '/bags/x', 'rate': 2.0}]

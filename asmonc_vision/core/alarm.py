@@ -83,6 +83,9 @@ class GroundStatus(enum.IntEnum):
 
 
 #: Plain-speech texts of the faults (FAULT level).
+#: period of the alarm node's timeout check (`AlarmLogic.check_timeout`), seconds: with
+#: the default timeout (0.4 s) a FAULT is decided at most 0.45 s after the last list
+CHECK_PERIOD_S = 0.05
 TEXT_STARTING = 'starting up, hold still'
 TEXT_NO_DATA = 'fault, obstacle detection has stopped, walk with care'
 TEXT_NOT_STARTED = 'fault, obstacle detection has not started, walk with care'
@@ -423,7 +426,8 @@ class AlarmLogic:
         """The wearer's smoothed walking speed (m/s) and direction (radians from the
         camera's axis, positive left) at time t (s), e.g. from ``WalkingSpeed``."""
         if math.isfinite(speed) and math.isfinite(heading):
-            self._speed, self._heading, self._speed_t = max(0.0, float(speed)), float(heading), float(t)
+            self._speed, self._heading = max(0.0, float(speed)), float(heading)
+            self._speed_t = float(t)
 
     def gait(self, t: float, walking: bool) -> None:
         """The walk model's walking/standing verdict at time t (s)."""

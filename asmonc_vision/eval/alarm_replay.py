@@ -4,7 +4,7 @@
 stamps as its clock: the logic starts (FAULT "starting up") just before the first pair;
 for each pair the detector answered, its obstacle list (`update`) and then its ground
 status (`ground_status`), in the order the detector node publishes them (/obstacles,
-then /ground_plane); and the node's 10 Hz timer (`check_timeout`) between pairs, so a
+then /ground_plane); and the node's timer (`check_timeout`, every `CHECK_PERIOD_S`) between pairs, so a
 run of pairs without an answer gives the FAULT the node would give. Alarms about a pair
 carry its stamp (as the node's do); timer alarms carry the tick's bag time.
 """
@@ -12,15 +12,15 @@ from __future__ import annotations
 
 from typing import Sequence
 
-from asmonc_vision.core.alarm import AlarmConfig, AlarmLogic, Decision, GroundStatus, \
-    ObstacleInfo
+from asmonc_vision.core.alarm import (CHECK_PERIOD_S, AlarmConfig, AlarmLogic, Decision,
+                                      GroundStatus, ObstacleInfo)
 from asmonc_vision.core.evaluation import FrameObstacles
 
 #: the detector's status words -> GroundPlane status values
 STATUS_VALUES = {'initialising': GroundStatus.INITIALISING, 'tracking': GroundStatus.TRACKING,
                  'lost': GroundStatus.LOST}
 #: the alarm node's timer period, seconds
-TIMER_PERIOD_S = 0.1
+TIMER_PERIOD_S = CHECK_PERIOD_S
 
 
 def obstacle_infos(fo: FrameObstacles) -> list[ObstacleInfo]:

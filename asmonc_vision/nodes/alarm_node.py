@@ -36,8 +36,8 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from std_msgs.msg import Header
 
-from asmonc_vision.core.alarm import (AlarmConfig, AlarmLevel, AlarmLogic, Contact, Decision,
-                                      ObstacleInfo, WalkingSpeed)
+from asmonc_vision.core.alarm import (CHECK_PERIOD_S, AlarmConfig, AlarmLevel, AlarmLogic,
+                                      Contact, Decision, ObstacleInfo, WalkingSpeed)
 from asmonc_vision.nodes.common import (ALARM_QOS, RESULT_QOS, SENSOR_QOS, Diagnostics,
                                         declare_config, run_node)
 from asmonc_vision.nodes.conversions import stamp_to_ns
@@ -45,9 +45,8 @@ from asmonc_vision_msgs.msg import Alarm, GaitState, GroundPlane, ObstacleArray
 
 #: frame id of alarms made before any obstacle list was seen
 DEFAULT_FRAME = 'stereo_left_optical_frame'
-#: period of the timeout check on the steady clock, seconds: with the default timeout
-#: (0.4 s) a FAULT is published at most 0.45 s after the last obstacle list
-CHECK_PERIOD = 0.05
+#: period of the timeout check on the steady clock, seconds
+CHECK_PERIOD = CHECK_PERIOD_S
 #: a stamp this much older than the last one is a restarted replay, not a late
 #: message: it is accepted (and the order check starts again), seconds
 CLOCK_RESET_JUMP = 5.0
