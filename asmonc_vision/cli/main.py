@@ -10,6 +10,7 @@
     asmonc campaign [--minutes M] [--workers N]   random walks scored for safety: ours vs SGBM
     asmonc images-bag FOLDER OUT [--repeat N]   a contract bag from a folder of stereo pairs
     asmonc fuzz {nmea,bag} --seconds N         fuzz the NMEA parser or the bag reader
+    asmonc params [--markdown]                 every node's parameters (docs/parameters.md)
 """
 from __future__ import annotations
 
@@ -59,6 +60,10 @@ def build_parser() -> argparse.ArgumentParser:
     fuzz.add_arguments(sub.add_parser(
         'fuzz', help='fuzz the NMEA parser or the bag reader for a given time',
         description=fuzz.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
+    from asmonc_vision import paramdoc
+    paramdoc.add_arguments(sub.add_parser(
+        'params', help="every node's parameters: default, range, description",
+        description=paramdoc.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
     return parser
 
 
