@@ -28,7 +28,7 @@ PENDING_WORK_LOG_CLEANUP = {
 }
 
 #: a dated note, a numbered work session or issue, an experiment log entry
-WORK_LOG = re.compile(r'\b[Ss]ession \d+|\b[Ii]ssue #?\d+|[Tt]ried, not kept'
+WORK_LOG = re.compile(r'\b[Ss]ession[ -]\d+|\b[Ii]ssue #?\d+|[Tt]ried, not kept'
                       r'|\b20[2-9]\d-[01]\d-[0-3]\d\b(?!T)')
 
 
@@ -166,7 +166,7 @@ def test_no_work_log_references():
 
 
 def test_work_log_pattern_catches_what_it_names():
-    for bad in ('as in session 37', 'Issue 48 asks', 'Tried, not kept: x', 'on 2026-01-05'):
+    for bad in ('as in session 37', 'the session-12 kernels', 'Issue 48 asks', 'Tried, not kept: x', 'on 2026-01-05'):
         assert WORK_LOG.search(bad), bad
     for fine in ('sessions of walking', 'a stamp of 2023-11-14T22:13:20Z', 'no issue here'):
         assert not WORK_LOG.search(fine), fine

@@ -10,7 +10,7 @@ from asmonc_vision.core.alarm import TEXT_NO_DATA, TEXT_STARTING
 from conftest import BAGS
 
 FAULT, CLEAR = 4, 0
-#: the alarm node's timeout in this test (the wearer issue's target: 0.5 s)
+#: the alarm node's timeout in this test (the wearer's target: FAULT within 0.5 s)
 TIMEOUT = 0.5
 
 

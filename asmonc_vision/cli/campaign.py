@@ -14,7 +14,7 @@ a rosbag2 bag with the pixels that see each obstacle in both images beside it
 (GPOD, default settings) and the SGBM peer (`core.baseline`, as `asmonc eval --method
 sgbm`) each run over the stereo pairs in order, the alarm node's logic (`core.alarm`,
 default settings) is replayed over their outputs in bag time (`eval.alarm_replay`), and
-the safety score is taken (`eval.safety`, the definitions of EVALUATION.md).
+the safety score is taken (`eval.safety`, the definitions of docs/evaluation.md).
 
 Seeds: TUNING walks use seeds 1000-1999, BLIND walks 900000-900999. Tune only on the
 tuning seeds and quote the blind ones, which no tuning has looked at. By default both

@@ -30,7 +30,7 @@ summary of `asmonc run`). Both paths are scored by the same code (core.evaluatio
 * ground-plane error against /ground_truth/ground_plane: the angle between the normals
   (deg) and the camera-height difference (mm), over the frames with a plane;
 * latency of process() per frame (median, p90 ms; OpenCV on one thread; not for --outputs).
-* the safety score of EVALUATION.md (`eval.safety`: obstacles on the path warned in
+* the safety score of docs/evaluation.md (`eval.safety`: obstacles on the path warned in
   time, false alarm events per minute of walking, false reports per frame, recall), of
   the alarms the alarm node's logic (default settings) gives over the detector's outputs
   replayed in bag time (`eval.alarm_replay`), or of the recorded /alarms and /obstacles;

@@ -1,4 +1,4 @@
-"""The wearer's safety score: one implementation of the definitions in EVALUATION.md.
+"""The wearer's safety score: one implementation of the definitions in docs/evaluation.md.
 
 Inputs (all in bag time, nanosecond stamps):
 
@@ -67,7 +67,7 @@ from asmonc_vision.core.evaluation import (HEIGHT_BINS_M, RANGE_BINS_M, WARNING_
 
 @dataclass(frozen=True)
 class SafetyCriteria:
-    """The numbers of EVALUATION.md's definitions."""
+    """The numbers of the safety score's definitions (docs/evaluation.md)."""
 
     corridor_half_width: float = param(0.5, 'walking corridor half width, metres',
                                        range=(0.05, 5.0))

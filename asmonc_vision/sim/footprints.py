@@ -1,4 +1,4 @@
-"""The obstacles' footprints on the ground, for scoring (EVALUATION.md: "footprint").
+"""The obstacles' footprints on the ground, for scoring (docs/evaluation.md: "footprint").
 
 ``world_footprints(world)`` lists, per obstacle of a `World`, its outline on the ground
 in world x, y (metres, z up): a box's (post, door, wall) rectangle, a cylinder's
