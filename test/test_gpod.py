@@ -1645,7 +1645,7 @@ def test_a_noisy_camera_makes_no_obstacles_on_clear_pavement():
 
 
 # ---------------------------------------------------------------- compiled paths (speed)
-# Session 12: more of the detector's loops compiled with numba, each beside its numpy
+# The detector's compiled loops (numba), each beside its numpy
 # path; these tests check that both give exactly the same results (bit for bit).
 
 #: The gpod kernels checked here, each with a numpy path beside it.
@@ -2019,7 +2019,7 @@ def test_run_and_string_kernels_equal_numpy(box_frame, monkeypatch):
 
 
 def test_detector_outputs_equal_without_the_new_kernels(monkeypatch):
-    """The whole detector, with the session-12 kernels and without them (the numpy
+    """The whole detector, with the compiled kernels and without them (the numpy
     paths), gives the same results, field for field: calibration, standing still
     (averaged excess), walking frames with boxes, and a step down."""
     gpod, mt = _need_numba()

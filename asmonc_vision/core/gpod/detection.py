@@ -64,6 +64,8 @@ _DROP_RANK = 1
 #: Edge strings within this many pixels of the left or right image border may be the
 #: view's edge rather than an obstacle's silhouette.
 _BORDER_PX = 3.0
+#: The lone-face search's evidence bar is at least this many gradient-noise sigmas
+#: (`faces.lone_face_points`).
 _LONE_FLOOR_SIGMAS = 4.0
 #: The standard deviation of the unblurred Sobel gradient per grey level of pixel noise.
 _SOBEL_NOISE_GAIN = gradient_noise_gain(0.0)
@@ -178,35 +180,15 @@ class Detection(PlaneTracking):
     def _detect(self, m: Matches, u, v, d, cam: StereoCamera, metric: MetricPlane,
                 d_min: float, d_max: float, el: EdgeMap, er: EdgeMap, cand: Candidates,
                 still: bool) -> tuple[GpodFeatures, tuple[GpodObstacle, ...]]:
+        """Obstacles and drop-offs of one frame's matches ``m`` (features u, v, d; the
+        plane's disparity range d_min .. d_max; ``still``: the rig stood still): (the
+        features with their obstacle / drop classes, the detections nearest first)."""
         c = self.config
-        pd = plane_disparity(self._abc, u, v)
-        pts = cam.triangulate(u, v, d)
-        h = metric.signed_height(pts)
-        self._surface = None
-        if c.surface_enabled:
-            # The reference of the obstacle test: the plane continued by the profile
-            # ahead where features support it (core/ground_surface.py).
-            surf = fit_ground_surface(pts, metric, surface_config(c))
-            self._surface = surf
-            if surf.bends:
-                pd_surf = surf.disparity(cam, u, v)
-                pd = np.where(np.isfinite(pd_surf), pd_surf, pd)
-                h = surf.height_above(pts)
+        pd, pts, h = self._ground_reference(u, v, d, cam, metric)
         excess = d - pd
         feet = pts - h[:, None] * metric.normal_up[None, :]
         ground_range = np.linalg.norm(feet + metric.height * metric.normal_up[None, :], axis=1)
-        tol = c.string_disparity_tolerance_px
-        nxt = None
-        if kn.nb_runs is not None and type(tol) in (float, int) and len(m):
-            # run_links, matched_run_length and smooth_along_runs in one compiled pass
-            # (the same links, lengths and sums; the tolerance compared in single
-            # precision, as numpy compares the float32 disparities with it).
-            prev, run, smooth, nxt = kn.nb_runs(el.string_prev, m.left_index, m.d, len(el),
-                                              np.float32(tol), int(c.string_window), excess)
-        else:
-            prev = run_links(el, m, tol)
-            run = matched_run_length(el, m, tol, prev)
-            smooth = smooth_along_runs(excess, prev, c.string_window)
+        prev, run, smooth, nxt = self._runs(m, el, excess)
         in_range = ground_range <= c.max_range_m
         thr, thr_global = self.pixel_thresholds(_noise_key(m), v)
         ex_mean = self._temporal_excess(m, smooth, still, el.shape, thr)
@@ -222,26 +204,8 @@ class Detection(PlaneTracking):
         obst = (ex_mean > thr) & (h <= c.max_obstacle_height_m) & usable
         below = (ex_mean < -thr) & (h >= -c.max_drop_depth_m)
         if obst.any():
-            obst &= ~hanging_runs(el, m, prev, h, c.max_floating_height_m,
-                                  c.string_disparity_tolerance_px, slope, obst,
-                                  solid=run >= c.min_matched_run)
-            obst &= ~floating_bottom_runs(m.string_id, m.v, prev, h, reliable & in_range,
-                                          c.max_floating_height_m, obst)
-            high = obst & (excess > _AMBIGUOUS_EXCESS_PX)
-            if high.any():
-                # A run, at any height, that hangs over its own string's continuation on
-                # the lower ground beyond a drop and could have been matched there: the
-                # paving beyond a kerb down matched one period off. Every stretch of
-                # these strings well above the plane is tested (one matched the same
-                # period off may hold up another).
-                in_s = np.zeros(int(m.string_id.max()) + 1, bool)
-                in_s[m.string_id[high]] = True
-                high = (excess > _AMBIGUOUS_EXCESS_PX) & in_s[m.string_id]
-                support = max(c.min_drop_cluster_pixels,
-                              math.ceil(_LOWER_GROUND_FRACTION * len(m)))
-                obst &= ~continuation_alternatives(
-                    el, m, prev, cand, high, below & (run >= c.min_matched_run), pd,
-                    c.string_disparity_tolerance_px, slope, support)
+            self._rejected_runs(el, m, cand, prev, run, reliable & in_range, h, excess, pd,
+                                below, slope, obst)
         drop = np.zeros_like(obst)
         if c.detect_drops:
             # Below the plane where the plane itself is within the detection range.
@@ -252,19 +216,7 @@ class Detection(PlaneTracking):
         weight = self._evidence_weight(m.strength)
         min_px = self.min_obstacle_pixels(cam)
         if obst.any():
-            # The edge-string rule holds for each piece of a string between stretches of
-            # it on the ground (`string_pieces`): a noisy pixel far below a post, on the
-            # post's edge continued by a tile joint, is no part of the post (its foot
-            # would be taken there).
-            has = np.zeros(n_s, bool)
-            has[sid[obst]] = True
-            sel = np.flatnonzero(has[sid])
-            piece = string_pieces(sid[sel], m.v[sel], (np.abs(ex_mean[sel]) <= thr[sel])
-                                  & usable[sel])
-            o_sel = obst[sel]
-            n_piece = np.bincount(piece[o_sel], weights=weight[sel][o_sel],
-                                  minlength=int(piece.max()) + 1)
-            obst[sel] &= n_piece[piece] + 1e-9 >= min_px
+            self._piece_rule(m, ex_mean, thr, usable, weight, min_px, n_s, obst)
         n_obst = np.bincount(sid[obst], weights=weight[obst], minlength=n_s) + 1e-9
         n_drop = np.bincount(sid[drop], weights=weight[drop], minlength=n_s) + 1e-9
         obst_string = n_obst >= min_px
@@ -306,28 +258,10 @@ class Detection(PlaneTracking):
                                   prev=prev, ground_points=pts[ground], left=self._left,
                                   u_left=m.u_left, usable=usable, nxt=nxt)
         if obst_string.any():
-            # Candidate silhouette edges for placing detected obstacles (never obstacles):
-            # strings neither obstacle, drop nor rejected as one (mismatch, repetitive
-            # pattern, half-occlusion), consistently above the plane near the threshold:
-            # reliably matched pixels above _WEAK_FRACTION of it, at least
-            # _WEAK_MIN_PIXELS, whose mean excess is _WEAK_SIGMAS standard errors above
-            # the plane (sum of z > K sqrt(n _WEAK_CORR)).
-            weak = (usable & (ex_mean > _WEAK_FRACTION * thr) & (h <= c.max_obstacle_height_m)
-                    & ~(obst_string | drop_string | (n_obst >= min_px))[sid])
-            wi = np.flatnonzero(weak)
-            if wi.size:
-                z = ex_mean[wi] * (c.threshold_k / thr[wi])
-                n_w = np.bincount(sid[wi], minlength=n_s)
-                z_sum = np.bincount(sid[wi], weights=z, minlength=n_s)
-                ok_s = (n_w >= _WEAK_MIN_PIXELS) & (
-                    z_sum > _WEAK_SIGMAS * np.sqrt(np.maximum(n_w, 1) * _WEAK_CORR))
-                wi = wi[ok_s[sid[wi]]]
-            if wi.size:
-                o = np.lexsort((-m.v[wi], sid[wi]))
-                wi = wi[o]
-                head = np.concatenate((_TRUE, sid[wi][1:] != sid[wi][:-1]))
-                top = np.maximum.reduceat(h[wi], np.flatnonzero(head))
-                self._ctx.weak_start, self._ctx.weak_top = wi[head], top
+            weak = self._weak_silhouettes(m, ex_mean, thr, h, usable,
+                                          obst_string | drop_string | (n_obst >= min_px))
+            if weak is not None:
+                self._ctx.weak_start, self._ctx.weak_top = weak
         found: list[GpodObstacle] = []
         for sel, sign, radius, min_px in (
                 (obst, 1.0, c.cluster_radius_m, 1),
@@ -338,6 +272,125 @@ class Detection(PlaneTracking):
                                             cam, metric))
         found.sort(key=lambda o: o.range)
         return features, tuple(found)
+
+    def _ground_reference(self, u, v, d, cam: StereoCamera, metric: MetricPlane
+                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The ground the features are judged against: (its disparity at each feature,
+        the features' 3-D points, their heights above it). The plane, or with
+        ``surface_enabled`` the ground surface ahead where it bends (kept in
+        ``self._surface``)."""
+        c = self.config
+        pd = plane_disparity(self._abc, u, v)
+        pts = cam.triangulate(u, v, d)
+        h = metric.signed_height(pts)
+        self._surface = None
+        if c.surface_enabled:
+            # The reference of the obstacle test: the plane continued by the profile
+            # ahead where features support it (core/ground_surface.py).
+            surf = fit_ground_surface(pts, metric, surface_config(c))
+            self._surface = surf
+            if surf.bends:
+                pd_surf = surf.disparity(cam, u, v)
+                pd = np.where(np.isfinite(pd_surf), pd_surf, pd)
+                h = surf.height_above(pts)
+        return pd, pts, h
+
+    def _runs(self, m: Matches, el: EdgeMap, excess: np.ndarray) -> tuple:
+        """The matched runs: (`run_links`, `matched_run_length`, the excess smoothed along
+        the runs, the links downwards or None)."""
+        c = self.config
+        tol = c.string_disparity_tolerance_px
+        nxt = None
+        if kn.nb_runs is not None and type(tol) in (float, int) and len(m):
+            # run_links, matched_run_length and smooth_along_runs in one compiled pass
+            # (the same links, lengths and sums; the tolerance compared in single
+            # precision, as numpy compares the float32 disparities with it).
+            prev, run, smooth, nxt = kn.nb_runs(el.string_prev, m.left_index, m.d, len(el),
+                                                np.float32(tol), int(c.string_window), excess)
+        else:
+            prev = run_links(el, m, tol)
+            run = matched_run_length(el, m, tol, prev)
+            smooth = smooth_along_runs(excess, prev, c.string_window)
+        return prev, run, smooth, nxt
+
+    def _rejected_runs(self, el: EdgeMap, m: Matches, cand: Candidates, prev, run, reliable,
+                       h, excess, pd, below, slope: float, obst: np.ndarray) -> None:
+        """Obstacle pixels ``obst`` (changed in place) that are no evidence: runs that
+        hang over another depth of their own string or float above the ground, and runs
+        that hang over their string's continuation on the lower ground beyond a drop
+        (``reliable``: reliably matched and in range)."""
+        c = self.config
+        obst &= ~hanging_runs(el, m, prev, h, c.max_floating_height_m,
+                              c.string_disparity_tolerance_px, slope, obst,
+                              solid=run >= c.min_matched_run)
+        obst &= ~floating_bottom_runs(m.string_id, m.v, prev, h, reliable,
+                                      c.max_floating_height_m, obst)
+        high = obst & (excess > _AMBIGUOUS_EXCESS_PX)
+        if high.any():
+            # A run, at any height, that hangs over its own string's continuation on
+            # the lower ground beyond a drop and could have been matched there: the
+            # paving beyond a kerb down matched one period off. Every stretch of
+            # these strings well above the plane is tested (one matched the same
+            # period off may hold up another).
+            in_s = np.zeros(int(m.string_id.max()) + 1, bool)
+            in_s[m.string_id[high]] = True
+            high = (excess > _AMBIGUOUS_EXCESS_PX) & in_s[m.string_id]
+            support = max(c.min_drop_cluster_pixels,
+                          math.ceil(_LOWER_GROUND_FRACTION * len(m)))
+            obst &= ~continuation_alternatives(
+                el, m, prev, cand, high, below & (run >= c.min_matched_run), pd,
+                c.string_disparity_tolerance_px, slope, support)
+
+    @staticmethod
+    def _piece_rule(m: Matches, ex_mean, thr, usable, weight, min_px: float, n_s: int,
+                    obst: np.ndarray) -> None:
+        """The edge-string rule per piece of a string: obstacle pixels ``obst`` (changed in
+        place) of pieces with fewer than ``min_px`` (weighted) of them are dropped."""
+        sid = m.string_id
+        # The edge-string rule holds for each piece of a string between stretches of
+        # it on the ground (`string_pieces`): a noisy pixel far below a post, on the
+        # post's edge continued by a tile joint, is no part of the post (its foot
+        # would be taken there).
+        has = np.zeros(n_s, bool)
+        has[sid[obst]] = True
+        sel = np.flatnonzero(has[sid])
+        piece = string_pieces(sid[sel], m.v[sel], (np.abs(ex_mean[sel]) <= thr[sel])
+                              & usable[sel])
+        o_sel = obst[sel]
+        n_piece = np.bincount(piece[o_sel], weights=weight[sel][o_sel],
+                              minlength=int(piece.max()) + 1)
+        obst[sel] &= n_piece[piece] + 1e-9 >= min_px
+
+    def _weak_silhouettes(self, m: Matches, ex_mean, thr, h, usable, taken: np.ndarray
+                          ) -> tuple[np.ndarray, np.ndarray] | None:
+        """The candidate silhouette strings (``taken``: (n_s,) strings already obstacles,
+        drops or rejected): (their lowest pixels, their top heights), or None."""
+        c = self.config
+        sid = m.string_id
+        n_s = taken.shape[0]
+        # Candidate silhouette edges for placing detected obstacles (never obstacles):
+        # strings neither obstacle, drop nor rejected as one (mismatch, repetitive
+        # pattern, half-occlusion), consistently above the plane near the threshold:
+        # reliably matched pixels above _WEAK_FRACTION of it, at least
+        # _WEAK_MIN_PIXELS, whose mean excess is _WEAK_SIGMAS standard errors above
+        # the plane (sum of z > K sqrt(n _WEAK_CORR)).
+        weak = (usable & (ex_mean > _WEAK_FRACTION * thr) & (h <= c.max_obstacle_height_m)
+                & ~taken[sid])
+        wi = np.flatnonzero(weak)
+        if wi.size:
+            z = ex_mean[wi] * (c.threshold_k / thr[wi])
+            n_w = np.bincount(sid[wi], minlength=n_s)
+            z_sum = np.bincount(sid[wi], weights=z, minlength=n_s)
+            ok_s = (n_w >= _WEAK_MIN_PIXELS) & (
+                z_sum > _WEAK_SIGMAS * np.sqrt(np.maximum(n_w, 1) * _WEAK_CORR))
+            wi = wi[ok_s[sid[wi]]]
+        if wi.size:
+            o = np.lexsort((-m.v[wi], sid[wi]))
+            wi = wi[o]
+            head = np.concatenate((_TRUE, sid[wi][1:] != sid[wi][:-1]))
+            top = np.maximum.reduceat(h[wi], np.flatnonzero(head))
+            return wi[head], top
+        return None
 
     def _ambiguous_strings(self, m: Matches, excess: np.ndarray, obst: np.ndarray,
                            cand: Candidates, el: EdgeMap, er: EdgeMap, threshold: float,
@@ -493,6 +546,38 @@ class Detection(PlaneTracking):
         brg = np.array([math.atan2(y, x) for x, y in q.tolist()])
         return rng, brg, q0
 
+    def _drop_feet(self, idx, label, hh, count, sid_all, cam, metric
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The place of each drop cluster of `_describe`: (range of its nearest visible
+        lower ground, its bearing, each pixel's ground point on the lower ground)."""
+        n_c = count.shape[0]
+        # A drop is placed at the nearest visible part of the lower ground (just
+        # beyond the brink, which hides the lower ground for a shadow's length):
+        # each pixel's viewing ray, continued from where it meets the plane down to
+        # the cluster's depth D (the median height), lands at r_ray (H + D) / H,
+        # H the camera's height -- its row places it, not its noisy disparity. The
+        # nearest: the pixel of rank _DROP_RANK.
+        ctx = self._ctx
+        g_ray = ctx.to_xy(cam.triangulate(ctx.u[idx], ctx.v[idx], ctx.pd[idx]))
+        depth = np.maximum(-_group_quantile(label, hh, 0.5, n_c), 0.0)
+        scale = ((metric.height + depth) / metric.height)[label]
+        g2 = g_ray * scale[:, None]
+        rng_px = np.hypot(g2[:, 0], g2[:, 1])
+        o1 = np.lexsort((rng_px, label))
+        first = np.searchsorted(label[o1], np.arange(n_c))
+        r_near = rng_px[o1][first + np.minimum(_DROP_RANK, count - 1)]
+        o3 = np.lexsort((rng_px, sid_all, label))
+        lab3, sid3 = label[o3], sid_all[o3]
+        head = np.concatenate((_TRUE, (lab3[1:] != lab3[:-1]) | (sid3[1:] != sid3[:-1])))
+        s_lab, s_rng, s_g = lab3[head], rng_px[o3][head], g2[o3][head]
+        zone = s_rng <= (r_near + np.maximum(_NEAR_ZONE_M,
+                                             _NEAR_ZONE_FRACTION * r_near))[s_lab]
+        zx = _group_quantile(s_lab[zone], s_g[zone, 0], 0.5, n_c)
+        zy = _group_quantile(s_lab[zone], s_g[zone, 1], 0.5, n_c)
+        bearing = np.arctan2(zy, zx)
+        bearing = _brink_bearings(s_g[zone], s_lab[zone], bearing)
+        return r_near, bearing, g2
+
     def _describe(self, idx, label, sign, min_pixels, hh, g2, m: Matches, excess, cam,
                   metric, fwd, lft) -> list[GpodObstacle]:
         """GpodObstacles of the clusters ``label`` (0..C-1) of the pixels ``idx``, all at
@@ -515,31 +600,7 @@ class Detection(PlaneTracking):
             r_near, bearing, q_roi = self._obstacle_feet(idx, label, sid_all, n_c, m,
                                                               height)
         else:
-            # A drop is placed at the nearest visible part of the lower ground (just
-            # beyond the brink, which hides the lower ground for a shadow's length):
-            # each pixel's viewing ray, continued from where it meets the plane down to
-            # the cluster's depth D (the median height), lands at r_ray (H + D) / H,
-            # H the camera's height -- its row places it, not its noisy disparity. The
-            # nearest: the pixel of rank _DROP_RANK.
-            ctx = self._ctx
-            g_ray = ctx.to_xy(cam.triangulate(ctx.u[idx], ctx.v[idx], ctx.pd[idx]))
-            depth = np.maximum(-_group_quantile(label, hh, 0.5, n_c), 0.0)
-            scale = ((metric.height + depth) / metric.height)[label]
-            g2 = g_ray * scale[:, None]
-            rng_px = np.hypot(g2[:, 0], g2[:, 1])
-            o1 = np.lexsort((rng_px, label))
-            first = np.searchsorted(label[o1], np.arange(n_c))
-            r_near = rng_px[o1][first + np.minimum(_DROP_RANK, count - 1)]
-            o3 = np.lexsort((rng_px, sid_all, label))
-            lab3, sid3 = label[o3], sid_all[o3]
-            head = np.concatenate((_TRUE, (lab3[1:] != lab3[:-1]) | (sid3[1:] != sid3[:-1])))
-            s_lab, s_rng, s_g = lab3[head], rng_px[o3][head], g2[o3][head]
-            zone = s_rng <= (r_near + np.maximum(_NEAR_ZONE_M,
-                                                 _NEAR_ZONE_FRACTION * r_near))[s_lab]
-            zx = _group_quantile(s_lab[zone], s_g[zone, 0], 0.5, n_c)
-            zy = _group_quantile(s_lab[zone], s_g[zone, 1], 0.5, n_c)
-            bearing = np.arctan2(zy, zx)
-            bearing = _brink_bearings(s_g[zone], s_lab[zone], bearing)
+            r_near, bearing, g2 = self._drop_feet(idx, label, hh, count, sid_all, cam, metric)
         foot = (-metric.height * metric.normal_up[None, :]
                 + r_near[:, None] * (np.cos(bearing)[:, None] * fwd[None, :]
                                      + np.sin(bearing)[:, None] * lft[None, :]))

@@ -231,6 +231,7 @@ def view_edge_points(xy: np.ndarray, group: np.ndarray, n_groups: int, to_image,
     return out
 
 
+#: Index pairs (i < j) of n points, by n (`_pairs_of`).
 _PAIRS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
 

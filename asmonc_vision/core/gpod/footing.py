@@ -15,6 +15,8 @@ from . import kernels_geometry as kg
 _FOOT_SIGMAS = 1.0
 #: Least uncertainty of a foot's image row, rows (the row is found to a pixel).
 _FOOT_MIN_ROWS = 0.5
+#: The lone-face search (`faces.lone_face_points`) follows each direction from the foot
+#: in steps of _LONE_STEP_M metres up to _LONE_MAX_M: the steps.
 _LONE_STEP_M = 0.02
 _LONE_MAX_M = 0.7
 _LONE_STEPS = np.arange(1, int(round(_LONE_MAX_M / _LONE_STEP_M)) + 1) * _LONE_STEP_M

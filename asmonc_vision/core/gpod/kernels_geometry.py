@@ -23,6 +23,8 @@ _CORNER_SIGMAS = 2.0
 #: it out (features on its sides are its own contact edges; feet and ground features are
 #: located to a few centimetres).
 _FREE_SPACE_MARGIN_M = 0.05
+#: Least number of ground features that show the ground behind a face's line
+#: (`view_edge_points`) or between two bodies (`soft_nearest`).
 _FACE_BEHIND_MIN = 5
 #: `soft_nearest` averages the nearest foot with the feet as near as it only over one
 #: body: not with a foot more than _BODY_GAP_SPAN_M away from it when at least
@@ -33,6 +35,8 @@ _FACE_BEHIND_MIN = 5
 _BODY_GAP_SPAN_M = 0.2
 _BODY_GAP_BAND_M = (0.05, 0.3)
 _BODY_GAP_END_M = 0.1
+#: A candidate silhouette's top must be at the obstacle's height within this factor
+#: (`silhouette_owners`).
 _WEAK_HEIGHT_RATIO = 2.0
 #: A candidate silhouette is no side of an obstacle when at least this many ground
 #: features are seen where the body between it and the obstacle's feet would hide them

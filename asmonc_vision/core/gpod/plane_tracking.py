@@ -237,41 +237,7 @@ class PlaneTracking(DetectorState):
         as `process` takes it, or None). Returns (status, updated)."""
         c = self.config
         if self._calib is None:
-            self._init_window.append((u, v, d, s))
-            if len(self._init_window) < c.init_frames:
-                return 'initialising', False
-            uu, vv, dd, ss = (np.concatenate(x) for x in zip(*self._init_window))
-            # No plane is known yet: the ground must hold init_min_inlier_fraction of the
-            # features to be a candidate at all (not only the winner checked below), so
-            # that the disparity weighting cannot crown a few wrong matches at large
-            # disparity, which a long baseline searched from min_range_m gives.
-            support = c.init_min_inlier_fraction
-            fit = self._fit(uu, vv, dd, cam, support)
-            if fit is None:
-                return 'initialising', False
-            if len(self._init_window) > 1:
-                # Frames of different ground planes (a wearer who walks from the first
-                # frame sways): their joint plane lies between them, tilted for each
-                # (3 degrees: obstacles everywhere), and its residual spread, which sets
-                # the obstacle threshold, is theirs plus the sway's. Then this frame
-                # alone calibrates. (A car on a flat road moves, but its ground plane
-                # does not.)
-                # Both tests: the latest frame's own robust fit may find another surface
-                # than the joint fit (the near ground before a kerb down, where the joint
-                # took the lower ground beyond it), which a least-squares refit started
-                # from the joint plane does not.
-                last = self._fit(u, v, d, cam, support)
-                if last is not None and (
-                        not _planes_agree(fit.abc, last.abc, cam, c.plane_inlier_px)
-                        or not self._window_shares_plane(fit, cam)):
-                    fit, uu, vv, dd, ss = last, u, v, d, s
-            if fit.num_features < c.init_min_inlier_fraction * uu.shape[0]:
-                return 'initialising', False
-            self._calib = self._last_fit = fit
-            self._abc, self._cov = fit.abc.copy(), fit.cov.copy()
-            self._calibrate_sigma(uu, vv, dd, ss.astype(np.float64))
-            self._init_window.clear()
-            return 'tracking', True
+            return self._calibrate(u, v, d, s, cam)
         enough = u.shape[0] >= c.min_plane_features
         if c.plane_update == 'fixed':
             # The plane is known, but a frame with too few features cannot vouch that
@@ -314,24 +280,9 @@ class PlaneTracking(DetectorState):
         rejected = False
 
         def coarse_then_fine(gate_px: float = c.refit_gate_px) -> PlaneFit | None:
-            # Coarse refit from the nearer half of the features near the predicted plane
-            # in disparity (a gate wide enough for walking motion), then a fine refit
-            # from all features near the coarse plane in disparity *and* metric height,
-            # so that another surface (the ground beyond a step, a kerb top) cannot
-            # take over.
             nonlocal rejected
-            gate = np.abs(d - plane_disparity(self._abc, u, v)) <= gate_px
-            if gate.any():      # the coarse fit sees only the nearer half: the ground here
-                gate &= d >= fast_median(d[gate])      # (np.median's arithmetic, finite d)
-            coarse = self._fit(u[gate], v[gate], d[gate], cam)
-            out = None
-            if coarse is not None:
-                height = coarse.metric.signed_height(cam.triangulate(u, v, d))
-                gate = ((np.abs(d - plane_disparity(coarse.abc, u, v)) <= gate_px)
-                        & (np.abs(height) <= gate_m))
-                out = self._fit(u[gate], v[gate], d[gate], cam)
-            if out is not None and not self._close_to_current(out, cam, current, tight):
-                out, rejected = None, True
+            out, no = self._coarse_then_fine(u, v, d, cam, current, tight, gate_m, gate_px)
+            rejected = rejected or no
             return out
 
         if enough and current is not None and not anchored:
@@ -370,28 +321,84 @@ class PlaneTracking(DetectorState):
             # (Not once lost: the plane to widen the gate around is then stale.)
             fit = coarse_then_fine(c.refit_retry_gate_px)
         if fit is None and enough and self._coast >= coast_frames:
-            # Lost: recover from the nearer half of the features (the ground the wearer
-            # stands on, rather than the ground beyond a step) if the result is near the
-            # calibration.
-            near = d >= np.median(d)
-            ungated = self._fit(u[near], v[near], d[near], cam)
-            if ungated is not None and self._near_calibration(ungated):
-                fit = ungated
+            fit = self._recover(u, v, d, cam)
         noise = c.motion_process_noise_px if predicted else c.refit_process_noise_px
         sq = noise ** 2
         q = np.diag([sq / (0.5 * cam.width) ** 2, sq / (0.5 * cam.height) ** 2, sq])
         if fit is None:
-            self._rejected = self._rejected + 1 if rejected else 0
-            self._stale = self._stale or not predicted
-            if self._coast < coast_frames and enough and (
-                    predicted or still or self._near_ground_agrees(u, v, d)):
-                self._coast += 1
-                if predicted:
-                    self._cov = self._cov + q
-                return 'tracking', False
-            # stay lost until a refit succeeds
-            self._coast = max(c.max_coast_frames, c.motion_coast_frames)
-            return 'lost', False
+            return self._without_refit(u, v, d, q, rejected, predicted, still, enough,
+                                       coast_frames)
+        self._kalman_update(fit, q)
+        return 'tracking', True
+
+    def _calibrate(self, u, v, d, s, cam: StereoCamera) -> tuple[str, bool]:
+        """The calibration step of `_update_plane`: this frame's features join the
+        calibration window; once it holds ``init_frames`` frames, the plane is fitted
+        from them (or from the latest frame alone when the frames' planes disagree).
+        Returns (status, updated)."""
+        c = self.config
+        self._init_window.append((u, v, d, s))
+        if len(self._init_window) < c.init_frames:
+            return 'initialising', False
+        uu, vv, dd, ss = (np.concatenate(x) for x in zip(*self._init_window))
+        # No plane is known yet: the ground must hold init_min_inlier_fraction of the
+        # features to be a candidate at all (not only the winner checked below), so
+        # that the disparity weighting cannot crown a few wrong matches at large
+        # disparity, which a long baseline searched from min_range_m gives.
+        support = c.init_min_inlier_fraction
+        fit = self._fit(uu, vv, dd, cam, support)
+        if fit is None:
+            return 'initialising', False
+        if len(self._init_window) > 1:
+            # Frames of different ground planes (a wearer who walks from the first
+            # frame sways): their joint plane lies between them, tilted for each
+            # (3 degrees: obstacles everywhere), and its residual spread, which sets
+            # the obstacle threshold, is theirs plus the sway's. Then this frame
+            # alone calibrates. (A car on a flat road moves, but its ground plane
+            # does not.)
+            # Both tests: the latest frame's own robust fit may find another surface
+            # than the joint fit (the near ground before a kerb down, where the joint
+            # took the lower ground beyond it), which a least-squares refit started
+            # from the joint plane does not.
+            last = self._fit(u, v, d, cam, support)
+            if last is not None and (
+                    not _planes_agree(fit.abc, last.abc, cam, c.plane_inlier_px)
+                    or not self._window_shares_plane(fit, cam)):
+                fit, uu, vv, dd, ss = last, u, v, d, s
+        if fit.num_features < c.init_min_inlier_fraction * uu.shape[0]:
+            return 'initialising', False
+        self._calib = self._last_fit = fit
+        self._abc, self._cov = fit.abc.copy(), fit.cov.copy()
+        self._calibrate_sigma(uu, vv, dd, ss.astype(np.float64))
+        self._init_window.clear()
+        return 'tracking', True
+
+    def _coarse_then_fine(self, u, v, d, cam: StereoCamera, current: MetricPlane,
+                          tight: bool, gate_m: float, gate_px: float
+                          ) -> tuple[PlaneFit | None, bool]:
+        """The refit of `_update_plane`: a coarse refit from the nearer half of the
+        features near the predicted plane in disparity (a gate wide enough for walking
+        motion), then a fine refit from all features near the coarse plane in disparity
+        *and* metric height, so that another surface (the ground beyond a step, a kerb
+        top) cannot take over. Returns (the refit or None, whether a refit was rejected
+        by the change limits around ``current``)."""
+        gate = np.abs(d - plane_disparity(self._abc, u, v)) <= gate_px
+        if gate.any():      # the coarse fit sees only the nearer half: the ground here
+            gate &= d >= fast_median(d[gate])      # (np.median's arithmetic, finite d)
+        coarse = self._fit(u[gate], v[gate], d[gate], cam)
+        out = None
+        if coarse is not None:
+            height = coarse.metric.signed_height(cam.triangulate(u, v, d))
+            gate = ((np.abs(d - plane_disparity(coarse.abc, u, v)) <= gate_px)
+                    & (np.abs(height) <= gate_m))
+            out = self._fit(u[gate], v[gate], d[gate], cam)
+        if out is not None and not self._close_to_current(out, cam, current, tight):
+            return None, True
+        return out, False
+
+    def _kalman_update(self, fit: PlaneFit, q: np.ndarray) -> None:
+        """The Kalman step of `_update_plane` with the refit ``fit`` and the process
+        noise ``q``; the refit is the plane's latest fit."""
         # Kalman filter: predict with the process noise Q (the walking motion's, or what
         # the known motion leaves unexplained): P = F P F^T + Q (F P F^T is already in
         # self._cov when predicted through the motion, F = I otherwise); update with the
@@ -404,7 +411,34 @@ class PlaneTracking(DetectorState):
         self._last_fit = fit
         self._coast = self._rejected = 0
         self._stale = False
-        return 'tracking', True
+
+    def _recover(self, u, v, d, cam: StereoCamera) -> PlaneFit | None:
+        """Lost: a plane from the nearer half of the features (the ground the wearer
+        stands on, rather than the ground beyond a step) if it is near the calibration,
+        else None."""
+        near = d >= np.median(d)
+        ungated = self._fit(u[near], v[near], d[near], cam)
+        if ungated is not None and self._near_calibration(ungated):
+            return ungated
+        return None
+
+    def _without_refit(self, u, v, d, q: np.ndarray, rejected: bool, predicted: bool,
+                       still: bool, enough: bool, coast_frames: int) -> tuple[str, bool]:
+        """A frame of `_update_plane` without a refit: the plane is carried over it (for
+        up to ``coast_frames``; through the motion when ``predicted``, adding the process
+        noise ``q``), or the status is lost until a refit succeeds."""
+        c = self.config
+        self._rejected = self._rejected + 1 if rejected else 0
+        self._stale = self._stale or not predicted
+        if self._coast < coast_frames and enough and (
+                predicted or still or self._near_ground_agrees(u, v, d)):
+            self._coast += 1
+            if predicted:
+                self._cov = self._cov + q
+            return 'tracking', False
+        # stay lost until a refit succeeds
+        self._coast = max(c.max_coast_frames, c.motion_coast_frames)
+        return 'lost', False
 
     def _near_ground_agrees(self, u: np.ndarray, v: np.ndarray, d: np.ndarray) -> bool:
         """Whether the current plane may be carried, unconfirmed by a refit, over a frame

@@ -345,6 +345,47 @@ def floating_bottom_runs(sid: np.ndarray, v: np.ndarray, prev: np.ndarray, h: np
     return out
 
 
+def _matches_below(e: np.ndarray, below: np.ndarray, feat_of_edge: np.ndarray,
+                   max_gap: int) -> np.ndarray:
+    """(R, N) int64: the matches (-1: none) of the edge pixels 1..R rows below the edge
+    pixels ``e`` along their strings (``below``: each edge pixel's next one down), R at
+    most ``max_gap`` (fewer where every string has ended)."""
+    under = np.full((max_gap, e.shape[0]), -1, np.int64)
+    for r in range(max_gap):
+        e = np.where(e >= 0, below[np.maximum(e, 0)], -1)
+        if not (e >= 0).any():
+            under = under[:r]
+            break
+        under[r] = np.where(e >= 0, feat_of_edge[np.maximum(e, 0)], -1)
+    return under
+
+
+def _continuations(edges: EdgeMap, m: Matches, prev: np.ndarray, bottoms: np.ndarray,
+                   under: np.ndarray, lower: np.ndarray, feat_of_edge: np.ndarray,
+                   max_gap: int) -> np.ndarray:
+    """(N,) int64: the continuation of each run bottom of `continuation_alternatives`
+    on lower ground (-1: none): its string's first ``lower`` match in ``under``, else
+    the nearest ``lower`` match within ``max_gap`` rows above its run."""
+    is_low = (under >= 0) & lower[np.maximum(under, 0)]
+    ok = is_low.any(axis=0)
+    found = np.full(bottoms.size, -1, np.int64)
+    if ok.any():
+        found[ok] = under[np.argmax(is_low[:, ok], axis=0), np.flatnonzero(ok)]
+    if not ok.all():
+        top = chain_roots(prev)                 # each run's top
+        miss = np.flatnonzero(~ok)
+        e = m.left_index[top[bottoms[miss]]].astype(np.int64)
+        for _ in range(max_gap):
+            live = (found[miss] < 0) & (e >= 0)
+            if not live.any():
+                break
+            e = np.where(live, edges.string_prev[np.maximum(e, 0)], -1)
+            f = np.where(e >= 0, feat_of_edge[np.maximum(e, 0)], -1)
+            hit = (f >= 0) & lower[np.maximum(f, 0)]
+            found[miss[hit]] = f[hit]
+    return found
+
+
 def continuation_alternatives(edges: EdgeMap, m: Matches, prev: np.ndarray,
                               cand: Candidates, select: np.ndarray, lower: np.ndarray,
                               plane_d: np.ndarray, tolerance_px: float, slope: float,
@@ -408,14 +449,8 @@ def continuation_alternatives(edges: EdgeMap, m: Matches, prev: np.ndarray,
     below[edges.string_prev[has_e]] = np.flatnonzero(has_e)
     # The matched pixels of each bottom's string in the max_gap rows below it.
     nb = bottoms.size
-    under = np.full((max_gap, nb), -1, np.int64)
-    e = m.left_index[bottoms].astype(np.int64)
-    for r in range(max_gap):
-        e = np.where(e >= 0, below[np.maximum(e, 0)], -1)
-        if not (e >= 0).any():
-            under = under[:r]
-            break
-        under[r] = np.where(e >= 0, feat_of_edge[np.maximum(e, 0)], -1)
+    under = _matches_below(m.left_index[bottoms].astype(np.int64), below, feat_of_edge,
+                           max_gap)
     d = m.d.astype(np.float64)
     pd = np.asarray(plane_d, np.float64)
     d0 = d[bottoms]
@@ -423,24 +458,8 @@ def continuation_alternatives(edges: EdgeMap, m: Matches, prev: np.ndarray,
     # wherever the run hangs: a lower match nearer than the bottom is within the slope
     # allowance of its depth, below, and holds the run up.) Where the string has none
     # below (the run ends it, at a kerb's brink), the nearest lower match above the run.
-    is_low = (under >= 0) & lower[np.maximum(under, 0)]
-    ok = is_low.any(axis=0)
-    found = np.full(nb, -1, np.int64)
-    if ok.any():
-        found[ok] = under[np.argmax(is_low[:, ok], axis=0), np.flatnonzero(ok)]
-    if not ok.all():
-        top = chain_roots(prev)                 # each run's top
-        miss = np.flatnonzero(~ok)
-        e = m.left_index[top[bottoms[miss]]].astype(np.int64)
-        for _ in range(max_gap):
-            live = (found[miss] < 0) & (e >= 0)
-            if not live.any():
-                break
-            e = np.where(live, edges.string_prev[np.maximum(e, 0)], -1)
-            f = np.where(e >= 0, feat_of_edge[np.maximum(e, 0)], -1)
-            hit = (f >= 0) & lower[np.maximum(f, 0)]
-            found[miss[hit]] = f[hit]
-        ok = found >= 0
+    found = _continuations(edges, m, prev, bottoms, under, lower, feat_of_edge, max_gap)
+    ok = found >= 0
     ok[ok] = pd[found[ok]] > 0
     # The lower ground, taken parallel to the plane: its disparity the continuation's
     # fraction d / plane_d of the plane's. It must itself be seen: min_support lower
