@@ -413,8 +413,9 @@ def test_a_walking_start_calibrates_the_threshold_on_one_plane(scenario, seed):
     walks from the first frame gives the window's frames planes a little apart (on
     slope 9019 each within 1 px of their joint plane): about the joint plane their
     spread was 0.75 px (plain_wall 9035: 1.24 px; walk_stop_turn 9013: 1.56 px, the
-    threshold at its 1.7 px ceiling), against 0.2 px about each frame's own. Each frame must lie on the joint
-    plane as tightly as on its own, else the latest frame alone calibrates. A standing
+    threshold at its 1.7 px ceiling), against 0.2 px about each frame's own. Each frame
+    must lie on the joint plane as tightly as on its own, else the latest frame alone
+    calibrates. A standing
     start keeps the whole window (three frames' features)."""
     from asmonc_vision.sim.scenarios import make_scenario, simulate_frame
     sc = make_scenario(scenario, seed=seed)
@@ -762,7 +763,9 @@ def test_soft_nearest_does_not_average_two_obstacles_side_by_side():
     gx, gy = np.meshgrid(np.arange(2.6, 4.5, 0.04), np.arange(-0.8, 0.8, 0.04))
     grid = np.stack([gx.ravel(), gy.ravel()], axis=1)
     # Two boxes 0.3 m deep: ground everywhere but under them.
-    under = lambda g, y0: (np.abs(g[:, 1] - y0) < 0.15) & (g[:, 0] > 2.98) & (g[:, 0] < 3.3)
+    def under(g, y0):
+        return (np.abs(g[:, 1] - y0) < 0.15) & (g[:, 0] > 2.98) & (g[:, 0] < 3.3)
+
     between = grid[~under(grid, 0.45) & ~under(grid, -0.45)]
     q = soft_nearest(feet, sr, between)
     np.testing.assert_allclose(q, feet[0])
@@ -812,7 +815,9 @@ def test_hidden_corner_from_thales_and_the_contact_edges():
     # A frontal face explains the edges as well as any corner: no hidden corner, and the
     # reported point is the middle of the face.
     flat = np.array([[3.0, 0.25], [3.0, -0.25]])
-    chord = lambda a, n, b: -np.abs(n[:, 0] - 3.0)         # edges along the face
+    def chord(a, n, b):                                   # edges along the face
+        return -np.abs(n[:, 0] - 3.0)
+
     assert hidden_corner(flat[0], flat[1], 0.01, np.zeros((0, 2)), chord) is None
     q = nearest_point(flat, np.array([0.01, 0.01]), np.zeros((0, 2)), chord)
     assert abs(q[1]) < 0.01 and abs(q[0] - 3.0) < 0.01
@@ -1394,9 +1399,10 @@ def test_hanging_runs_follow_a_long_chain_of_mismatched_stretches(monkeypatch, c
 def test_continuation_alternatives():
     """A run of an edge string matched a period off, well above the plane, with the
     string going on below it on lower ground (beyond a kerb down; or above it, where the
-    run ends the string) and a candidate of its own on that ground, is found. It is not when the string goes on below at the run's
-    own depth (a real edge broken by a mismatch), when the lower ground is not seen by
-    enough matches, or when the run had no candidate on it."""
+    run ends the string) and a candidate of its own on that ground, is found. It is not
+    when the string goes on below at the run's own depth (a real edge broken by a
+    mismatch), when the lower ground is not seen by enough matches, or when the run had no
+    candidate on it."""
     from asmonc_vision.core.gpod import continuation_alternatives, run_links
     from asmonc_vision.core.matching import Candidates, Matches
     n = 30
