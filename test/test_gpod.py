@@ -16,6 +16,12 @@ from asmonc_vision.core.alarm import AlarmConfig
 from asmonc_vision.core.camera import StereoCamera
 from asmonc_vision.core.draw import draw_debug, excess_colours
 from asmonc_vision.core.gpod import GpodConfig, GpodDetector, cluster_points_2d
+from asmonc_vision.core.gpod import faces as gpod_faces
+from asmonc_vision.core.gpod import grouping as gpod_grouping
+from asmonc_vision.core.gpod import kernels as gk
+from asmonc_vision.core.gpod import kernels_geometry as gkg
+from asmonc_vision.core.gpod import nearest as gpod_nearest
+from asmonc_vision.core.gpod import support as gpod_support
 
 CAM = StereoCamera(f=300.0, cx=159.5, cy=119.5, baseline=0.35, width=320, height=240)
 HEIGHT = 1.25
@@ -341,7 +347,7 @@ def test_finds_a_step_down():
 
 
 def test_brink_bearings_at_the_foot_of_the_perpendicular():
-    from asmonc_vision.core.gpod import _brink_bearings
+    from asmonc_vision.core.gpod.grouping import _brink_bearings
     rng = np.random.default_rng(3)
     # A kerb 3 m ahead, turned 10 degrees: its nearest point lies at -10 degrees.
     a = math.radians(-10.0)
@@ -407,8 +413,9 @@ def test_a_walking_start_calibrates_the_threshold_on_one_plane(scenario, seed):
     walks from the first frame gives the window's frames planes a little apart (on
     slope 9019 each within 1 px of their joint plane): about the joint plane their
     spread was 0.75 px (plain_wall 9035: 1.24 px; walk_stop_turn 9013: 1.56 px, the
-    threshold at its 1.7 px ceiling), against 0.2 px about each frame's own. Each frame must lie on the joint
-    plane as tightly as on its own, else the latest frame alone calibrates. A standing
+    threshold at its 1.7 px ceiling), against 0.2 px about each frame's own. Each frame
+    must lie on the joint plane as tightly as on its own, else the latest frame alone
+    calibrates. A standing
     start keeps the whole window (three frames' features)."""
     from asmonc_vision.sim.scenarios import make_scenario, simulate_frame
     sc = make_scenario(scenario, seed=seed)
@@ -483,12 +490,11 @@ def test_refit_follows_a_pitch_change(scenes):
 # ---------------------------------------------------------------- helpers, drawing
 @pytest.mark.parametrize('use_numba', [True, False])
 def test_cluster_points_2d(monkeypatch, use_numba):
-    from asmonc_vision.core import gpod
-    gpod._warm_up()
-    if use_numba and gpod._nb_link_groups is None:
+    gk.warm_up()
+    if use_numba and gk.nb_link_groups is None:
         pytest.skip('numba not installed')
     if not use_numba:
-        monkeypatch.setattr(gpod, '_nb_link_groups', None)
+        monkeypatch.setattr(gk, 'nb_link_groups', None)
     pts = np.array([[0.0, 0.0], [0.2, 0.0], [1.0, 0.0], [1.1, 0.05], [5.0, 5.0], [0.45, 0.0]])
     grp = np.array([0, 1, 2, 3, 4, 1])
     lab = cluster_points_2d(pts, grp, 0.3)
@@ -500,9 +506,8 @@ def test_cluster_points_2d(monkeypatch, use_numba):
 def test_cluster_points_2d_paths_agree(monkeypatch):
     """The compiled all-pairs kernel, the numpy all-pairs path and the numpy grid path
     give the same labels (numbered by each cluster's first group)."""
-    from asmonc_vision.core import gpod
-    gpod._warm_up()
-    if gpod._nb_link_groups is None:
+    gk.warm_up()
+    if gk.nb_link_groups is None:
         pytest.skip('numba not installed')
     rng = np.random.default_rng(5)
     for n, spread in ((40, 2.0), (300, 3.0), (1500, 6.0)):
@@ -512,9 +517,9 @@ def test_cluster_points_2d_paths_agree(monkeypatch):
         grp = g * 7                                    # sparse, unordered group ids
         ref = cluster_points_2d(pts, grp, 0.25)
         with monkeypatch.context() as mp:
-            mp.setattr(gpod, '_nb_link_groups', None)
+            mp.setattr(gk, 'nb_link_groups', None)
             np.testing.assert_array_equal(cluster_points_2d(pts, grp, 0.25), ref)
-            mp.setattr(gpod, '_PAIRWISE_POINTS', 0)          # the grid search
+            mp.setattr(gpod_grouping, '_PAIRWISE_POINTS', 0)          # the grid search
             np.testing.assert_array_equal(cluster_points_2d(pts, grp, 0.25), ref)
         assert 1 < ref.max() + 1 < n
 
@@ -528,7 +533,7 @@ def test_corner_search_compiled_equals_numpy(monkeypatch):
     det = GpodDetector(GpodConfig())
     for _ in range(2):
         det.process(*render_pair(seed=4), CAM)
-    if gpod._nb_corner_free is None:
+    if gkg.nb_corner_free is None:
         pytest.skip('numba not installed')
     det.process(*render_pair(boxes=[(-0.4, 0.2, 3.0, 3.4, 0.3)], seed=4), CAM)
     ctx = det._ctx
@@ -539,7 +544,7 @@ def test_corner_search_compiled_equals_numpy(monkeypatch):
                                                         np.sin(t)], axis=1)
     a, b, sig = mid - half, mid + half, rng.uniform(0.005, 0.05, 60)
     start = np.flatnonzero(ctx.usable)[::7]
-    m_n = gpod._CORNER_ARC_POINTS
+    m_n = gkg._CORNER_ARC_POINTS
     n = mid[:, None, :] + rng.normal(0.0, 0.3, (60, m_n, 2))
     ok = rng.random((60, m_n)) < 0.8
 
@@ -550,8 +555,8 @@ def test_corner_search_compiled_equals_numpy(monkeypatch):
 
     fast = run()
     assert np.isfinite(fast[0][:, 0]).sum() >= 3 and np.isnan(fast[0][:, 0]).sum() >= 3
-    for name in ('_nb_corner_free', '_nb_contact', '_nb_walk_down'):
-        monkeypatch.setattr(gpod, name, None)
+    for name in ('nb_corner_free', 'nb_contact', 'nb_walk_down'):
+        monkeypatch.setattr(gkg, name, None)
     for x, y in zip(fast, run()):
         np.testing.assert_array_equal(x, y)
 
@@ -595,14 +600,13 @@ def test_occluded_matches_half_occlusion(monkeypatch, use_numba):
     are hidden behind the post in the right image. An untrusted near match hides
     nothing, and a string matched at one consistent disparity is left alone."""
     from asmonc_vision.core.edges import detect_vertical_edges
-    from asmonc_vision.core import gpod
     from asmonc_vision.core.gpod import occluded_matches
     from asmonc_vision.core.matching import Matches
-    gpod._warm_up()
-    if use_numba and gpod._nb_occluded is None:
+    gk.warm_up()
+    if use_numba and gk.nb_occluded is None:
         pytest.skip('numba not installed')
     if not use_numba:
-        monkeypatch.setattr(gpod, '_nb_occluded', None)
+        monkeypatch.setattr(gk, 'nb_occluded', None)
     img = np.zeros((12, 40), np.uint8)
     img[:, 20:] = 200
     e = detect_vertical_edges(img)                # the right image: one string, 10 rows
@@ -759,7 +763,9 @@ def test_soft_nearest_does_not_average_two_obstacles_side_by_side():
     gx, gy = np.meshgrid(np.arange(2.6, 4.5, 0.04), np.arange(-0.8, 0.8, 0.04))
     grid = np.stack([gx.ravel(), gy.ravel()], axis=1)
     # Two boxes 0.3 m deep: ground everywhere but under them.
-    under = lambda g, y0: (np.abs(g[:, 1] - y0) < 0.15) & (g[:, 0] > 2.98) & (g[:, 0] < 3.3)
+    def under(g, y0):
+        return (np.abs(g[:, 1] - y0) < 0.15) & (g[:, 0] > 2.98) & (g[:, 0] < 3.3)
+
     between = grid[~under(grid, 0.45) & ~under(grid, -0.45)]
     q = soft_nearest(feet, sr, between)
     np.testing.assert_allclose(q, feet[0])
@@ -809,7 +815,9 @@ def test_hidden_corner_from_thales_and_the_contact_edges():
     # A frontal face explains the edges as well as any corner: no hidden corner, and the
     # reported point is the middle of the face.
     flat = np.array([[3.0, 0.25], [3.0, -0.25]])
-    chord = lambda a, n, b: -np.abs(n[:, 0] - 3.0)         # edges along the face
+    def chord(a, n, b):                                   # edges along the face
+        return -np.abs(n[:, 0] - 3.0)
+
     assert hidden_corner(flat[0], flat[1], 0.01, np.zeros((0, 2)), chord) is None
     q = nearest_point(flat, np.array([0.01, 0.01]), np.zeros((0, 2)), chord)
     assert abs(q[1]) < 0.01 and abs(q[0] - 3.0) < 0.01
@@ -953,8 +961,7 @@ def test_a_small_box_track_is_not_ended_by_its_own_lowest_rows(monkeypatch):
     found in every frame. When they counted as ground the track ended: 15 of 20. (Measured
     without the lone-face placement, which also places some of the detected frames.)"""
     from asmonc_vision.cli import smallbox
-    import asmonc_vision.core.gpod as gpod_module
-    monkeypatch.setattr(gpod_module, '_LONE_MAX_HEIGHT_M', 0.0)
+    monkeypatch.setattr(gpod_faces, '_LONE_MAX_HEIGHT_M', 0.0)
     r = smallbox.run_scene(0.08, 5.0, 69, methods=('gpod',),
                            gpod_config=GpodConfig(track_sure_hits=0))
     assert r['gpod']['box_frames'] == 20
@@ -974,8 +981,7 @@ def test_a_small_box_that_appears_is_not_averaged_with_the_ground_it_stands_on(
     new = smallbox.run_scene(0.08, 5.0, 49, methods=('gpod',))
     assert new['gpod/frame']['found'] == 20 and new['gpod']['false'] == 0
     # the old count without the lone-face placement (it also places two misplaced frames)
-    import asmonc_vision.core.gpod as gpod_module
-    monkeypatch.setattr(gpod_module, '_LONE_MAX_HEIGHT_M', 0.0)
+    monkeypatch.setattr(gpod_faces, '_LONE_MAX_HEIGHT_M', 0.0)
     old = smallbox.run_scene(0.08, 5.0, 49, methods=('gpod',),
                              gpod_config=GpodConfig(temporal_gate_thr=0.0))
     assert old['gpod/frame']['found'] <= 16
@@ -991,11 +997,10 @@ def test_a_low_box_seen_by_one_silhouette_is_placed_along_the_face_the_image_sho
     followed from the one foot (`lone_face_points`) it places the box within 0.3 m in 19
     of 20 frames, with no false report. With the search off: 0 of 20."""
     from asmonc_vision.cli import smallbox
-    import asmonc_vision.core.gpod as gpod_module
     new = smallbox.run_scene(0.08, 5.0, 162, methods=('gpod',))['gpod']
     assert new['box_frames'] == 20 and new['found'] >= 18 and new['false'] == 0
     assert max(abs(e) for e in new['range_err']) <= 0.05
-    monkeypatch.setattr(gpod_module, '_LONE_MAX_HEIGHT_M', 0.0)
+    monkeypatch.setattr(gpod_faces, '_LONE_MAX_HEIGHT_M', 0.0)
     old = smallbox.run_scene(0.08, 5.0, 162, methods=('gpod',))['gpod']
     assert old['found'] <= 2 and old['found_on_box'] == 20
 
@@ -1079,7 +1084,7 @@ def test_view_edge_points_see_through_the_gap_between_objects_in_a_row():
     feet = np.array([[4.94, 0.28], [4.93, 0.18],                            # the post
                      [4.44, 0.67], [4.16, 1.12], [4.37, 0.70], [4.12, 1.11]])  # the box
     group = np.zeros(6, np.int64)
-    c, d, _, _ = gpod._fit_line(feet)
+    c, d, _, _ = gpod_grouping._fit_line(feet)
     nrm = np.array([-d[1], d[0]]) * np.sign(np.array([-d[1], d[0]]) @ -c)   # towards us
     gx, gy = np.meshgrid(np.arange(2.0, 4.6, 0.1), np.arange(-0.5, 2.5, 0.1))
     front = np.stack([gx.ravel(), gy.ravel()], axis=1)
@@ -1263,7 +1268,8 @@ def test_moved_roi_keeps_its_place_beside_the_foot():
     """A coasted obstacle's region follows its foot but keeps its offset from it: a
     foot placed beside the obstacle's edges (a wall's nearest point) once dragged the
     region onto empty pavement, a false report for half a second while turning."""
-    from asmonc_vision.core.gpod import GpodObstacle, _moved_roi
+    from asmonc_vision.core.gpod import GpodObstacle
+    from asmonc_vision.core.gpod.support import _moved_roi
     up = np.array([0.0, -1.0, 0.0])
     foot = np.array([-1.0, 1.25, 5.0])                  # projects to u = 99.5
     ob = GpodObstacle(position=foot + 0.5 * up, height=0.5, range=5.1, bearing=0.2,
@@ -1366,13 +1372,12 @@ def test_hanging_runs_follow_a_long_chain_of_mismatched_stretches(monkeypatch, c
     away of it, and a false STOP) hangs as a whole: each stretch is held up only by the
     one below it, and the lowest one by nothing. Four passes (the old limit) left the
     upper four standing."""
-    from asmonc_vision.core import gpod
     from asmonc_vision.core.gpod import hanging_runs, run_links
     from asmonc_vision.core.matching import Matches
     if not compiled:
-        monkeypatch.setattr(gpod, '_nb_hanging_all', None)
-        monkeypatch.setattr(gpod, '_nb_hanging', None)
-    elif gpod._nb_hanging_all is None:
+        monkeypatch.setattr(gk, 'nb_hanging_all', None)
+        monkeypatch.setattr(gk, 'nb_hanging', None)
+    elif gk.nb_hanging_all is None:
         pytest.skip('numba not installed')
     stretches = 8
     d = [13.0] * 3 + ([56.0] * 2 + [13.0] * 2) * stretches + [13.0] * 6
@@ -1394,9 +1399,10 @@ def test_hanging_runs_follow_a_long_chain_of_mismatched_stretches(monkeypatch, c
 def test_continuation_alternatives():
     """A run of an edge string matched a period off, well above the plane, with the
     string going on below it on lower ground (beyond a kerb down; or above it, where the
-    run ends the string) and a candidate of its own on that ground, is found. It is not when the string goes on below at the run's
-    own depth (a real edge broken by a mismatch), when the lower ground is not seen by
-    enough matches, or when the run had no candidate on it."""
+    run ends the string) and a candidate of its own on that ground, is found. It is not
+    when the string goes on below at the run's own depth (a real edge broken by a
+    mismatch), when the lower ground is not seen by enough matches, or when the run had no
+    candidate on it."""
     from asmonc_vision.core.gpod import continuation_alternatives, run_links
     from asmonc_vision.core.matching import Candidates, Matches
     n = 30
@@ -1576,7 +1582,8 @@ def test_same_object_only_for_a_nearer_or_close_placement():
     a detection metres beyond the track: then the track's placement was wrong (a pole's
     foot once followed down a paving joint to 1.1 m, the pole then seen at 7 m), and it
     must end instead of being reported, and alarmed, for as long as the wearer stands."""
-    from asmonc_vision.core.gpod import GpodObstacle, _same_object
+    from asmonc_vision.core.gpod import GpodObstacle
+    from asmonc_vision.core.gpod.grouping import _same_object
 
     def ob(rng, roi, bearing=0.0):
         return GpodObstacle(position=np.zeros(3), height=1.0, range=rng, bearing=bearing,
@@ -1595,11 +1602,10 @@ def test_same_object_only_for_a_nearer_or_close_placement():
 def test_hanging_runs_compiled_equals_numpy(monkeypatch):
     """The compiled walk of `hanging_runs` (numba, optional) marks the same matches as
     the numpy one, on a real walking frame."""
-    from asmonc_vision.core import gpod
     from asmonc_vision.core.gpod import hanging_runs, run_links
     det = GpodDetector(GpodConfig())
     det.process(*render_pair(seed=3), CAM)
-    if gpod._nb_hanging is None:
+    if gk.nb_hanging is None:
         pytest.skip('numba not installed')
     from asmonc_vision.core.edges import detect_vertical_edges
     from asmonc_vision.core.matching import pmf_match
@@ -1612,8 +1618,8 @@ def test_hanging_runs_compiled_equals_numpy(monkeypatch):
     solid = rng.uniform(size=len(m)) < 0.7
     fast = hanging_runs(el, m, prev, h, 0.5, 1.0, 0.1)
     fast_s = hanging_runs(el, m, prev, h, 0.5, 1.0, 0.1, solid=solid)
-    monkeypatch.setattr(gpod, '_nb_hanging', None)
-    monkeypatch.setattr(gpod, '_nb_hanging_all', None)
+    monkeypatch.setattr(gk, 'nb_hanging', None)
+    monkeypatch.setattr(gk, 'nb_hanging_all', None)
     slow = hanging_runs(el, m, prev, h, 0.5, 1.0, 0.1)
     slow_s = hanging_runs(el, m, prev, h, 0.5, 1.0, 0.1, solid=solid)
     assert slow.any() and not slow.all()
@@ -1645,34 +1651,43 @@ def test_a_noisy_camera_makes_no_obstacles_on_clear_pavement():
 
 
 # ---------------------------------------------------------------- compiled paths (speed)
-# Session 12: more of the detector's loops compiled with numba, each beside its numpy
+# The detector's compiled loops (numba), each beside its numpy
 # path; these tests check that both give exactly the same results (bit for bit).
 
-#: The kernels added in session 12 (gpod), each with a numpy path beside it.
-_NEW_GPOD_KERNELS = ('_nb_extremes', '_nb_soft_args', '_nb_arcs', '_nb_contact_bounds',
-                     '_nb_owners', '_nb_group_quantile', '_nb_extent', '_nb_runs',
-                     '_nb_occluded_all', '_nb_hanging_all', '_nb_on_ground', '_nb_still',
-                     '_nb_temporal', '_nb_thin')
+#: The gpod kernels checked here, each with a numpy path beside it.
+_NEW_GPOD_KERNELS = ('nb_extremes', 'nb_soft_args', 'nb_arcs', 'nb_contact_bounds',
+                     'nb_owners', 'nb_group_quantile', 'nb_extent', 'nb_runs',
+                     'nb_occluded_all', 'nb_hanging_all', 'nb_on_ground', 'nb_still',
+                     'nb_temporal', 'nb_thin')
 _NEW_MATCHING_KERNELS = ('_nb_candidates', '_nb_cells', '_nb_siblings', '_nb_link_rows')
+#: the modules of the gpod kernels
+_GPOD = (gk, gkg)
+
+
+def _holder(modules, name):
+    """The module of ``modules`` (one or a tuple) that has ``name``."""
+    modules = modules if isinstance(modules, tuple) else (modules,)
+    return next(m for m in modules if hasattr(m, name))
 
 
 def _need_numba():
     from asmonc_vision.core import gpod
     from asmonc_vision.core import matching as mt
-    gpod._warm_up()
-    if any(getattr(gpod, k) is None for k in _NEW_GPOD_KERNELS) or any(
+    gk.warm_up()
+    if any(getattr(_holder(_GPOD, k), k) is None for k in _NEW_GPOD_KERNELS) or any(
             getattr(mt, k) is None for k in _NEW_MATCHING_KERNELS):
         pytest.skip('numba not installed')
     return gpod, mt
 
 
-def _without(monkeypatch, module, names):
+def _without(monkeypatch, modules, names):
     for name in names:
-        monkeypatch.setattr(module, name, None)
+        monkeypatch.setattr(_holder(modules, name), name, None)
 
 
 def _compiled_equals_numpy(monkeypatch, module, names, run):
-    """``run()`` (a sequence of arrays) with the kernels ``names`` of ``module``, then
+    """``run()`` (a sequence of arrays) with the kernels ``names`` of ``module`` (one or a
+    tuple of modules), then
     without them (their numpy paths): equal element by element. Returns both runs."""
     fast = run()
     _without(monkeypatch, module, names)
@@ -1745,10 +1760,10 @@ def test_body_gap_kernel_decides_as_body_gap():
         a = rng.uniform([2.0, -1.5], [5.0, 1.5])
         b = a + rng.normal(0.0, 0.4, 2)
         g = a + rng.uniform(-0.6, 0.9, (int(rng.integers(0, 300)), 2))
-        k = gpod._nb_body_gap(g, a[0], a[1], b[0], b[1])
+        k = gkg.nb_body_gap(g, a[0], a[1], b[0], b[1])
         counts[k] += 1
         if k >= 0:
-            assert bool(k) == gpod._body_gap(g, a, b)
+            assert bool(k) == gpod_nearest._body_gap(g, a, b)
     assert counts[0] > 300 and counts[1] > 300 and counts[-1] == 0
     # Points exactly on the strip's sides (at along = 0.1 m, behind = 0.3 m): undecided
     # unless the others decide.
@@ -1757,9 +1772,9 @@ def test_body_gap_kernel_decides_as_body_gap():
     inside = a + 0.5 * t + 0.15 * nrm + np.array([[0.0, 0.01 * i] for i in range(4)])
     edge = a + 0.1 * t + 0.2 * nrm
     g = np.vstack([inside, edge[None]])
-    assert gpod._nb_body_gap(g, a[0], a[1], b[0], b[1]) == -1
-    assert gpod._nb_body_gap(np.vstack([g, inside[:1]]), a[0], a[1], b[0], b[1]) == 1
-    assert gpod._nb_body_gap(inside, a[0], a[1], b[0], b[1]) == 0
+    assert gkg.nb_body_gap(g, a[0], a[1], b[0], b[1]) == -1
+    assert gkg.nb_body_gap(np.vstack([g, inside[:1]]), a[0], a[1], b[0], b[1]) == 1
+    assert gkg.nb_body_gap(inside, a[0], a[1], b[0], b[1]) == 0
 
 
 def test_soft_nearest_groups_compiled_equals_numpy(monkeypatch):
@@ -1788,8 +1803,8 @@ def test_soft_nearest_groups_compiled_equals_numpy(monkeypatch):
     want = np.ones(sizes.size, bool)
     want[::7] = False
     fast, _ = _compiled_equals_numpy(
-        monkeypatch, gpod, ('_nb_soft_args',),
-        lambda: [gpod._soft_nearest_groups(xy, sr, group, sizes.size, want, g)
+        monkeypatch, _GPOD, ('nb_soft_args',),
+        lambda: [gpod_nearest._soft_nearest_groups(xy, sr, group, sizes.size, want, g)
                  for g in (None, ground, lambda: ground)])
     assert np.isnan(fast[1][~want]).all() and np.isfinite(fast[1][want]).all()
     # the visible ground separated some feet from their group's nearest one
@@ -1819,8 +1834,8 @@ def test_nearest_points_compiled_equals_numpy(box_frame, monkeypatch):
                 gpod.hidden_corners(xy[:30], xy[30:60], sr[:30], ctx.ground_xy,
                                     ctx.contact_edge_scores)]
 
-    fast, _ = _compiled_equals_numpy(monkeypatch, gpod, ('_nb_extremes', '_nb_soft_args',
-                                                         '_nb_arcs', '_nb_contact_bounds'), run)
+    fast, _ = _compiled_equals_numpy(monkeypatch, _GPOD, ('nb_extremes', 'nb_soft_args',
+                                                         'nb_arcs', 'nb_contact_bounds'), run)
     assert np.isnan(fast[0][n_g:]).all() and np.isfinite(fast[0][:n_g]).all()
     assert np.isfinite(fast[2][:, 0]).sum() >= 2
 
@@ -1838,11 +1853,11 @@ def test_outline_evidence_compiled_equals_numpy(box_frame, monkeypatch):
         out = []
         for foot in feet:
             for h in (0.04, 0.3, 1.5):
-                _, ev, sep, shift = ctx.outline_evidence(foot, h, gpod._LONE_PHI)
+                _, ev, sep, shift = ctx.outline_evidence(foot, h, gpod_faces._LONE_PHI)
                 out += [ev, sep, shift]
         return out
 
-    fast, _ = _compiled_equals_numpy(monkeypatch, gpod, ('_nb_outline',), run)
+    fast, _ = _compiled_equals_numpy(monkeypatch, _GPOD, ('nb_outline',), run)
     assert max(float(x.max()) for x in fast[0::3]) > 10.0     # edges were seen
     # the separation is the raise's part across the lines
     assert all(np.all(sep <= shift + 1e-9) for sep, shift in zip(fast[1::3], fast[2::3]))
@@ -1893,7 +1908,7 @@ def test_a_lone_face_must_cross_its_raise(box_frame, monkeypatch):
     assert np.median(sep[0, reach] / shift[0, reach]) < 0.75
     assert np.isnan(gpod.lone_face_points(ctx, *args)).all()
     with monkeypatch.context() as m:
-        m.setattr(gpod, '_LONE_MIN_SEP_FRACTION', 0.0)
+        m.setattr(gpod_faces, '_LONE_MIN_SEP_FRACTION', 0.0)
         moved = gpod.lone_face_points(ctx, *args)[0]
     assert np.hypot(*moved) < np.hypot(*foot) - 0.1
     across = math.radians(100.0)
@@ -1927,7 +1942,7 @@ def test_silhouette_owners_compiled_equals_numpy(monkeypatch):
         cam_h = float(rng.uniform(0.8, 1.6)) if len(cases) % 2 else math.inf
         cases.append((xw, top, xy, g_lab, height, 0.7, ground, cam_h,
                       rng.uniform(0.0, 0.08, w_n), rng.uniform(0.0, 0.08, s_n)))
-    fast, _ = _compiled_equals_numpy(monkeypatch, gpod, ('_nb_owners',),
+    fast, _ = _compiled_equals_numpy(monkeypatch, _GPOD, ('nb_owners',),
                                      lambda: [gpod.silhouette_owners(*c) for c in cases])
     flat = np.concatenate(fast)
     assert (flat >= 0).sum() > 10 and (flat < 0).sum() > 10
@@ -1947,8 +1962,8 @@ def test_group_quantile_and_thinning_compiled_equal_numpy(monkeypatch):
         data.append((g, x, float(rng.choice([0.1, 0.5, 0.9, 0.25])), n_g))
     pts = [rng.uniform(0.0, 3.0, (int(rng.integers(1, 400)), 2)) for _ in range(20)]
     grp = [rng.integers(0, 60, p.shape[0]) * 3 for p in pts]
-    _compiled_equals_numpy(monkeypatch, gpod, ('_nb_group_quantile', '_nb_thin'),
-                           lambda: ([gpod._group_quantile(*d) for d in data]
+    _compiled_equals_numpy(monkeypatch, _GPOD, ('nb_group_quantile', 'nb_thin'),
+                           lambda: ([gpod_grouping._group_quantile(*d) for d in data]
                                     + [cluster_points_2d(p, g, 0.25)
                                        for p, g in zip(pts, grp)]))
 
@@ -1971,7 +1986,7 @@ def test_run_and_string_kernels_equal_numpy(box_frame, monkeypatch):
     perm = rng.permutation(len(m))                  # matches in no particular order
     shuffled = dataclasses.replace(m, **{f.name: getattr(m, f.name)[perm]
                                          for f in dataclasses.fields(m)})
-    k_runs = [gpod._nb_runs(el.string_prev, m.left_index, m.d, len(el), np.float32(tol),
+    k_runs = [gk.nb_runs(el.string_prev, m.left_index, m.d, len(el), np.float32(tol),
                             win, x) for tol, win in ((1.0, 5), (0.3, 3), (1.0, 1))]
     trusted = rng.random(len(m)) < 0.7
     h = rng.uniform(0.0, 1.5, len(m))
@@ -1985,18 +2000,18 @@ def test_run_and_string_kernels_equal_numpy(box_frame, monkeypatch):
                  gpod.occluded_matches(er, shuffled, 0.5, trusted[perm], neighbours=1)]
                 + [gpod.hanging_runs(el, m, prev, h, top, 1.0, 0.1, sel)
                    for top in (0.2, 0.5, 1.0) for sel in (None, only)]
-                + [gpod._ground_candidates(cand, el, er, det._abc, thr)
+                + [gpod_support._ground_candidates(cand, el, er, det._abc, thr)
                    for thr in (0.3, 0.8)])
 
-    _, slow = _compiled_equals_numpy(monkeypatch, gpod,
-                                     ('_nb_runs', '_nb_occluded_all', '_nb_hanging_all',
-                                      '_nb_on_ground', '_nb_occluded', '_nb_hanging'), rest)
+    _, slow = _compiled_equals_numpy(monkeypatch, _GPOD,
+                                     ('nb_runs', 'nb_occluded_all', 'nb_hanging_all',
+                                      'nb_on_ground', 'nb_occluded', 'nb_hanging'), rest)
     assert all(y.any() and not y.all() for y in slow)
     np.testing.assert_array_equal(slow[2], slow[0][perm])
     # (a match's neighbours are its string's matches in row order, whatever their order)
     key = rng.integers(0, 50, 1000)
     rows = np.flatnonzero(rng.random(1000) < 0.6)
-    np.testing.assert_array_equal(gpod._nb_stable_order(key, rows, 50),
+    np.testing.assert_array_equal(gk.nb_stable_order(key, rows, 50),
                                   rows[np.argsort(key[rows], kind='stable')])
     for (pk, rk, sk, nk), (tol, win) in zip(k_runs, ((1.0, 5), (0.3, 3), (1.0, 1))):
         p = gpod.run_links(el, m, tol)
@@ -2010,7 +2025,7 @@ def test_run_and_string_kernels_equal_numpy(box_frame, monkeypatch):
 
 
 def test_detector_outputs_equal_without_the_new_kernels(monkeypatch):
-    """The whole detector, with the session-12 kernels and without them (the numpy
+    """The whole detector, with the compiled kernels and without them (the numpy
     paths), gives the same results, field for field: calibration, standing still
     (averaged excess), walking frames with boxes, and a step down."""
     gpod, mt = _need_numba()
@@ -2047,7 +2062,7 @@ def test_detector_outputs_equal_without_the_new_kernels(monkeypatch):
     assert any(r.still for r in fast) and not all(r.still for r in fast[3:])
     assert sum(len(r.detections) for r in fast) >= 6
     assert any(o.is_drop for r in fast for o in r.detections)
-    _without(monkeypatch, gpod, _NEW_GPOD_KERNELS)
+    _without(monkeypatch, _GPOD, _NEW_GPOD_KERNELS)
     _without(monkeypatch, mt, _NEW_MATCHING_KERNELS)
     for i, (x, y) in enumerate(zip(fast, run())):
         same(x, y, f'frame {i}')
@@ -2085,7 +2100,7 @@ def test_stillness_and_temporal_kernels_equal_numpy(box_frame, monkeypatch):
             sums.extend(d._acc)
         return still + sums
 
-    fast, _ = _compiled_equals_numpy(monkeypatch, gpod, ('_nb_still', '_nb_temporal'), run)
+    fast, _ = _compiled_equals_numpy(monkeypatch, _GPOD, ('nb_still', 'nb_temporal'), run)
     decisions = fast[0:10:2]
     assert decisions[0] and decisions[1] and decisions[2] and not decisions[3]
     assert not np.array_equal(fast[-3], excess[2])          # averaged with the sums

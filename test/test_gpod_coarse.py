@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from asmonc_vision.core.camera import StereoCamera
-from asmonc_vision.core.gpod import (GpodConfig, GpodDetector, GpodFeatures, GpodObstacle,
-                                     _coarse_consistent, _disparity_image, bin_pair)
+from asmonc_vision.core.gpod import GpodConfig, GpodDetector, GpodFeatures, GpodObstacle, bin_pair
+from asmonc_vision.core.gpod.coarse import _coarse_consistent, _disparity_image
 
 BIG = StereoCamera(f=600.0, cx=319.5, cy=239.5, baseline=0.35, width=640, height=480)
 

@@ -4,7 +4,7 @@ import pytest
 
 from asmonc_vision.core.camera import MetricPlane, StereoCamera, plane_from_metric
 from asmonc_vision.core.rotations import rotvec_to_matrix
-from asmonc_vision.core.ground_plane import (PlaneFit, _median, fit_ground_plane, lsq_plane,
+from asmonc_vision.core.ground_plane import (PlaneFit, fast_median, fit_ground_plane, lsq_plane,
                                              plane_is_plausible, predict_plane)
 
 CAM = StereoCamera(f=300.0, cx=159.5, cy=119.5, baseline=0.35, width=320, height=240)
@@ -157,7 +157,7 @@ def test_weights_prefer_the_near_surface():
 @pytest.mark.parametrize('n', [1, 2, 3, 10, 101, 1000])
 def test_median_is_numpy_median(n):
     x = np.random.default_rng(n).normal(0.0, 1.0, n)
-    assert _median(x) == float(np.median(x))
+    assert fast_median(x) == float(np.median(x))
 
 
 @pytest.mark.parametrize('seed', range(5))

@@ -214,7 +214,7 @@ def _ransac_best(u: np.ndarray, v: np.ndarray, d: np.ndarray, threshold: float,
     return best
 
 
-def _median(x: np.ndarray) -> float:
+def fast_median(x: np.ndarray) -> float:
     """``np.median`` of a non-empty 1-D array of finite values (the same arithmetic,
     without its overhead)."""
     n = x.shape[0]
@@ -391,7 +391,7 @@ def fit_ground_plane(u, v, d, *, cam: StereoCamera | None = None, method: str = 
     sel = np.flatnonzero(inl)
     mask[np.flatnonzero(finite)[sel]] = True
     res = df[sel] - (abc[0] * uf[sel] + abc[1] * vf[sel] + abc[2])
-    sigma = float(1.4826 * _median(np.abs(res - _median(res))))
+    sigma = float(1.4826 * fast_median(np.abs(res - fast_median(res))))
     return PlaneFit(abc=np.asarray(abc, np.float64), cov=np.asarray(cov, np.float64),
                     num_features=int(inl.sum()), residual_rms=float(rms), inliers=mask,
                     metric=metric, residual_sigma=sigma)

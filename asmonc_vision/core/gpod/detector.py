@@ -1,0 +1,363 @@
+"""`GpodDetector`: the wiring of the stages per stereo pair (`process`): images checked,
+edges and matches, the plane, the detection, the binned pass, the unseen-ground rule
+and the tracks.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from typing import Callable
+
+import numpy as np
+
+from ..alignment import AlignmentConfig, VerticalAlignment, brightness_gain_offset
+from ..camera import MetricPlane, StereoCamera
+from ..edges import detect_vertical_edges, image_noise_sigma, textured_edge_threshold
+from ..matching import pmf_match
+from . import kernels as kn
+from .coarse import _coarse_consistent, _disparity_image, bin_pair
+from .faces import _ground_points
+from .results import GpodFeatures, GpodObstacle, GpodResult
+from .settings import GpodConfig
+from .support import _features, _noise_key, _Pass, _state_metric
+from .tracking import Tracking
+
+#: The left image's pixel noise is estimated (`edges.image_noise_sigma`, 0.2 ms at
+#: 320 x 240) on the first frame and then every this many frames.
+_NOISE_EVERY = 8
+
+
+class GpodDetector(Tracking):
+    """The GPOD obstacle detector with ground-plane calibration and per-frame refit.
+
+    Call :meth:`process` on every rectified stereo pair, in order. The detector keeps
+    the ground plane between frames; it resets itself when the camera changes, and
+    :meth:`reset` starts a new calibration.
+    """
+
+    def __init__(self, config: GpodConfig | None = None) -> None:
+        self.config = config if config is not None else GpodConfig()
+        kn.warm_up()
+        c = self.config
+        #: the rig's vertical misalignment (a property of the cameras: kept over resets
+        #: of the detector, restarted by a new camera)
+        self.alignment = VerticalAlignment(AlignmentConfig(
+            enabled=c.align_vertical, every_frames=c.align_every_frames,
+            apply_min_px=c.align_apply_px))
+        self.reset()
+
+    # ------------------------------------------------------------------ helpers
+    def _check_images(self, left: np.ndarray, right: np.ndarray, cam: StereoCamera) -> None:
+        """Raise ValueError unless both images are 2-D uint8 of the camera's size."""
+        for name, img in (('left', left), ('right', right)):
+            if not isinstance(img, np.ndarray):
+                raise ValueError(f'{name} image must be a numpy array, got {type(img).__name__}')
+            if img.dtype != np.uint8 or img.ndim != 2:
+                raise ValueError(f'{name} image must be a 2-D uint8 array (H, W), got '
+                                 f'{img.dtype} with shape {img.shape}')
+            if img.shape != (cam.height, cam.width):
+                raise ValueError(f'{name} image shape {img.shape} differs from the camera '
+                                 f'size (height {cam.height}, width {cam.width})')
+
+    # ------------------------------------------------------------------ main
+    def process(self, left: np.ndarray, right: np.ndarray, cam: StereoCamera,
+                stamp_ns: int | None = None,
+                motion: tuple | Callable[[], tuple | None] | None = None) -> GpodResult:
+        """Detect obstacles in one rectified stereo pair.
+
+        Args:
+            left, right: (H, W) uint8 rectified grey images, H = cam.height, W = cam.width.
+            cam: the rectified stereo camera. A camera different from the previous
+                call's resets the detector.
+            stamp_ns: the pair's time, ns (for the obstacle tracks' coasting time); None:
+                frames ``track_frame_period_s`` apart.
+            motion: the left camera's motion from the previous pair to this one, the
+                obstacle tracks' input: (R (3, 3), t (3,)) or (R, t, cov (3, 3) of t, m²),
+                ``X_prev = R X_curr + t`` (metres, left optical frames; `/egomotion`'s
+                convention). None: the identity while the rig stands still (its edges
+                stay in place), unknown otherwise (the tracks end). A callable returning
+                one of these is called after the detection, before the tracks are updated
+                (so a node can wait for the motion while the detector works).
+        Returns:
+            The GpodResult (status 'initialising', 'tracking' or 'lost').
+        Raises:
+            ValueError: images that are not 2-D uint8 arrays of the camera's size.
+        """
+        t_start = time.perf_counter()
+        self._begin(left, right, cam)
+        c = self.config
+        corrected = self.alignment.applied
+        right = self.alignment.process(left, right, cam.f, cam.cx, cam.cy)
+        if self.alignment.applied != corrected:
+            if self._calib is None:
+                # the calibration frames must all be seen alike (their residual spread
+                # sets the obstacle threshold)
+                self._init_window.clear()
+            else:
+                self._sigma_stale = True
+        p = self._frame_pass(left, right, cam, motion)
+        motion = p.motion
+        status, metric, timings = p.status, p.metric, p.timings
+        detections = p.detections
+        if self._coarse_wanted(cam):
+            t0 = time.perf_counter()
+            detections = self._with_coarse(detections, p.features, left, right, cam, metric,
+                                           None if callable(motion) else motion)
+            timings['coarse'] = (time.perf_counter() - t0) * 1e3
+        t3 = time.perf_counter()
+        obstacles: tuple[GpodObstacle, ...] = ()
+        if status == 'tracking':
+            stamp_s = (self._frame * c.track_frame_period_s if stamp_ns is None
+                       else stamp_ns * 1e-9)
+            if callable(motion):            # the frame that completed the calibration
+                motion = motion()
+            obstacles = self._track(detections, stamp_s, p.still, cam, metric, motion)
+            unseen = self._unseen_ground(p.features, p.threshold, cam, metric,
+                                         detections + obstacles)
+            if unseen:
+                detections = tuple(sorted(detections + unseen, key=lambda o: o.range))
+                obstacles = tuple(sorted(obstacles + unseen, key=lambda o: o.range))
+        else:
+            self._tracker.reset()
+            self._last_motion = None
+            if self._unseen is not None:
+                self._unseen.reset()
+        t4 = time.perf_counter()
+        timings['obstacles'] = timings.get('obstacles', 0.0) + (t4 - t3) * 1e3
+        timings['total'] = (t4 - t_start) * 1e3
+        have_plane = status == 'tracking'
+        al = self.alignment
+        fit = self._last_fit
+        return GpodResult(
+            status=status, frame_index=self._frame,
+            plane_abc=self._abc.copy() if have_plane else None,
+            plane_cov=self._cov.copy() if have_plane else None,
+            plane_num_features=fit.num_features if (fit is not None and have_plane) else 0,
+            plane_residual_rms=(fit.residual_rms if (fit is not None and have_plane)
+                                else float('nan')),
+            plane_updated=p.updated and have_plane, metric_plane=metric if have_plane else None,
+            obstacles=obstacles, features=p.features, threshold_px=p.threshold,
+            num_edges=(len(p.el), len(p.er)), timings_ms=timings, sigma_px=self._sigma,
+            still=p.still, detections=detections,
+            misalignment_px=al.max_px if al.measurements else float('nan'),
+            misalignment_corrected=al.applied, edge_threshold=p.el.threshold,
+            surface=self._surface if have_plane else None)
+
+    def _begin(self, left: np.ndarray, right: np.ndarray, cam: StereoCamera) -> None:
+        """Check a pair against its camera (ValueError, `_check_images`); a camera
+        different from the previous pair's resets the detector."""
+        self._check_images(left, right, cam)
+        if self._cam is not None and cam != self._cam:
+            self.reset()
+        self._cam = cam
+
+    def _frame_pass(self, left: np.ndarray, right: np.ndarray, cam: StereoCamera,
+                    motion: tuple | Callable[[], tuple | None] | None = None) -> '_Pass':
+        """One pair's edges, matches, plane and detections (no tracking): the images
+        already checked against ``cam``, the camera already this detector's; ``motion``
+        as `process` takes it (a callable is called once the pair is matched, before
+        the plane is updated; not while the plane is being calibrated)."""
+        self._left = left
+        self._frame += 1
+        c = self.config
+        timings: dict[str, float] = {}
+
+        t0 = time.perf_counter()
+        self._estimate_noise(left)
+        edge_kw = dict(abs_threshold=self._edge_threshold(left),
+                       rel_threshold=c.edge_rel_threshold,
+                       max_angle_deg=c.edge_max_angle_deg, min_string_length=c.min_string_length,
+                       blur_sigma=c.edge_blur_sigma)
+        el = detect_vertical_edges(left, **edge_kw)
+        er = detect_vertical_edges(right, **edge_kw)
+        t1 = time.perf_counter()
+        timings['edges'] = (t1 - t0) * 1e3
+
+        d_min, d_max = self.disparity_range(cam)
+        m, cand, _ = pmf_match(el, er, d_min, d_max,
+                               min_strength_ratio=c.match_min_strength_ratio,
+                               max_orientation_diff_deg=c.match_max_orientation_diff_deg,
+                               support_radius=c.pmf_support_radius_px,
+                               disparity_gradient_limit=c.pmf_disparity_gradient_limit,
+                               iterations=c.pmf_iterations, min_support=c.pmf_min_support,
+                               right_gain=self._right_gain(left, right))
+        t2 = time.perf_counter()
+        timings['matching'] = (t2 - t1) * 1e3
+
+        u = m.u
+        v = m.v.astype(np.float64)
+        d = m.d.astype(np.float64)
+        still = self._stillness(el)
+        if callable(motion) and self._calib is not None:     # not while calibrating
+            motion = motion()
+        s = _noise_key(m)
+        status, updated = self._update_plane(u, v, d, s, cam, still,
+                                             None if callable(motion) else motion)
+        if self._sigma_stale and status == 'tracking' and updated:
+            # the images changed since the calibration (the right one is now resampled,
+            # or no longer): the residual spread is taken again, about this frame's plane
+            self._calibrate_sigma(u, v, d, s.astype(np.float64))
+            self._sigma_stale = False
+        t3 = time.perf_counter()
+        timings['plane'] = (t3 - t2) * 1e3
+
+        metric = None
+        detections: tuple[GpodObstacle, ...] = ()
+        if status == 'tracking':
+            metric = _state_metric(cam, self._abc)
+        threshold = self.pixel_thresholds(np.zeros(0))[1]
+        if status == 'tracking' and metric is not None:
+            features, detections = self._detect(m, u, v, d, cam, metric, d_min, d_max, el,
+                                                er, cand, still)
+        else:
+            if status == 'tracking':          # smoothing made an implausible plane
+                status = 'lost'
+            self._acc = None
+            features = _features(m, np.full(len(m), np.nan, np.float32))
+        timings['obstacles'] = (time.perf_counter() - t3) * 1e3
+        return _Pass(status, bool(updated), metric, features, detections, threshold, el, er,
+                     still, timings, motion)
+
+    def _unseen_ground(self, features: GpodFeatures, threshold: float, cam: StereoCamera,
+                       metric: MetricPlane, known: tuple[GpodObstacle, ...]
+                       ) -> tuple[GpodObstacle, ...]:
+        """The frame's band of unseen corridor ground (`core.unseen_ground`), unless an
+        obstacle or drop-off in ``known`` at least ``unseen_explain_min_confidence``
+        confident explains it, as an untracked obstacle straight
+        ahead (``track_id`` 0; ``disparity_excess`` 0: nothing was measured on it;
+        ``num_edge_pixels`` 0; ``confidence`` 1 - seen / expected). Empty when there is
+        none or ``unseen_max_ratio`` is 0."""
+        if self._unseen is None:
+            return ()
+        # the known feet on the ground: (forward, left) from their range and bearing; a
+        # weak report (a 4 cm blip at 0.08) would hide a wall from the wearer
+        known = tuple(o for o in known
+                      if o.confidence >= self.config.unseen_explain_min_confidence)
+        explained = _ground_points(known) if known else None
+        thr = features.threshold if features.threshold is not None else threshold
+        r = self._unseen.update(cam, metric, features.u_left, features.v, features.excess,
+                                thr, explained, left=self._left)
+        if r is None:
+            return ()
+        u, v = cam.project_left(np.stack([r.position, r.position - r.height
+                                          * metric.normal_up]))
+        x0 = int(np.clip(np.floor(min(u)), 0, cam.width - 1))
+        y0 = int(np.clip(np.floor(min(v)), 0, cam.height - 1))
+        x1 = int(np.clip(np.ceil(max(u)), x0 + 1, cam.width))
+        y1 = int(np.clip(np.ceil(max(v)), y0 + 1, cam.height))
+        return (GpodObstacle(
+            position=r.position, height=r.height, range=r.range, bearing=0.0,
+            width=r.width, disparity_excess=0.0,
+            confidence=float(np.clip(1.0 - r.seen / r.expected, 0.0, 1.0)),
+            roi=(x0, y0, x1 - x0, y1 - y0), num_edge_pixels=0,
+            string_ids=np.zeros(0, np.int32)),)
+
+    # ------------------------------------------------------------ binned pass
+    def _coarse_wanted(self, cam: StereoCamera) -> bool:
+        """Whether this camera's images are also searched binned 2 x 2
+        (``coarse_min_width``)."""
+        w = self.config.coarse_min_width
+        return w > 0 and cam.width >= w and cam.height >= 2
+
+    def _with_coarse(self, detections: tuple[GpodObstacle, ...], features: GpodFeatures,
+                     left: np.ndarray, right: np.ndarray, cam: StereoCamera,
+                     metric: MetricPlane | None, motion: tuple | None = None
+                     ) -> tuple[GpodObstacle, ...]:
+        """The frame's detections joined by those of the binned pass that no full-size
+        detection explains.
+
+        The binned pass is a second detector (its own plane, threshold and noise
+        estimates, no tracks) on the pair binned 2 x 2 (`bin_pair`). Its obstacles at least
+        ``coarse_min_height_m`` high (drop-offs as deep) whose foot lies farther than
+        ``part_radius_m`` from every full-size detection's foot join, their image regions
+        scaled to the full image. It runs on every pair, so that its plane calibrates
+        along with this one's; while this detector has no plane its detections are not
+        used.
+
+        Args:
+            detections, features: the full-size detections and matched features of the
+                pair.
+            left, right: (H, W) uint8 full-size rectified images.
+            cam: the full-size camera; metric: this frame's plane (None: none).
+        Returns:
+            the detections, the binned pass's added, nearest first.
+        """
+        c = self.config
+        if self._coarse is None:
+            self._coarse = GpodDetector(dataclasses.replace(c, coarse_min_width=0))
+        lb, rb, cam_b = bin_pair(left, right, cam)
+        self._coarse._begin(lb, rb, cam_b)
+        p = self._coarse._frame_pass(lb, rb, cam_b, motion)
+        if metric is None or not p.detections:
+            return detections
+        n = metric.normal_up
+        feet = np.array([o.position - o.height * n for o in detections]).reshape(-1, 3)
+        fine_d = None
+        added = []
+        for ob in p.detections:
+            if abs(ob.height) < c.coarse_min_height_m:
+                continue
+            if fine_d is None:
+                fine_d = _disparity_image(features, cam)
+            if not _coarse_consistent(ob, p.features, fine_d):
+                continue
+            foot = ob.position - ob.height * n
+            if len(feet):
+                gap = feet - foot
+                gap -= np.outer(gap @ n, n)            # along the ground
+                if float(np.min(np.linalg.norm(gap, axis=1))) <= c.part_radius_m:
+                    continue
+            x, y, w, h = ob.roi
+            x0, y0 = 2 * x, 2 * y
+            roi = (x0, y0, min(2 * w, cam.width - x0), min(2 * h, cam.height - y0))
+            added.append(dataclasses.replace(ob, roi=roi, string_ids=np.zeros(0, np.int32)))
+        if not added:
+            return detections
+        return tuple(sorted(detections + tuple(added), key=lambda o: o.range))
+
+    def _right_gain(self, left: np.ndarray, right: np.ndarray) -> float:
+        """The factor that puts the right image's grey levels on the left's scale: the
+        median over the latest ``right_gain_frames`` pairs of the ratio of their grey-level
+        spreads (`alignment.brightness_gain_offset`), within [1/4, 4]; 1 when disabled or
+        before a pair with contrast."""
+        if self.config.right_gain_frames == 0:
+            return 1.0
+        go = brightness_gain_offset(left, right)
+        if go is not None:
+            self._log_gains.append(math.log(min(max(go[0], 0.25), 4.0)))
+        if not self._log_gains:
+            return 1.0
+        return math.exp(float(np.median(np.asarray(self._log_gains))))
+
+    @property
+    def image_noise_sigma(self) -> float:
+        """The left image's pixel noise as last estimated (:func:`edges.image_noise_sigma`),
+        grey levels (NaN before the first frame)."""
+        return self._image_noise
+
+    def _estimate_noise(self, left: np.ndarray) -> None:
+        """Estimate the left image's pixel noise on the first frame and every
+        ``_NOISE_EVERY`` frames after, and set the obstacle edge strength in force from it
+        (``obstacle_min_edge_snr``)."""
+        if (self._frame - 1) % _NOISE_EVERY:
+            return
+        c = self.config
+        self._image_noise = image_noise_sigma(left)
+        self._min_strength = max(c.obstacle_min_strength, c.obstacle_min_edge_snr
+                                 * self._noise_gain * self._image_noise)
+
+    def _edge_threshold(self, left: np.ndarray) -> float:
+        """The edge threshold of this pair, grey levels per pixel: ``edge_threshold``,
+        lowered on weakly textured ground (`edges.textured_edge_threshold`:
+        ``edge_min_density``, ``edge_target_density``) to no less than
+        ``edge_noise_floor_snr`` times the gradient noise; unchanged while the pixel noise
+        is unknown."""
+        c = self.config
+        if not c.edge_min_density > 0 or not math.isfinite(self._image_noise):
+            return c.edge_threshold
+        floor = c.edge_noise_floor_snr * self._noise_gain * self._image_noise
+        return textured_edge_threshold(left, c.edge_threshold, min_density=c.edge_min_density,
+                                       target_density=c.edge_target_density, floor=floor,
+                                       blur_sigma=c.edge_blur_sigma)
+

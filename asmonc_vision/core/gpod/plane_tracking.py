@@ -1,0 +1,475 @@
+"""The ground plane over frames: calibration on the first frames, the per-frame refit
+or motion-carried prediction with its Kalman filter (`PlaneTracking._update_plane`),
+and the obstacle thresholds from the calibration's residual spread.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..camera import MetricPlane, StereoCamera, plane_disparity
+from ..ground_plane import PlaneFit, fast_median, fit_ground_plane, lsq_plane, predict_plane
+from .runs import _robust_row_slope
+from .state import DetectorState
+from .support import _mad_sigma, _planes_agree, _state_metric, _still_motion
+
+#: The residual spread sigma of the initial fit is taken over the calibration features
+#: within this many ``plane_inlier_px`` of the fitted plane.
+_SIGMA_GATE = 3.0
+#: The initial plane is fitted to the calibration window's frames together only if each
+#: frame's residual spread about it is at most this many times that about the frame's
+#: own plane (a standing rig: 1.00-1.03; a wearer already walking: 1.2-10).
+_WINDOW_SIGMA_RATIO = 1.15
+
+
+class PlaneTracking(DetectorState):
+    """The ground-plane stage of `GpodDetector`."""
+
+    @property
+    def calibrated_plane(self) -> PlaneFit | None:
+        """The plane fitted on the calibration frames, or None while initialising."""
+        return self._calib
+
+    def _fit(self, u, v, d, cam: StereoCamera, min_support: float = 0.0) -> PlaneFit | None:
+        """Robust, plausibility-checked plane fit of features (u, v, d) with the settings
+        (``min_support``: least fraction of the features on a RANSAC hypothesis)."""
+        c = self.config
+        # Weighted by disparity cubed: of two competing surfaces (the ground here and the
+        # ground beyond a step), the nearer one is the one the wearer stands on; far
+        # features, least flat and least well measured, count little.
+        return fit_ground_plane(
+            u, v, d, cam=cam, method=c.plane_method, inlier_threshold_px=c.plane_inlier_px,
+            iterations=c.ransac_iterations, weights=np.maximum(d, 0.0) ** 3,
+            min_features=c.min_plane_features, min_spread_px=c.plane_min_spread_px,
+            min_support_fraction=min_support, rng=self._rng, **c.plausibility())
+
+    def _near_calibration(self, fit: PlaneFit) -> bool:
+        """Whether an ungated refit is close enough to the calibrated plane to trust."""
+        c = self.config
+        cal = self._calib.metric if self._calib is not None else None
+        if cal is None or fit.metric is None:
+            return False
+        if abs(fit.metric.height - cal.height) > c.recover_height_tolerance * cal.height:
+            return False
+        cosang = float(np.clip(np.dot(fit.metric.normal_up, cal.normal_up), -1.0, 1.0))
+        return math.degrees(math.acos(cosang)) <= c.recover_max_angle_deg
+
+    def _predict_plane(self, cam: StereoCamera, motion: tuple) -> bool:
+        """Carry the plane state (and the plane the rig stopped with) through the camera's
+        motion (R, t, ...) since the previous frame: x = f(x), P = F P F^T
+        (`ground_plane.predict_plane`); the plane before it is kept as ``_unmoved``.
+        False, with nothing changed, when it cannot."""
+        r = predict_plane(cam, self._abc, motion[0], motion[1])
+        if r is None:
+            return False
+        R, t = np.asarray(motion[0], float), np.asarray(motion[1], float)
+        self._unmoved = _state_metric(cam, self._abc)
+        self._abc, F = r
+        self._cov = F @ self._cov @ F.T
+        if self._still_plane is not None:
+            n = self._still_plane.normal_up
+            # n . X_prev + h = 0, X_prev = R X + t  =>  (R^T n) . X + (h + n . t) = 0
+            self._still_plane = MetricPlane(normal_up=R.T @ n,
+                                            height=self._still_plane.height + float(n @ t))
+        self._still_travel += float(np.linalg.norm(t))
+        return True
+
+    def _close_to_current(self, fit: PlaneFit, cam: StereoCamera,
+                          cur: MetricPlane | None = None, tight: bool = False) -> bool:
+        """Whether a refit is within the per-frame change limits of the current plane
+        (``cur``: its metric plane, if known; ``tight``: the current plane was predicted
+        through the camera's motion: the limits ``motion_max_*``, from the prediction or
+        from the plane before the motion -- a wrong motion (visual egomotion once 4 cm
+        off) must not reject the ground; another surface differs from both)."""
+        c = self.config
+        if tight:
+            max_h, max_a = c.motion_max_height_change_m, c.motion_max_angle_change_deg
+        else:
+            max_h, max_a = c.refit_max_height_change_m, c.refit_max_angle_change_deg
+        if cur is None:
+            cur = _state_metric(cam, self._abc)
+        if cur is None or fit.metric is None:
+            return False
+        if tight and self._unmoved is not None and self._within(fit.metric, self._unmoved,
+                                                                max_h, max_a):
+            return True
+        return self._within(fit.metric, cur, max_h, max_a)
+
+    @staticmethod
+    def _within(plane: MetricPlane, ref: MetricPlane, max_h: float, max_a: float) -> bool:
+        """Whether ``plane`` is within ``max_h`` metres of camera height and ``max_a``
+        degrees of normal of ``ref``."""
+        if abs(plane.height - ref.height) > max_h:
+            return False
+        cosang = float(np.clip(np.dot(plane.normal_up, ref.normal_up), -1.0, 1.0))
+        return math.degrees(math.acos(cosang)) <= max_a
+
+    @property
+    def sigma_px(self) -> float:
+        """Robust (MAD) spread of the disparity residuals of the initial ground-plane fit,
+        pixels (NaN while initialising)."""
+        return self._sigma
+
+    def _window_shares_plane(self, joint: PlaneFit, cam: StereoCamera) -> bool:
+        """Whether the calibration window's frames all lie on the plane ``joint`` fitted
+        to them together: each frame's own plane (least squares from ``joint``, refitted
+        on its features within ``plane_inlier_px``, weighted as `_fit` weights them)
+        differs from it by at most ``plane_inlier_px`` over the image's lower half, and
+        the frame's residual spread about ``joint`` (robust sigma within ``_SIGMA_GATE *
+        plane_inlier_px``) is at most ``_WINDOW_SIGMA_RATIO`` times that about its own.
+        Deterministic (draws nothing from the detector's random generator). A frame
+        whose own plane cannot be fitted counts as not sharing it."""
+        tol = self.config.plane_inlier_px
+        for u, v, d, _ in self._init_window:
+            own = joint.abc
+            for it in range(3):
+                near = (self._gated_residuals(own, u, v, d)[1] if it == 0
+                        else np.abs(d - plane_disparity(own, u, v)) <= tol)
+                ls = lsq_plane(u[near], v[near], d[near], np.maximum(d[near], 0.0) ** 3)
+                if ls is None:
+                    return False
+                own = ls[0]
+            if not _planes_agree(joint.abc, own, cam, tol):
+                return False
+            sig = []
+            for abc in (own, joint.abc):
+                res, near = self._gated_residuals(abc, u, v, d)
+                sig.append(_mad_sigma(res[near]) if near.sum() >= 3 else math.nan)
+            if not (sig[1] <= _WINDOW_SIGMA_RATIO * sig[0]):      # NaN: not shared
+                return False
+        return True
+
+    def _gated_residuals(self, abc, u, v, d) -> tuple[np.ndarray, np.ndarray]:
+        """Disparity residuals of features (u, v, d: (N,) pixels) about the plane ``abc``
+        (N,) px, and (N,) bool: within ``_SIGMA_GATE * plane_inlier_px`` of it (the
+        features whose spread is the fit's error; far off it are other surfaces, walls,
+        trees)."""
+        res = d - plane_disparity(abc, u, v)
+        return res, np.abs(res) <= _SIGMA_GATE * self.config.plane_inlier_px
+
+    def _calibrate_sigma(self, u, v, d, s) -> None:
+        """Residual spread of the calibration features about the calibrated plane.
+
+        ``sigma_px``: one robust sigma (1.4826 * MAD) over the features within
+        ``_SIGMA_GATE * plane_inlier_px`` of the plane. For ``sigma_per_edge``: sigmas in
+        (equal-count) bins of the features' precision s (made non-increasing with it),
+        and factors (>= 1) in bands of image rows by which the residuals, divided by their
+        bin's sigma, are still spread (the far ground, foreshortened, matches less well).
+        """
+        res, near = self._gated_residuals(self._abc, u, v, d)
+        res, s, v = res[near], s[near], v[near]
+        self._sigma = _mad_sigma(res)
+        n_bins = int(min(8, res.size // 100))
+        self._sigma_bins = None
+        if n_bins >= 2:
+            order = np.argsort(s, kind='stable')
+            parts = np.array_split(order, n_bins)
+            s_b = np.array([np.median(s[p]) for p in parts])
+            sig_b = np.array([_mad_sigma(res[p]) for p in parts])
+            sig_b = np.maximum(np.minimum.accumulate(sig_b), 0.01)
+            log_s = np.log(np.maximum(s_b, 1e-3))
+            r_n = res / np.interp(np.log(np.maximum(s, 1e-3)), log_s, sig_b)
+            order = np.argsort(v, kind='stable')
+            parts = np.array_split(order, n_bins)
+            v_b = np.array([np.median(v[p]) for p in parts])
+            f_b = np.array([max(1.0, _mad_sigma(r_n[p])) for p in parts])
+            self._sigma_bins = (log_s, sig_b, v_b, f_b)
+
+    def pixel_thresholds(self, precision: np.ndarray, v: np.ndarray | None = None
+                         ) -> tuple[np.ndarray, float]:
+        """The obstacle thresholds of edge pixels, and the global one.
+
+        Args:
+            precision: (K,) the pixels' ``Matches.precision`` (or edge strengths).
+            v: (K,) their image rows (None: no row factor).
+        Returns:
+            ((K,) float64 per-pixel thresholds, global threshold), pixels.
+        """
+        c = self.config
+        k = precision.shape[0]
+        if c.threshold_mode == 'fixed' or not np.isfinite(self._sigma):
+            return np.full(k, c.threshold_px), c.threshold_px
+        ceiling = self.threshold_ceiling()
+        glob = float(np.clip(c.threshold_k * self._sigma, c.threshold_floor_px, ceiling))
+        if not c.sigma_per_edge or self._sigma_bins is None:
+            return np.full(k, glob), glob
+        log_s, sig_b, v_b, f_b = self._sigma_bins
+        log_p = np.log(np.maximum(precision.astype(np.float64), 1e-3))
+        sig = np.interp(log_p, log_s, sig_b)
+        # Below the least precise bin, sigma grows as 1 / precision.
+        sig *= np.exp(np.maximum(log_s[0] - log_p, 0.0))
+        if v is not None:
+            sig = sig * np.interp(v, v_b, f_b)
+        thr = np.clip(c.threshold_k * sig, c.threshold_floor_px, ceiling)
+        return thr, glob
+
+    def min_obstacle_pixels(self, cam: StereoCamera) -> float:
+        """Obstacle pixels an edge string needs on this camera: ``min_obstacle_pixels``
+        times f / ``min_obstacle_pixels_focal_px`` (rounded), at least
+        ``min_obstacle_pixels``: the same angle of evidence on any rig."""
+        c = self.config
+        if c.min_obstacle_pixels_focal_px <= 0.0:
+            return float(c.min_obstacle_pixels)
+        return float(max(c.min_obstacle_pixels,
+                         round(c.min_obstacle_pixels * cam.f / c.min_obstacle_pixels_focal_px)))
+
+    def threshold_ceiling(self) -> float:
+        """The largest obstacle threshold of the 'sigma' mode, pixels: the larger of
+        ``threshold_ceiling_px`` and the disparity excess ``f*B*h/(H*z)`` of an obstacle
+        ``threshold_ceiling_height_m`` high at depth ``threshold_ceiling_depth_m`` for the
+        calibrated camera height H (the paper's rig: 1.7 px and 1.68 px; the KITTI car's:
+        4.7 px). ``threshold_ceiling_px`` alone before the calibration."""
+        c = self.config
+        cal = self._calib.metric if self._calib is not None else None
+        if (c.threshold_ceiling_height_m <= 0.0 or cal is None or self._cam is None
+                or not cal.height > 0.0):
+            return c.threshold_ceiling_px
+        excess = (self._cam.fb * c.threshold_ceiling_height_m
+                  / (cal.height * c.threshold_ceiling_depth_m))
+        return max(c.threshold_ceiling_px, float(excess))
+
+    def _update_plane(self, u, v, d, s, cam: StereoCamera, still: bool = False,
+                      motion: tuple | None = None) -> tuple[str, bool]:
+        """Advance the plane state with this frame's features (s: their
+        :func:`_noise_key`, for the residual spread; ``still``: the rig stood still since
+        the previous frame; ``motion``: the camera's (R, t, ...) since the previous frame,
+        as `process` takes it, or None). Returns (status, updated)."""
+        c = self.config
+        if self._calib is None:
+            return self._calibrate(u, v, d, s, cam)
+        enough = u.shape[0] >= c.min_plane_features
+        if c.plane_update == 'fixed':
+            # The plane is known, but a frame with too few features cannot vouch that
+            # nothing stands on it: lost, as in 'refit' mode.
+            return ('tracking', False) if enough else ('lost', False)
+        fit = None
+        # Kalman predict: through the camera's motion when it is known (the paper's
+        # dynamic recalibration), else the constant-plane model below. While the rig
+        # stands still (its edges stayed in place) a motion larger than a standing
+        # wearer's sway can only be an error: the identity instead (a wrong one carried
+        # the plane the rig stopped with off the ground for as long as the wearer stood).
+        self._unmoved = None
+        if motion is not None and still and not _still_motion(motion):
+            motion = (np.eye(3), np.zeros(3))
+        predicted = motion is not None and self._predict_plane(cam, motion)
+        current = _state_metric(cam, self._abc)
+        # moving: the plane the rig stopped with is kept, carried through the motion,
+        # while the camera is still near where it stopped (on the same ground)
+        if not still and not (predicted and self._still_plane is not None
+                              and self._still_travel <= c.still_anchor_travel_m):
+            self._still_plane = None
+        elif self._still_plane is None:
+            self._still_plane = current             # the plane when the rig stopped
+            self._still_travel = 0.0
+        anchored = self._still_plane is not None
+        # Refits near the prediction through the motion: a narrower gate and tighter
+        # change limits, unless refits were rejected by those limits max_coast_frames
+        # times in a row (the motion may be wrong: then as without one, around the
+        # predicted plane). With a motion the plane is carried through frames with too
+        # few ground features to refit for up to motion_coast_frames.
+        # A plane carried unrefitted over a frame whose motion was missing has not moved
+        # with the camera over that frame: its prediction through the later motions is
+        # off by that frame's motion (a vigorous walker's sway: 10 px of disparity). It
+        # gets neither the narrow gate nor the long coast until a refit has found the
+        # ground again (it coasted at most max_coast_frames, then recovers).
+        tight = predicted and not self._stale and self._rejected < c.max_coast_frames
+        gate_m = c.motion_gate_m if tight else c.refit_gate_m
+        coast_frames = (c.motion_coast_frames if predicted and not self._stale
+                        else c.max_coast_frames)
+        rejected = False
+
+        def coarse_then_fine(gate_px: float = c.refit_gate_px) -> PlaneFit | None:
+            nonlocal rejected
+            out, no = self._coarse_then_fine(u, v, d, cam, current, tight, gate_m, gate_px)
+            rejected = rejected or no
+            return out
+
+        if enough and current is not None and not anchored:
+            fit = coarse_then_fine()
+        if enough and current is not None and fit is None:
+            # Standing still the current plane is where the ground is: refit from the
+            # features within refit_gate_m of it. So too when the coarse fit took another
+            # surface while walking: the ground beyond a step down can fill more of the
+            # view than the ground the wearer stands on, even in the nearer half (and a
+            # mixture of the two tilts the plane).
+            # Standing, the gate stays where the plane was when the rig stopped: the
+            # ground has not moved since. Gated around the current plane instead, the
+            # ground beyond a kerb down leaked in at 4-10 m (where 15 cm is 1-2 px of
+            # disparity, about the gate's 10 cm), each refit tilted the plane towards it
+            # and the tilted plane let more of it in: 0.1 -> 3.8 degrees and 12 cm in
+            # 0.5 s, and the pavement between the wearer and the kerb stood 20 cm up.
+            ref = self._still_plane if self._still_plane is not None else current
+            height = ref.signed_height(cam.triangulate(u, v, d))
+            gate = np.abs(height) <= gate_m
+            fit = self._fit(u[gate], v[gate], d[gate], cam)
+            if fit is not None and not self._close_to_current(fit, cam, current, tight):
+                fit, rejected = None, True
+            if fit is None and anchored and not predicted:
+                # "Still" by the edges, with no motion to carry the plane, but no ground
+                # where the rig stopped: the edges can stay in place while the camera
+                # moves (the only edges of smooth slabs are joints along the walk,
+                # which forward motion keeps in place while the body's pitch sway moves
+                # the ground by pixels). Refit as when moving.
+                fit = coarse_then_fine()
+        if (fit is None and enough and current is not None and (self._stale or not predicted)
+                and self._coast < coast_frames and c.refit_retry_gate_px > c.refit_gate_px):
+            # Nothing predicted where the ground went: a vigorous walker (the paper's
+            # extreme motion: 5 degrees of sway) moves the ground by 10 px of disparity
+            # between frames, and a frame whose /egomotion is missing then kept the
+            # previous frame's plane, 10 px off, and reported the whole ground as a drop.
+            # (Not once lost: the plane to widen the gate around is then stale.)
+            fit = coarse_then_fine(c.refit_retry_gate_px)
+        if fit is None and enough and self._coast >= coast_frames:
+            fit = self._recover(u, v, d, cam)
+        noise = c.motion_process_noise_px if predicted else c.refit_process_noise_px
+        sq = noise ** 2
+        q = np.diag([sq / (0.5 * cam.width) ** 2, sq / (0.5 * cam.height) ** 2, sq])
+        if fit is None:
+            return self._without_refit(u, v, d, q, rejected, predicted, still, enough,
+                                       coast_frames)
+        self._kalman_update(fit, q)
+        return 'tracking', True
+
+    def _calibrate(self, u, v, d, s, cam: StereoCamera) -> tuple[str, bool]:
+        """The calibration step of `_update_plane`: this frame's features join the
+        calibration window; once it holds ``init_frames`` frames, the plane is fitted
+        from them (or from the latest frame alone when the frames' planes disagree).
+        Returns (status, updated)."""
+        c = self.config
+        self._init_window.append((u, v, d, s))
+        if len(self._init_window) < c.init_frames:
+            return 'initialising', False
+        uu, vv, dd, ss = (np.concatenate(x) for x in zip(*self._init_window))
+        # No plane is known yet: the ground must hold init_min_inlier_fraction of the
+        # features to be a candidate at all (not only the winner checked below), so
+        # that the disparity weighting cannot crown a few wrong matches at large
+        # disparity, which a long baseline searched from min_range_m gives.
+        support = c.init_min_inlier_fraction
+        fit = self._fit(uu, vv, dd, cam, support)
+        if fit is None:
+            return 'initialising', False
+        if len(self._init_window) > 1:
+            # Frames of different ground planes (a wearer who walks from the first
+            # frame sways): their joint plane lies between them, tilted for each
+            # (3 degrees: obstacles everywhere), and its residual spread, which sets
+            # the obstacle threshold, is theirs plus the sway's. Then this frame
+            # alone calibrates. (A car on a flat road moves, but its ground plane
+            # does not.)
+            # Both tests: the latest frame's own robust fit may find another surface
+            # than the joint fit (the near ground before a kerb down, where the joint
+            # took the lower ground beyond it), which a least-squares refit started
+            # from the joint plane does not.
+            last = self._fit(u, v, d, cam, support)
+            if last is not None and (
+                    not _planes_agree(fit.abc, last.abc, cam, c.plane_inlier_px)
+                    or not self._window_shares_plane(fit, cam)):
+                fit, uu, vv, dd, ss = last, u, v, d, s
+        if fit.num_features < c.init_min_inlier_fraction * uu.shape[0]:
+            return 'initialising', False
+        self._calib = self._last_fit = fit
+        self._abc, self._cov = fit.abc.copy(), fit.cov.copy()
+        self._calibrate_sigma(uu, vv, dd, ss.astype(np.float64))
+        self._init_window.clear()
+        return 'tracking', True
+
+    def _coarse_then_fine(self, u, v, d, cam: StereoCamera, current: MetricPlane,
+                          tight: bool, gate_m: float, gate_px: float
+                          ) -> tuple[PlaneFit | None, bool]:
+        """The refit of `_update_plane`: a coarse refit from the nearer half of the
+        features near the predicted plane in disparity (a gate wide enough for walking
+        motion), then a fine refit from all features near the coarse plane in disparity
+        *and* metric height, so that another surface (the ground beyond a step, a kerb
+        top) cannot take over. Returns (the refit or None, whether a refit was rejected
+        by the change limits around ``current``)."""
+        gate = np.abs(d - plane_disparity(self._abc, u, v)) <= gate_px
+        if gate.any():      # the coarse fit sees only the nearer half: the ground here
+            gate &= d >= fast_median(d[gate])      # (np.median's arithmetic, finite d)
+        coarse = self._fit(u[gate], v[gate], d[gate], cam)
+        out = None
+        if coarse is not None:
+            height = coarse.metric.signed_height(cam.triangulate(u, v, d))
+            gate = ((np.abs(d - plane_disparity(coarse.abc, u, v)) <= gate_px)
+                    & (np.abs(height) <= gate_m))
+            out = self._fit(u[gate], v[gate], d[gate], cam)
+        if out is not None and not self._close_to_current(out, cam, current, tight):
+            return None, True
+        return out, False
+
+    def _kalman_update(self, fit: PlaneFit, q: np.ndarray) -> None:
+        """The Kalman step of `_update_plane` with the refit ``fit`` and the process
+        noise ``q``; the refit is the plane's latest fit."""
+        # Kalman filter: predict with the process noise Q (the walking motion's, or what
+        # the known motion leaves unexplained): P = F P F^T + Q (F P F^T is already in
+        # self._cov when predicted through the motion, F = I otherwise); update with the
+        # refit z and its covariance R: K = P (P + R)^-1, x = x + K (z - x),
+        # P = (I - K) P.
+        p_pred = self._cov + q
+        gain = p_pred @ np.linalg.inv(p_pred + fit.cov)
+        self._abc = self._abc + gain @ (fit.abc - self._abc)
+        self._cov = (np.eye(3) - gain) @ p_pred
+        self._last_fit = fit
+        self._coast = self._rejected = 0
+        self._stale = False
+
+    def _recover(self, u, v, d, cam: StereoCamera) -> PlaneFit | None:
+        """Lost: a plane from the nearer half of the features (the ground the wearer
+        stands on, rather than the ground beyond a step) if it is near the calibration,
+        else None."""
+        near = d >= np.median(d)
+        ungated = self._fit(u[near], v[near], d[near], cam)
+        if ungated is not None and self._near_calibration(ungated):
+            return ungated
+        return None
+
+    def _without_refit(self, u, v, d, q: np.ndarray, rejected: bool, predicted: bool,
+                       still: bool, enough: bool, coast_frames: int) -> tuple[str, bool]:
+        """A frame of `_update_plane` without a refit: the plane is carried over it (for
+        up to ``coast_frames``; through the motion when ``predicted``, adding the process
+        noise ``q``), or the status is lost until a refit succeeds."""
+        c = self.config
+        self._rejected = self._rejected + 1 if rejected else 0
+        self._stale = self._stale or not predicted
+        if self._coast < coast_frames and enough and (
+                predicted or still or self._near_ground_agrees(u, v, d)):
+            self._coast += 1
+            if predicted:
+                self._cov = self._cov + q
+            return 'tracking', False
+        # stay lost until a refit succeeds
+        self._coast = max(c.max_coast_frames, c.motion_coast_frames)
+        return 'lost', False
+
+    def _near_ground_agrees(self, u: np.ndarray, v: np.ndarray, d: np.ndarray) -> bool:
+        """Whether the current plane may be carried, unconfirmed by a refit, over a frame
+        of a walk with no motion to carry it by (u, v, d: (N,) the frame's features,
+        pixels; "near": the half with d at least the median).
+
+        It may if it still lies on the near features (their median disparity residual
+        within ``plane_inlier_px``), or if they stand above it as a surface that is not
+        the ground (an obstacle filling the near view: their disparity does not grow
+        down the image as the plane's does), or if there are fewer than twice
+        ``min_plane_features`` of them (a plain wall filling the view leaves a few
+        mismatches). Not if they lie below it (the near view is the ground the wearer
+        stands on, or an obstacle on it: never lower; the plane is off and every
+        feature a drop) or above it as a ground (the plane is too low: every feature an
+        obstacle)."""
+        near = d >= fast_median(d)
+        un, vn, dn = u[near], v[near], d[near]
+        if un.shape[0] < 2 * self.config.min_plane_features:
+            return True
+        res = dn - plane_disparity(self._abc, un, vn)
+        med = fast_median(res)
+        if abs(med) <= self.config.plane_inlier_px:
+            return True
+        if med < 0:
+            return False
+        return bool(_robust_row_slope(un, vn, dn) < 0.5 * float(self._abc[1]))
+
+    def disparity_range(self, cam: StereoCamera) -> tuple[float, float]:
+        """Disparity search range (d_min, d_max) of the matcher, pixels, from
+        ``search_max_range_m`` and ``min_range_m`` (d_max at most the image width - 1)."""
+        d_min = cam.fb / self.config.search_max_range_m
+        d_max = min(cam.fb / self.config.min_range_m, float(cam.width - 1))
+        return d_min, max(d_max, d_min)
+
