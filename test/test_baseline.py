@@ -4,7 +4,7 @@ import pytest
 
 from asmonc_vision.core.baseline import SgbmBaseline, SgbmConfig, fit_disparity_plane
 from asmonc_vision.core.camera import StereoCamera
-from asmonc_vision.core.evaluation import frame_from_detections, score_sequence
+from asmonc_vision.eval.evaluation import frame_from_detections, score_sequence
 from conftest import BAGS
 
 

@@ -8,7 +8,7 @@ import pytest
 from scipy import integrate
 
 from asmonc_vision.core.camera import MetricPlane, StereoCamera, plane_disparity, plane_from_metric
-from asmonc_vision.core.detection_model import (PAPER_RIG, ModelRig, disparity_excess,
+from asmonc_vision.eval.detection_model import (PAPER_RIG, ModelRig, disparity_excess,
                                                 edge_pixel_excesses, edge_span_rows,
                                                 exact_disparity_excess, excess_row_gradient,
                                                 fig5_curves, min_height_for,

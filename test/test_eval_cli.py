@@ -8,7 +8,7 @@ import pytest
 
 from asmonc_vision.cli.main import main
 from asmonc_vision.core.camera import MetricPlane
-from asmonc_vision.core.evaluation import (FrameObstacles, SequenceEvaluation, match_frame,
+from asmonc_vision.eval.evaluation import (FrameObstacles, SequenceEvaluation, match_frame,
                                            plane_error)
 from conftest import BAGS
 
@@ -141,7 +141,7 @@ def _write_outputs_bag(path, frames, skip=(), initialising=2, shift=0.05):
     further away) and /ground_plane (the true plane, INITIALISING for the first frames)."""
     from rosbags.rosbag2 import StoragePlugin, Writer
 
-    from asmonc_vision import bagio
+    from asmonc_vision.io import bagio
     from asmonc_vision.core.camera import plane_from_metric
 
     ts = bagio.typestore()
@@ -216,7 +216,7 @@ def test_eval_of_recorded_outputs_scores_the_alarms(tmp_path, capsys):
     time, an alarm that comes a second late does not."""
     from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 
-    from asmonc_vision import bagio
+    from asmonc_vision.io import bagio
     from asmonc_vision.cli.bench import load_frames
 
     frames = load_frames(STATIC, 0, images=False)

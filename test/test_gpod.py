@@ -386,7 +386,7 @@ def test_calibrates_from_one_frame_when_the_walk_starts_at_once():
     frame: obstacles everywhere in the first tracked frame): when the window's joint
     plane and its latest frame's disagree, the latest frame alone calibrates."""
     from asmonc_vision.cli.bench import load_frames
-    from asmonc_vision.core.evaluation import plane_error
+    from asmonc_vision.eval.evaluation import plane_error
     from conftest import BAGS
     det = GpodDetector(GpodConfig())
     first = None
@@ -1472,7 +1472,7 @@ def test_the_plane_does_not_creep_onto_the_ground_beyond_a_kerb_down():
     degrees and 12 cm within 0.5 s, and the pavement before the kerb stood 20 cm up
     (a WARNING "obstacle, 2 metres" in the node graph). Gated around the plane the rig
     had when it stopped, the plane stays on the ground the wearer stands on."""
-    from asmonc_vision.core.evaluation import plane_error
+    from asmonc_vision.eval.evaluation import plane_error
     from asmonc_vision.sim import RigSettings, StereoRenderer, simulate_frame
     from asmonc_vision.sim.scenarios import step_down
 
@@ -1504,7 +1504,7 @@ def test_the_plane_predicted_through_the_motion_stays_on_the_ground_stood_on():
     1.5 metres" in the node graph. With the camera's motion given, the plane is carried
     through it, the refits are gated 5 cm around the prediction and limited to 2 degrees
     and 5 cm from it, and the plane stays on the ground the wearer stands on."""
-    from asmonc_vision.core.evaluation import plane_error
+    from asmonc_vision.eval.evaluation import plane_error
     from asmonc_vision.sim import RigSettings, StereoRenderer, simulate_frame
     from asmonc_vision.sim.scenarios import step_down
 
@@ -1544,7 +1544,7 @@ def test_a_wrong_motion_does_not_take_the_plane_off_the_ground(scenario, error_m
     the plane before the motion is accepted as well. Standing still, a motion (8 cm
     off here) is not used at all: carried through it, the plane the rig stopped with
     stayed off the ground for as long as the wearer stood (a drop in every frame)."""
-    from asmonc_vision.core.evaluation import plane_error
+    from asmonc_vision.eval.evaluation import plane_error
     from asmonc_vision.sim import StereoRenderer, make_scenario, simulate_frame
 
     sc = make_scenario(scenario, seed=3, duration=3.0)

@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 import pytest
 
-from asmonc_vision import bagio
+from asmonc_vision.io import bagio
 from asmonc_vision.cli.images_bag import folder_rate, write_images_bag
 from asmonc_vision.cli.main import main as asmonc_main
 

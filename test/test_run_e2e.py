@@ -10,9 +10,9 @@ import sys
 import numpy as np
 import pytest
 
-from asmonc_vision import bagio
+from asmonc_vision.io import bagio
 from asmonc_vision.cli.run import frame_from_obstacle_array
-from asmonc_vision.core.evaluation import score_sequence
+from asmonc_vision.eval.evaluation import score_sequence
 from conftest import BAGS
 
 

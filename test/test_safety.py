@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from asmonc_vision.core.alarm import AlarmConfig, AlarmLevel
-from asmonc_vision.core.evaluation import FrameObstacles
+from asmonc_vision.eval.evaluation import FrameObstacles
 from asmonc_vision.eval.alarm_replay import replay_alarms
 from asmonc_vision.eval.safety import (SafetyCriteria, SafetyTruth, TrueObstacle, TruthFrame,
                                        corridor_range, polygon_distance, score_safety,

@@ -46,7 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
-from asmonc_vision import bagio
+from asmonc_vision.io import bagio
 
 METHODS = ('gpod', 'sgbm')
 #: the 640x480 rig of the bench: f = 600 px keeps the paper's field of view
@@ -196,7 +196,7 @@ def render_frames(scenario: str = 'static_obstacles', seed: int = 0, frames=(0,)
         frames: frame indices to render (10 Hz; in this order).
         **rig_changes: RigSettings fields to change (e.g. width, height, focal).
     """
-    from asmonc_vision.core.evaluation import frame_from_detections
+    from asmonc_vision.eval.evaluation import frame_from_detections
     from asmonc_vision.sim import RigSettings, StereoRenderer, make_scenario, simulate_frame
     from asmonc_vision.sim.bagwriter import stamp_ns
 
@@ -270,7 +270,7 @@ def run_method(frames: list[Frame], method: str = 'gpod', threshold_px: float | 
     """
     import cv2
 
-    from asmonc_vision.core.evaluation import frame_from_detections
+    from asmonc_vision.eval.evaluation import frame_from_detections
 
     cv2.setNumThreads(1)
     det = make_method(method, threshold_px, map_enabled)
@@ -308,7 +308,7 @@ def out_of_view_for(frames: list[Frame]) -> dict:
     """stamp_ns -> true obstacles out of view in that frame
     (`core.evaluation.out_of_view_truth`), from the frames' truth, true poses and true
     planes; empty when they have none."""
-    from asmonc_vision.core.evaluation import out_of_view_truth
+    from asmonc_vision.eval.evaluation import out_of_view_truth
 
     have = [f for f in frames if f.truth is not None and f.pose is not None
             and f.truth_plane is not None]
@@ -328,7 +328,7 @@ def score_runs(frames: list[Frame], runs: list[FrameRun], evaluation=None, warmu
     Returns:
         the SequenceEvaluation.
     """
-    from asmonc_vision.core.evaluation import SequenceEvaluation
+    from asmonc_vision.eval.evaluation import SequenceEvaluation
 
     ev = evaluation if evaluation is not None else SequenceEvaluation(**criteria)
     away = out_of_view_for(frames)
@@ -475,6 +475,6 @@ def run(args) -> int:
         _print(f'static_obstacles (seed 0) rendered at 640x480, f = 600 px, in '
                f'{render_s:.0f} s ({clear} clear + {n} frames with obstacles)', res)
     if args.json:
-        from asmonc_vision.core.evaluation import json_ready
+        from asmonc_vision.eval.evaluation import json_ready
         args.json.write_text(json.dumps(json_ready(results), indent=2, allow_nan=False) + '\n')
     return 0

@@ -367,7 +367,7 @@ def run(args) -> int:
     print('\n'.join(timing_lines(results, list(args.methods))))
     print(f'campaign wall time {(time.monotonic() - t0) / 60:.1f} min')
     if args.json is not None:
-        from asmonc_vision.core.evaluation import json_ready
+        from asmonc_vision.eval.evaluation import json_ready
         doc = summary_json(results, list(args.methods))
         doc['arguments'] = {'minutes': args.minutes, 'workers': args.workers, 'sets': sets,
                             'classes': args.classes, 'rigs': args.rigs,

@@ -49,7 +49,7 @@ import re
 import sys
 from pathlib import Path
 
-from asmonc_vision import bagio
+from asmonc_vision.io import bagio
 from asmonc_vision.cli.bench import METHODS, load_frames, make_method, out_of_view_for, \
     plane_from_msg, run_method, score_runs
 
@@ -134,7 +134,7 @@ def score_outputs(frames, outputs: Path, evaluation) -> dict | None:
     """
     from asmonc_vision.cli.run import frame_from_obstacle_array
     from asmonc_vision.core.alarm import AlarmConfig
-    from asmonc_vision.core.evaluation import path_criteria, path_warnings, path_warnings_summary
+    from asmonc_vision.eval.evaluation import path_criteria, path_warnings, path_warnings_summary
 
     t_obs, t_plane = bagio.TOPICS['obstacles'][0], bagio.TOPICS['ground_plane'][0]
     t_alarm = bagio.TOPICS['alarms'][0]
@@ -371,7 +371,7 @@ def write_plots(ev, title: str, stem: str, out_dir: Path) -> list[Path]:
 
 def run(args) -> int:
     from asmonc_vision.core.config import to_dict
-    from asmonc_vision.core.evaluation import SequenceEvaluation, json_ready
+    from asmonc_vision.eval.evaluation import SequenceEvaluation, json_ready
 
     err = lambda s: print(f'asmonc eval: {s}', file=sys.stderr)  # noqa: E731
     if args.outputs is not None:

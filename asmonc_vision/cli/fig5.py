@@ -1,7 +1,7 @@
 """The paper's Fig. 5: obstacle detection probability against obstacle height, per range.
 
 Model (default): prints the detection probability of Molton et al. (1998), Sec. 2.3
-(:mod:`asmonc_vision.core.detection_model`) for obstacle heights 1-20 cm, one column per
+(:mod:`asmonc_vision.eval.detection_model`) for obstacle heights 1-20 cm, one column per
 range 2-8 m, and the 90% heights; ``--png`` plots Fig. 5. Without ``--pitch-deg`` the
 paper's level-camera Eq. 1 is used; with it, the exact geometry of the pitched rig.
 
@@ -39,9 +39,9 @@ from pathlib import Path
 
 import numpy as np
 
-from asmonc_vision.core.detection_model import (PAPER_SIGMA_PX, PAPER_THRESHOLD_PX,
+from asmonc_vision.eval.detection_model import (PAPER_SIGMA_PX, PAPER_THRESHOLD_PX,
                                                 ModelRig, fig5_curves, min_height_for)
-from asmonc_vision.core.evaluation import json_ready
+from asmonc_vision.eval.evaluation import json_ready
 
 #: Ranges (m) of the table columns and of the empirical boxes.
 RANGES_M = (2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0)
@@ -271,7 +271,7 @@ def place_boxes(rng: np.random.Generator, height_m: float, ranges_m, rig,
 
 def _frame_obstacles(items, stamp: int = 0):
     """core.evaluation.FrameObstacles of GpodObstacle or ObstacleTruth items."""
-    from asmonc_vision.core.evaluation import FrameObstacles
+    from asmonc_vision.eval.evaluation import FrameObstacles
 
     if not items:
         return FrameObstacles.empty(stamp)
@@ -294,7 +294,7 @@ def _seed_job(seed: int, heights_m: list, ranges_m: list, frames: int, rig_kw: d
     from scipy import ndimage
 
     from asmonc_vision.core.camera import ground_range_bearing
-    from asmonc_vision.core.evaluation import DetectionScore, score_frame
+    from asmonc_vision.eval.evaluation import DetectionScore, score_frame
     from asmonc_vision.core.gpod import GpodConfig, GpodDetector
     from asmonc_vision.sim import (Ground, RigPose, RigSettings, StereoRenderer, World,
                                    camera_poses, ground_plane_truth, obstacle_truth)

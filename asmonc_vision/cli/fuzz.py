@@ -66,7 +66,7 @@ def nmea_target(data: bytes, counter: _Counter | None = None) -> None:
 
 def bag_target(data: bytes, workdir: Path, counter: _Counter | None = None) -> None:
     """Write ``data`` as an .mcap file and read it as `asmonc run` and the player do."""
-    from asmonc_vision import bagio, bagplay
+    from asmonc_vision.io import bagio, bagplay
 
     path = workdir / 'input.mcap'
     path.write_bytes(data)
@@ -107,7 +107,7 @@ def small_bag(path: Path, compression: str | None) -> bytes:
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 
-    from asmonc_vision import bagio
+    from asmonc_vision.io import bagio
 
     store = bagio.typestore()
     T = store.types

@@ -48,7 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
-from asmonc_vision.core.evaluation import json_ready
+from asmonc_vision.eval.evaluation import json_ready
 from asmonc_vision.core.gait import GaitConfig, GaitTracker
 from asmonc_vision.core.gait import scoring
 from asmonc_vision.core.gait.rotations import (R_BODY_OPTICAL, rotvec_to_matrix,

@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from asmonc_vision.core.evaluation import json_ready
+from asmonc_vision.eval.evaluation import json_ready
 
 #: the bags rendered when none are given: (scenario, seconds, seeds)
 DEFAULT_SCENARIOS = (('clear_walk', 30.0, (1, 2, 3)), ('walk_stop_turn', 30.0, (1, 2, 3)))
@@ -74,7 +74,7 @@ def load_bag(bag: Path) -> BagStreams:
         bagio.BagError: unreadable bag.
         ValueError: no inclinometer stream, or no ground truth.
     """
-    from asmonc_vision import bagio
+    from asmonc_vision.io import bagio
     from asmonc_vision.cli.motion import load_sequence
     from asmonc_vision.core.motion import EgomotionEstimator
     from asmonc_vision.core.rotations import R_BODY_OPTICAL, matrix_to_rpy
@@ -244,7 +244,7 @@ def add_arguments(s) -> None:
 
 
 def run(args) -> int:
-    from asmonc_vision import bagio
+    from asmonc_vision.io import bagio
 
     bags = list(args.bags) or render_default_bags(args.cache,
                                                   lambda s: print(s, file=sys.stderr))

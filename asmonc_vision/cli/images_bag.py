@@ -33,10 +33,10 @@ from pathlib import Path
 
 import numpy as np
 
-from asmonc_vision import bagio
+from asmonc_vision.io import bagio
 from asmonc_vision.core.capture import (CalibrationError, FolderSource, FrameSizeError,
                                         SourceError, StereoRectifier, load_calibration)
-from asmonc_vision.sim.bagwriter import EPOCH_NS, _dir_size, _qos
+from asmonc_vision.sim.bagwriter import EPOCH_NS, dir_size, writer_qos
 from asmonc_vision.sim.rig import LEFT_FRAME, RIGHT_FRAME
 
 #: per-pair topics, in the order written (keys of bagio.TOPICS)
@@ -147,7 +147,7 @@ def write_images_bag(folder: str | Path, out: str | Path, calibration: str = '',
                 'f': rect.f, 'baseline': rect.baseline, 'epoch_ns': EPOCH_NS}
         writer.set_custom_data('asmonc_vision.images_bag', json.dumps(meta, sort_keys=True))
         conns = {k: writer.add_connection(bagio.TOPICS[k][0], bagio.TOPICS[k][1],
-                                          typestore=ts, offered_qos_profiles=_qos())
+                                          typestore=ts, offered_qos_profiles=writer_qos())
                  for k in PAIR_TOPICS}
 
         def put(key: str, ns: int, msg) -> None:
@@ -175,7 +175,7 @@ def write_images_bag(folder: str | Path, out: str | Path, calibration: str = '',
                 put('right_image', ns, image(ns, right, RIGHT_FRAME))
                 k += 1
     return ImagesBag(path=out, frames=k, pairs=len(pairs), fps=rate, size=size, f=rect.f,
-                     baseline=rect.baseline, size_bytes=_dir_size(out))
+                     baseline=rect.baseline, size_bytes=dir_size(out))
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from asmonc_vision.core.evaluation import json_ready
+from asmonc_vision.eval.evaluation import json_ready
 
 DEFAULT_BAGS = ('walk_obstacles', 'walk_stop_turn', 'slope', 'clear_walk')
 ANGLES = ('pitch', 'roll', 'yaw')
@@ -117,7 +117,7 @@ def _header(title: str) -> list[str]:
 
 def run_tables(args) -> int:
     from asmonc_vision.core.motion import METHODS
-    from asmonc_vision.core.motion.experiment import (PAPER_TABLES, TrialSettings,
+    from asmonc_vision.eval.motion_experiment import (PAPER_TABLES, TrialSettings,
                                                       run_level, run_minimal_level)
     methods = list(args.methods or METHODS)
     bad = [m for m in methods if m not in METHODS]
@@ -322,7 +322,7 @@ def score_recorded_egomotion(bag: Path, outputs: Path) -> dict | None:
     (the node publishes only for consecutive pairs). Returns None when the outputs hold no
     /egomotion or the bag has no ground-truth pose; else {'motions', 'pairs', 'errors'}.
     """
-    from asmonc_vision import bagio
+    from asmonc_vision.io import bagio
     from asmonc_vision.core.motion.geometry import (compose, invert, quaternion_to_matrix,
                                                     rotation_error_components)
 
@@ -356,7 +356,7 @@ def score_recorded_egomotion(bag: Path, outputs: Path) -> dict | None:
 
 
 def run_eval(args) -> int:
-    from asmonc_vision import bagio
+    from asmonc_vision.io import bagio
     root = Path(__file__).resolve().parents[2] / 'bags'
     bags = args.bags or [root / b for b in DEFAULT_BAGS]
     try:
@@ -413,7 +413,7 @@ def _print_eval(name: str, r: dict, cam) -> None:
 # --- corners ----------------------------------------------------------------------------
 
 def run_corners(args) -> int:
-    from asmonc_vision.core.motion.experiment import (CORNER_DETECTORS, CORNER_KINDS,
+    from asmonc_vision.eval.motion_experiment import (CORNER_DETECTORS, CORNER_KINDS,
                                                       corner_localisation)
     if args.trials < 1:
         print('asmonc motion corners: --trials must be >= 1', file=sys.stderr)

@@ -26,10 +26,12 @@ from pathlib import Path
 
 import numpy as np
 
-from asmonc_vision import bagio, graph
+from asmonc_vision import graph
+from asmonc_vision.io import bagio
+from asmonc_vision.io.bagplay import BagSource
 from asmonc_vision.faults import MESSAGE_KINDS, PROCESS_KINDS, affected_pairs, parse_faults
 from asmonc_vision.graph import GraphNode
-from asmonc_vision.core.evaluation import (FrameObstacles, json_ready, path_criteria,
+from asmonc_vision.eval.evaluation import (FrameObstacles, json_ready, path_criteria,
                                           path_warnings, path_warnings_summary, score_sequence)
 
 LEVEL_NAMES = {0: 'CLEAR', 1: 'CAUTION', 2: 'WARNING', 3: 'STOP', 4: 'FAULT'}
@@ -292,7 +294,7 @@ def read_out_of_view_truth(bag: Path, truth: dict[int, FrameObstacles]
     the bag's /ground_truth/camera_pose and /ground_truth/ground_plane; None when it has
     no poses."""
     from asmonc_vision.cli.bench import plane_from_msg, pose_from_msg
-    from asmonc_vision.core.evaluation import out_of_view_truth
+    from asmonc_vision.eval.evaluation import out_of_view_truth
 
     t_pose, t_plane = bagio.TOPICS['gt_camera_pose'][0], bagio.TOPICS['gt_ground_plane'][0]
     poses, planes = {}, {}
@@ -700,7 +702,7 @@ def run(args) -> int:
                              'processes': injector.done if injector is not None else []}
         if any(f.kind in MESSAGE_KINDS for f in faults):
             # pairs the faults changed may go without a result: only good ones count
-            every, affected = affected_pairs(bag, faults)
+            every, affected = affected_pairs(BagSource(bag), faults)
             with monitor.lock:
                 lost = sorted((every - affected) - set(monitor.detections))
             dropped = len(lost)

@@ -46,7 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
-from asmonc_vision.core.evaluation import json_ready
+from asmonc_vision.eval.evaluation import json_ready
 
 METHODS = ('gpod', 'sgbm')
 #: The row of GPOD's own per-frame detections, before its obstacle tracks.
@@ -69,7 +69,7 @@ def small_box_scene(height: float, range_m: float, seed: int, box_frames: int = 
         an `asmonc_vision.sim.Scenario` of clear_frames + box_frames frames.
     """
     from asmonc_vision.sim import Box, Ground, Leg, RigSettings, Scenario, Trajectory, World
-    from asmonc_vision.sim.scenarios import _obstacle_albedo, random_pavement
+    from asmonc_vision.sim.scenarios import obstacle_albedo, random_pavement
 
     rig = RigSettings()
     rng = np.random.default_rng([seed, 77])
@@ -84,7 +84,7 @@ def small_box_scene(height: float, range_m: float, seed: int, box_frames: int = 
     dist = range_m + reach
     box = Box(x=dist * math.cos(bearing), y=dist * math.sin(bearing), length=length,
               width=width, height=height, yaw_deg=yaw,
-              albedo=_obstacle_albedo(rng, ground.pavement.brightness), name='box',
+              albedo=obstacle_albedo(rng, ground.pavement.brightness), name='box',
               appear=(clear_frames - 0.5) / rig.fps)
     world = World(ground, [box], seed=seed)
     duration = (clear_frames + box_frames) / rig.fps

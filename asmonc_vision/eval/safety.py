@@ -61,7 +61,7 @@ import numpy as np
 
 from asmonc_vision.core.alarm import AlarmLevel
 from asmonc_vision.core.config import check_fields, param
-from asmonc_vision.core.evaluation import (HEIGHT_BINS_M, RANGE_BINS_M, WARNING_LEVELS,
+from asmonc_vision.eval.evaluation import (HEIGHT_BINS_M, RANGE_BINS_M, WARNING_LEVELS,
                                            FrameObstacles, alarm_levels_at, json_ready)
 
 

@@ -165,7 +165,7 @@ def render_scene(scenario) -> tuple[list, SafetyTruth]:
         scenario: a `sim.scenarios.Scenario` (e.g. from `sim.scenes.make_scene`).
     """
     from asmonc_vision.cli.bench import Frame
-    from asmonc_vision.core.evaluation import frame_from_detections
+    from asmonc_vision.eval.evaluation import frame_from_detections
     from asmonc_vision.sim.bagwriter import EPOCH_NS, stamp_ns
     from asmonc_vision.sim.footprints import world_footprints
     from asmonc_vision.sim.render import StereoRenderer
