@@ -182,7 +182,7 @@ def _write_outputs_bag(path, frames, skip=(), initialising=2, shift=0.05):
 
 
 def test_eval_of_recorded_outputs(tmp_path, capsys):
-    from asmonc_vision.cli.bench import load_frames
+    from asmonc_vision.io.frames import load_frames
 
     frames = load_frames(STATIC, 30, images=False)
     assert len(frames) == 30 and frames[0].left is None and frames[0].truth_plane is not None
@@ -217,7 +217,7 @@ def test_eval_of_recorded_outputs_scores_the_alarms(tmp_path, capsys):
     from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 
     from asmonc_vision.io import bagio
-    from asmonc_vision.cli.bench import load_frames
+    from asmonc_vision.io.frames import load_frames
 
     frames = load_frames(STATIC, 0, images=False)
     base = tmp_path / 'base'
@@ -273,6 +273,6 @@ def test_eval_refuses_bad_input(tmp_path, capsys):
 
 
 def test_threshold_px_selects_gpod_fixed_threshold():
-    from asmonc_vision.cli.bench import make_method
+    from asmonc_vision.eval.bench import make_method
     det = make_method('gpod', 1.2)
     assert det.config.threshold_mode == 'fixed' and det.config.threshold_px == 1.2

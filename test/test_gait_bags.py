@@ -3,7 +3,7 @@ of the egomotion estimator (no ROS)."""
 import numpy as np
 import pytest
 
-from asmonc_vision.cli import gait_bags
+from asmonc_vision.eval import gait_bags
 from asmonc_vision.core.gait import scoring
 
 from conftest import BAGS

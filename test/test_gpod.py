@@ -385,7 +385,7 @@ def test_calibrates_from_one_frame_when_the_walk_starts_at_once():
     tilted between them (3 degrees on walk_stop_turn, whose wearer walks from the first
     frame: obstacles everywhere in the first tracked frame): when the window's joint
     plane and its latest frame's disagree, the latest frame alone calibrates."""
-    from asmonc_vision.cli.bench import load_frames
+    from asmonc_vision.io.frames import load_frames
     from asmonc_vision.eval.evaluation import plane_error
     from conftest import BAGS
     det = GpodDetector(GpodConfig())

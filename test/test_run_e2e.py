@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from asmonc_vision.io import bagio
-from asmonc_vision.cli.run import frame_from_obstacle_array
+from asmonc_vision.io.frames import frame_from_obstacle_array
 from asmonc_vision.eval.evaluation import score_sequence
 from conftest import BAGS
 
@@ -363,7 +363,7 @@ def test_a_plain_wall_is_announced_through_the_graph(tmp_path):
 
 
 def test_recorded_egomotion_scores_against_the_true_camera_pose(static_run):
-    from asmonc_vision.cli.motion import score_recorded_egomotion
+    from asmonc_vision.eval.motion_bags import score_recorded_egomotion
     _, out = static_run
     m = score_recorded_egomotion(BAGS / 'static_obstacles', out)
     # the egomotion node keeps only the newest pair when it falls behind (a loaded

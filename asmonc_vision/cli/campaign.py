@@ -161,7 +161,8 @@ def score_walk(w: Walk, cache: Path, methods: list[str], version: str) -> dict:
          when cached), 'frames': int, 'scores': {method: SafetyScore},
          'detect_s', 'detect_cpu_s': {method: wall and CPU seconds}}.
     """
-    from asmonc_vision.cli.bench import load_frames, run_method
+    from asmonc_vision.eval.bench import run_method
+    from asmonc_vision.io.frames import load_frames
     from asmonc_vision.eval.alarm_replay import replay_alarms
     from asmonc_vision.eval.safety import score_safety
     from asmonc_vision.eval.truth import truth_from_bag

@@ -50,8 +50,9 @@ import sys
 from pathlib import Path
 
 from asmonc_vision.io import bagio
-from asmonc_vision.cli.bench import METHODS, load_frames, make_method, out_of_view_for, \
-    plane_from_msg, run_method, score_runs
+from asmonc_vision.eval.bench import (METHODS, make_method, out_of_view_for, run_method,
+                                      score_runs)
+from asmonc_vision.io.frames import load_frames, plane_from_msg
 
 STATUS_NAMES = {0: 'initialising', 1: 'tracking', 2: 'lost'}
 
@@ -132,7 +133,7 @@ def score_outputs(frames, outputs: Path, evaluation) -> dict | None:
     Raises:
         bagio.BagError: unreadable bag, or one without /obstacles.
     """
-    from asmonc_vision.cli.run import frame_from_obstacle_array
+    from asmonc_vision.io.frames import frame_from_obstacle_array
     from asmonc_vision.core.alarm import AlarmConfig
     from asmonc_vision.eval.evaluation import path_criteria, path_warnings, path_warnings_summary
 
@@ -185,7 +186,7 @@ def read_alarms(outputs: Path) -> list[dict]:
 def outputs_safety(bag: Path, frames, outputs: Path) -> dict | None:
     """The safety score (`eval.safety`) of the /alarms and /obstacles recorded by
     `asmonc run BAG --out DIR`, against BAG's truth; None when BAG has no true poses."""
-    from asmonc_vision.cli.run import frame_from_obstacle_array
+    from asmonc_vision.io.frames import frame_from_obstacle_array
     from asmonc_vision.eval.safety import score_safety
     from asmonc_vision.eval.truth import truth_from_bag
 
@@ -198,7 +199,7 @@ def outputs_safety(bag: Path, frames, outputs: Path) -> dict | None:
 
 
 def method_safety(truth, runs) -> dict | None:
-    """The safety score of an offline detector run (`cli.bench.run_method`): the alarm
+    """The safety score of an offline detector run (`eval.bench.run_method`): the alarm
     node's logic with its default settings replayed over its outputs in bag time
     (`eval.alarm_replay`), scored by `eval.safety`; None without truth."""
     from asmonc_vision.eval.alarm_replay import replay_alarms
@@ -212,7 +213,7 @@ def method_safety(truth, runs) -> dict | None:
 
 def egomotion_scores(bag: Path, outputs: Path | None, frames: int = 0) -> dict | None:
     """Egomotion errors on a bag: the estimator run offline, or the recorded /egomotion."""
-    from asmonc_vision.cli import motion
+    from asmonc_vision.eval import motion_bags as motion
 
     if outputs is not None:
         return motion.score_recorded_egomotion(bag, outputs)

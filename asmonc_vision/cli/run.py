@@ -24,7 +24,7 @@ import time
 from collections import Counter
 from pathlib import Path
 
-import numpy as np
+from asmonc_vision.io.frames import frame_from_obstacle_array
 
 from asmonc_vision import graph
 from asmonc_vision.io import bagio
@@ -170,24 +170,6 @@ class _Monitor:
             return self.infos_played
 
 
-def frame_from_obstacle_array(msg) -> FrameObstacles:
-    """An ObstacleArray (rclpy or rosbags message) to FrameObstacles."""
-    obs = list(msg.obstacles)
-    stamp = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
-    if not obs:
-        return FrameObstacles.empty(stamp)
-    return FrameObstacles(
-        stamp_ns=stamp,
-        ids=np.array([o.id for o in obs], int),
-        position=np.array([[o.position.x, o.position.y, o.position.z] for o in obs], float),
-        height=np.array([o.height for o in obs], float),
-        range=np.array([o.range for o in obs], float),
-        bearing=np.array([o.bearing for o in obs], float),
-        roi=np.array([[o.roi.x_offset, o.roi.y_offset, o.roi.width, o.roi.height]
-                      for o in obs], int),
-        confidence=np.array([o.confidence for o in obs], float))
-
-
 # --- child processes ----------------------------------------------------------------------
 
 #: the bag player's log line once it has published the whole bag (`nodes.player_node`)
@@ -293,7 +275,7 @@ def read_out_of_view_truth(bag: Path, truth: dict[int, FrameObstacles]
     """stamp_ns -> true obstacles out of view (`core.evaluation.out_of_view_truth`), from
     the bag's /ground_truth/camera_pose and /ground_truth/ground_plane; None when it has
     no poses."""
-    from asmonc_vision.cli.bench import plane_from_msg, pose_from_msg
+    from asmonc_vision.io.frames import plane_from_msg, pose_from_msg
     from asmonc_vision.eval.evaluation import out_of_view_truth
 
     t_pose, t_plane = bagio.TOPICS['gt_camera_pose'][0], bagio.TOPICS['gt_ground_plane'][0]

@@ -387,8 +387,13 @@ def run(args) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m asmonc_vision.cli.smallbox ...``: the same as ``asmonc smallbox ...``."""
-    from asmonc_vision.cli.main import main as asmonc_main
-    return asmonc_main(['smallbox', *(sys.argv[1:] if argv is None else argv)])
+    import argparse
+
+    parser = argparse.ArgumentParser(prog='asmonc smallbox', description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_arguments(parser)
+    args = parser.parse_args(argv)
+    return int(args.func(args) or 0)
 
 
 if __name__ == '__main__':
