@@ -231,7 +231,7 @@ def test_run_summary_has_the_safety_score():
     import threading
     from types import SimpleNamespace
 
-    from asmonc_vision.cli.run import read_truth, summarise
+    from asmonc_vision.replay.summary import read_truth, summarise
     from asmonc_vision.eval.truth import truth_from_bag
     from conftest import BAGS
 

@@ -469,7 +469,7 @@ def run(args) -> int:
         thr = f"_t{r['threshold_px']:g}" if (r.get('threshold_px') and args.threshold_px) else ''
         return _slug(f"{'all' if pooled_ else r['name']}_{r['method']}{thr}")
 
-    from asmonc_vision.cli.run import path_warning_lines
+    from asmonc_vision.replay.summary import path_warning_lines
     from asmonc_vision.eval.safety import format_safety
 
     for r in runs:
