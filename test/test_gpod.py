@@ -1653,12 +1653,12 @@ _NEW_GPOD_KERNELS = ('_nb_extremes', '_nb_soft_args', '_nb_arcs', '_nb_contact_b
                      '_nb_owners', '_nb_group_quantile', '_nb_extent', '_nb_runs',
                      '_nb_occluded_all', '_nb_hanging_all', '_nb_on_ground', '_nb_still',
                      '_nb_temporal', '_nb_thin')
-_NEW_MATCHING_KERNELS = ('_nb_candidates', '_nb_cells', '_nb_siblings', '_nb_link_rows')
+_NEW_MATCHING_KERNELS = ('nb_candidates', 'nb_cells', 'nb_siblings', 'nb_link_rows')
 
 
 def _need_numba():
     from asmonc_vision.core import gpod
-    from asmonc_vision.core import matching as mt
+    from asmonc_vision.core.matching import kernels as mt
     gpod._warm_up()
     if any(getattr(gpod, k) is None for k in _NEW_GPOD_KERNELS) or any(
             getattr(mt, k) is None for k in _NEW_MATCHING_KERNELS):
