@@ -1,4 +1,4 @@
-"""`asmonc eval`: the binned evaluation (core.evaluation.SequenceEvaluation), the command
+"""`asmonc eval`: the binned evaluation (eval.evaluation.SequenceEvaluation), the command
 on the committed static bag, and scoring recorded outputs (--outputs)."""
 import json
 import math

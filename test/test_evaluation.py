@@ -1,4 +1,4 @@
-"""Scoring detections against ground truth (core.evaluation)."""
+"""Scoring detections against ground truth (eval.evaluation)."""
 import numpy as np
 import pytest
 

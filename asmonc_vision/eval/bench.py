@@ -148,7 +148,7 @@ def run_method(frames: list[Frame], method: str = 'gpod', threshold_px: float | 
 
 def out_of_view_for(frames: list[Frame]) -> dict:
     """stamp_ns -> true obstacles out of view in that frame
-    (`core.evaluation.out_of_view_truth`), from the frames' truth, true poses and true
+    (`eval.evaluation.out_of_view_truth`), from the frames' truth, true poses and true
     planes; empty when they have none."""
     from asmonc_vision.eval.evaluation import out_of_view_truth
 
@@ -164,7 +164,7 @@ def score_runs(frames: list[Frame], runs: list[FrameRun], evaluation=None, warmu
     """Score a method's output against the frames' truth (frames without truth are skipped).
 
     Args:
-        evaluation: a core.evaluation.SequenceEvaluation to add to (default a new one with
+        evaluation: a eval.evaluation.SequenceEvaluation to add to (default a new one with
             `criteria`: match_radius, min_height, max_range).
         warmup: the first `warmup` latencies are left out of the latency statistics.
     Returns:

@@ -82,7 +82,7 @@ def obstacles_from_listings(truth: dict, poses: dict, planes: dict) -> list[True
     """Point-set footprints from the listed obstacles (see the module doc).
 
     Args:
-        truth: stamp_ns -> `core.evaluation.FrameObstacles` (left optical frame).
+        truth: stamp_ns -> `eval.evaluation.FrameObstacles` (left optical frame).
         poses: stamp_ns -> (R, t) of the left optical frame in the world.
         planes: stamp_ns -> the true ground plane (`core.camera.MetricPlane`).
     """
