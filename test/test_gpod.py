@@ -698,11 +698,11 @@ def test_excess_is_averaged_while_still_and_not_when_moving(scenes):
 # ---------------------------------------------------------------- small boxes (simulator)
 def small_box_detection(height, range_m, seeds, box_frames=20, clear_frames=5, config=None,
                         match_radius=0.3):
-    """GpodDetector on `asmonc_vision.cli.smallbox.small_box_scene` for each seed: the
-    tally of `asmonc_vision.cli.smallbox.score_frame` (frames with the box in view, found
+    """GpodDetector on `asmonc_vision.eval.smallbox.small_box_scene` for each seed: the
+    tally of `asmonc_vision.eval.smallbox.score_frame` (frames with the box in view, found
     within ``match_radius``, found on the box, false reports, range and bearing errors).
     The full measurement, GPOD against SGBM: ``python -m asmonc_vision.cli.smallbox``."""
-    from asmonc_vision.cli.smallbox import merge, new_tally, run_scene
+    from asmonc_vision.eval.smallbox import merge, new_tally, run_scene
 
     out = new_tally()
     for seed in seeds:
@@ -952,7 +952,7 @@ def test_a_small_box_track_is_not_ended_by_its_own_lowest_rows(monkeypatch):
     so they are no evidence that its place is free: its track bridges the gaps and it is
     found in every frame. When they counted as ground the track ended: 15 of 20. (Measured
     without the lone-face placement, which also places some of the detected frames.)"""
-    from asmonc_vision.cli import smallbox
+    from asmonc_vision.eval import smallbox
     import asmonc_vision.core.gpod as gpod_module
     monkeypatch.setattr(gpod_module, '_LONE_MAX_HEIGHT_M', 0.0)
     r = smallbox.run_scene(0.08, 5.0, 69, methods=('gpod',),
@@ -970,7 +970,7 @@ def test_a_small_box_that_appears_is_not_averaged_with_the_ground_it_stands_on(
     than 1 px (temporal_gate_px): averaged with the ground's zero, it stayed under the
     threshold for two frames and was then misplaced for three. A jump as large as 0.75 of
     the pixel's threshold restarts the average: found in every frame from the first."""
-    from asmonc_vision.cli import smallbox
+    from asmonc_vision.eval import smallbox
     new = smallbox.run_scene(0.08, 5.0, 49, methods=('gpod',))
     assert new['gpod/frame']['found'] == 20 and new['gpod']['false'] == 0
     # the old count without the lone-face placement (it also places two misplaced frames)
@@ -990,7 +990,7 @@ def test_a_low_box_seen_by_one_silhouette_is_placed_along_the_face_the_image_sho
     face shows as two parallel intensity edges, the contact line and the top outline:
     followed from the one foot (`lone_face_points`) it places the box within 0.3 m in 19
     of 20 frames, with no false report. With the search off: 0 of 20."""
-    from asmonc_vision.cli import smallbox
+    from asmonc_vision.eval import smallbox
     import asmonc_vision.core.gpod as gpod_module
     new = smallbox.run_scene(0.08, 5.0, 162, methods=('gpod',))['gpod']
     assert new['box_frames'] == 20 and new['found'] >= 18 and new['false'] == 0

@@ -30,8 +30,8 @@ the walk model run on it; the 0.5 s-ahead prediction against "hold the last valu
 the straight walks (Test5) within the reference walking bouts, the daily-living walk
 (Test11) likewise, with two references (an oracle-aided benchmark, not a bound: a
 Fourier-combiner Kalman filter given each bout's own stride frequency and start; and the
-upper bound of the model family, a non-causal fit of each bout); walk starts/stops against the reference
-bouts (INDIP MicroWB: precision and recall within 0.5 s and 1 s); the tracked step
+upper bound of the model family, a non-causal fit of each bout); walk starts/stops against
+the reference bouts (INDIP MicroWB: precision and recall within 0.5 s and 1 s); the tracked step
 frequency against the reference cadence.
 
 figs: the paper's Figs. 13-15 redrawn from these runs (docs/gait_fig13.png, ...).

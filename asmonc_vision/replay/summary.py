@@ -168,7 +168,8 @@ def print_summary(s: dict, console: Console) -> None:
                 continue
             verdict = 'DETECTED' if o['detected'] else 'MISSED'
             p(f"  obstacle {oid:>3}: {o['height_m'] * 100:5.1f} cm, nearest "
-              f"{o['min_range_m']:4.1f} m — {verdict} in {o['frames_detected']}/{o['frames_eligible']} frames")
+              f"{o['min_range_m']:4.1f} m — {verdict} in "
+              f"{o['frames_detected']}/{o['frames_eligible']} frames")
         recall = gt['recall']
         p(f"recall per frame: {gt['detected']}/{gt['eligible']}"
           + (f' = {recall:.1%}' if gt['eligible'] else ''))
