@@ -18,7 +18,6 @@ MAX_FUNCTION_LINES = 100
 PENDING_SPLIT = ('core/gpod', 'core/gait/')
 #: functions over MAX_FUNCTION_LINES outside PENDING_SPLIT, to be split; only shrinks
 LONG_FUNCTIONS_PENDING = {
-    ('core/ground_plane.py', 'fit_ground_plane'),
     ('eval/safety.py', 'score_safety'),
 }
 #: what core/ must not import: ROS, messages, bags, and the layers above it
