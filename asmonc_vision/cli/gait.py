@@ -81,5 +81,8 @@ def run(args) -> int:
     if args.gait_command == 'figs':
         from asmonc_vision.eval.gait_figures import figures_command
         return figures_command(args.out, args.data)
+    if args.gait_command == 'real':
+        from asmonc_vision.eval.gait_real import real_command
+        return real_command(args.data, args.json)
     from asmonc_vision.eval.gait_walks import gait_command
     return gait_command(args)

@@ -6,8 +6,8 @@ from pathlib import Path
 import numpy as np
 
 from asmonc_vision.core.gait import GaitConfig, GaitTracker
-from asmonc_vision.eval.gait_walks import (DEFAULT_DATA, HORIZON, REAL_SIGMA, load_real,
-                                           make_case, real_config, run_tracker)
+from asmonc_vision.eval.gait_real import REAL_SIGMA, load_real, real_config
+from asmonc_vision.eval.gait_walks import DEFAULT_DATA, HORIZON, make_case, run_tracker
 
 
 def draw_figures(out: Path, data: Path = DEFAULT_DATA) -> list[Path]:
