@@ -285,7 +285,7 @@ def evaluate_real(data: Path = DEFAULT_DATA, config: GaitConfig | None = None,
         sel = [r for r in rows if f' {test} ' in r['name'] and r['n']]
         if not sel:
             continue
-        cat = lambda k: np.concatenate([r[k] for r in sel])  # noqa: E731
+        cat = lambda k, sel=sel: np.concatenate([r[k] for r in sel])  # noqa: E731
         p, h = scoring.rms(cat('pred_err')), scoring.rms(cat('hold_err'))
         ps, hs = scoring.rms(cat('pred_err_steady')), scoring.rms(cat('hold_err_steady'))
         fe = cat('fit_err')
@@ -368,7 +368,8 @@ def print_real(res: dict, file=sys.stdout) -> None:
         if x['cadence']:
             c = np.array([[d['tracked_hz'], d['reference_hz']] for d in x['cadence']])
             e = c[:, 0] / c[:, 1] - 1.0
-            p(f'  tracked step frequency vs reference cadence: median error {100 * np.median(e):+.0f}%, '
+            p('  tracked step frequency vs reference cadence: median error '
+              f'{100 * np.median(e):+.0f}%, '
               f'{int(np.sum(np.abs(e) <= 0.1))}/{e.size} bouts within 10 %')
 
 
