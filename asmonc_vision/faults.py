@@ -239,24 +239,19 @@ def _pitch_by(msg, angle: float) -> None:
     q.w, q.x, q.y, q.z = (w * c - y * s, x * c - z * s, y * c + w * s, z * c + x * s)
 
 
-def affected_pairs(bag, faults: list[Fault]) -> tuple[set[int], set[int]]:
+def affected_pairs(src, faults: list[Fault]) -> tuple[set[int], set[int]]:
     """(every left image's header stamp, the stamps of the pairs ``faults`` change or
-    leave out), in ns. A pair is affected when any of its images or camera_infos is
-    changed or left out: it may go without a result. A duplicated message still reaches
-    the graph unchanged: its pair counts as good. A damaged bag is read up to the damage."""
-    from asmonc_vision.bagplay import BagError, BagSource
-
-    src = BagSource(bag)
+    leave out), in ns, of the open bag ``src`` (an `asmonc_vision.io.bagplay.BagSource`).
+    A pair is affected when any of its images or camera_infos is changed or left out: it
+    may go without a result. A duplicated message still reaches the graph unchanged: its
+    pair counts as good. A damaged bag is read up to the damage."""
     plan = FaultPlan(faults, src.info.start_ns)
     selected = {t: src.info.topics[t].msgtype for t in STEREO if t in src.info.topics}
     every: set[int] = set()
     out: set[int] = set()
-    try:
-        for m in src.messages(selected):
-            if m.topic == LEFT_IMAGE:
-                every.add(_stamp_ns(m.topic, m.data))
-            if plan and m.data not in plan.apply(m.topic, m.data, m.timestamp):
-                out.add(_stamp_ns(m.topic, m.data))
-    except BagError:
-        pass
+    for m in src.messages_before_damage(selected):
+        if m.topic == LEFT_IMAGE:
+            every.add(_stamp_ns(m.topic, m.data))
+        if plan and m.data not in plan.apply(m.topic, m.data, m.timestamp):
+            out.add(_stamp_ns(m.topic, m.data))
     return every, out

@@ -13,7 +13,7 @@ import time
 import numpy as np
 import pytest
 
-from asmonc_vision import bagio
+from asmonc_vision.io import bagio
 from asmonc_vision.core.alarm import AlarmConfig
 from asmonc_vision.core.audio import read_wav
 from conftest import BAGS

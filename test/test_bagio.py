@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
 
-from asmonc_vision import bagio
+from asmonc_vision.io import bagio
 
 
 def test_custom_messages_round_trip_through_an_mcap_bag(tmp_path):

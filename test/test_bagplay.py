@@ -1,4 +1,4 @@
-"""Bag reading, topic planning and replay timing without ROS (asmonc_vision.bagplay)."""
+"""Bag reading, topic planning and replay timing without ROS (asmonc_vision.io.bagplay)."""
 from __future__ import annotations
 
 import dataclasses
@@ -14,9 +14,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import test_bagplay_helpers as h  # noqa: E402
 
-from asmonc_vision.bagio import typestore  # noqa: E402
-from asmonc_vision.bagplay import (BagError, BagSource, BagTopic, PlayerConfig,  # noqa: E402
-                                   ReplaySchedule, compressed_to_image_cdr, plan_topics)
+from asmonc_vision.io.bagio import compressed_to_image_cdr, typestore  # noqa: E402
+from asmonc_vision.io.bagplay import (BagError, BagSource, BagTopic, PlayerConfig,  # noqa: E402
+                                      ReplaySchedule, plan_topics)
 from asmonc_vision.core.config import to_dict  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent

@@ -16,7 +16,7 @@ import pytest
 
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
-from asmonc_vision.bagio import TOPICS, typestore  # noqa: E402
+from asmonc_vision.io.bagio import TOPICS, typestore  # noqa: E402
 
 LEFT = TOPICS['left_image'][0]
 LEFT_INFO = TOPICS['left_info'][0]

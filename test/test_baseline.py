@@ -4,7 +4,7 @@ import pytest
 
 from asmonc_vision.core.baseline import SgbmBaseline, SgbmConfig, fit_disparity_plane
 from asmonc_vision.core.camera import StereoCamera
-from asmonc_vision.core.evaluation import frame_from_detections, score_sequence
+from asmonc_vision.eval.evaluation import frame_from_detections, score_sequence
 from conftest import BAGS
 
 
@@ -80,7 +80,7 @@ def test_finds_a_tall_box_where_it_is():
 
 
 def test_no_obstacles_on_a_clear_pavement():
-    from asmonc_vision.cli.bench import load_pairs
+    from asmonc_vision.io.frames import load_pairs
     base = SgbmBaseline()
     found = 0
     for left, right, cam in load_pairs(BAGS / 'clear_static', limit=8):

@@ -3,7 +3,8 @@ import json
 
 import numpy as np
 
-from asmonc_vision.cli.bench import load_pairs, render_frames, time_detector
+from asmonc_vision.eval.bench import render_frames, time_detector
+from asmonc_vision.io.frames import load_pairs
 from asmonc_vision.cli.main import main
 from conftest import BAGS
 
@@ -33,7 +34,7 @@ def test_bench_prints_both_methods_at_both_sizes(tmp_path, capsys):
 
 
 def test_fastest_pass_takes_each_frames_minimum():
-    from asmonc_vision.cli.bench import FrameRun, fastest_pass
+    from asmonc_vision.eval.bench import FrameRun, fastest_pass
     a = [FrameRun(1, 'tracking', 'A1', None, 5.0, {'edges': 1.0}, 4.0),
          FrameRun(2, 'tracking', 'A2', None, 9.0, {'edges': 2.0}, 8.0)]
     b = [FrameRun(1, 'tracking', 'B1', None, 6.0, {'edges': 0.5}, 3.0),

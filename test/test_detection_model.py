@@ -1,4 +1,4 @@
-"""The detection model of Molton et al. (1998), Sec. 2.2-2.3 (core.detection_model), and
+"""The detection model of Molton et al. (1998), Sec. 2.2-2.3 (eval.detection_model), and
 `asmonc fig5` (cli.fig5)."""
 import itertools
 import math
@@ -8,7 +8,7 @@ import pytest
 from scipy import integrate
 
 from asmonc_vision.core.camera import MetricPlane, StereoCamera, plane_disparity, plane_from_metric
-from asmonc_vision.core.detection_model import (PAPER_RIG, ModelRig, disparity_excess,
+from asmonc_vision.eval.detection_model import (PAPER_RIG, ModelRig, disparity_excess,
                                                 edge_pixel_excesses, edge_span_rows,
                                                 exact_disparity_excess, excess_row_gradient,
                                                 fig5_curves, min_height_for,
@@ -169,7 +169,7 @@ def test_cli_model_table_and_png(tmp_path, capsys):
 def test_tiny_empirical_run(tmp_path):
     """1 seed, 2 heights, 1 range, 2 frames: completes and gives rates in [0, 1]. The
     values depend on the detector (improved elsewhere) and are not asserted."""
-    from asmonc_vision.cli.fig5 import empirical_report, plot_empirical, run_empirical
+    from asmonc_vision.eval.fig5 import empirical_report, plot_empirical, run_empirical
 
     keep = {}
     res = run_empirical(seeds=1, frames=2, heights_m=[0.05, 0.2], ranges_m=[3.0], jobs=1,

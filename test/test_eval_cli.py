@@ -1,4 +1,4 @@
-"""`asmonc eval`: the binned evaluation (core.evaluation.SequenceEvaluation), the command
+"""`asmonc eval`: the binned evaluation (eval.evaluation.SequenceEvaluation), the command
 on the committed static bag, and scoring recorded outputs (--outputs)."""
 import json
 import math
@@ -8,7 +8,7 @@ import pytest
 
 from asmonc_vision.cli.main import main
 from asmonc_vision.core.camera import MetricPlane
-from asmonc_vision.core.evaluation import (FrameObstacles, SequenceEvaluation, match_frame,
+from asmonc_vision.eval.evaluation import (FrameObstacles, SequenceEvaluation, match_frame,
                                            plane_error)
 from conftest import BAGS
 
@@ -141,7 +141,7 @@ def _write_outputs_bag(path, frames, skip=(), initialising=2, shift=0.05):
     further away) and /ground_plane (the true plane, INITIALISING for the first frames)."""
     from rosbags.rosbag2 import StoragePlugin, Writer
 
-    from asmonc_vision import bagio
+    from asmonc_vision.io import bagio
     from asmonc_vision.core.camera import plane_from_metric
 
     ts = bagio.typestore()
@@ -182,7 +182,7 @@ def _write_outputs_bag(path, frames, skip=(), initialising=2, shift=0.05):
 
 
 def test_eval_of_recorded_outputs(tmp_path, capsys):
-    from asmonc_vision.cli.bench import load_frames
+    from asmonc_vision.io.frames import load_frames
 
     frames = load_frames(STATIC, 30, images=False)
     assert len(frames) == 30 and frames[0].left is None and frames[0].truth_plane is not None
@@ -216,8 +216,8 @@ def test_eval_of_recorded_outputs_scores_the_alarms(tmp_path, capsys):
     time, an alarm that comes a second late does not."""
     from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 
-    from asmonc_vision import bagio
-    from asmonc_vision.cli.bench import load_frames
+    from asmonc_vision.io import bagio
+    from asmonc_vision.io.frames import load_frames
 
     frames = load_frames(STATIC, 0, images=False)
     base = tmp_path / 'base'
@@ -273,6 +273,6 @@ def test_eval_refuses_bad_input(tmp_path, capsys):
 
 
 def test_threshold_px_selects_gpod_fixed_threshold():
-    from asmonc_vision.cli.bench import make_method
+    from asmonc_vision.eval.bench import make_method
     det = make_method('gpod', 1.2)
     assert det.config.threshold_mode == 'fixed' and det.config.threshold_px == 1.2

@@ -1,8 +1,8 @@
-"""Scoring detections against ground truth (core.evaluation)."""
+"""Scoring detections against ground truth (eval.evaluation)."""
 import numpy as np
 import pytest
 
-from asmonc_vision.core.evaluation import FrameObstacles, score_sequence
+from asmonc_vision.eval.evaluation import FrameObstacles, score_sequence
 
 
 def _frame(stamp, rows):
@@ -72,7 +72,7 @@ def test_a_report_of_a_true_obstacle_that_has_left_the_view_is_remembered_not_fa
     """Truth lists obstacles in view only; carried by the true poses, an obstacle listed
     earlier explains a later report at its place (remembered), but nothing else does."""
     from asmonc_vision.core.camera import MetricPlane
-    from asmonc_vision.core.evaluation import out_of_view_truth
+    from asmonc_vision.eval.evaluation import out_of_view_truth
 
     plane = MetricPlane(normal_up=np.array([0.0, -1.0, 0.0]), height=1.2)
     s = 100_000_000                                       # 10 Hz, ns
@@ -128,7 +128,7 @@ RANGES = [4.5, 4.0, 3.5, 3.0, 2.5, 2.0, 1.5, 1.2]
 
 
 def test_alarm_level_in_force_at_each_frame():
-    from asmonc_vision.core.evaluation import alarm_levels_at
+    from asmonc_vision.eval.evaluation import alarm_levels_at
     st = [T0 + k * DT for k in range(6)]
     # starting-up FAULT stamped on another clock (wall time), then CLEAR and CAUTION on frames
     alarms = [_alarm(1_800_000_000_000_000_000, 4), _alarm(st[1], 0), _alarm(st[3], 1),
@@ -140,7 +140,7 @@ def test_alarm_level_in_force_at_each_frame():
 
 
 def test_an_obstacle_warned_before_it_comes_onto_the_path():
-    from asmonc_vision.core.evaluation import path_warnings, path_warnings_summary
+    from asmonc_vision.eval.evaluation import path_warnings, path_warnings_summary
     truth = _approach(RANGES)
     alarms = [_alarm(T0, 0), _alarm(T0 + 2 * DT, 1), _alarm(T0 + 5 * DT, 2)]  # CAUTION at 3.5 m
     (o,) = path_warnings(truth, alarms)
@@ -152,7 +152,7 @@ def test_an_obstacle_warned_before_it_comes_onto_the_path():
 
 
 def test_an_obstacle_warned_late_or_never():
-    from asmonc_vision.core.evaluation import path_warnings, path_warnings_summary
+    from asmonc_vision.eval.evaluation import path_warnings, path_warnings_summary
     truth = _approach(RANGES)
     # the warning comes at 1.5 m: two frames on the path (2.5, 2.0 m) went unwarned
     (late,) = path_warnings(truth, [_alarm(T0, 0), _alarm(T0 + 6 * DT, 3)])
@@ -172,7 +172,7 @@ def test_an_obstacle_warned_late_or_never():
 
 def test_only_obstacles_in_the_corridor_high_enough_count():
     from asmonc_vision.core.alarm import AlarmConfig
-    from asmonc_vision.core.evaluation import path_warnings
+    from asmonc_vision.eval.evaluation import path_warnings
     assert path_warnings(_approach(RANGES, lateral=0.8), []) == []      # beside the path
     assert path_warnings(_approach(RANGES, height=0.03), []) == []      # too low
     assert len(path_warnings(_approach(RANGES, height=-0.15), [])) == 1  # a drop counts
@@ -184,7 +184,7 @@ def test_only_obstacles_in_the_corridor_high_enough_count():
 def test_an_obstacle_walked_up_to_counts_at_its_remembered_place():
     """Out of view (below the image) it is taken at its remembered place: silence there
     counts as unwarned."""
-    from asmonc_vision.core.evaluation import path_warnings
+    from asmonc_vision.eval.evaluation import path_warnings
     seen = [4.0, 3.0, 2.4, None, None]
     truth = _approach(seen)
     remembered = {s: (_frame(s, [(7, 0.0, 1.0, r, 0.2, r, 0.0, (0, 0, 0, 0))]) if r else

@@ -433,7 +433,7 @@ def test_settings_are_checked():
 
 # ------------------------------------------------------------------ the stage
 def test_perception_with_the_map_off_is_the_detector():
-    from asmonc_vision.cli.bench import load_frames
+    from asmonc_vision.io.frames import load_frames
     from asmonc_vision.core.gpod import GpodDetector
     from asmonc_vision.core.perception import Perception
     from conftest import BAGS
@@ -451,7 +451,7 @@ def test_perception_with_the_map_off_is_the_detector():
 
 
 def test_perception_with_the_map_reports_confirmed_obstacles():
-    from asmonc_vision.cli.bench import load_frames
+    from asmonc_vision.io.frames import load_frames
     from asmonc_vision.core.perception import Perception
     from conftest import BAGS
 

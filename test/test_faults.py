@@ -6,7 +6,7 @@ import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import CameraInfo, Image, Imu
 
-from asmonc_vision.bagio import ImageFormatError
+from asmonc_vision.io.bagio import ImageFormatError
 from asmonc_vision.faults import KINDS, FaultPlan, parse_faults
 from asmonc_vision.nodes.conversions import image_msg_to_gray, stereo_camera_from_infos
 
@@ -116,7 +116,7 @@ def test_broken_camera_infos_are_refused(kind, topic):
 
 
 def test_imu_jump_turns_pitch_by_the_angle():
-    from asmonc_vision.bagio import imu_to_rpy_var
+    from asmonc_vision.io.bagio import imu_to_rpy_var
     from asmonc_vision.core.gait.rotations import rpy_to_quaternion
     m = Imu()
     q = rpy_to_quaternion(np.array([0.05, 0.3, 1.0]))   # x, y, z, w

@@ -5,7 +5,7 @@ import os
 import subprocess
 import sys
 
-from asmonc_vision import bagio
+from asmonc_vision.io import bagio
 from asmonc_vision.core.alarm import TEXT_NO_DATA, TEXT_STARTING
 from conftest import BAGS
 

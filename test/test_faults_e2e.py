@@ -12,7 +12,7 @@ import sys
 
 import pytest
 
-from asmonc_vision import bagio
+from asmonc_vision.io import bagio
 from asmonc_vision.core.alarm import TEXT_NO_DATA
 from conftest import BAGS
 

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from asmonc_vision.cli import gait as ev
+from asmonc_vision.eval import gait_walks as ev
 from asmonc_vision.core.gait import GaitConfig, GaitTracker, scoring
 from asmonc_vision.core.gait.attitude import complementary_filter, decimate_to
 from asmonc_vision.core.gait.detector import WalkDetector, fit_walk, stop_amplitudes

@@ -3,7 +3,7 @@ of the egomotion estimator (no ROS)."""
 import numpy as np
 import pytest
 
-from asmonc_vision.cli import gait_bags
+from asmonc_vision.eval import gait_bags
 from asmonc_vision.core.gait import scoring
 
 from conftest import BAGS
@@ -57,7 +57,7 @@ def _copy_without(src, dst, drop):
     """A copy of the bag `src` at `dst` without the topics whose names start with `drop`."""
     from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 
-    from asmonc_vision import bagio
+    from asmonc_vision.io import bagio
 
     ts = bagio.typestore()
     with Reader(src) as r, Writer(dst, version=9, storage_plugin=StoragePlugin.MCAP) as w:
@@ -81,7 +81,7 @@ def test_a_bag_without_inclinometer_is_refused(tmp_path):
 
 
 def test_a_missing_bag_is_refused(tmp_path):
-    from asmonc_vision import bagio
+    from asmonc_vision.io import bagio
 
     with pytest.raises(bagio.BagError):
         gait_bags.load_bag(tmp_path / 'nothing_here')

@@ -15,7 +15,7 @@ from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from sensor_msgs.msg import Imu  # noqa: E402
 
-from asmonc_vision.cli import gait as ev  # noqa: E402
+from asmonc_vision.eval import gait_walks as ev  # noqa: E402
 from asmonc_vision.core.gait.rotations import (matrix_to_quaternion,  # noqa: E402
                                                quaternion_to_matrix)
 from asmonc_vision.nodes.common import RESULT_QOS, SENSOR_QOS  # noqa: E402

@@ -5,7 +5,7 @@ measures at length; the data must be there (it ships beside the project)."""
 import numpy as np
 import pytest
 
-from asmonc_vision.cli import gait
+from asmonc_vision.eval import gait_real as gait
 from asmonc_vision.core.gait import scoring
 
 

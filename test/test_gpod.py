@@ -391,8 +391,8 @@ def test_calibrates_from_one_frame_when_the_walk_starts_at_once():
     tilted between them (3 degrees on walk_stop_turn, whose wearer walks from the first
     frame: obstacles everywhere in the first tracked frame): when the window's joint
     plane and its latest frame's disagree, the latest frame alone calibrates."""
-    from asmonc_vision.cli.bench import load_frames
-    from asmonc_vision.core.evaluation import plane_error
+    from asmonc_vision.io.frames import load_frames
+    from asmonc_vision.eval.evaluation import plane_error
     from conftest import BAGS
     det = GpodDetector(GpodConfig())
     first = None
@@ -702,11 +702,11 @@ def test_excess_is_averaged_while_still_and_not_when_moving(scenes):
 # ---------------------------------------------------------------- small boxes (simulator)
 def small_box_detection(height, range_m, seeds, box_frames=20, clear_frames=5, config=None,
                         match_radius=0.3):
-    """GpodDetector on `asmonc_vision.cli.smallbox.small_box_scene` for each seed: the
-    tally of `asmonc_vision.cli.smallbox.score_frame` (frames with the box in view, found
+    """GpodDetector on `asmonc_vision.eval.smallbox.small_box_scene` for each seed: the
+    tally of `asmonc_vision.eval.smallbox.score_frame` (frames with the box in view, found
     within ``match_radius``, found on the box, false reports, range and bearing errors).
     The full measurement, GPOD against SGBM: ``python -m asmonc_vision.cli.smallbox``."""
-    from asmonc_vision.cli.smallbox import merge, new_tally, run_scene
+    from asmonc_vision.eval.smallbox import merge, new_tally, run_scene
 
     out = new_tally()
     for seed in seeds:
@@ -960,7 +960,7 @@ def test_a_small_box_track_is_not_ended_by_its_own_lowest_rows(monkeypatch):
     so they are no evidence that its place is free: its track bridges the gaps and it is
     found in every frame. When they counted as ground the track ended: 15 of 20. (Measured
     without the lone-face placement, which also places some of the detected frames.)"""
-    from asmonc_vision.cli import smallbox
+    from asmonc_vision.eval import smallbox
     monkeypatch.setattr(gpod_faces, '_LONE_MAX_HEIGHT_M', 0.0)
     r = smallbox.run_scene(0.08, 5.0, 69, methods=('gpod',),
                            gpod_config=GpodConfig(track_sure_hits=0))
@@ -977,7 +977,7 @@ def test_a_small_box_that_appears_is_not_averaged_with_the_ground_it_stands_on(
     than 1 px (temporal_gate_px): averaged with the ground's zero, it stayed under the
     threshold for two frames and was then misplaced for three. A jump as large as 0.75 of
     the pixel's threshold restarts the average: found in every frame from the first."""
-    from asmonc_vision.cli import smallbox
+    from asmonc_vision.eval import smallbox
     new = smallbox.run_scene(0.08, 5.0, 49, methods=('gpod',))
     assert new['gpod/frame']['found'] == 20 and new['gpod']['false'] == 0
     # the old count without the lone-face placement (it also places two misplaced frames)
@@ -996,7 +996,7 @@ def test_a_low_box_seen_by_one_silhouette_is_placed_along_the_face_the_image_sho
     face shows as two parallel intensity edges, the contact line and the top outline:
     followed from the one foot (`lone_face_points`) it places the box within 0.3 m in 19
     of 20 frames, with no false report. With the search off: 0 of 20."""
-    from asmonc_vision.cli import smallbox
+    from asmonc_vision.eval import smallbox
     new = smallbox.run_scene(0.08, 5.0, 162, methods=('gpod',))['gpod']
     assert new['box_frames'] == 20 and new['found'] >= 18 and new['false'] == 0
     assert max(abs(e) for e in new['range_err']) <= 0.05
@@ -1478,7 +1478,7 @@ def test_the_plane_does_not_creep_onto_the_ground_beyond_a_kerb_down():
     degrees and 12 cm within 0.5 s, and the pavement before the kerb stood 20 cm up
     (a WARNING "obstacle, 2 metres" in the node graph). Gated around the plane the rig
     had when it stopped, the plane stays on the ground the wearer stands on."""
-    from asmonc_vision.core.evaluation import plane_error
+    from asmonc_vision.eval.evaluation import plane_error
     from asmonc_vision.sim import RigSettings, StereoRenderer, simulate_frame
     from asmonc_vision.sim.scenarios import step_down
 
@@ -1510,7 +1510,7 @@ def test_the_plane_predicted_through_the_motion_stays_on_the_ground_stood_on():
     1.5 metres" in the node graph. With the camera's motion given, the plane is carried
     through it, the refits are gated 5 cm around the prediction and limited to 2 degrees
     and 5 cm from it, and the plane stays on the ground the wearer stands on."""
-    from asmonc_vision.core.evaluation import plane_error
+    from asmonc_vision.eval.evaluation import plane_error
     from asmonc_vision.sim import RigSettings, StereoRenderer, simulate_frame
     from asmonc_vision.sim.scenarios import step_down
 
@@ -1550,7 +1550,7 @@ def test_a_wrong_motion_does_not_take_the_plane_off_the_ground(scenario, error_m
     the plane before the motion is accepted as well. Standing still, a motion (8 cm
     off here) is not used at all: carried through it, the plane the rig stopped with
     stayed off the ground for as long as the wearer stood (a drop in every frame)."""
-    from asmonc_vision.core.evaluation import plane_error
+    from asmonc_vision.eval.evaluation import plane_error
     from asmonc_vision.sim import StereoRenderer, make_scenario, simulate_frame
 
     sc = make_scenario(scenario, seed=3, duration=3.0)
@@ -1659,7 +1659,7 @@ _NEW_GPOD_KERNELS = ('nb_extremes', 'nb_soft_args', 'nb_arcs', 'nb_contact_bound
                      'nb_owners', 'nb_group_quantile', 'nb_extent', 'nb_runs',
                      'nb_occluded_all', 'nb_hanging_all', 'nb_on_ground', 'nb_still',
                      'nb_temporal', 'nb_thin')
-_NEW_MATCHING_KERNELS = ('_nb_candidates', '_nb_cells', '_nb_siblings', '_nb_link_rows')
+_NEW_MATCHING_KERNELS = ('nb_candidates', 'nb_cells', 'nb_siblings', 'nb_link_rows')
 #: the modules of the gpod kernels
 _GPOD = (gk, gkg)
 

@@ -104,9 +104,9 @@ def test_setup_installs_the_launch_file_and_package_xml_depends_on_launch_ros():
 
 
 def test_asmonc_run_starts_the_graph_nodes():
-    from asmonc_vision.cli import run
-    assert run.NodeSpec is graph.GraphNode
-    assert 'nodes_for' in Path(run.__file__).read_text()
+    from asmonc_vision.replay import session
+    assert session.GraphNode is graph.GraphNode
+    assert 'nodes_for' in Path(session.__file__).read_text()
 
 
 def test_launch_file_builds_the_graph(monkeypatch, tmp_path):

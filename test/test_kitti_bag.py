@@ -1,4 +1,4 @@
-"""`asmonc images-bag`: a contract bag from a folder of stereo pairs (cli/images_bag.py).
+"""`asmonc images-bag`: a contract bag from a folder of stereo pairs (io/images_bag.py).
 
 A small KITTI-like folder (colour images, calib.txt, times.txt) written here is turned
 into a bag and read back: the topic contract's four topics per pair at one stamp, mono8
@@ -12,8 +12,8 @@ import cv2
 import numpy as np
 import pytest
 
-from asmonc_vision import bagio
-from asmonc_vision.cli.images_bag import folder_rate, write_images_bag
+from asmonc_vision.io import bagio
+from asmonc_vision.io.images_bag import folder_rate, write_images_bag
 from asmonc_vision.cli.main import main as asmonc_main
 
 F, CX, CY = 700.0, 40.0, 30.0

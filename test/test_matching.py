@@ -267,8 +267,8 @@ def test_numba_kernels_equal_the_numpy_path(plane_pair, monkeypatch, shuffle):
         c = Candidates(c.left[o], c.right[o], c.d[o])
     fast_links = support_links(el, er, c, 0.5, 80.0, support_radius=3.0)
     fast = select_matches(c, fast_links, el, er, iterations=3)
-    for name in ('_nb_pairs', '_nb_group', '_nb_select'):
-        monkeypatch.setattr(mt, name, None)
+    for name in ('nb_pairs', 'nb_group', 'nb_select'):
+        monkeypatch.setattr(mt.kernels, name, None)
     links = support_links(el, er, c, 0.5, 80.0, support_radius=3.0)
     for f in ('cand', 'start', 'pair_link', 'pair_cand', 'pair_edge', 'pair_right', 'weight'):
         np.testing.assert_array_equal(getattr(fast_links, f), getattr(links, f))

@@ -4,7 +4,7 @@ import pytest
 
 from asmonc_vision.core.motion import METHODS, Correspondences, RansacSettings, estimate_motion
 from asmonc_vision.core.motion.estimators import ransac, sample_indices
-from asmonc_vision.core.motion.experiment import (PAPER_TABLES, TrialSettings, default_ransac,
+from asmonc_vision.eval.motion_experiment import (PAPER_TABLES, TrialSettings, default_ransac,
                                                   make_trial, motion_errors, run_level,
                                                   run_minimal_level)
 

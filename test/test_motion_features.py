@@ -3,7 +3,7 @@ import cv2
 import numpy as np
 import pytest
 
-from asmonc_vision.core.motion.experiment import (CORNER_KINDS, corner_localisation,
+from asmonc_vision.eval.motion_experiment import (CORNER_KINDS, corner_localisation,
                                                   render_corner)
 from asmonc_vision.core.motion.features import (corner_strength, detect_corners, match_stereo,
                                                 match_temporal, patches, shi_tomasi_corners,

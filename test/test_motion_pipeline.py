@@ -4,7 +4,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from asmonc_vision.cli.motion import load_sequence
+from asmonc_vision.eval.motion_bags import load_sequence
 from asmonc_vision.core.motion import (FIRST, IMPLAUSIBLE, NO_MOTION, OK, TOO_FEW_FEATURES,
                                        TOO_FEW_MATCHES, EgomotionConfig, EgomotionEstimator)
 from asmonc_vision.core.motion.geometry import (compose, invert, rotation_error_components,

@@ -16,8 +16,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import test_bagplay_helpers as h  # noqa: E402
 from test_bagplay_helpers import ros_context  # noqa: E402,F401 - fixture
 
-from asmonc_vision.bagio import typestore  # noqa: E402
-from asmonc_vision.bagplay import BagError, PlayerConfig  # noqa: E402
+from asmonc_vision.io.bagio import typestore  # noqa: E402
+from asmonc_vision.io.bagplay import BagError, PlayerConfig  # noqa: E402
 
 TYPES = {h.LEFT: 'sensor_msgs/msg/Image', h.LEFT_INFO: 'sensor_msgs/msg/CameraInfo',
          h.IMU: 'sensor_msgs/msg/Imu', h.OBSTACLES: 'asmonc_vision_msgs/msg/ObstacleArray'}

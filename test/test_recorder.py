@@ -257,7 +257,7 @@ def test_process_refuses_existing_bag(tmp_path):
 
 def test_round_trip_play_record(tmp_path, ros_context):
     """Play a bag, record it: the same messages come back (bytes, per-topic order)."""
-    from asmonc_vision.bagplay import PlayerConfig
+    from asmonc_vision.io.bagplay import PlayerConfig
     from asmonc_vision.nodes.player_node import BagPlayerNode
 
     msgs = h.sample_messages(5) + [

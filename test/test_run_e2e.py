@@ -10,9 +10,9 @@ import sys
 import numpy as np
 import pytest
 
-from asmonc_vision import bagio
-from asmonc_vision.cli.run import frame_from_obstacle_array
-from asmonc_vision.core.evaluation import score_sequence
+from asmonc_vision.io import bagio
+from asmonc_vision.io.frames import frame_from_obstacle_array
+from asmonc_vision.eval.evaluation import score_sequence
 from conftest import BAGS
 
 
@@ -148,7 +148,7 @@ def test_missing_right_images_are_not_announced_as_a_fault(tmp_path):
 def test_the_alarm_timeout_comes_from_the_params_files(tmp_path):
     """`asmonc run` stops the alarm node after half its timeout of silence at the end:
     the timeout is the alarm node's own (default, or the last params file setting it)."""
-    from asmonc_vision.cli.run import _alarm_timeout
+    from asmonc_vision.replay.params import alarm_timeout as _alarm_timeout
     from asmonc_vision.core.alarm import AlarmConfig
     assert _alarm_timeout([]) == AlarmConfig().timeout
     a, b, bad = tmp_path / 'a.yaml', tmp_path / 'b.yaml', tmp_path / 'bad.yaml'
@@ -162,7 +162,7 @@ def test_the_alarm_timeout_comes_from_the_params_files(tmp_path):
 
 
 def test_the_gait_timeout_comes_from_the_params_files(tmp_path):
-    from asmonc_vision.cli.run import _gait_timeout
+    from asmonc_vision.replay.params import gait_timeout as _gait_timeout
     from asmonc_vision.nodes.gait_node import GaitNodeConfig
     assert _gait_timeout([]) == GaitNodeConfig().timeout
     a = tmp_path / 'a.yaml'
@@ -207,7 +207,7 @@ def test_the_gait_node_is_stopped_after_its_last_state_not_before():
     harness is doing (its own thread)."""
     import time
 
-    from asmonc_vision.cli.run import _GaitStopper
+    from asmonc_vision.replay.children import GaitStopper as _GaitStopper
     gait, player, monitor = _FakeChild(), _FakeChild(), _FakeMonitor()
     stopper = _GaitStopper(gait, player, monitor, n_imu=100, quiet=0.2)
     stopper.start()
@@ -338,7 +338,7 @@ def test_a_plain_wall_is_announced_through_the_graph(tmp_path):
     no vertical edges, so only the ground it hides (the unseen-ground cue) shows it. The
     graph must report it at its foot while the walker approaches, and the alarm node must
     warn of an obstacle ahead while it is still more than 3 m away."""
-    from asmonc_vision.cli.run import read_truth
+    from asmonc_vision.replay.summary import read_truth
     from asmonc_vision.sim.bagwriter import write_bag
     from asmonc_vision.sim.scenarios import make_scenario
     bag = tmp_path / 'plain_wall'
@@ -363,18 +363,18 @@ def test_a_plain_wall_is_announced_through_the_graph(tmp_path):
 
 
 def test_recorded_egomotion_scores_against_the_true_camera_pose(static_run):
-    from asmonc_vision.cli.motion import score_recorded_egomotion
+    from asmonc_vision.eval.motion_bags import score_recorded_egomotion
     _, out = static_run
     m = score_recorded_egomotion(BAGS / 'static_obstacles', out)
     # the egomotion node keeps only the newest pair when it falls behind (a loaded
     # machine), so a few motions may be skipped; most must be there
     assert m is not None and m['motions'] >= 0.75 * (m['pairs'] - 1)
-    assert m['errors']['pitch']['median'] < 0.3      # degrees (issue 4 target on walking bags)
+    assert m['errors']['pitch']['median'] < 0.3      # degrees (the target on walking bags)
     assert m['errors']['translation']['median'] < 10  # mm
 
 
 def test_side_by_side_runs_claim_different_domains(tmp_path):
-    from asmonc_vision.cli.run import MAX_DOMAIN_ID, MAX_LINUX_DOMAIN_ID, claim_domain
+    from asmonc_vision.replay.domain import MAX_DOMAIN_ID, MAX_LINUX_DOMAIN_ID, claim_domain
     d1, f1 = claim_domain(7, tmp_path)
     d2, f2 = claim_domain(7, tmp_path)
     assert (d1, d2) == (7, 8)

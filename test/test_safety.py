@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from asmonc_vision.core.alarm import AlarmConfig, AlarmLevel
-from asmonc_vision.core.evaluation import FrameObstacles
+from asmonc_vision.eval.evaluation import FrameObstacles
 from asmonc_vision.eval.alarm_replay import replay_alarms
 from asmonc_vision.eval.safety import (SafetyCriteria, SafetyTruth, TrueObstacle, TruthFrame,
                                        corridor_range, polygon_distance, score_safety,
@@ -231,7 +231,7 @@ def test_run_summary_has_the_safety_score():
     import threading
     from types import SimpleNamespace
 
-    from asmonc_vision.cli.run import read_truth, summarise
+    from asmonc_vision.replay.summary import read_truth, summarise
     from asmonc_vision.eval.truth import truth_from_bag
     from conftest import BAGS
 

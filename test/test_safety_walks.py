@@ -9,7 +9,7 @@ About 40 s on an idle core (150 frames rendered, then detected).
 """
 import pytest
 
-from asmonc_vision.cli.bench import run_method
+from asmonc_vision.eval.bench import run_method
 from asmonc_vision.eval.alarm_replay import replay_alarms
 from asmonc_vision.eval.safety import SafetyScore, score_safety
 from asmonc_vision.eval.truth import render_scene

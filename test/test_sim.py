@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 import pytest
 
-from asmonc_vision import bagio
+from asmonc_vision.io import bagio
 from asmonc_vision.core.camera import (MetricPlane, ground_range_bearing, plane_disparity,
                                        plane_from_metric)
 from asmonc_vision.sim.geometry import (R_BODY_OPTICAL, RigPose, camera_poses,
@@ -672,7 +672,7 @@ def test_cli(tmp_path, capsys):
     rigged = tmp_path / 'rigged'
     assert main(['clear_static', str(rigged), '--duration', '0.1', '--quiet', '--width', '160',
                  '--height', '120', '--rig', 'baseline=0.2', '--rig', 'camera_height=1.0']) == 0
-    from asmonc_vision.bagio import read_messages
+    from asmonc_vision.io.bagio import read_messages
     _, _, info = next(read_messages(rigged, ['/stereo/right/camera_info']))
     assert info.p[3] == pytest.approx(-info.p[0] * 0.2)     # Tx = -f B
     # Another walker: the paper's extreme motion, then a change of it; recorded in the

@@ -355,7 +355,7 @@ def test_every_scene_class_renders_with_consistent_truth(scene_class):
 
 
 def test_a_scene_class_writes_a_contract_bag(tmp_path, capsys):
-    from asmonc_vision import bagio
+    from asmonc_vision.io import bagio
     from asmonc_vision.sim.cli import main
 
     out = tmp_path / 'bag'

@@ -1,4 +1,4 @@
-"""The small-box measurement (asmonc_vision.cli.smallbox): scene, scoring, command."""
+"""The small-box measurement (asmonc_vision.eval.smallbox): scene, scoring, command."""
 import json
 import math
 from types import SimpleNamespace
@@ -6,7 +6,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from asmonc_vision.cli import smallbox
+from asmonc_vision.cli import smallbox as smallbox_cli
+from asmonc_vision.eval import smallbox
 
 
 def _report(rng, bearing_deg, roi=(0, 0, 4, 4), height=0.05):
@@ -56,7 +57,7 @@ def test_cells_pair_or_grid():
 
 def test_command_runs_both_methods_on_the_same_frames(tmp_path, capsys):
     out = tmp_path / 'sb.json'
-    rc = smallbox.main(['--heights', '0.08', '--ranges', '2.5', '--seeds', '1',
+    rc = smallbox_cli.main(['--heights', '0.08', '--ranges', '2.5', '--seeds', '1',
                         '--frames', '3', '--clear-frames', '3', '--json', str(out),
                         '--cache', str(tmp_path / 'cache'), '--quiet'])
     assert rc == 0

@@ -161,7 +161,8 @@ def score_walk(w: Walk, cache: Path, methods: list[str], version: str) -> dict:
          when cached), 'frames': int, 'scores': {method: SafetyScore},
          'detect_s', 'detect_cpu_s': {method: wall and CPU seconds}}.
     """
-    from asmonc_vision.cli.bench import load_frames, run_method
+    from asmonc_vision.eval.bench import run_method
+    from asmonc_vision.io.frames import load_frames
     from asmonc_vision.eval.alarm_replay import replay_alarms
     from asmonc_vision.eval.safety import score_safety
     from asmonc_vision.eval.truth import truth_from_bag
@@ -367,7 +368,7 @@ def run(args) -> int:
     print('\n'.join(timing_lines(results, list(args.methods))))
     print(f'campaign wall time {(time.monotonic() - t0) / 60:.1f} min')
     if args.json is not None:
-        from asmonc_vision.core.evaluation import json_ready
+        from asmonc_vision.eval.evaluation import json_ready
         doc = summary_json(results, list(args.methods))
         doc['arguments'] = {'minutes': args.minutes, 'workers': args.workers, 'sets': sets,
                             'classes': args.classes, 'rigs': args.rigs,

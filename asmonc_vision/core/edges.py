@@ -335,6 +335,14 @@ def detect_vertical_edges(image: np.ndarray, *, abs_threshold: float = 4.0,
         return EdgeMap(v=vv, u_int=uu, u=u_sub, strength=peak, polarity=pol,
                        orientation=ori, string_id=sid, string_prev=prev,
                        string_length=slen, shape=(h, w), threshold=thr, curvature=curv)
+    return _edges_numpy(c, left, right, thr_c, thr, h, w, scale, gx_flat, gy_src, mag_flat,
+                        cos_max, min_string_length)
+
+
+def _edges_numpy(c, left, right, thr_c, thr: float, h: int, w: int, scale, gx_flat, gy_src,
+                 mag_flat, cos_max: float, min_string_length: int) -> EdgeMap:
+    """`detect_vertical_edges`'s numpy path from the row maxima on: the edges, their
+    sub-pixel positions, strength and strings (``scale``: the integer Sobel path's)."""
     k = np.flatnonzero((c > left) & (c >= right) & (c >= thr_c))
     vv = (k // (w - 4) + 1).astype(np.int32)
     uu = (k % (w - 4) + 2).astype(np.int32)

@@ -308,74 +308,22 @@ def fit_ground_plane(u, v, d, *, cam: StereoCamera | None = None, method: str = 
         raise ValueError(f'inlier_threshold_px must be > 0, got {inlier_threshold_px}')
     if not min_spread_px >= 0:
         raise ValueError(f'min_spread_px must be >= 0, got {min_spread_px}')
-    u = np.asarray(u, np.float64).ravel()
-    v = np.asarray(v, np.float64).ravel()
-    d = np.asarray(d, np.float64).ravel()
-    if not (u.shape == v.shape == d.shape):
-        raise ValueError(f'u, v, d must have the same length, got {u.shape}, {v.shape}, {d.shape}')
-    n = u.shape[0]
     min_features = max(int(min_features), 3)
-    finite = np.isfinite(u) & np.isfinite(v) & np.isfinite(d)
-    n_finite = int(np.count_nonzero(finite))
-    if n_finite < min_features:
+    data = _finite_data(u, v, d, weights, min_features)
+    if data is None:
         return None
-    everything = n_finite == n
-    uf, vf, df = (u, v, d) if everything else (u[finite], v[finite], d[finite])
-    wf = None
-    if weights is not None:
-        w_all = np.asarray(weights, np.float64).ravel()
-        if w_all.shape != u.shape:
-            raise ValueError(f'weights must have the length of u, got {w_all.shape} vs {u.shape}')
-        w_f = w_all if everything else w_all[finite]
-        wf = np.where(np.isfinite(w_f), np.maximum(w_f, 0.0), 0.0)
+    uf, vf, df, wf, finite = data
+    n = finite.shape[0]
     thr = float(inlier_threshold_px)
     if method == 'ransac':
-        gen = np.random.default_rng(rng)
-        abc = _ransac_best(uf, vf, df, thr, max(int(iterations), 1), gen, cam=cam,
-                           bounds=(min_height_m, max_height_m, max_tilt_deg), weights=wf,
-                           min_support_fraction=float(min_support_fraction))
-        if abc is None:
-            return None
-        inl = np.abs(df - (abc[0] * uf + abc[1] * vf + abc[2])) <= thr
-        rounds = max(int(refine_iterations), 0) + 1
-        for it in range(rounds):
-            sel = np.flatnonzero(inl)
-            if sel.size < min_features:
-                return None
-            fit = lsq_plane(uf[sel], vf[sel], df[sel], None if wf is None else wf[sel])
-            if fit is None:
-                return None
-            abc = fit[0]
-            new = np.abs(df - (abc[0] * uf + abc[1] * vf + abc[2])) <= thr
-            if it == rounds - 1 or np.array_equal(new, inl):
-                break           # ``fit`` is the least squares on ``inl``
-            inl = new
+        found = _fit_ransac(uf, vf, df, wf, thr, iterations, refine_iterations, min_features,
+                            np.random.default_rng(rng), cam,
+                            (min_height_m, max_height_m, max_tilt_deg), min_support_fraction)
     else:
-        inl = np.ones(uf.shape[0], bool)
-        fit = lsq_plane(uf, vf, df)
-        if fit is None:
-            return None
-        frac = min(max(float(trim_fraction), 0.0), 0.9)
-        for _ in range(max(int(refine_iterations), 0)):
-            abc = fit[0]
-            res = np.abs(df - (abc[0] * uf + abc[1] * vf + abc[2]))
-            k = int(inl.sum())
-            keep = int(np.ceil(k * (1.0 - frac)))
-            if keep < min_features:
-                break
-            cut = np.partition(res[inl], keep - 1)[keep - 1]
-            inl = inl & (res <= cut)
-            fit = lsq_plane(uf[inl], vf[inl], df[inl])
-            if fit is None:
-                return None
-        abc = fit[0]
-        res = np.abs(df - (abc[0] * uf + abc[1] * vf + abc[2]))
-        inl = res <= max(thr, 2.5 * fit[2])
-        if int(inl.sum()) < min_features:
-            return None
-        fit = lsq_plane(uf[inl], vf[inl], df[inl])
-        if fit is None:
-            return None
+        found = _fit_trimmed(uf, vf, df, thr, refine_iterations, trim_fraction, min_features)
+    if found is None:
+        return None
+    inl, fit = found
     abc, cov, rms = fit
     if int(inl.sum()) < min_features or not np.all(np.isfinite(abc)):
         return None
@@ -395,6 +343,88 @@ def fit_ground_plane(u, v, d, *, cam: StereoCamera | None = None, method: str = 
     return PlaneFit(abc=np.asarray(abc, np.float64), cov=np.asarray(cov, np.float64),
                     num_features=int(inl.sum()), residual_rms=float(rms), inliers=mask,
                     metric=metric, residual_sigma=sigma)
+
+
+def _finite_data(u, v, d, weights, min_features: int):
+    """(u, v, d, weights of the finite features (weights None or clipped to >= 0, 0 where
+    not finite), the mask of those features), or None when fewer than ``min_features``
+    are finite. Raises ValueError for inputs of different lengths."""
+    u = np.asarray(u, np.float64).ravel()
+    v = np.asarray(v, np.float64).ravel()
+    d = np.asarray(d, np.float64).ravel()
+    if not (u.shape == v.shape == d.shape):
+        raise ValueError(f'u, v, d must have the same length, got {u.shape}, {v.shape}, {d.shape}')
+    n = u.shape[0]
+    finite = np.isfinite(u) & np.isfinite(v) & np.isfinite(d)
+    n_finite = int(np.count_nonzero(finite))
+    if n_finite < min_features:
+        return None
+    everything = n_finite == n
+    uf, vf, df = (u, v, d) if everything else (u[finite], v[finite], d[finite])
+    wf = None
+    if weights is not None:
+        w_all = np.asarray(weights, np.float64).ravel()
+        if w_all.shape != u.shape:
+            raise ValueError(f'weights must have the length of u, got {w_all.shape} vs {u.shape}')
+        w_f = w_all if everything else w_all[finite]
+        wf = np.where(np.isfinite(w_f), np.maximum(w_f, 0.0), 0.0)
+    return uf, vf, df, wf, finite
+
+
+def _fit_ransac(uf, vf, df, wf, thr: float, iterations: int, refine_iterations: int,
+                min_features: int, gen, cam, bounds: tuple, min_support_fraction: float):
+    """`fit_ground_plane`'s 'ransac' method: (inliers, lsq_plane fit) or None."""
+    abc = _ransac_best(uf, vf, df, thr, max(int(iterations), 1), gen, cam=cam,
+                       bounds=bounds, weights=wf,
+                       min_support_fraction=float(min_support_fraction))
+    if abc is None:
+        return None
+    inl = np.abs(df - (abc[0] * uf + abc[1] * vf + abc[2])) <= thr
+    rounds = max(int(refine_iterations), 0) + 1
+    for it in range(rounds):
+        sel = np.flatnonzero(inl)
+        if sel.size < min_features:
+            return None
+        fit = lsq_plane(uf[sel], vf[sel], df[sel], None if wf is None else wf[sel])
+        if fit is None:
+            return None
+        abc = fit[0]
+        new = np.abs(df - (abc[0] * uf + abc[1] * vf + abc[2])) <= thr
+        if it == rounds - 1 or np.array_equal(new, inl):
+            break           # ``fit`` is the least squares on ``inl``
+        inl = new
+    return inl, fit
+
+
+def _fit_trimmed(uf, vf, df, thr: float, refine_iterations: int, trim_fraction: float,
+                 min_features: int):
+    """`fit_ground_plane`'s 'trimmed' method: (inliers, lsq_plane fit) or None."""
+    inl = np.ones(uf.shape[0], bool)
+    fit = lsq_plane(uf, vf, df)
+    if fit is None:
+        return None
+    frac = min(max(float(trim_fraction), 0.0), 0.9)
+    for _ in range(max(int(refine_iterations), 0)):
+        abc = fit[0]
+        res = np.abs(df - (abc[0] * uf + abc[1] * vf + abc[2]))
+        k = int(inl.sum())
+        keep = int(np.ceil(k * (1.0 - frac)))
+        if keep < min_features:
+            break
+        cut = np.partition(res[inl], keep - 1)[keep - 1]
+        inl = inl & (res <= cut)
+        fit = lsq_plane(uf[inl], vf[inl], df[inl])
+        if fit is None:
+            return None
+    abc = fit[0]
+    res = np.abs(df - (abc[0] * uf + abc[1] * vf + abc[2]))
+    inl = res <= max(thr, 2.5 * fit[2])
+    if int(inl.sum()) < min_features:
+        return None
+    fit = lsq_plane(uf[inl], vf[inl], df[inl])
+    if fit is None:
+        return None
+    return inl, fit
 
 
 def _minor_spread(u: np.ndarray, v: np.ndarray) -> float:

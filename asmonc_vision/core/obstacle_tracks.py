@@ -248,62 +248,13 @@ class ObstacleTracker:
             raise ValueError(f'feet ({n}), feet_cov ({Rz.shape[0]}) and payloads '
                              f'({len(payloads)}) must be as many')
         stamp = 0.0 if self._stamp is None else self._stamp
-        det_track = np.full(n, -1, np.int64)
-        if n and t:
-            # y = z - H x ; S = H P Hᵀ + R ; d² = yᵀ S⁻¹ y, all (track, detection) pairs
-            y = z[None, :, :] - self._x[:, None, :]
-            S = self._P[:, None] + Rz[None, :]
-            d2 = np.einsum('tni,tni->tn', y, np.linalg.solve(S, y[..., None])[..., 0])
-            order = np.argsort(d2, axis=None)
-            used_t = np.zeros(t, bool)
-            for flat in order:
-                i, j = divmod(int(flat), n)
-                if d2[i, j] > self.gate_chi2:
-                    break
-                if used_t[i] or det_track[j] >= 0:
-                    continue
-                used_t[i] = True
-                det_track[j] = i
-            ti = det_track[det_track >= 0]
-            dj = np.flatnonzero(det_track >= 0)
-            if ti.size:
-                P = self._P[ti]
-                S = P + Rz[dj]
-                # K = P Hᵀ S⁻¹ (P, S symmetric: K = (S⁻¹ P)ᵀ)
-                K = np.swapaxes(np.linalg.solve(S, P), 1, 2)
-                # x = x + K y
-                self._x[ti] = self._x[ti] + np.einsum('nij,nj->ni', K, z[dj] - self._x[ti])
-                # P = (I - K) P (I - K)ᵀ + K R Kᵀ
-                IK = np.eye(3)[None] - K
-                self._P[ti] = (np.einsum('nij,njk,nlk->nil', IK, P, IK)
-                               + np.einsum('nij,njk,nlk->nil', K, Rz[dj], K))
-                self._hits[ti] += 1
-                self._last_seen[ti] = stamp
-                for i, j in zip(ti.tolist(), dj.tolist()):
-                    self._payload[i] = payloads[j]
+        det_track = self._associate(z, Rz)
+        self._correct(det_track, z, Rz, payloads, stamp)
         # Tracks not detected: coast or end.
         seen = np.zeros(t, bool)
         seen[det_track[det_track >= 0]] = True
-        keep = np.ones(t, bool)
         self._frames += 1
-        for i in np.flatnonzero(~seen).tolist():
-            if same_object is not None and any(same_object(self._payload[i], payloads[j])
-                                               for j in range(n)):
-                self._hits[i] += 1
-                self._last_seen[i] = stamp
-                continue
-            sure = self._sure(i)
-            age = stamp - self._last_seen[i]
-            if unseen is not None and unseen(self._payload[i], self._x[i].copy()):
-                # Out of view: no evidence either way. Only a sure track is remembered.
-                alive = sure and age <= self.unseen_coast_s + 1e-9
-            else:
-                alive = (self._hits[i] >= self.confirm_hits
-                         and (sure or self._hits[i] >= self.min_hit_fraction * self._frames[i])
-                         and age <= self.coast_s + 1e-9)
-            if alive and is_free is not None:
-                alive = not is_free(self._payload[i], self._x[i].copy())
-            keep[i] = alive
+        keep = self._survivors(seen, payloads, stamp, is_free, same_object, unseen)
         # Births: detections left over.
         new = np.flatnonzero(det_track < 0)
         ids = np.arange(self._next_id, self._next_id + new.size, dtype=np.int64)
@@ -327,3 +278,73 @@ class ObstacleTracker:
                            payload=self._payload[i]) for i in range(len(self))]
         out.sort(key=lambda o: (o.index < 0, o.index))
         return out
+
+    def _associate(self, z: np.ndarray, Rz: np.ndarray) -> np.ndarray:
+        """The track index of each detection (-1: none): nearest pairs first by
+        Mahalanobis distance, within the gate, one detection per track."""
+        n, t = z.shape[0], len(self)
+        det_track = np.full(n, -1, np.int64)
+        if not (n and t):
+            return det_track
+        # y = z - H x ; S = H P Hᵀ + R ; d² = yᵀ S⁻¹ y, all (track, detection) pairs
+        y = z[None, :, :] - self._x[:, None, :]
+        S = self._P[:, None] + Rz[None, :]
+        d2 = np.einsum('tni,tni->tn', y, np.linalg.solve(S, y[..., None])[..., 0])
+        order = np.argsort(d2, axis=None)
+        used_t = np.zeros(t, bool)
+        for flat in order:
+            i, j = divmod(int(flat), n)
+            if d2[i, j] > self.gate_chi2:
+                break
+            if used_t[i] or det_track[j] >= 0:
+                continue
+            used_t[i] = True
+            det_track[j] = i
+        return det_track
+
+    def _correct(self, det_track: np.ndarray, z: np.ndarray, Rz: np.ndarray,
+                 payloads: Sequence[object], stamp: float) -> None:
+        """The Kalman update of the detected tracks with their detections."""
+        ti = det_track[det_track >= 0]
+        dj = np.flatnonzero(det_track >= 0)
+        if not ti.size:
+            return
+        P = self._P[ti]
+        S = P + Rz[dj]
+        # K = P Hᵀ S⁻¹ (P, S symmetric: K = (S⁻¹ P)ᵀ)
+        K = np.swapaxes(np.linalg.solve(S, P), 1, 2)
+        # x = x + K y
+        self._x[ti] = self._x[ti] + np.einsum('nij,nj->ni', K, z[dj] - self._x[ti])
+        # P = (I - K) P (I - K)ᵀ + K R Kᵀ
+        IK = np.eye(3)[None] - K
+        self._P[ti] = (np.einsum('nij,njk,nlk->nil', IK, P, IK)
+                       + np.einsum('nij,njk,nlk->nil', K, Rz[dj], K))
+        self._hits[ti] += 1
+        self._last_seen[ti] = stamp
+        for i, j in zip(ti.tolist(), dj.tolist()):
+            self._payload[i] = payloads[j]
+
+    def _survivors(self, seen: np.ndarray, payloads: Sequence[object], stamp: float,
+                   is_free, same_object, unseen) -> np.ndarray:
+        """Which tracks live on (the undetected ones coast or end; `update`'s rules)."""
+        keep = np.ones(len(seen), bool)
+        n = len(payloads)
+        for i in np.flatnonzero(~seen).tolist():
+            if same_object is not None and any(same_object(self._payload[i], payloads[j])
+                                               for j in range(n)):
+                self._hits[i] += 1
+                self._last_seen[i] = stamp
+                continue
+            sure = self._sure(i)
+            age = stamp - self._last_seen[i]
+            if unseen is not None and unseen(self._payload[i], self._x[i].copy()):
+                # Out of view: no evidence either way. Only a sure track is remembered.
+                alive = sure and age <= self.unseen_coast_s + 1e-9
+            else:
+                alive = (self._hits[i] >= self.confirm_hits
+                         and (sure or self._hits[i] >= self.min_hit_fraction * self._frames[i])
+                         and age <= self.coast_s + 1e-9)
+            if alive and is_free is not None:
+                alive = not is_free(self._payload[i], self._x[i].copy())
+            keep[i] = alive
+        return keep

@@ -14,7 +14,7 @@ from typing import Sequence
 
 from asmonc_vision.core.alarm import (CHECK_PERIOD_S, AlarmConfig, AlarmLogic, Decision,
                                       GroundStatus, ObstacleInfo)
-from asmonc_vision.core.evaluation import FrameObstacles
+from asmonc_vision.eval.evaluation import FrameObstacles
 
 #: the detector's status words -> GroundPlane status values
 STATUS_VALUES = {'initialising': GroundStatus.INITIALISING, 'tracking': GroundStatus.TRACKING,

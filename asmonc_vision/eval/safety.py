@@ -8,7 +8,7 @@ Inputs (all in bag time, nanosecond stamps):
   which obstacles are in view (with the pixels that see them in both images, if known);
 * the alarms given (dicts ``stamp_ns``, ``level``, ``obstacle_id``, ``range`` m,
   ``bearing`` rad, as /alarms carries them), in the order they were announced;
-* the obstacles reported per frame (``core.evaluation.FrameObstacles``: ``height``,
+* the obstacles reported per frame (``eval.evaluation.FrameObstacles``: ``height``,
   ``range``, ``bearing`` are used).
 
 Geometry. At each frame the wearer's *ground frame* is the point on the ground below the
@@ -24,7 +24,7 @@ Definitions (`SafetyCriteria` holds every number):
   point of its footprint's part inside the corridor within ``on_path_range`` of the
   ground point below the camera. Obstacles out of view count where they are.
 * **Alarm in force** at a frame: the last alarm stamped at or before the frame's stamp
-  (`core.evaluation.alarm_levels_at`, which also places alarms stamped by a node's own
+  (`eval.evaluation.alarm_levels_at`, which also places alarms stamped by a node's own
   clock, far outside the bag's span, right after the alarm before them).
 * **Warned in time**: per obstacle, at its first frame on the path the alarm in force is
   CAUTION, WARNING or STOP: *warned*. FAULT there: *under FAULT* (apart). Otherwise
@@ -61,7 +61,7 @@ import numpy as np
 
 from asmonc_vision.core.alarm import AlarmLevel
 from asmonc_vision.core.config import check_fields, param
-from asmonc_vision.core.evaluation import (HEIGHT_BINS_M, RANGE_BINS_M, WARNING_LEVELS,
+from asmonc_vision.eval.evaluation import (HEIGHT_BINS_M, RANGE_BINS_M, WARNING_LEVELS,
                                            FrameObstacles, alarm_levels_at, json_ready)
 
 

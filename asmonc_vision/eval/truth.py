@@ -82,7 +82,7 @@ def obstacles_from_listings(truth: dict, poses: dict, planes: dict) -> list[True
     """Point-set footprints from the listed obstacles (see the module doc).
 
     Args:
-        truth: stamp_ns -> `core.evaluation.FrameObstacles` (left optical frame).
+        truth: stamp_ns -> `eval.evaluation.FrameObstacles` (left optical frame).
         poses: stamp_ns -> (R, t) of the left optical frame in the world.
         planes: stamp_ns -> the true ground plane (`core.camera.MetricPlane`).
     """
@@ -108,7 +108,7 @@ def obstacles_from_listings(truth: dict, poses: dict, planes: dict) -> list[True
 
 def truth_from_frames(frames, footprints: list[dict] | None = None, epoch_ns: int = 0,
                       visible: dict | None = None) -> SafetyTruth:
-    """SafetyTruth of loaded frames (`cli.bench.Frame`: stamp, truth, truth_plane, pose).
+    """SafetyTruth of loaded frames (`io.frames.Frame`: stamp, truth, truth_plane, pose).
 
     Args:
         frames: the bag's frames; those without a true pose are left out.
@@ -140,12 +140,12 @@ def truth_from_bag(bag: Path, frames=None, visible: dict | None = None) -> Safet
     """SafetyTruth of a bag with /ground_truth/camera_pose (None without poses).
 
     Args:
-        bag: the bag; frames: its frames if already loaded (`cli.bench.load_frames`,
+        bag: the bag; frames: its frames if already loaded (`io.frames.load_frames`,
             images not needed); visible: as `truth_from_frames`.
     Raises:
         bagio.BagError: unreadable bag.
     """
-    from asmonc_vision.cli.bench import load_frames
+    from asmonc_vision.io.frames import load_frames
 
     if frames is None:
         frames = load_frames(bag, images=False)
@@ -158,14 +158,14 @@ def truth_from_bag(bag: Path, frames=None, visible: dict | None = None) -> Safet
 
 
 def render_scene(scenario) -> tuple[list, SafetyTruth]:
-    """Render a scenario in memory: its frames (`cli.bench.Frame`, with images, truth and
+    """Render a scenario in memory: its frames (`io.frames.Frame`, with images, truth and
     true pose) and its `SafetyTruth` (the world's footprints, pixels seen in both images).
 
     Args:
         scenario: a `sim.scenarios.Scenario` (e.g. from `sim.scenes.make_scene`).
     """
-    from asmonc_vision.cli.bench import Frame
-    from asmonc_vision.core.evaluation import frame_from_detections
+    from asmonc_vision.io.frames import Frame
+    from asmonc_vision.eval.evaluation import frame_from_detections
     from asmonc_vision.sim.bagwriter import EPOCH_NS, stamp_ns
     from asmonc_vision.sim.footprints import world_footprints
     from asmonc_vision.sim.render import StereoRenderer

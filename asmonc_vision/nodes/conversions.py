@@ -8,7 +8,7 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from sensor_msgs.msg import CameraInfo, Image
 
-from asmonc_vision.bagio import ImageFormatError, image_to_gray
+from asmonc_vision.io.bagio import ImageFormatError, image_to_gray
 from asmonc_vision.core.camera import StereoCamera
 
 __all__ = ['ImageFormatError', 'image_msg_to_gray', 'array_to_image_msg',

@@ -44,7 +44,7 @@ from sensor_msgs.msg import Imu
 
 from asmonc_vision.core.config import check_fields, param
 from asmonc_vision.core.gait import GaitConfig, GaitEstimate, GaitTracker
-from asmonc_vision.bagio import imu_to_rpy_var
+from asmonc_vision.io.bagio import imu_to_rpy_var
 from asmonc_vision.core.gait.rotations import (matrix_to_quaternion, quaternion_to_matrix,
                                                wrap_angle)
 from asmonc_vision.nodes.common import (RESULT_QOS, SENSOR_QOS, Diagnostics, declare_config,

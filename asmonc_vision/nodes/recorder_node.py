@@ -24,8 +24,8 @@ from typing import Any
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from asmonc_vision.bagio import typestore
-from asmonc_vision.bagplay import normalize_topic
+from asmonc_vision.io.bagio import typestore
+from asmonc_vision.io.bagplay import normalize_topic
 from asmonc_vision.core.config import check_fields, param
 from asmonc_vision.nodes.common import config_overrides, declare_config, run_node
 from asmonc_vision.nodes.player_node import message_class

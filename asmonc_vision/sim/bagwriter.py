@@ -18,7 +18,7 @@ from typing import Callable
 
 import numpy as np
 
-from asmonc_vision import bagio
+from asmonc_vision.io import bagio
 from asmonc_vision.core.camera import plane_from_metric
 from asmonc_vision.sim.footprints import world_footprints
 from asmonc_vision.sim.geometry import matrix_to_quaternion, quaternion_from_rpy
@@ -139,7 +139,8 @@ class _Msgs:
             linear_acceleration_covariance=absent.copy())
 
 
-def _qos():
+def writer_qos():
+    """The offered QoS recorded with every topic of a written bag (reliable, depth 10)."""
     from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness,
                                     QosReliability, QosTime)
     zero = QosTime(sec=0, nsec=0)
@@ -149,7 +150,8 @@ def _qos():
                 avoid_ros_namespace_conventions=False)]
 
 
-def _dir_size(path: Path) -> int:
+def dir_size(path: Path) -> int:
+    """Bytes in the files under ``path``."""
     return sum(p.stat().st_size for p in path.rglob('*') if p.is_file())
 
 
@@ -192,7 +194,7 @@ def write_bag(scenario: Scenario, out_dir: str | Path,
         for key in FRAME_TOPICS + ('imu',):
             topic, msgtype = bagio.TOPICS[key]
             conns[key] = writer.add_connection(topic, msgtype, typestore=ts,
-                                               offered_qos_profiles=_qos())
+                                               offered_qos_profiles=writer_qos())
 
         def put(key: str, ns: int, msg) -> None:
             topic, msgtype = bagio.TOPICS[key]
@@ -225,4 +227,4 @@ def write_bag(scenario: Scenario, out_dir: str | Path,
             j += 1
     return BagSummary(path=out, frames=scenario.n_frames, imu=int(imu.times.size),
                       duration=scenario.frame_time(scenario.n_frames - 1),
-                      size_bytes=_dir_size(out), counts=counts)
+                      size_bytes=dir_size(out), counts=counts)

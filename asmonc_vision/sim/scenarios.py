@@ -167,18 +167,19 @@ def _along(path_xy: np.ndarray, heading: float, s: float, lateral: float
     return (float(path_xy[0] + c * s - sn * lateral), float(path_xy[1] + sn * s + c * lateral))
 
 
-def _obstacle_albedo(rng: np.random.Generator, ground: float) -> float:
+def obstacle_albedo(rng: np.random.Generator, ground: float) -> float:
     """An albedo clearly darker or brighter than the ground's."""
     if rng.random() < 0.5:
         return float(rng.uniform(40.0, max(ground - 45.0, 45.0)))
     return float(rng.uniform(min(ground + 45.0, 200.0), 215.0))
 
 
-def _box(rng: np.random.Generator, x: float, y: float, height: float, ground: float,
-         **kw) -> Box:
+def random_box(rng: np.random.Generator, x: float, y: float, height: float, ground: float,
+               **kw) -> Box:
+    """A box of the given height at (x, y), random size, yaw and contrasting albedo."""
     return Box(x=x, y=y, length=float(rng.uniform(0.2, 0.45)),
                width=float(rng.uniform(0.25, 0.5)), height=height,
-               yaw_deg=float(rng.uniform(0.0, 90.0)), albedo=_obstacle_albedo(rng, ground),
+               yaw_deg=float(rng.uniform(0.0, 90.0)), albedo=obstacle_albedo(rng, ground),
                name=f'box {height * 100:.0f} cm', **kw)
 
 
@@ -229,7 +230,7 @@ def static_obstacles(seed: int = 0, duration: float = 8.0,
                 break
         placed.append((x, y))
         if kind == 'box':
-            obstacles.append(_box(rng, x, y, h, gb, appear=2.0))
+            obstacles.append(random_box(rng, x, y, h, gb, appear=2.0))
         elif kind == 'post':
             obstacles.append(post(x, y, height=h, appear=3.0, round_=bool(rng.random() < 0.5),
                                   name='post'))
@@ -292,7 +293,7 @@ def walk_obstacles(seed: int = 0, duration: float = 10.0,
             obstacles.append(post(x, y, height=2.2, round_=bool(rng.random() < 0.5),
                                   name='post'))
         else:
-            obstacles.append(_box(rng, x, y, float(item), gb))
+            obstacles.append(random_box(rng, x, y, float(item), gb))
         s += float(rng.uniform(1.1, 1.8))
         k += 1
     # a wall on the right with a door opened into the path
@@ -352,7 +353,7 @@ def walk_stop_turn(seed: int = 0, duration: float = 12.0,
     for s, lat, h in ((3.0, float(rng.uniform(-0.6, 0.6)), 0.15),
                       (5.0, float(rng.uniform(-0.8, 0.8)), 0.08)):
         x, y = _along(stop_xy, heading, s, lat)
-        obstacles.append(_box(rng, x, y, h, gb))
+        obstacles.append(random_box(rng, x, y, h, gb))
     x, y = _along(stop_xy, heading, 6.5, float(rng.choice([-1, 1]) * rng.uniform(0.7, 1.2)))
     obstacles.append(bollard(x, y, name='bollard'))
     world = World(ground, obstacles, seed=seed)
@@ -379,7 +380,7 @@ def slope(seed: int = 0, duration: float = 6.0, rig: RigSettings | None = None,
             obstacles.append(bollard(s, float(rng.choice([-1, 1]) * rng.uniform(0.7, 1.3)),
                                      name='bollard'))
         else:
-            obstacles.append(_box(rng, s, float(rng.uniform(-1.0, 1.0)),
+            obstacles.append(random_box(rng, s, float(rng.uniform(-1.0, 1.0)),
                                   heights[k % len(heights)], gb))
         s += float(rng.uniform(1.8, 2.6))
         k += 1
@@ -423,7 +424,7 @@ def plain_wall(seed: int = 0, duration: float = 8.0,
     legs = [Leg(max(duration - 2.5, 0.5), v), Leg(2.5, 0.0, ramp=1.2)]
     probe = Trajectory(legs, rig, None, start_speed=v, rng=0)
     wx = _distance(probe, duration) + float(rng.uniform(1.3, 1.8))
-    albedo = _obstacle_albedo(rng, ground.pavement.brightness)
+    albedo = obstacle_albedo(rng, ground.pavement.brightness)
     obstacles = [wall(wx, -8.0, wx, 8.0, albedo=albedo, texture=0.0, name='plain wall')]
     world = World(ground, obstacles, seed=seed)
     traj = Trajectory(legs, rig, world, start_speed=v, gait=gait, rng=walker)

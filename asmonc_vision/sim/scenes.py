@@ -45,7 +45,7 @@ from asmonc_vision.sim.motion import GaitSettings, Leg, Trajectory
 from asmonc_vision.sim.people import Person, walker
 from asmonc_vision.sim.relief import GroundProfile
 from asmonc_vision.sim.rig import RigSettings
-from asmonc_vision.sim.scenarios import Scenario, _box, _obstacle_albedo, random_pavement
+from asmonc_vision.sim.scenarios import Scenario, obstacle_albedo, random_box, random_pavement
 from asmonc_vision.sim.surfaces import Marking
 from asmonc_vision.sim.world import (Box, Ground, Obstacle, PavementSettings, Terrace, World,
                                      bollard, kerb_up, post, step_down, wall)
@@ -186,7 +186,7 @@ def _beside(rng: np.random.Generator, course: Course, gb: float, n: int,
         elif k == 1:
             out.append(bollard(x, y, height=float(rng.uniform(0.8, 1.0)), name='bollard'))
         else:
-            out.append(_box(rng, x, y, float(rng.uniform(0.1, 0.4)), gb))
+            out.append(random_box(rng, x, y, float(rng.uniform(0.1, 0.4)), gb))
     return out
 
 
@@ -297,10 +297,10 @@ def _pavement_obstacles(rng, rig, duration):
     while s < course.length + 4.0:
         if k < 2 or rng.random() < 0.45:   # a box in the corridor
             x, y, _ = course.point(s, float(rng.uniform(-0.35, 0.35)))
-            obs.append(_box(rng, x, y, round(float(rng.uniform(0.05, 0.40)), 3), gb))
+            obs.append(random_box(rng, x, y, round(float(rng.uniform(0.05, 0.40)), 3), gb))
         elif rng.random() < 0.5:
             x, y, _ = course.point(s, _side(rng, 0.6, 1.5))
-            obs.append(_box(rng, x, y, round(float(rng.uniform(0.05, 0.40)), 3), gb))
+            obs.append(random_box(rng, x, y, round(float(rng.uniform(0.05, 0.40)), 3), gb))
         else:
             x, y, _ = course.point(s, _side(rng, 0.7, 1.5))
             obs.append(post(x, y, round_=bool(rng.random() < 0.5), name='post')
@@ -447,7 +447,7 @@ def _person(rng, track, gb):
     return walker(track, height=round(float(rng.uniform(1.5, 1.9)), 3),
                   width=round(float(rng.uniform(0.4, 0.5)), 3),
                   depth=round(float(rng.uniform(0.22, 0.32)), 3),
-                  albedo=_obstacle_albedo(rng, gb), lower_albedo=float(rng.uniform(35, 120)))
+                  albedo=obstacle_albedo(rng, gb), lower_albedo=float(rng.uniform(35, 120)))
 
 
 def _people_crossing(rng, rig, duration):
@@ -529,7 +529,7 @@ def _stop_turn(rng, rig, duration):
     t_stop = 0.45 * rest + 1.0
     stop = probe.path(t_stop)
     wx = float(stop[0]) + float(rng.uniform(1.8, 3.0))
-    obs: list[Obstacle] = [wall(wx, -8.0, wx, 8.0, albedo=_obstacle_albedo(rng, gb),
+    obs: list[Obstacle] = [wall(wx, -8.0, wx, 8.0, albedo=obstacle_albedo(rng, gb),
                                 name='wall ahead')]
     heading = math.radians(turn)
     c, sn = math.cos(heading), math.sin(heading)
@@ -537,7 +537,7 @@ def _stop_turn(rng, rig, duration):
     while s < 0.55 * rest * v + 4.0:
         lat = float(rng.uniform(-0.4, 0.4)) if rng.random() < 0.5 else _side(rng, 0.7, 1.3)
         x, y = float(stop[0] + c * s - sn * lat), float(stop[1] + sn * s + c * lat)
-        obs.append(_box(rng, x, y, round(float(rng.uniform(0.05, 0.4)), 3), gb))
+        obs.append(random_box(rng, x, y, round(float(rng.uniform(0.05, 0.4)), 3), gb))
         s += float(rng.uniform(1.5, 2.5))
     course = Course(legs, rig, duration, start_speed=v)
     return _Parts(legs, obs, _some_markings(rng, course), ground, start_speed=v)

@@ -11,8 +11,7 @@ tested without a ROS middleware:
 * `plan_topics` decides what is published where (topic filters; image_transport
   ``<topic>/compressed`` streams become mono8 ``sensor_msgs/Image`` on ``<topic>``).
 * `ReplaySchedule` maps bag time to wall-clock time for a replay rate.
-* `compressed_to_image_cdr` converts a CompressedImage (PNG, JPEG) to a mono8 Image,
-  CDR in and CDR out.
+* `read_errors` lists what reading a damaged bag may raise.
 * `PlayerConfig` holds the player's settings (the node's ROS parameters).
 """
 from __future__ import annotations
@@ -25,12 +24,11 @@ from collections.abc import Collection, Iterator
 from pathlib import Path
 from typing import NamedTuple
 
-from asmonc_vision.bagio import decode_compressed, typestore
 from asmonc_vision.core.config import check_fields, param
 
 __all__ = ['PlayerConfig', 'BagError', 'BagTopic', 'BagInfo', 'BagMessage', 'BagSource',
            'PlayTopic', 'plan_topics', 'normalize_topic', 'ReplaySchedule',
-           'compressed_to_image_cdr', 'IMAGE_TYPE', 'COMPRESSED_TYPE']
+           'IMAGE_TYPE', 'COMPRESSED_TYPE', 'read_errors']
 
 IMAGE_TYPE = 'sensor_msgs/msg/Image'
 CAMERA_INFO_TYPE = 'sensor_msgs/msg/CameraInfo'
@@ -211,7 +209,7 @@ _READ_ERRORS = (OSError, EOFError, ValueError, KeyError, IndexError, struct.erro
                 zlib.error, MemoryError, RuntimeError, OverflowError, TypeError)
 
 
-def _read_errors() -> tuple:
+def read_errors() -> tuple:
     errors: list = list(_READ_ERRORS)
     from mcap.exceptions import McapError
     from rosbags.rosbag2 import ReaderError
@@ -282,7 +280,7 @@ def _stream_mcap(path: Path, selected: dict | None = None, start_ns: int | None 
                     elif scan is not None:
                         scan.setdefault('non_cdr', set()).add(
                             f'{rec.topic} ({rec.message_encoding})')
-    except _read_errors() as exc:
+    except read_errors() as exc:
         detail = f'{type(exc).__name__}: {exc}' if str(exc) else type(exc).__name__
         msg = (f"bag file '{path}' is truncated or corrupt: reading stopped after "
                f'{n} message(s) ({detail})' if n else
@@ -453,6 +451,14 @@ class BagSource:
         for f in self._stream_files:
             yield from _stream_mcap(f, selected, start_ns)
 
+    def messages_before_damage(self, selected: dict[str, str] | None = None
+                               ) -> Iterator[BagMessage]:
+        """`messages`, ending quietly at a cut or damage in the file."""
+        try:
+            yield from self.messages(selected)
+        except BagError:
+            return
+
     def _rosbags_messages(self, selected: dict[str, str],
                           start_ns: int | None) -> Iterator[BagMessage]:
         from rosbags.rosbag2 import Reader
@@ -466,7 +472,7 @@ class BagSource:
                 for conn, ts, data in reader.messages(conns, start=start_ns):
                     n += 1
                     yield BagMessage(conn.topic, conn.msgtype, ts, bytes(data))
-        except _read_errors() as exc:
+        except read_errors() as exc:
             raise BagError(f"bag '{self.path}' is corrupt: reading stopped after {n} "
                            f'message(s) ({type(exc).__name__}: {exc})') from exc
 
@@ -569,26 +575,3 @@ class ReplaySchedule:
     def bag_time(self, now: float) -> int:
         """Bag time (ns) that corresponds to wall time `now` (for /clock)."""
         return self.bag_start_ns + int(max(0.0, now - self.wall_start) * self.rate * 1e9)
-
-
-# --- compressed images --------------------------------------------------------------
-
-def compressed_to_image_cdr(data: bytes) -> bytes:
-    """CDR sensor_msgs/CompressedImage (PNG or JPEG) -> CDR mono8 sensor_msgs/Image.
-
-    The header (stamp, frame) is kept.
-
-    Raises:
-        asmonc_vision.bagio.ImageFormatError: the payload cannot be decoded.
-        ValueError: the bytes are not a CompressedImage.
-    """
-    import numpy as np
-
-    store = typestore()
-    msg = store.deserialize_cdr(data, COMPRESSED_TYPE)
-    img = decode_compressed(msg.format, msg.data)
-    image_cls = store.types[IMAGE_TYPE]
-    h, w = img.shape[:2]
-    out = image_cls(header=msg.header, height=h, width=w, encoding='mono8', is_bigendian=0,
-                    step=w, data=np.ascontiguousarray(img, dtype=np.uint8).reshape(-1))
-    return bytes(store.serialize_cdr(out, IMAGE_TYPE))

@@ -1,7 +1,7 @@
 """Benchmark of what the wearer hears: latency from a stereo pair to its sound, and the
 soundtrack's counts, over `asmonc run --audio` replays of bags at rate 1.
 
-    python -m asmonc_vision.cli.audio_bench [BAG ...] [--out DIR] [--rate R]
+    python -m asmonc_vision.eval.audio_bench [BAG ...] [--out DIR] [--rate R]
 
 For each bag (default: every bundled bag) it runs `asmonc run BAG --audio DIR/<bag>.wav`
 in a subprocess, then prints, from the audio node's ``.latency.json`` and

@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from asmonc_vision.core.evaluation import json_ready
+from asmonc_vision.eval.evaluation import json_ready
 
 #: the bags rendered when none are given: (scenario, seconds, seeds)
 DEFAULT_SCENARIOS = (('clear_walk', 30.0, (1, 2, 3)), ('walk_stop_turn', 30.0, (1, 2, 3)))
@@ -74,8 +74,8 @@ def load_bag(bag: Path) -> BagStreams:
         bagio.BagError: unreadable bag.
         ValueError: no inclinometer stream, or no ground truth.
     """
-    from asmonc_vision import bagio
-    from asmonc_vision.cli.motion import load_sequence
+    from asmonc_vision.io import bagio
+    from asmonc_vision.eval.motion_bags import load_sequence
     from asmonc_vision.core.motion import EgomotionEstimator
     from asmonc_vision.core.rotations import R_BODY_OPTICAL, matrix_to_rpy
 
@@ -135,7 +135,8 @@ def _truth(streams: BagStreams):
 def evaluate_bag(streams: BagStreams, config=None, horizon: float = 0.5) -> dict:
     """The five modes on one bag: per mode the attitude and motion errors (deg, (n, 3))
     of the scored samples (module doc)."""
-    from asmonc_vision.cli.gait import (STEADY_AFTER, WALK_SPEED, _held, motion_increments,
+    from asmonc_vision.eval.gait_walks import (STEADY_AFTER, WALK_SPEED, held,
+                                               motion_increments,
                                         run_tracker)
     from asmonc_vision.core.gait import GaitConfig, scoring
 
@@ -162,7 +163,7 @@ def evaluate_bag(streams: BagStreams, config=None, horizon: float = 0.5) -> dict
 
         sel = (inside & moving(t) & moving(t - STEADY_AFTER) & moving(t + horizon)
                & (t - STEADY_AFTER >= streams.frame_times[0])
-               & _held(t, run.walking, STEADY_AFTER))
+               & held(t, run.walking, STEADY_AFTER))
         if 'drop_inc' in o or 'drop_ego' in o:
             sel &= (t >= window[0]) & (t <= window[1])
         truth_h, truth_now = att(t + horizon), att(t)     # (only `inside` is scored)
@@ -209,10 +210,10 @@ def render_default_bags(cache: Path, progress=print) -> list[Path]:
 
 def print_summary(per_bag: dict, summary: dict, file=None) -> None:
     file = sys.stdout if file is None else file
-    from asmonc_vision.cli.gait import _fmt3
+    from asmonc_vision.eval.gait_walks import fmt3
 
     def _fmt(v):
-        return _fmt3(v or [None] * 3)
+        return fmt3(v or [None] * 3)
 
     p = lambda s='': print(s, file=file)  # noqa: E731
     p('walk model on walking bags: the inclinometer as recorded, visual motion from the '
@@ -233,20 +234,12 @@ def _rms(e):
     return [float(v) for v in scoring.rms(e)] if e.size else None
 
 
-def add_arguments(s) -> None:
-    s.add_argument('bags', nargs='*', type=Path,
-                   help='walking bags with /inclinometer/imu, stereo pairs and '
-                        '/ground_truth/camera_pose (default: render clear_walk and '
-                        'walk_stop_turn, 30 s, seeds 1-3)')
-    s.add_argument('--cache', type=Path, default=DEFAULT_CACHE,
-                   help=f'where the default bags are rendered (default {DEFAULT_CACHE})')
-    s.add_argument('--json', type=Path, default=None, help='also write the numbers as JSON')
+def bags_command(bags, cache: Path, json_path: Path | None = None) -> int:
+    """`asmonc gait bags`: the walking ``bags`` (default: rendered into ``cache``) scored
+    and printed, the numbers also written to ``json_path``; the exit code."""
+    from asmonc_vision.io import bagio
 
-
-def run(args) -> int:
-    from asmonc_vision import bagio
-
-    bags = list(args.bags) or render_default_bags(args.cache,
+    bags = list(bags) or render_default_bags(cache,
                                                   lambda s: print(s, file=sys.stderr))
     per_bag = {}
     for bag in bags:
@@ -261,13 +254,13 @@ def run(args) -> int:
               file=sys.stderr)
     summary = summarise(per_bag)
     print_summary(per_bag, summary)
-    if args.json:
+    if json_path:
         doc = {'summary': summary, 'bags': {
             n: {m: {'attitude_rms_deg': _rms(b[m]['attitude_err']),
                     'motion_rms_deg': _rms(b[m]['motion_err']),
                     'samples': int(b[m]['attitude_err'].shape[0])} for m in MODES}
             for n, b in per_bag.items()}}
-        args.json.write_text(json.dumps(json_ready(doc), indent=1, allow_nan=False))
+        json_path.write_text(json.dumps(json_ready(doc), indent=1, allow_nan=False))
     return 0
 
 

@@ -64,7 +64,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtr
 
-from .camera import StereoCamera
+from asmonc_vision.core.camera import StereoCamera
 
 #: Threshold and noise of the paper (Sec. 2.2-2.3), pixels.
 PAPER_THRESHOLD_PX = 1.7

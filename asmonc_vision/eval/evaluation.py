@@ -26,8 +26,8 @@ from typing import Sequence
 
 import numpy as np
 
-from .alarm import AlarmConfig, AlarmLevel, AlarmLogic, ObstacleInfo
-from .camera import MetricPlane, ground_range_bearing
+from asmonc_vision.core.alarm import AlarmConfig, AlarmLevel, AlarmLogic, ObstacleInfo
+from asmonc_vision.core.camera import MetricPlane, ground_range_bearing
 
 
 @dataclass

@@ -14,7 +14,7 @@ import numpy as np
 
 MSG_PACKAGE = 'asmonc_vision_msgs'
 
-#: The topic contract (issue 2). Names and types are stable: evaluations rely on them.
+#: The topic contract. Names and types are stable: evaluations rely on them.
 TOPICS = {
     'left_image': ('/stereo/left/image_rect', 'sensor_msgs/msg/Image'),
     'right_image': ('/stereo/right/image_rect', 'sensor_msgs/msg/Image'),
@@ -174,9 +174,9 @@ def open_reader(path):
 
 def _damaged_source(path, problem: BagError):
     """A damaged or truncated MCAP bag that rosbags cannot open, scanned as a stream
-    (`asmonc_vision.bagplay.BagSource`: the messages before the damage). Raises
+    (`asmonc_vision.io.bagplay.BagSource`: the messages before the damage). Raises
     ``problem`` when not even that can be read."""
-    from asmonc_vision import bagplay
+    from asmonc_vision.io import bagplay
 
     try:
         return bagplay.BagSource(path)
@@ -230,7 +230,7 @@ def read_messages(path, topics):
         reader = open_reader(path)
     except BagError as exc:
         # A truncated or damaged MCAP file: the messages before the damage, then the error.
-        from asmonc_vision import bagplay
+        from asmonc_vision.io import bagplay
 
         src = _damaged_source(path, exc)
         wanted = {t.name: t.msgtype for t in src.info.topics.values() if t.name in set(topics)}
@@ -269,9 +269,9 @@ def _deserialize(store, path, topic: str, raw, msgtype: str):
 
 
 def bagplay_read_errors() -> tuple:
-    """What decoding a damaged bag may raise (`asmonc_vision.bagplay`'s list)."""
-    from asmonc_vision.bagplay import _read_errors
-    return _read_errors()
+    """What decoding a damaged bag may raise (`asmonc_vision.io.bagplay`'s list)."""
+    from asmonc_vision.io.bagplay import read_errors
+    return read_errors()
 
 
 def header_stamp_ns(msg) -> int:
@@ -298,3 +298,24 @@ def imu_to_rpy_var(msg) -> tuple[np.ndarray, np.ndarray | None]:
     if var is not None and not np.all(np.isfinite(var) & (var > 0)):
         var = None
     return rpy, var
+
+
+# --- compressed images --------------------------------------------------------------
+
+def compressed_to_image_cdr(data: bytes) -> bytes:
+    """CDR sensor_msgs/CompressedImage (PNG or JPEG) -> CDR mono8 sensor_msgs/Image.
+
+    The header (stamp, frame) is kept.
+
+    Raises:
+        ImageFormatError: the payload cannot be decoded.
+        ValueError: the bytes are not a CompressedImage.
+    """
+    store = typestore()
+    msg = store.deserialize_cdr(data, 'sensor_msgs/msg/CompressedImage')
+    img = decode_compressed(msg.format, msg.data)
+    image_cls = store.types['sensor_msgs/msg/Image']
+    h, w = img.shape[:2]
+    out = image_cls(header=msg.header, height=h, width=w, encoding='mono8', is_bigendian=0,
+                    step=w, data=np.ascontiguousarray(img, dtype=np.uint8).reshape(-1))
+    return bytes(store.serialize_cdr(out, 'sensor_msgs/msg/Image'))

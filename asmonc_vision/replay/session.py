@@ -1,0 +1,478 @@
+"""One replay of a bag through the node graph (`asmonc run`): the steps in order.
+
+1. `plan_replay` checks the bag and the arguments and chooses the nodes;
+2. `claim_run_domain` takes a ROS domain of its own;
+3. `read_truths` reads the bag's ground truth, if any;
+4. `Replay` starts the monitor (and the recorder), the nodes and the player, watches
+   them until every pair has its result, and stops them in order;
+5. `Replay.summary` scores the run; `replay` prints it and writes the outputs.
+"""
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+
+from asmonc_vision import graph
+from asmonc_vision.eval.evaluation import json_ready
+from asmonc_vision.faults import MESSAGE_KINDS, PROCESS_KINDS, affected_pairs, parse_faults
+from asmonc_vision.graph import GraphNode
+from asmonc_vision.io import bagio
+from asmonc_vision.io.bagplay import BagSource
+from asmonc_vision.replay.children import (PLAYED_MARK, Child, FaultSchedule, GaitStopper,
+                                           connected, pacing, wait_topics)
+from asmonc_vision.replay.domain import MAX_DOMAIN_ID, MAX_LINUX_DOMAIN_ID, claim_domain, \
+    domain_search_limit
+from asmonc_vision.replay.monitor import Console, Monitor
+from asmonc_vision.replay.params import (LEVEL_NAMES, OUTPUT_TOPICS, PACE_LEAD, alarm_timeout,
+                                         audio_params, default_bag, gait_timeout)
+from asmonc_vision.replay.summary import (audio_outputs, bag_time, first_image_stamp,
+                                          print_summary, read_out_of_view_truth, read_truth,
+                                          summarise)
+
+
+def _err(text: str) -> None:
+    print(text, file=sys.stderr, flush=True)
+
+
+@dataclass
+class ReplayPlan:
+    """What a replay will do: the bag, what it holds, the nodes, the faults."""
+
+    bag: Path
+    topics: dict
+    damage: str | None
+    n_pairs: int
+    n_imu: int
+    nodes: dict[str, GraphNode]
+    paced: bool
+    faults: list
+
+
+def plan_replay(args) -> ReplayPlan | int:
+    """The plan of a replay, or exit status 2 (said why on stderr)."""
+    bag = Path(args.bag) if args.bag is not None else default_bag()
+    if not (0.01 <= args.rate <= 100):
+        _err(f'asmonc run: --rate must be in [0.01, 100], got {args.rate}')
+        return 2
+    try:
+        topics, damage = bagio.bag_summary(bag)
+    except bagio.BagError as exc:
+        _err(f'asmonc run: {exc}')
+        return 2
+    if damage:
+        _err(f'asmonc run: {damage}; replaying the messages before it')
+    left_topic = bagio.TOPICS['left_image'][0]
+    imu_topic = bagio.TOPICS['imu'][0]
+    n_pairs = topics.get(left_topic, ('', 0))[1]
+    n_imu = topics.get(imu_topic, ('', 0))[1]
+    inputs = {'images'} if n_pairs else set()
+    inputs |= {'imu'} if n_imu else set()
+    nodes = {spec.name: spec for spec in graph.nodes_for(
+        inputs, requested={'audio'} if args.audio is not None else set())
+             if importlib.util.find_spec(spec.module) is not None}
+    # the replay is paced by the detector's /obstacles unless --realtime
+    paced = 'detector' in nodes and not args.realtime
+    if not inputs:
+        _err(f"asmonc run: bag '{bag}' has no {left_topic} messages and no {imu_topic} "
+             f"messages: nothing to do. Topics: {', '.join(sorted(topics)) or 'none'}")
+        return 2
+    if not nodes:
+        _err(f"asmonc run: bag '{bag}' holds only {', '.join(sorted(inputs))}, and no node "
+             'for that is installed')
+        return 2
+    faults = _faults(args, nodes)
+    if isinstance(faults, int):
+        return faults
+    if args.out is not None and args.out.exists() and any(args.out.iterdir()):
+        _err(f"asmonc run: --out '{args.out}' exists and is not empty")
+        return 2
+    return ReplayPlan(bag, topics, damage, n_pairs, n_imu, nodes, paced, faults)
+
+
+def _faults(args, nodes: dict) -> list | int:
+    """The faults of --inject, or exit status 2; also checks --max-restarts."""
+    try:
+        faults = parse_faults(args.inject)
+    except ValueError as exc:
+        _err(f'asmonc run: --inject: {exc}')
+        return 2
+    unknown = [f for f in faults if f.kind in PROCESS_KINDS and f.arg not in nodes]
+    if unknown:
+        _err(f'asmonc run: --inject: {unknown[0]}: no node {unknown[0].arg!r} in this '
+             f"run (nodes: {', '.join(nodes)})")
+        return 2
+    if args.max_restarts < 0:
+        _err('asmonc run: --max-restarts must be >= 0')
+        return 2
+    return faults
+
+
+def claim_run_domain():
+    """(preferred ROS domain id, claimed id, open lock file) for this run, with
+    ROS_DOMAIN_ID set to the claimed one; or exit status 2 (said why on stderr)."""
+    try:
+        preferred = int(os.environ.get('ROS_DOMAIN_ID', '0') or 0)
+    except ValueError:
+        _err(f"asmonc run: ROS_DOMAIN_ID must be an integer, got "
+             f"'{os.environ['ROS_DOMAIN_ID']}'")
+        return 2
+    if not 0 <= preferred <= MAX_LINUX_DOMAIN_ID:
+        _err(f'asmonc run: ROS_DOMAIN_ID must be in [0, {MAX_LINUX_DOMAIN_ID}] '
+             f'(0..{MAX_DOMAIN_ID} is portable across DDS vendors), got {preferred}')
+        return 2
+    domain, domain_lock = claim_domain(preferred)
+    if domain is None:
+        _err(f'asmonc run: every ROS domain {preferred}..{domain_search_limit(preferred)} '
+             'is in use by another asmonc run')
+        return 2
+    os.environ['ROS_DOMAIN_ID'] = str(domain)
+    return preferred, domain, domain_lock
+
+
+def read_truths(plan: ReplayPlan, console: Console):
+    """(first image stamp, true obstacles per stamp, those out of view or None, the
+    safety truth or None) of the bag; what a damaged bag allows."""
+    t0, truth, out_of_view, safety_truth = 0, {}, None, None
+    try:
+        t0 = first_image_stamp(plan.bag) or 0
+        truth = read_truth(plan.bag) if bagio.TOPICS['gt_obstacles'][0] in plan.topics else {}
+        if truth and bagio.TOPICS['gt_camera_pose'][0] in plan.topics:
+            out_of_view = read_out_of_view_truth(plan.bag, truth)
+            from asmonc_vision.eval.truth import truth_from_bag
+            safety_truth = truth_from_bag(plan.bag)
+    except bagio.BagError as exc:
+        truth = getattr(exc, 'partial', truth)
+        if not plan.damage:
+            console.line(f'asmonc run: {exc} (continuing with what could be read)', err=True)
+    return t0, truth, out_of_view, safety_truth
+
+
+class Replay:
+    """The nodes of one replay as processes, watched from an in-process monitor."""
+
+    def __init__(self, args, plan: ReplayPlan, console: Console, env: dict, t0: int):
+        self.args, self.plan, self.console, self.env, self.t0 = args, plan, console, env, t0
+        self.nodes = plan.nodes
+        self.log_dir = Path(tempfile.mkdtemp(prefix='asmonc-run-'))
+        self.ros_params: list[str] = []
+        for pf in args.params_file:
+            self.ros_params += ['--params-file', str(pf)]
+        self.children: dict[str, Child] = {}
+        self.restarts: Counter = Counter()
+        self.failed: list[str] = []
+        if plan.damage:
+            self.failed.append(f'bag not read to its end: {plan.damage}')
+        self.player_rc = None
+        self.gait_stopper: GaitStopper | None = None
+        self.injector: FaultSchedule | None = None
+        self.stopped: set[str] = set()
+
+    # --- ROS side -------------------------------------------------------------------
+
+    def start_ros(self) -> None:
+        """The monitor (and, with --out, the recorder) on their own spinning threads."""
+        import rclpy
+        from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
+
+        self.ctx = rclpy.Context()
+        rclpy.init(context=self.ctx)
+        self.monitor = Monitor(self.ctx)
+        self.recorder = None
+        if self.args.out is not None:
+            from rclpy.parameter import Parameter
+
+            from asmonc_vision.nodes.recorder_node import BagRecorderNode
+            self.recorder = BagRecorderNode(context=self.ctx, parameter_overrides=[
+                Parameter('output', value=str(self.args.out)),
+                Parameter('topics', value=list(OUTPUT_TOPICS)),
+                Parameter('compression', value='zstd')])
+        # The monitor spins on its own thread: the recorder's callbacks (compressing debug
+        # images) must not delay the count of finished frames, which decides when the alarm
+        # node is stopped -- late, it announces the end of the replay as a FAULT.
+        self.executors = [SingleThreadedExecutor(context=self.ctx)]
+        self.executors[0].add_node(self.monitor.node)
+        if self.recorder is not None:
+            self.executors.append(MultiThreadedExecutor(num_threads=2, context=self.ctx))
+            self.executors[1].add_node(self.recorder)
+        for ex in self.executors:
+            threading.Thread(target=ex.spin, daemon=True).start()
+
+    def stop_ros(self) -> None:
+        import rclpy
+
+        for ex in self.executors:
+            ex.shutdown(timeout_sec=2.0)
+        if self.recorder is not None:
+            self.recorder.close()
+            self.recorder.destroy_node()
+        self.monitor.node.destroy_node()
+        rclpy.try_shutdown(context=self.ctx)
+
+    # --- the nodes ------------------------------------------------------------------
+
+    def spawn(self, name: str, log_name: str | None = None) -> Child:
+        cmd = [sys.executable, '-m', self.nodes[name].module, '--ros-args', *self.ros_params,
+               *self.nodes[name].ros_args()]
+        if name == 'audio':
+            cmd += audio_params(self.args, self.t0)
+        # the alarm node's warnings are its alarms, which are printed anyway
+        return Child(name, cmd, self.log_dir, lambda s: self.console.line(s, err=True),
+                     self.env, echo_warnings=(name != 'alarm'), log_name=log_name)
+
+    def start(self, names: list[str]) -> None:
+        for name in names:
+            self.children[name] = self.spawn(name)
+        # Wait until they are connected, so no frame is lost to discovery: each node
+        # publishes its outputs and subscribes its inputs, and the recorder (if any)
+        # has subscribed every output.
+        deadline = time.monotonic() + 60.0
+        while time.monotonic() < deadline:
+            if all(connected(self.monitor.node, self.nodes[n], self.recorder is not None)
+                   for n in names):
+                return
+            dead = [n for n, c in self.children.items() if not c.alive()]
+            if dead:
+                raise RuntimeError(f'{", ".join(dead)} node exited at start; see '
+                                   f'{self.children[dead[0]].log_path}')
+            time.sleep(0.1)
+        raise RuntimeError('the nodes did not connect within 60 s')
+
+    def start_nodes(self) -> None:
+        # The gait and alarm nodes last, in that order: their start-up graces (the
+        # alarm's FAULT "not started", the gait node's "inclinometer silent since the
+        # node started") run from their own start, and the detector may take seconds to
+        # be ready (compiling its kernels on a first run); so may the gait filter (about
+        # 15 s on a first run, before its own grace starts), which would use up the
+        # alarm's if the two started together.
+        self.start([n for n, spec in self.nodes.items() if not spec.start_late])
+        for name, spec in self.nodes.items():
+            if spec.start_late:
+                self.start([name])
+
+    def start_player(self) -> None:
+        # The player itself must also see every reader of the bag's inputs (images and
+        # their camera_info, the inclinometer) before the first message: a message sent
+        # before its subscriber is matched is lost.
+        plan, args = self.plan, self.args
+        player_cmd = [sys.executable, '-m', 'asmonc_vision.nodes.player_node', '--ros-args',
+                      '-p', f'bag:={plan.bag.resolve()}', '-p', f'rate:={float(args.rate)}',
+                      '-p', f'wait_topics:={json.dumps(wait_topics(self.nodes, plan.topics))}',
+                      '-p', 'exit_when_done:=true']
+        message_faults = '; '.join(str(f) for f in plan.faults if f.kind in MESSAGE_KINDS)
+        if message_faults:
+            player_cmd += ['-p', f'faults:={message_faults}']
+        if plan.paced:
+            # one /obstacles per pair: a slow machine slows the replay, drops nothing
+            player_cmd += ['-p', 'pace_topic:=/obstacles',
+                           '-p', 'pace_type:=asmonc_vision_msgs/msg/ObstacleArray',
+                           '-p', f'pace_image_topic:={bagio.TOPICS["left_image"][0]}',
+                           '-p', f'pace_lead:={PACE_LEAD}']
+        self.children['player'] = Child('player', player_cmd, self.log_dir,
+                                        lambda s: self.console.line(s, err=True), self.env,
+                                        done_mark=PLAYED_MARK)
+        if 'gait' in self.children:
+            self.gait_stopper = GaitStopper(
+                self.children['gait'], self.children['player'], self.monitor, plan.n_imu,
+                quiet=min(0.25, 0.25 * gait_timeout(args.params_file)))
+            self.gait_stopper.start()
+        self.injector = FaultSchedule(plan.faults, self.children, self.monitor, self.console,
+                                      self.t0)
+
+    def show_alarms(self) -> None:
+        for a in self.monitor.take_new_alarms():
+            self.console.line(f'{bag_time(a["stamp_ns"], self.t0)}  '
+                              f'{LEVEL_NAMES.get(a["level"], a["level"]):8s} {a["text"]}')
+
+    def check_nodes(self) -> None:
+        """Restart a dead node that may be restarted; RuntimeError for one that may not."""
+        if self.gait_stopper is not None and self.gait_stopper.stopping.is_set():
+            self.stopped.add('gait')
+        for name in self.nodes:
+            if name in self.stopped or self.children[name].alive():
+                continue
+            rc = self.children[name].proc.returncode
+            if not self.nodes[name].respawn or self.restarts[name] >= self.args.max_restarts:
+                raise RuntimeError(f'{name} node died (exit status {rc}); see '
+                                   f'{self.children[name].log_path}')
+            # Restart it at once: while it is down the alarm node's timeout says FAULT
+            # (or, for the alarm node itself, its successor starts with FAULT).
+            self.restarts[name] += 1
+            self.failed.append(f'{name} node died (exit status {rc}) and was restarted')
+            self.console.line(f'asmonc run: {name} node died (exit status {rc}); restarting '
+                              f'it ({self.restarts[name]} of at most {self.args.max_restarts})',
+                              err=True)
+            self.children[name].stop()
+            self.children[name] = self.spawn(name, f'{name}.restart{self.restarts[name]}')
+            if name == 'gait' and self.gait_stopper is not None:
+                self.gait_stopper.child = self.children[name]
+
+    def wait_for_results(self) -> None:
+        """Until every pair has its result (or, with no cameras, the bag has been played),
+        or the player has ended and nothing more has come for --settle seconds."""
+        monitor, player, n_pairs = self.monitor, self.children['player'], self.plan.n_pairs
+        # Half the alarm node's timeout, counted from the last result this monitor saw
+        # (`last_change`: when it arrived, not when this loop noticed it; the loop polls
+        # every 20 ms while that stop is pending): the silence the alarm node measures
+        # runs from the same /obstacles message, and it must be stopped well before that
+        # silence reaches its timeout (stopping it takes a signal and a shutdown).
+        # Counted from the end of the replay instead, which comes after the last result
+        # when the last pairs give none, too little of the timeout may be left; counted
+        # from when the loop noticed the result, a loop late on a cold first run (numba
+        # compiling) may stop the alarm node too late.
+        alarm_quiet = 0.5 * alarm_timeout(self.args.params_file)
+        n_infos = self.plan.topics.get(bagio.TOPICS['left_info'][0], ('', 0))[1]
+        last, last_change = monitor.frames, time.monotonic()
+        player_end = played_at = None
+        while (monitor.frames < n_pairs) if n_pairs else player.alive():
+            self.show_alarms()
+            self.console.bar(monitor.frames)
+            self.injector.poll()
+            self.check_nodes()
+            time.sleep(0.02 if played_at is not None and 'alarm' not in self.stopped else 0.1)
+            now = time.monotonic()
+            if monitor.frames != last:
+                last = monitor.frames
+                with monitor.lock:   # when it arrived, not when this loop noticed it
+                    last_change = monitor.last_result_at or now
+            if player_end is None and not player.alive():
+                player_end = now
+            # Played: the player said so (its last line, before it waits for the
+            # subscribers' acknowledgements and exits), or every camera_info has come
+            # back, or the player has ended.
+            if played_at is None and (player_end is not None or player.done.is_set()
+                                      or (n_infos and monitor.played >= n_infos)):
+                played_at = now
+            if (played_at is not None and 'alarm' in self.children
+                    and 'alarm' not in self.stopped and now - last_change > alarm_quiet):
+                # Every frame has been played and the results have stopped short of the
+                # pairs: some pairs give none (a right image missing from the recording,
+                # an image the detector refused). The replay is over: stop the alarm node
+                # before its timeout announces the silence as a fault, then wait out
+                # --settle for late results (recorded, but no longer alarmed).
+                self.show_alarms()
+                self.children['alarm'].stop()
+                self.stopped.add('alarm')
+            if player_end is not None and now - max(last_change, player_end) > self.args.settle:
+                break
+
+    def finish(self) -> None:
+        """After the last result: the alarm node stopped, the gait node and player ended."""
+        time.sleep(0.1)  # the alarm for the last frame (the alarm node has the frame too)
+        self.show_alarms()
+        # The replay is over: stop the alarm node before it reports the silence as a fault.
+        if 'alarm' in self.children:
+            self.children['alarm'].stop()
+        self.show_alarms()
+        if self.gait_stopper is not None:
+            self.gait_stopper.join(timeout=30.0)
+        try:
+            self.player_rc = self.children['player'].proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            self.failed.append('the player did not finish within 30 s of the last frame')
+
+    def stop_all(self) -> None:
+        self.console.done()
+        if self.gait_stopper is not None:
+            self.gait_stopper.cancel()
+            self.gait_stopper.join(timeout=10.0)
+        # Player, then alarm, then detector: the alarm must not outlive the detector
+        # and announce the end of the replay as a fault.
+        for name in ['player', 'alarm', *self.children]:
+            if name in self.children:
+                self.children[name].stop()
+        self.stop_ros()
+
+    def play(self) -> None:
+        """The whole replay, from the monitor's start to the last node's stop."""
+        self.start_ros()
+        try:
+            self.start_nodes()
+            self.start_player()
+            self.wait_for_results()
+            self.finish()
+        except RuntimeError as exc:
+            self.failed.append(str(exc))
+        except KeyboardInterrupt:
+            self.failed.append('interrupted')
+        finally:
+            self.stop_all()
+
+    # --- the outcome ----------------------------------------------------------------
+
+    def summary(self, truth: dict, out_of_view, safety_truth) -> tuple[dict, int]:
+        """(the summary, the frames dropped among the pairs that should have a result)."""
+        plan, monitor = self.plan, self.monitor
+        summary = summarise(monitor, truth, plan.n_pairs, self.args, out_of_view,
+                            safety_truth)
+        if 'audio' in self.nodes:
+            summary['audio'] = audio_outputs(self.args, monitor, self.t0, truth, plan.bag,
+                                             self.console)
+        summary['player_exit_code'] = self.player_rc
+        summary['replay'] = pacing(self.children.get('player'), plan.paced)
+        summary['errors'] = self.failed
+        summary['restarts'] = dict(self.restarts)
+        dropped = summary['dropped_frames']
+        if plan.faults:
+            summary['faults'] = {'spec': [str(f) for f in plan.faults],
+                                 'processes': self.injector.done if self.injector else []}
+            if any(f.kind in MESSAGE_KINDS for f in plan.faults):
+                # pairs the faults changed may go without a result: only good ones count
+                every, affected = affected_pairs(BagSource(plan.bag), plan.faults)
+                with monitor.lock:
+                    lost = sorted((every - affected) - set(monitor.detections))
+                dropped = len(lost)
+                summary['faults'].update(affected_pairs=len(affected),
+                                         good_pairs_without_result=len(lost))
+        return summary, dropped
+
+
+def replay(args) -> int:
+    """`asmonc run` with its parsed arguments (see `cli.run`); the exit status: 0 done,
+    1 frames dropped, a node failed or the bag ended in error, 2 unusable bag or
+    arguments."""
+    plan = plan_replay(args)
+    if isinstance(plan, int):
+        return plan
+    claimed = claim_run_domain()
+    if isinstance(claimed, int):
+        return claimed
+    preferred, domain, _domain_lock = claimed   # the lock is held until this returns
+    env = dict(os.environ)
+    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    console = Console(plan.n_pairs or plan.n_imu, not args.no_progress, args.quiet)
+    if domain != preferred:
+        console.line(f'asmonc run: ROS domain {preferred} is in use by another asmonc run; '
+                     f'this one uses domain {domain} (ROS_DOMAIN_ID={domain} to watch it)')
+    t0, truth, out_of_view, safety_truth = read_truths(plan, console)
+    console.line(f'asmonc run: {plan.bag} — {plan.n_pairs} stereo pairs, {plan.n_imu} '
+                 f'inclinometer readings, at rate {args.rate:g}'
+                 + (', with ground truth' if truth else ', no ground truth')
+                 + f"; nodes: {', '.join(plan.nodes)}")
+    if not plan.n_pairs:
+        console.line(f"asmonc run: no stereo images in this bag ({bagio.TOPICS['left_image'][0]}"
+                     '): running the walk model only')
+    run = Replay(args, plan, console, env, t0)
+    run.play()
+    summary, dropped = run.summary(truth, out_of_view, safety_truth)
+    print_summary(summary, console)
+    if args.out is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / 'summary.json').write_text(
+            json.dumps(json_ready(summary), indent=2, allow_nan=False) + '\n')
+        shutil.copytree(run.log_dir, args.out / 'logs', dirs_exist_ok=True)
+        console.line(f'outputs recorded in {args.out}')
+    shutil.rmtree(run.log_dir, ignore_errors=True)
+    if run.failed or dropped or run.player_rc not in (0, None):
+        return 1
+    return 0
