@@ -1,6 +1,16 @@
-"""Test isolation for ROS: local discovery only, a domain id of this session's own, and
-an rclpy Context per test (the `ros_context` fixture)."""
+"""Test isolation for ROS (local discovery only, a domain id of this session's own, an
+rclpy Context per test) and the test markers.
+
+Markers (registered in setup.cfg): ``ros`` (needs rclpy and DDS), ``e2e`` (starts processes:
+nodes, the graph, ``asmonc run``), ``slow`` (over about a second). ``ros`` and ``e2e`` are set
+here from what a test uses: the ROS fixtures, rclpy (in the test, its fixtures or the module
+functions it calls), subprocesses. ``slow`` is set in the test files, or here (SLOW) for the
+files listed there. ``make test-fast`` runs what has none of the three.
+"""
+import inspect
+import itertools
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -10,21 +20,110 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 # One domain per pytest process, so parallel or leftover runs never cross-talk.
 os.environ.setdefault('ROS_DOMAIN_ID', str(10 + os.getpid() % 80))
 
-REPO = Path(__file__).resolve().parent.parent
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
 SHARED = REPO.parent / 'shared'
 BAGS = REPO / 'bags'
 sys.path.insert(0, str(REPO))
 
+_domains = itertools.count()
+
+
+def next_domain_id() -> int:
+    """A DDS domain for one test (102..230, spread by process id so parallel runs rarely
+    meet; the ``ros`` fixture uses 1..100, the session 10..89)."""
+    return 102 + (os.getpid() * 7 + next(_domains)) % 129
+
 
 @pytest.fixture
 def ros_context():
-    """A fresh, initialised rclpy Context, shut down after the test."""
+    """A fresh rclpy Context on a domain of its own (`next_domain_id`), shut down after
+    the test."""
     import rclpy
 
     ctx = rclpy.Context()
-    rclpy.init(context=ctx)
+    rclpy.init(context=ctx, domain_id=next_domain_id())
     yield ctx
     rclpy.try_shutdown(context=ctx)
+
+
+# --- markers -------------------------------------------------------------------------------
+
+#: tests over about a second (measured with --durations=0, one file at a time), for files
+#: that carry no marks of their own: 'test_x.py' (all its tests) or 'test_x.py::test_y'
+#: (that test, all its parameters)
+SLOW: tuple[str, ...] = ()
+
+#: fixtures that start rclpy
+ROS_FIXTURES = {'ros_context', 'ros'}
+_PROCESS = re.compile(r'\bsubprocess\.(run|Popen|call|check_call|check_output)\b|\bPopen\(')
+_NAME = re.compile(r'\b[A-Za-z_]\w*\b')
+
+
+def _from_rclpy(obj) -> bool:
+    name = getattr(obj, '__name__', '') if inspect.ismodule(obj) else \
+        getattr(obj, '__module__', '') or ''
+    return name == 'rclpy' or name.startswith('rclpy.')
+
+
+def _uses(func, module, cache: dict) -> tuple[bool, bool]:
+    """(uses rclpy, starts a process): in `func`'s source or the source of the functions of
+    `module` it names, transitively."""
+    key = (module.__name__, getattr(func, '__qualname__', repr(func)))
+    if key in cache:
+        return cache[key]
+    cache[key] = (False, False)              # cycles
+    try:
+        src = inspect.getsource(func)
+    except (OSError, TypeError):
+        return cache[key]
+    ros = 'rclpy' in src
+    proc = bool(_PROCESS.search(src))
+    for name in set(_NAME.findall(src)):
+        obj = module.__dict__.get(name)
+        if obj is None or obj is func:
+            continue
+        if _from_rclpy(obj):
+            ros = True
+        elif inspect.isfunction(obj) and obj.__module__ == module.__name__:
+            r, p = _uses(obj, module, cache)
+            ros, proc = ros or r, proc or p
+    cache[key] = (ros, proc)
+    return ros, proc
+
+
+def _fixture_funcs(item):
+    """(function, module) of the fixtures of `item` defined in the test folder."""
+    info = getattr(item, '_fixtureinfo', None)
+    for defs in (info.name2fixturedefs.values() if info else ()):
+        for d in defs:
+            mod = sys.modules.get(getattr(d.func, '__module__', ''))
+            if mod is not None and Path(getattr(mod, '__file__', '') or '/').parent == HERE:
+                yield d.func, mod
+
+
+def _is_slow(item) -> bool:
+    name = item.path.name
+    test = name + item.nodeid[item.nodeid.find('::'):] if '::' in item.nodeid else name
+    return any(test == s or test.startswith((s + '::', s + '[')) for s in SLOW)
+
+
+def pytest_collection_modifyitems(config, items):
+    cache: dict = {}
+    for item in items:
+        func = getattr(item, 'function', None)
+        if func is None:
+            continue
+        ros, proc = _uses(func, item.module, cache)
+        for fix, mod in _fixture_funcs(item):
+            r, p = _uses(fix, mod, cache)
+            ros, proc = ros or r, proc or p
+        if ros or ROS_FIXTURES & set(item.fixturenames):
+            item.add_marker(pytest.mark.ros)
+        if proc:
+            item.add_marker(pytest.mark.e2e)
+        if _is_slow(item):
+            item.add_marker(pytest.mark.slow)
 
 
 def spin_until(executor, predicate, timeout=10.0, step=0.05):
@@ -37,7 +136,6 @@ def spin_until(executor, predicate, timeout=10.0, step=0.05):
             return True
         executor.spin_once(timeout_sec=step)
     return bool(predicate())
-
 
 
 def stereo_types():

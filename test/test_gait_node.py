@@ -125,7 +125,7 @@ def test_a_node_waiting_for_its_first_sample_is_not_silent_until_the_grace_ends(
 
 
 def test_imu_without_orientation_is_ignored(ros):
-    ctx, add, spin_until, spin_for = ros.ctx, ros.add, ros.spin_until, ros.spin_for
+    ctx, add, spin_until = ros.ctx, ros.add, ros.spin_until
     probe = add(Node('gait_probe2', context=ctx))
     pub = probe.create_publisher(Imu, '/inclinometer/imu', SENSOR_QOS)
     node = add(GaitFilterNode(context=ctx))

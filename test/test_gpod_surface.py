@@ -27,7 +27,10 @@ def _texture(rng, cell=0.02, size=(900, 500)):
     return 110.0 + 28.0 * t / t.std()
 
 
-def render(profile, rng, knots=np.arange(0.0, 18.01, 0.25)):
+KNOTS = np.arange(0.0, 18.01, 0.25)
+
+
+def render(profile, rng, knots=KNOTS):
     """The left and right (H, W) uint8 images of the ground z = profile(s) (piecewise
     linear between ``knots``), level across, 2 grey levels of noise."""
     tex = _texture(np.random.default_rng(99))

@@ -2,9 +2,10 @@
 
 Three panels on the bag's time line (t = 0 the first stereo pair): the alarm levels as
 the audio node heard them (frame-stamped ones at their frames, the alarm node's
-own-clock ones -- start-up, time-outs -- where the audio node placed them), the cues and phrases of the soundtrack (from the
-WAV's ``.cues.json``), and the true obstacles on the walking path (the alarm's own
-corridor, on the true range and bearing) with their range, drops apart.
+own-clock ones -- start-up, time-outs -- where the audio node placed them), the cues and
+phrases of the soundtrack (from the WAV's ``.cues.json``), and the true obstacles on the
+walking path (the alarm's own corridor, on the true range and bearing) with their range,
+drops apart.
 """
 from __future__ import annotations
 

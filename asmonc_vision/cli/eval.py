@@ -16,7 +16,8 @@ each. With `--outputs DIR` (one per BAG) nothing is run: the /obstacles and
 /ground_plane recorded by `asmonc run BAG --out DIR` are scored against BAG's truth,
 and its recorded /alarms tell whether each true obstacle on the walking path was warned of
 in time (`core.evaluation.path_warnings`, the alarm node's default criteria; as the
-summary of `asmonc run`). Both paths are scored by the same code (core.evaluation.SequenceEvaluation):
+summary of `asmonc run`). Both paths are scored by the same code
+(core.evaluation.SequenceEvaluation):
 
 * recall per frame, per |height| x range bin of the true obstacles (0-5, 5-10, 10-20,
   20-50, >= 50 cm x 1-2, 2-3, 3-4, 4-5, 5-8 m) with counts: a true obstacle is found in a

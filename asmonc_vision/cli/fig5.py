@@ -249,7 +249,7 @@ def place_boxes(rng: np.random.Generator, height_m: float, ranges_m, rig,
     foot = np.array([0.0, rig.baseline / 2.0])        # below the left camera
     side = 1.0 if rng.random() < 0.5 else -1.0
     boxes = []
-    for j, r in enumerate(ranges_m):
+    for r in ranges_m:
         length = float(rng.uniform(0.2, 0.45))
         width = float(rng.uniform(0.25, 0.5))
         yaw = float(rng.uniform(0.0, 90.0))

@@ -30,8 +30,8 @@ the walk model run on it; the 0.5 s-ahead prediction against "hold the last valu
 the straight walks (Test5) within the reference walking bouts, the daily-living walk
 (Test11) likewise, with two references (an oracle-aided benchmark, not a bound: a
 Fourier-combiner Kalman filter given each bout's own stride frequency and start; and the
-upper bound of the model family, a non-causal fit of each bout); walk starts/stops against the reference
-bouts (INDIP MicroWB: precision and recall within 0.5 s and 1 s); the tracked step
+upper bound of the model family, a non-causal fit of each bout); walk starts/stops against the
+reference bouts (INDIP MicroWB: precision and recall within 0.5 s and 1 s); the tracked step
 frequency against the reference cadence.
 
 figs: the paper's Figs. 13-15 redrawn from these runs (docs/gait_fig13.png, ...).
@@ -941,7 +941,7 @@ def evaluate_real(data: Path = DEFAULT_DATA, config: GaitConfig | None = None,
         sel = [r for r in rows if f' {test} ' in r['name'] and r['n']]
         if not sel:
             continue
-        cat = lambda k: np.concatenate([r[k] for r in sel])  # noqa: E731
+        cat = lambda k, sel=sel: np.concatenate([r[k] for r in sel])  # noqa: E731
         p, h = scoring.rms(cat('pred_err')), scoring.rms(cat('hold_err'))
         ps, hs = scoring.rms(cat('pred_err_steady')), scoring.rms(cat('hold_err_steady'))
         fe = cat('fit_err')
@@ -1024,7 +1024,8 @@ def print_real(res: dict, file=sys.stdout) -> None:
         if x['cadence']:
             c = np.array([[d['tracked_hz'], d['reference_hz']] for d in x['cadence']])
             e = c[:, 0] / c[:, 1] - 1.0
-            p(f'  tracked step frequency vs reference cadence: median error {100 * np.median(e):+.0f}%, '
+            p('  tracked step frequency vs reference cadence: '
+              f'median error {100 * np.median(e):+.0f}%, '
               f'{int(np.sum(np.abs(e) <= 0.1))}/{e.size} bouts within 10 %')
 
 

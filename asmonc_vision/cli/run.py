@@ -470,7 +470,8 @@ def run(args) -> int:
         if not damage:
             console.line(f'asmonc run: {exc} (continuing with what could be read)', err=True)
     console.line(f'asmonc run: {bag} — {n_pairs} stereo pairs, {n_imu} inclinometer readings, '
-                 f'at rate {args.rate:g}' + (', with ground truth' if truth else ', no ground truth')
+                 f'at rate {args.rate:g}'
+                 + (', with ground truth' if truth else ', no ground truth')
                  + f"; nodes: {', '.join(nodes)}")
     if not n_pairs:
         console.line(f'asmonc run: no stereo images in this bag ({left_topic}): '
@@ -709,7 +710,8 @@ def run(args) -> int:
     print_summary(summary, console)
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / 'summary.json').write_text(json.dumps(json_ready(summary), indent=2, allow_nan=False) + '\n')
+        (args.out / 'summary.json').write_text(
+            json.dumps(json_ready(summary), indent=2, allow_nan=False) + '\n')
         shutil.copytree(log_dir, args.out / 'logs', dirs_exist_ok=True)
         console.line(f'outputs recorded in {args.out}')
     shutil.rmtree(log_dir, ignore_errors=True)
@@ -970,12 +972,14 @@ def print_summary(s: dict, console: _Console) -> None:
     if gt:
         c = gt['criteria']
         p(f"true obstacles (>= {c['min_height_m'] * 100:.0f} cm high, within "
-          f"{c['max_range_m']:g} m; found = a report within {c['match_radius_m']:g} m of it on the ground):")
+          f"{c['max_range_m']:g} m; found = a report within {c['match_radius_m']:g} m of it "
+          'on the ground):')
         for oid, o in gt['obstacles'].items():
             if o['frames_eligible'] == 0:
                 continue
             verdict = 'DETECTED' if o['detected'] else 'MISSED'
-            p(f"  obstacle {oid:>3}: {o['height_m'] * 100:5.1f} cm, nearest {o['min_range_m']:4.1f} m"
+            p(f"  obstacle {oid:>3}: {o['height_m'] * 100:5.1f} cm, "
+              f"nearest {o['min_range_m']:4.1f} m"
               f" — {verdict} in {o['frames_detected']}/{o['frames_eligible']} frames")
         recall = gt['recall']
         p(f"recall per frame: {gt['detected']}/{gt['eligible']}"

@@ -161,7 +161,8 @@ class EvidenceMapConfig:
         "was cleared for want of a motion) the detector's reports are published unfiltered",
         range=(0, 1000))
     default_sigma_px: float = param(0.4, 'σ_d of a match when the detector gives '
-                                    'neither a per-pixel threshold nor a sigma, px', range=(0.01, 10.0))
+                                    'neither a per-pixel threshold nor a sigma, px',
+                                    range=(0.01, 10.0))
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -680,7 +681,8 @@ class EvidenceMap:
                     height=height, width=float(lat.max() - lat.min()) + c.cell_m,
                     confidence=conf, cells=int(cs.size),
                     fresh_pixels=(int(self._pair_count[cs].sum())
-                                  if self._pair_count is not None else 0), age_s=max(stamp_s - last, 0.0)))
+                                  if self._pair_count is not None else 0),
+                    age_s=max(stamp_s - last, 0.0)))
         self.ids = new_ids
         out.sort(key=lambda o: float(np.hypot(*o.nearest_xy)))
         return tuple(out)

@@ -99,7 +99,8 @@ class Soundtrack:
     def mix(self, duration: float | None = None) -> np.ndarray:
         """The whole time line from the first sample kept, (n, 2) float32 in [-1, 1];
         ``duration`` (s) pads with silence (or cuts) to that length from time 0."""
-        n = self.end - self._base if duration is None else int(round(duration * self.rate)) - self._base
+        n = (self.end - self._base if duration is None
+             else int(round(duration * self.rate)) - self._base)
         return self.read(self._base, max(n, 0))
 
     def trim(self, before: int) -> None:
