@@ -376,6 +376,7 @@ def fit_ground_plane(u, v, d, *, cam: StereoCamera | None = None, method: str = 
         fit = lsq_plane(uf[inl], vf[inl], df[inl])
         if fit is None:
             return None
+    assert fit is not None
     abc, cov, rms = fit
     if int(inl.sum()) < min_features or not np.all(np.isfinite(abc)):
         return None

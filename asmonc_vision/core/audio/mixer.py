@@ -21,8 +21,8 @@ class Soundtrack:
     def __init__(self, rate: int):
         self.rate = int(rate)
         self._base = 0                          # sample index of the buffers' first row
-        self._tones = np.zeros((0, 2), np.float32)
-        self._speech = np.zeros((0, 2), np.float32)
+        self._tones: np.ndarray = np.zeros((0, 2), np.float32)
+        self._speech: np.ndarray = np.zeros((0, 2), np.float32)
         #: (start, end) sample indices of the phrases placed (absolute)
         self._phrases: list[tuple[int, int]] = []
         #: (onset sample, kind) of every event placed, for inspection and timelines

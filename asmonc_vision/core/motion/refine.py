@@ -116,7 +116,8 @@ def _pose_terms(r, t, pts, obs, cam, huber):
 
 
 def _converged(old_cost, new_cost, step) -> bool:
-    return (old_cost - new_cost) <= 1e-8 * max(old_cost, 1e-12) or np.linalg.norm(step) < 1e-9
+    return bool((old_cost - new_cost) <= 1e-8 * max(old_cost, 1e-12)
+                or np.linalg.norm(step) < 1e-9)
 
 
 def refine_pose(r, t, points, curr_left, curr_right, cam: StereoCamera, iters: int = 10,
