@@ -48,8 +48,8 @@ MYPY_EXCLUDE_PENDING := asmonc_vision/core/gpod.py asmonc_vision/core/gpod/% \
   asmonc_vision/core/gait/% asmonc_vision/core/matching.py
 MYPY_FILES = $(filter-out $(MYPY_EXCLUDE_PENDING),$(sort $(shell find asmonc_vision/core -name '*.py')))
 lint: venv
-	$(PY) -m ruff check --no-cache $(LINT_PATHS)
-	$(PY) -m mypy $(MYPY_FILES)
+	$(PY) -m ruff check --no-cache $(LINT_PATHS); ruff=$$?; \
+	  $(PY) -m mypy $(MYPY_FILES) && exit $$ruff
 
 # Regenerate the committed bags (bags/README.md): about a minute.
 BUNDLED_BAGS := static_obstacles:5.5 clear_static:3 walk_obstacles:7.5 clear_walk:4 walk_stop_turn:7.5 slope:3
