@@ -52,7 +52,13 @@ def ros_context():
 #: tests over about a second (measured with --durations=0, one file at a time), for files
 #: that carry no marks of their own: 'test_x.py' (all its tests) or 'test_x.py::test_y'
 #: (that test, all its parameters)
-SLOW: tuple[str, ...] = ()
+SLOW: tuple[str, ...] = (
+    'test_bench.py::test_bench_prints_both_methods_at_both_sizes',
+    'test_safety_walks.py::test_walk_false_alarms_and_reports',
+    'test_sim_scenes.py::test_markings_change_the_image_but_are_not_obstacles',
+    'test_unseen_ground.py::test_a_plain_wall_that_appears_ahead_is_reported_at_its_foot',
+    'test_unseen_ground.py::test_only_a_confident_report_explains_the_unseen_ground',
+)
 
 #: fixtures that start rclpy
 ROS_FIXTURES = {'ros_context', 'ros'}

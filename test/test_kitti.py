@@ -33,6 +33,9 @@ from conftest import SHARED
 
 KITTI = SHARED / 'data' / 'kitti_road_seq'
 
+#: every test shares the one run over the sequence (seconds)
+pytestmark = pytest.mark.slow
+
 NEAR_ROW = 230          # image rows of the near road start here
 
 
