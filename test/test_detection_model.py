@@ -153,6 +153,7 @@ def test_rig_validation():
         edge_pixel_excesses(PAPER_RIG, 0.1, 3.0, phase=1.0)
 
 
+@pytest.mark.slow
 def test_cli_model_table_and_png(tmp_path, capsys):
     from asmonc_vision.cli.main import main
 
@@ -166,6 +167,7 @@ def test_cli_model_table_and_png(tmp_path, capsys):
     assert main(['fig5', '--sigma', '0']) == 2
 
 
+@pytest.mark.slow
 def test_tiny_empirical_run(tmp_path):
     """1 seed, 2 heights, 1 range, 2 frames: completes and gives rates in [0, 1]. The
     values depend on the detector (improved elsewhere) and are not asserted."""

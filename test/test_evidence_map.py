@@ -432,6 +432,7 @@ def test_settings_are_checked():
 
 
 # ------------------------------------------------------------------ the stage
+@pytest.mark.slow
 def test_perception_with_the_map_off_is_the_detector():
     from asmonc_vision.cli.bench import load_frames
     from asmonc_vision.core.gpod import GpodDetector
