@@ -57,6 +57,10 @@ SLOW: tuple[str, ...] = (
     'test_gait.py::test_compiled_filter_step_equals_the_numpy_path',
     'test_gait.py::test_fusion_beats_either_source_and_survives_dropouts',
     'test_gait.py::test_turning_and_uphill_keep_the_model',
+    'test_gait_bags.py::test_bag_streams_agree_with_each_other',
+    'test_gait_bags.py::test_fusion_on_the_bag',
+    'test_gait_bags.py::test_the_command',
+    'test_gait_real.py::test_walking_is_detected_inside_the_reference_bouts',
     'test_gpod.py::test_a_detection_of_weak_edges_has_the_confidence_of_its_weighted_pixels',
     'test_gpod.py::test_a_low_box_seen_by_one_silhouette_is_placed_along_the_face_the_image_shows',
     'test_gpod.py::test_a_noisy_camera_makes_no_obstacles_on_clear_pavement',
@@ -150,6 +154,20 @@ def _is_slow(item) -> bool:
     return any(test == s or test.startswith((s + '::', s + '[')) for s in SLOW)
 
 
+def _module_fixtures(item) -> set:
+    """(module, name) of the module- or session-scoped fixtures of the test folder that
+    `item` uses."""
+    info = getattr(item, '_fixtureinfo', None)
+    out = set()
+    for name, defs in (info.name2fixturedefs.items() if info else ()):
+        for d in defs:
+            mod = sys.modules.get(getattr(d.func, '__module__', ''))
+            if d.scope in ('module', 'session') and mod is not None and \
+                    Path(getattr(mod, '__file__', '') or '/').parent == HERE:
+                out.add((item.path, name))
+    return out
+
+
 def pytest_collection_modifyitems(config, items):
     cache: dict = {}
     for item in items:
@@ -165,6 +183,11 @@ def pytest_collection_modifyitems(config, items):
         if proc:
             item.add_marker(pytest.mark.e2e)
         if _is_slow(item):
+            item.add_marker(pytest.mark.slow)
+    # a fixture shared by a slow test is paid by whichever of its tests runs first: all slow
+    shared = set().union(*(_module_fixtures(i) for i in items if i.get_closest_marker('slow')))
+    for item in items:
+        if not item.get_closest_marker('slow') and _module_fixtures(item) & shared:
             item.add_marker(pytest.mark.slow)
 
 

@@ -96,6 +96,7 @@ def reports_ahead(profile, surface: bool, frames: int = 4, seed: int = 0,
 @pytest.mark.parametrize('seed', [0, 1])
 @pytest.mark.parametrize('name', ['rise 5 deg from 3 m', 'fall 5 deg from 3 m',
                                   'crest at 5 m'])
+@pytest.mark.slow
 def test_a_bend_ahead_is_ground(name, seed):
     """With the surface at most two reports per frame from 3 m on, at most a quarter of
     those of the plane alone (up to 30 per frame on the rise; a drop of 45 cm on the
@@ -108,6 +109,7 @@ def test_a_bend_ahead_is_ground(name, seed):
         assert sum(plane_only) >= 5 * len(plane_only)        # the case it is for
 
 
+@pytest.mark.slow
 def test_flat_ground_unchanged():
     flat = PROFILES['flat']
     assert reports_ahead(flat, True, from_m=0.0) == reports_ahead(flat, False, from_m=0.0)
