@@ -54,6 +54,7 @@ def ros_context():
 #: (that test, all its parameters)
 SLOW: tuple[str, ...] = (
     'test_bench.py::test_bench_prints_both_methods_at_both_sizes',
+    'test_campaign.py::test_one_walk_end_to_end_and_cached',
     'test_gait.py::test_compiled_filter_step_equals_the_numpy_path',
     'test_gait.py::test_fusion_beats_either_source_and_survives_dropouts',
     'test_gait.py::test_turning_and_uphill_keep_the_model',
