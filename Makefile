@@ -1,6 +1,8 @@
 # asmonc_vision — the two commands for a fresh machine:
 #   make demo   install everything into .venv, then replay the bundled bag through the node graph
 #   make test   install everything into .venv, then run the whole test suite
+# For development: make test-fast (the core tests: no ROS, no processes, none slow),
+# make lint (ruff and mypy).
 # Nothing outside this directory is installed. Needs python3 (3.11 or 3.12), cmake, gcc.
 
 PYTHON ?= python3
@@ -10,7 +12,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.asmonc-installed
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 
-.PHONY: all venv demo test bags clean-venv
+.PHONY: all venv demo test test-fast lint bags clean-venv
 
 all: demo
 
@@ -34,6 +36,20 @@ demo: venv
 
 test: venv
 	$(PY) -m pytest -q test
+
+# The tests marked neither ros, e2e nor slow (markers: setup.cfg, test/conftest.py).
+test-fast: venv
+	$(PY) -m pytest -q -m "not ros and not e2e and not slow" test
+
+# ruff (ruff.toml) over the package, the tests and the launch files; mypy (setup.cfg) over
+# core/, less the modules in MYPY_EXCLUDE_PENDING (make patterns).
+LINT_PATHS := asmonc_vision test launch
+MYPY_EXCLUDE_PENDING := asmonc_vision/core/gpod.py asmonc_vision/core/gpod/% \
+  asmonc_vision/core/gait/% asmonc_vision/core/matching.py
+MYPY_FILES = $(filter-out $(MYPY_EXCLUDE_PENDING),$(sort $(shell find asmonc_vision/core -name '*.py')))
+lint: venv
+	$(PY) -m ruff check --no-cache $(LINT_PATHS); ruff=$$?; \
+	  $(PY) -m mypy $(MYPY_FILES) && exit $$ruff
 
 # Regenerate the committed bags (bags/README.md): about a minute.
 BUNDLED_BAGS := static_obstacles:5.5 clear_static:3 walk_obstacles:7.5 clear_walk:4 walk_stop_turn:7.5 slope:3

@@ -73,7 +73,8 @@ def test_alarms_follow_obstacles_fault_on_silence_and_latch(ros):
     for r, level, text in [(4.0, Alarm.CAUTION, 'obstacle, 4 metres, ahead'),
                            (2.0, Alarm.WARNING, 'obstacle, 2 metres, ahead'),
                            (1.0, Alarm.STOP, 'stop, obstacle, 1 metre, ahead')]:
-        spin_until(lambda: alarms[-1].level == level, f'level {level}', each=send([r]))
+        spin_until(lambda level=level: alarms[-1].level == level, f'level {level}',
+                   each=send([r]))
         a = alarms[-1]
         assert a.text == text
         assert a.obstacle_id == 1 and a.range == pytest.approx(r)

@@ -55,6 +55,7 @@ def _sides_px(left, right, rig) -> np.ndarray:
 
 
 @pytest.mark.parametrize('tilt,roll', [(0.25, 0.0), (-0.2, 0.3), (0.1, 0.0)])
+@pytest.mark.slow
 def test_a_turned_right_camera_is_measured_and_corrected(tilt, roll):
     sc, frames = _frames('static_obstacles', 31, range(0, 30, 3),
                          right_tilt_deg=tilt, right_roll_deg=roll)
@@ -83,6 +84,7 @@ def test_matched_brightness_undoes_a_gain_and_an_offset():
 
 
 @pytest.mark.parametrize('gain,offset', [(1.05, 4.0), (1.5, -25.0), (0.7, 15.0)])
+@pytest.mark.slow
 def test_the_cameras_exposures_do_not_bias_the_measurement(gain, offset):
     """Two cameras with their own gain and black level (the simulator's default is 1.05
     and +4 grey levels) on a well-rectified rig, in the scene that biased the measurement
@@ -101,6 +103,7 @@ def test_the_cameras_exposures_do_not_bias_the_measurement(gain, offset):
     assert not al.wanted()
 
 
+@pytest.mark.slow
 def test_a_well_rectified_rig_is_left_untouched():
     """No correction, and the detector's output is bit for bit that without the check."""
     sc, frames = _frames('static_obstacles', 32, range(0, 36, 2))
@@ -120,6 +123,7 @@ def test_a_well_rectified_rig_is_left_untouched():
     assert on.alignment.measurements < len(frames)       # settled: measured 1 pair in 5
 
 
+@pytest.mark.slow
 def test_the_correction_brings_the_obstacle_threshold_back():
     """A misalignment raises the ground's disparity spread and the obstacle threshold
     taken from it; corrected, the spread is taken again and is that of the well-rectified

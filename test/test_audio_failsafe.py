@@ -11,7 +11,6 @@ import sys
 import time
 
 import numpy as np
-import pytest
 
 from asmonc_vision.io import bagio
 from asmonc_vision.core.alarm import AlarmConfig

@@ -5,18 +5,17 @@ rclpy Context on their own DDS domain, with discovery limited to this machine.
 """
 from __future__ import annotations
 
-import itertools
 import os
 import threading
 import time
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
 from asmonc_vision.io.bagio import TOPICS, typestore  # noqa: E402
+from conftest import next_domain_id  # noqa: E402,F401 - re-exported for the tests
 
 LEFT = TOPICS['left_image'][0]
 LEFT_INFO = TOPICS['left_info'][0]
@@ -25,14 +24,6 @@ OBSTACLES = TOPICS['obstacles'][0]
 ALARMS = TOPICS['alarms'][0]
 T0 = 1_700_000_000_000_000_000  # bag start, ns
 STEP = 100_000_000              # 100 ms between frames
-
-_domains = itertools.count()
-
-
-def next_domain_id() -> int:
-    """A DDS domain for one test (spread by process id so parallel runs rarely meet)."""
-    return 102 + (os.getpid() * 7 + next(_domains)) % 129
-
 
 def stamp(ns: int):
     t = typestore().types['builtin_interfaces/msg/Time']
@@ -164,17 +155,6 @@ def big_bag(tmp_path: Path, n: int = 40) -> tuple[Path, list]:
 
 
 # --- ROS ----------------------------------------------------------------------------
-
-@pytest.fixture
-def ros_context():
-    """A fresh rclpy Context on its own domain; shut down after the test."""
-    import rclpy
-
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=next_domain_id())
-    yield ctx
-    ctx.try_shutdown()
-
 
 class Spinner:
     """Spins an executor (of the test's context) in a background thread."""

@@ -59,6 +59,7 @@ def _tall_box_clip(n_frames=3):
     return rig.camera(), [simulate_frame(sc, k, r) for k in range(n_frames)]
 
 
+@pytest.mark.slow
 def test_finds_a_tall_box_where_it_is():
     cam, frames = _tall_box_clip()
     base = SgbmBaseline()

@@ -13,20 +13,25 @@ CONFIG = Path(__file__).resolve().parent.parent / 'config'
 
 # yaml file -> (node name, [(parameter prefix, 'module:Class'), ...])
 NODE_CONFIGS = {
-    'detector.yaml': ('detector_node', [('', 'asmonc_vision.nodes.detector_node:DetectorNodeConfig'),
-                                        ('gpod.', 'asmonc_vision.core.gpod:GpodConfig'),
-                                        ('map.', 'asmonc_vision.core.evidence_map:EvidenceMapConfig')]),
+    'detector.yaml': ('detector_node', [
+        ('', 'asmonc_vision.nodes.detector_node:DetectorNodeConfig'),
+        ('gpod.', 'asmonc_vision.core.gpod:GpodConfig'),
+        ('map.', 'asmonc_vision.core.evidence_map:EvidenceMapConfig')]),
     'alarm.yaml': ('alarm_node', [('', 'asmonc_vision.core.alarm:AlarmConfig')]),
     'audio.yaml': ('audio_node', [('', 'asmonc_vision.nodes.audio_node:AudioNodeConfig'),
                                   ('', 'asmonc_vision.core.audio.render:AudioConfig')]),
-    'stereo_capture.yaml': ('stereo_capture_node', [('', 'asmonc_vision.core.capture:CaptureConfig')]),
+    'stereo_capture.yaml': ('stereo_capture_node', [
+        ('', 'asmonc_vision.core.capture:CaptureConfig')]),
     'bag_player.yaml': ('bag_player_node', [('', 'asmonc_vision.nodes.player_node:PlayerConfig')]),
-    'bag_recorder.yaml': ('bag_recorder_node', [('', 'asmonc_vision.nodes.recorder_node:RecorderConfig')]),
-    'egomotion.yaml': ('egomotion_node', [('', 'asmonc_vision.nodes.egomotion_node:EgomotionNodeConfig'),
-                                          ('motion.', 'asmonc_vision.core.motion:EgomotionConfig')]),
+    'bag_recorder.yaml': ('bag_recorder_node', [
+        ('', 'asmonc_vision.nodes.recorder_node:RecorderConfig')]),
+    'egomotion.yaml': ('egomotion_node', [
+        ('', 'asmonc_vision.nodes.egomotion_node:EgomotionNodeConfig'),
+        ('motion.', 'asmonc_vision.core.motion:EgomotionConfig')]),
     'compass.yaml': ('compass_node', [('', 'asmonc_vision.core.nmea:CompassConfig')]),
-    'gait_filter.yaml': ('gait_filter_node', [('', 'asmonc_vision.nodes.gait_node:GaitNodeConfig'),
-                                              ('gait.', 'asmonc_vision.core.gait.model:GaitConfig')]),
+    'gait_filter.yaml': ('gait_filter_node', [
+        ('', 'asmonc_vision.nodes.gait_node:GaitNodeConfig'),
+        ('gait.', 'asmonc_vision.core.gait.model:GaitConfig')]),
 }
 
 

@@ -16,7 +16,7 @@ from asmonc_vision.eval.detection_model import (PAPER_RIG, ModelRig, disparity_e
                                                 pixel_detection_probability,
                                                 string_detection_probability, top_excess)
 
-F, I, H = 300.0, 0.35, 1.25
+F, B, H = 300.0, 0.35, 1.25
 
 
 def test_eq1_is_the_exact_excess_of_a_level_camera():
@@ -24,33 +24,33 @@ def test_eq1_is_the_exact_excess_of_a_level_camera():
     y = np.array([2.0, 2.5, 5.0, 5.0, 3.0, 8.0])
     # the ground point B behind the top A on the same ray: dY / Y = S / (H - S)
     behind = y * H / (H - s)
-    by_hand = F * I / y - F * I / behind
-    np.testing.assert_allclose(disparity_excess(F, I, H, s, y), by_hand, rtol=1e-12)
-    np.testing.assert_allclose(exact_disparity_excess(F, I, H, s, y, 0.0), by_hand, rtol=1e-12)
+    by_hand = F * B / y - F * B / behind
+    np.testing.assert_allclose(disparity_excess(F, B, H, s, y), by_hand, rtol=1e-12)
+    np.testing.assert_allclose(exact_disparity_excess(F, B, H, s, y, 0.0), by_hand, rtol=1e-12)
     # the paper: 1.7 px is the excess of a 10 cm obstacle at 5 m
-    assert disparity_excess(F, I, H, 0.10, 5.0) == pytest.approx(1.68)
+    assert disparity_excess(F, B, H, 0.10, 5.0) == pytest.approx(1.68)
 
 
 def test_exact_excess_of_a_pitched_rig_matches_its_closed_form():
     th = math.radians(20.0)
     s, y = np.meshgrid([0.03, 0.1, 0.25], [1.5, 3.0, 7.0])
-    closed = F * I * s / (H * (y * math.cos(th) + (H - s) * math.sin(th)))
-    np.testing.assert_allclose(exact_disparity_excess(F, I, H, s, y, th), closed, rtol=1e-10)
-    rig = ModelRig(F, I, H, 20.0)
+    closed = F * B * s / (H * (y * math.cos(th) + (H - s) * math.sin(th)))
+    np.testing.assert_allclose(exact_disparity_excess(F, B, H, s, y, th), closed, rtol=1e-10)
+    rig = ModelRig(F, B, H, 20.0)
     np.testing.assert_allclose(top_excess(rig, s, y), closed, rtol=1e-12)
     # the same from the ground plane in disparity space (core.camera): the plane's
     # disparity at A's pixel is B's
-    cam = StereoCamera(f=F, cx=160.0, cy=120.0, baseline=I, width=320, height=240)
+    cam = StereoCamera(f=F, cx=160.0, cy=120.0, baseline=B, width=320, height=240)
     abc = plane_from_metric(cam, MetricPlane(np.array([0.0, -math.cos(th), -math.sin(th)]), H))
     fwd = np.array([0.0, -math.sin(th), math.cos(th)])
     upv = np.array([0.0, -math.cos(th), -math.sin(th)])
-    pts = (y.reshape(-1, 1) * fwd + (s.reshape(-1, 1) - H) * upv) + [I / 2, 0.0, 0.0]
+    pts = (y.reshape(-1, 1) * fwd + (s.reshape(-1, 1) - H) * upv) + [B / 2, 0.0, 0.0]
     u, v, d = cam.project(pts)
     np.testing.assert_allclose(d - plane_disparity(abc, u, v), closed.ravel(), rtol=1e-10)
     # pitched down, the top is deeper than its range (z > Y while Y < (H - S) sin / (1 - cos),
     # ~7 m here): less excess than Eq. 1 says
     near = y < (H - s) * math.sin(th) / (1 - math.cos(th))
-    assert np.all((closed < disparity_excess(F, I, H, s, y)) == near)
+    assert np.all((closed < disparity_excess(F, B, H, s, y)) == near)
 
 
 def test_pixel_probability_limits_and_integral():
@@ -60,7 +60,7 @@ def test_pixel_probability_limits_and_integral():
     assert pixel_detection_probability(-20.0, 1.7, 1.0) == pytest.approx(0.0, abs=1e-12)
     # Eq. 2 as an integral of the normal density from the threshold up
     for ex, sig in ((0.5, 1.0), (2.3, 0.4), (1.0, 2.0)):
-        val, _ = integrate.quad(lambda x: math.exp(-0.5 * ((x - ex) / sig) ** 2)
+        val, _ = integrate.quad(lambda x, ex=ex, sig=sig: math.exp(-0.5 * ((x - ex) / sig) ** 2)
                                 / (sig * math.sqrt(2 * math.pi)), 1.7, math.inf)
         assert pixel_detection_probability(ex, 1.7, sig) == pytest.approx(val, abs=1e-9)
     with pytest.raises(ValueError):
@@ -86,7 +86,7 @@ def test_string_probability_product_and_at_least_m():
 def test_excess_grows_linearly_along_the_edge(pitch):
     """Project points of the vertical edge: the excess at each pixel row above the foot is
     exactly the linear law of edge_pixel_excesses."""
-    rig = ModelRig(F, I, H, pitch)
+    rig = ModelRig(F, B, H, pitch)
     th = rig.pitch_rad
     y, s = 3.0, 0.15
 
@@ -105,14 +105,14 @@ def test_excess_grows_linearly_along_the_edge(pitch):
             for _ in range(80):                    # the edge point seen in that row
                 mid = (lo + hi) / 2
                 lo, hi = (mid, hi) if row(mid) > target else (lo, mid)
-            exact = exact_disparity_excess(F, I, H, lo, y, th)
+            exact = exact_disparity_excess(F, B, H, lo, y, th)
             assert e == pytest.approx(float(exact), abs=1e-7)
-    assert float(edge_span_rows(ModelRig(F, I, H), s, y)) == pytest.approx(F * s / y)
+    assert float(edge_span_rows(ModelRig(F, B, H), s, y)) == pytest.approx(F * s / y)
 
 
 def test_paper_90_percent_sizes():
     """Sec. 2.3: '... increases from 6 cm to 12 cm for distances varying from 2.5 m to
-    5 m' (f 300, I 0.35 m, H 1.25 m, threshold 1.7, sigma 1, level camera: Eq. 1)."""
+    5 m' (f 300, B 0.35 m, H 1.25 m, threshold 1.7, sigma 1, level camera: Eq. 1)."""
     h25, h5 = min_height_for(0.9, np.array([2.5, 5.0]), PAPER_RIG, 1.7, 1.0)
     assert h25 == pytest.approx(0.06, abs=0.015)
     assert h5 == pytest.approx(0.12, abs=0.015)
@@ -125,7 +125,7 @@ def test_paper_90_percent_sizes():
 
 
 def test_monotonic():
-    rig = ModelRig(F, I, H, 20.0)
+    rig = ModelRig(F, B, H, 20.0)
     heights = np.linspace(0.0, 0.3, 61)
     ranges = np.array([2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0])
     grid = fig5_curves(rig, heights, ranges, 1.7, 1.0)
@@ -153,6 +153,7 @@ def test_rig_validation():
         edge_pixel_excesses(PAPER_RIG, 0.1, 3.0, phase=1.0)
 
 
+@pytest.mark.slow
 def test_cli_model_table_and_png(tmp_path, capsys):
     from asmonc_vision.cli.main import main
 
@@ -166,6 +167,7 @@ def test_cli_model_table_and_png(tmp_path, capsys):
     assert main(['fig5', '--sigma', '0']) == 2
 
 
+@pytest.mark.slow
 def test_tiny_empirical_run(tmp_path):
     """1 seed, 2 heights, 1 range, 2 frames: completes and gives rates in [0, 1]. The
     values depend on the detector (improved elsewhere) and are not asserted."""

@@ -60,7 +60,7 @@ def test_one_result_per_pair_and_obstacles_found(graph):
     frames = load_frames(BAGS / 'static_obstacles', [0, 1, 2, 3, 45, 46, 47])
     for i, f in enumerate(frames):
         send(*f)
-        assert spin_until(ex, lambda: len(got['obstacles']) == i + 1, timeout=15)
+        assert spin_until(ex, lambda i=i: len(got['obstacles']) == i + 1, timeout=15)
     stamps = [(m.header.stamp.sec, m.header.stamp.nanosec) for m in got['obstacles']]
     assert stamps == [(f[0].header.stamp.sec, f[0].header.stamp.nanosec) for f in frames]
     assert all(m.header.frame_id == 'stereo_left_optical_frame' for m in got['obstacles'])
@@ -102,7 +102,7 @@ def test_a_rig_off_its_calibration_is_corrected_and_reported(ros_context):
         frames = load_frames(BAGS / 'static_obstacles', list(range(0, 8)) + [45, 46, 47])
         for i, (left, right, li, ri) in enumerate(frames):
             send(left, shifted(right), li, ri)
-            assert spin_until(ex, lambda: len(got['obstacles']) == i + 1, timeout=15)
+            assert spin_until(ex, lambda i=i: len(got['obstacles']) == i + 1, timeout=15)
         assert spin_until(ex, lambda: any('misaligned' in d.message for d in diags),
                           timeout=5)
         last = [d for d in diags if 'misaligned' in d.message][-1]
@@ -121,7 +121,6 @@ def test_walking_tracks_take_egomotion_as_their_motion_input(graph):
     """Walking: with the pair's /egomotion (here from the core estimator on the same
     frames) the node's obstacle tracks are carried from frame to frame and keep their
     ids; the detector uses one motion per pair after the first."""
-    import numpy as np
     from geometry_msgs.msg import TransformStamped
 
     from asmonc_vision.core.motion import EgomotionEstimator
@@ -155,7 +154,7 @@ def test_walking_tracks_take_egomotion_as_their_motion_input(graph):
             msg.transform.translation.x, msg.transform.translation.y = float(t[0]), float(t[1])
             msg.transform.translation.z = float(t[2])
             pub.publish(msg)
-        assert spin_until(ex, lambda: len(got['obstacles']) == i + 1, timeout=15)
+        assert spin_until(ex, lambda i=i: len(got['obstacles']) == i + 1, timeout=15)
     # a motion is taken for every pair with a ground plane (none while initialising)
     assert spin_until(ex, lambda: len(got['plane']) == len(frames))
     tracking = [p.status == GroundPlane.TRACKING for p in got['plane']]

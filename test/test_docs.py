@@ -166,7 +166,8 @@ def test_no_work_log_references():
 
 
 def test_work_log_pattern_catches_what_it_names():
-    for bad in ('as in session 37', 'the session-12 kernels', 'Issue 48 asks', 'Tried, not kept: x', 'on 2026-01-05'):
+    for bad in ('as in session 37', 'the session-12 kernels', 'Issue 48 asks',
+                'Tried, not kept: x', 'on 2026-01-05'):
         assert WORK_LOG.search(bad), bad
     for fine in ('sessions of walking', 'a stamp of 2023-11-14T22:13:20Z', 'no issue here'):
         assert not WORK_LOG.search(fine), fine

@@ -72,7 +72,7 @@ def test_one_motion_per_pair_matching_ground_truth(graph):
     frames, truth = load_frames(idx)
     for i, f in enumerate(frames):
         send(*f)
-        assert spin_until(ex, lambda: node.frames_done == i + 1, timeout=15)
+        assert spin_until(ex, lambda i=i: node.frames_done == i + 1, timeout=15)
     assert spin_until(ex, lambda: len(got['motion']) == len(frames) - 1 and
                       len(got['odom']) == len(frames) - 1, timeout=5)
     stamps = [_ns(f[0].header.stamp) for f in frames]
@@ -114,7 +114,7 @@ def test_blank_pair_publishes_nothing_and_says_why(graph):
     sequence = [frames[0], frames[1], tuple(blank), frames[3], frames[4]]
     for i, f in enumerate(sequence):
         send(*f)
-        assert spin_until(ex, lambda: node.frames_done == i + 1, timeout=15)
+        assert spin_until(ex, lambda i=i: node.frames_done == i + 1, timeout=15)
     assert spin_until(ex, lambda: len(got['odom']) == 3, timeout=5)
     # /egomotion only from a pair to the one just before it: 31 (from 30) and 34 (from 33);
     # not for the blank pair, nor for 33, whose motion is from 31 across the blank one

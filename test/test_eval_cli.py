@@ -98,6 +98,7 @@ def test_plane_error_of_identical_planes_is_zero():
     assert plane_error(p, p) == pytest.approx((0.0, 0.0), abs=1e-6)
 
 
+@pytest.mark.slow
 def test_eval_on_the_static_bag(tmp_path, capsys):
     out = tmp_path / 'eval.json'
     rc = main(['eval', str(STATIC), '--frames', '25', '--method', 'gpod', 'sgbm',

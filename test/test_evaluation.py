@@ -23,13 +23,15 @@ FAR_ROI = (0, 0, 5, 5)
 
 def test_detected_missed_false_and_dropped():
     truth = {
-        1: _frame(1, [(1, 0.0, 1.0, 3.0, 0.2, 3.0, 0.0, ROI), (2, 1.0, 1.0, 4.0, 0.05, 4.0, -0.2, ROI)]),
+        1: _frame(1, [(1, 0.0, 1.0, 3.0, 0.2, 3.0, 0.0, ROI),
+                      (2, 1.0, 1.0, 4.0, 0.05, 4.0, -0.2, ROI)]),
         2: _frame(2, [(1, 0.0, 1.0, 3.0, 0.2, 3.0, 0.0, ROI)]),
         3: _frame(3, [(1, 0.0, 1.0, 3.0, 0.2, 3.0, 0.0, ROI)]),
     }
     det = {
         # frame 1: obstacle 1 found (0.1 m off), obstacle 2 too low to count, a false one
-        1: _frame(1, [(0, 0.1, 1.0, 3.0, 0.2, 3.1, 0.01, ROI), (0, -2.0, 1.0, 6.0, 0.3, 6.0, 0.3, FAR_ROI)]),
+        1: _frame(1, [(0, 0.1, 1.0, 3.0, 0.2, 3.1, 0.01, ROI),
+                      (0, -2.0, 1.0, 6.0, 0.3, 6.0, 0.3, FAR_ROI)]),
         # frame 2: a report ~0.6 m away on the ground misses, but it lies on the
         # obstacle's roi: not false
         2: _frame(2, [(0, 0.5, 1.0, 3.0, 0.2, 3.0, -0.2, ROI)]),
@@ -49,7 +51,8 @@ def test_detected_missed_false_and_dropped():
 
 
 def test_one_detection_finds_one_obstacle_only():
-    truth = {5: _frame(5, [(1, 0.0, 1.0, 3.0, 0.2, 3.0, 0.0, ROI), (2, 0.2, 1.0, 3.0, 0.2, 3.1, 0.0, ROI)])}
+    truth = {5: _frame(5, [(1, 0.0, 1.0, 3.0, 0.2, 3.0, 0.0, ROI),
+                           (2, 0.2, 1.0, 3.0, 0.2, 3.1, 0.0, ROI)])}
     det = {5: _frame(5, [(0, 0.1, 1.0, 3.0, 0.2, 3.05, 0.0, ROI)])}
     score, _ = score_sequence(det, truth)
     assert score.detected == 1 and score.false_obstacles == 0

@@ -432,6 +432,7 @@ def test_settings_are_checked():
 
 
 # ------------------------------------------------------------------ the stage
+@pytest.mark.slow
 def test_perception_with_the_map_off_is_the_detector():
     from asmonc_vision.io.frames import load_frames
     from asmonc_vision.core.gpod import GpodDetector
@@ -487,7 +488,7 @@ def test_detector_node_publishes_the_map(ros_context):
             assert spin_until(ex, lambda: det.pub_map.get_subscription_count() >= 1)
             for i, f in enumerate(frames):
                 send(*f)
-                assert spin_until(ex, lambda: len(got['obstacles']) == i + 1, timeout=15)
+                assert spin_until(ex, lambda i=i: len(got['obstacles']) == i + 1, timeout=15)
             assert spin_until(ex, lambda: len(maps) >= 4, timeout=5)
         finally:
             ex.remove_node(listener)

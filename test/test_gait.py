@@ -196,8 +196,9 @@ def test_straight_walk_prediction_phase_and_start_stop():
     case, run, sc = _run('walk', 0)
     pred = _rms(sc['pred_err_walk'])
     hold = _rms(sc['hold_err_walk'])
-    # (the targets, pooled over seeds, are 0.5 / 0.7 / 0.7: `asmonc gait sim`)
-    assert pred[1] <= 0.5 and pred[0] <= 0.7 and pred[2] <= 0.85, pred
+    # measured on this walk (seed 0): roll 0.19, pitch 0.29, yaw 0.84 deg RMS; the yaw is
+    # above the 0.7 deg target, which `asmonc gait sim` scores pooled over seeds
+    assert pred[0] <= 0.25 and pred[1] <= 0.35 and pred[2] <= 0.85, pred
     assert np.all(pred < 0.5 * hold)
     assert np.all(_rms(sc['phase_err_walk']) <= 2.5)
     assert sc['start_delays'].size == 1 and sc['stop_delays'].size == 1

@@ -53,8 +53,18 @@ def test_fusion_on_the_bag(walk):
     assert summary['fused']['samples'] == n
 
 
+def _counts(bag):
+    """{topic: message count} of a bag."""
+    from rosbags.rosbag2 import Reader
+
+    with Reader(bag) as r:
+        return {c.topic: c.msgcount for c in r.connections}
+
+
 def _copy_without(src, dst, drop):
-    """A copy of the bag `src` at `dst` without the topics whose names start with `drop`."""
+    """A copy of the bag `src` at `dst` without the topics whose names start with `drop`
+    (which `src` has), every other topic's messages intact: a refusal of the copy is for
+    the dropped topics alone."""
     from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 
     from asmonc_vision.io import bagio
@@ -65,6 +75,9 @@ def _copy_without(src, dst, drop):
         out = {c.id: w.add_connection(c.topic, c.msgtype, typestore=ts) for c in keep}
         for c, t, raw in r.messages(connections=keep):
             w.write(out[c.id], t, raw)
+    before = _counts(src)
+    assert any(t.startswith(drop) and n > 0 for t, n in before.items()), before
+    assert _counts(dst) == {t: n for t, n in before.items() if not t.startswith(drop)}
     return dst
 
 
@@ -78,6 +91,15 @@ def test_a_bag_without_inclinometer_is_refused(tmp_path):
     bag = _copy_without(BAGS / 'clear_static', tmp_path / 'no_imu', '/inclinometer/')
     with pytest.raises(ValueError, match='no /inclinometer/imu'):
         gait_bags.load_bag(bag)
+
+
+def test_the_copies_are_readable_but_for_the_dropped_topic(tmp_path):
+    from asmonc_vision.cli.motion import load_sequence
+
+    frames = load_sequence(_copy_without(BAGS / 'clear_static', tmp_path / 'a', '/inclinometer/'))
+    assert len(frames) == 30 and all(f['pose'] is not None for f in frames)
+    frames = load_sequence(_copy_without(BAGS / 'clear_static', tmp_path / 'b', '/ground_truth/'))
+    assert len(frames) == 30 and all(f['pose'] is None for f in frames)
 
 
 def test_a_missing_bag_is_refused(tmp_path):

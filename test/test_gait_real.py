@@ -62,3 +62,32 @@ def test_pitch_half_a_second_ahead_beats_holding(runs):
     # against 2.34
     assert p[1] < 0.85 * h[1], (p, h)
     assert p[0] < h[0], (p, h)
+
+
+#: HA/001's first straight walk (Test5 Trial1), its reference walking bout (INDIP, s) and
+#: cadence (steps/s), as `gait.load_real` reads them from data.mat
+ONE_WALK = ('HA', '001', 'TimeMeasure1_Test5_Trial1.csv')
+ONE_BOUT = (5.05, 9.88)
+ONE_CADENCE = 1.675
+
+
+def test_one_real_walk_quickly():
+    """One recording without its reference file (about a second): the attitude as
+    `gait.load_real` makes it (complementary filter, 16 Hz), through the walk model."""
+    from asmonc_vision.core.gait.attitude import (MOBILISE_TO_BODY, complementary_filter,
+                                                  decimate_to)
+
+    f = gait.DEFAULT_DATA.joinpath('data_csv', *ONE_WALK)
+    assert f.is_file(), f'the real walking recordings are missing: {f}'
+    a = np.loadtxt(f, delimiter=',', skiprows=1)
+    rpy = complementary_filter(a[:, 1:4] @ MOBILISE_TO_BODY.T,
+                               np.radians(a[:, 4:7]) @ MOBILISE_TO_BODY.T,
+                               gait.REAL_RATE, gait.REAL_ATTITUDE_TIME_CONSTANT)
+    t16, rpy16 = decimate_to(rpy, gait.REAL_RATE, 16.0)
+    run = gait.run_tracker(t16, rpy16, gait.REAL_SIGMA ** 2, gait.real_config())
+    bout = (run.times >= ONE_BOUT[0]) & (run.times <= ONE_BOUT[1])
+    # measured: walking in 0.79 of the bout's samples; tracked step frequency 1.72 Hz
+    # (median while walking in the bout) against the reference 1.675 steps/s
+    assert run.walking[bout].mean() >= 0.75, run.walking[bout].mean()
+    freq = float(np.median(run.frequency[bout & run.walking]))
+    assert abs(freq - ONE_CADENCE) < 0.1, freq

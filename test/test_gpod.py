@@ -2269,9 +2269,10 @@ def test_smooth_slabs_walked_on_without_motion_keep_the_plane_or_lose_it():
             off.append(k)
         false += [k for o in r.obstacles if o.confidence >= 0.3 and o.range <= 5.0
                   and abs(o.height) >= 0.05 and o.num_edge_pixels > 0]
-    assert len(off) <= 4, off
-    assert lost <= 25, lost
-    assert len(false) <= 10, false
+    # measured: 2 frames off (65, 74), 13 of the 80 lost, no false report
+    assert len(off) <= 3, off
+    assert lost <= 15, lost
+    assert len(false) <= 2, false
 
 
 def test_weakly_textured_ground_lowers_the_edge_threshold_to_find_the_plane():

@@ -116,6 +116,7 @@ def _wall_found(cam, frames, config):
     return det, found
 
 
+@pytest.mark.slow
 def test_a_faint_wall_ahead_is_found_by_the_binned_pass(faint_wall):
     cam, frames = faint_wall
     # the unseen-ground cue, which also finds this wall, is off in both runs
@@ -129,6 +130,7 @@ def test_a_faint_wall_ahead_is_found_by_the_binned_pass(faint_wall):
     assert sum(found0) <= 1, found0
 
 
+@pytest.mark.slow
 def test_small_images_have_no_binned_pass():
     from test_gpod import CAM, render_pair           # the paper's 320 x 240 rig
     pair = render_pair(seed=2)

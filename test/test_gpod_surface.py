@@ -27,7 +27,10 @@ def _texture(rng, cell=0.02, size=(900, 500)):
     return 110.0 + 28.0 * t / t.std()
 
 
-def render(profile, rng, knots=np.arange(0.0, 18.01, 0.25)):
+KNOTS = np.arange(0.0, 18.01, 0.25)
+
+
+def render(profile, rng, knots=KNOTS):
     """The left and right (H, W) uint8 images of the ground z = profile(s) (piecewise
     linear between ``knots``), level across, 2 grey levels of noise."""
     tex = _texture(np.random.default_rng(99))
@@ -93,6 +96,7 @@ def reports_ahead(profile, surface: bool, frames: int = 4, seed: int = 0,
 @pytest.mark.parametrize('seed', [0, 1])
 @pytest.mark.parametrize('name', ['rise 5 deg from 3 m', 'fall 5 deg from 3 m',
                                   'crest at 5 m'])
+@pytest.mark.slow
 def test_a_bend_ahead_is_ground(name, seed):
     """With the surface at most two reports per frame from 3 m on, at most a quarter of
     those of the plane alone (up to 30 per frame on the rise; a drop of 45 cm on the
@@ -105,6 +109,7 @@ def test_a_bend_ahead_is_ground(name, seed):
         assert sum(plane_only) >= 5 * len(plane_only)        # the case it is for
 
 
+@pytest.mark.slow
 def test_flat_ground_unchanged():
     flat = PROFILES['flat']
     assert reports_ahead(flat, True, from_m=0.0) == reports_ahead(flat, False, from_m=0.0)

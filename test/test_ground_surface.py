@@ -164,6 +164,7 @@ def test_settings_are_checked():
         GroundSurfaceConfig(knot_spacing_m=0.0)
 
 
+@pytest.mark.slow
 def test_steps_and_slopes_over_many_seeds():
     """10 cm steps up and down at 2.6-6 m (10 seeds) are never bent into; 3-5 degree
     slopes up and down starting 2.5-5 m ahead (10 seeds) are followed within 5 cm."""

@@ -1,5 +1,5 @@
-"""GPOD on a real road: the KITTI odometry stereo sequence in ../shared/data (skipped when
-it is absent; see /work/shared/data/README.md).
+"""GPOD on a real road: the KITTI odometry stereo sequence in ../shared/data (its README
+describes it; the tests fail when it is missing: it ships beside the project).
 
 The 20 rectified pairs (1241 x 376, f = 718.9 px, B = 0.532 m, cameras 1.65 m above the
 road) are run through one GpodDetector in order; the first three frames calibrate the
@@ -21,7 +21,6 @@ f = 300 px, B = 0.35 m): every gate that depends on the rig is derived from the 
 (f, B, image size) and the calibrated plane, not set per rig.
 """
 import glob
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -30,9 +29,12 @@ import pytest
 from asmonc_vision.core.camera import StereoCamera, metric_from_plane
 from asmonc_vision.core.gpod import GpodConfig, GpodDetector
 
-KITTI = Path(__file__).resolve().parent.parent.parent / 'shared' / 'data' / 'kitti_road_seq'
+from conftest import SHARED
 
-pytestmark = pytest.mark.skipif(not KITTI.is_dir(), reason='KITTI sample not available')
+KITTI = SHARED / 'data' / 'kitti_road_seq'
+
+#: every test shares the one run over the sequence (seconds)
+pytestmark = pytest.mark.slow
 
 NEAR_ROW = 230          # image rows of the near road start here
 
@@ -62,8 +64,10 @@ def foot_pixel(ob, plane, cam):
 
 @pytest.fixture(scope='module')
 def run():
+    assert (KITTI / 'calib.txt').is_file(), f'the KITTI sequence is missing: {KITTI}'
     files_l = sorted(glob.glob(str(KITTI / 'image_2' / '*.png')))
     files_r = sorted(glob.glob(str(KITTI / 'image_3' / '*.png')))
+    assert len(files_l) == len(files_r) == 20, (len(files_l), len(files_r))
     calib = {ln.split(':')[0]: np.array(ln.split()[1:], float).reshape(3, 4)
              for ln in open(KITTI / 'calib.txt') if ':' in ln}
     left = [cv2.imread(f, cv2.IMREAD_GRAYSCALE) for f in files_l]

@@ -4,7 +4,7 @@ A small KITTI-like folder (colour images, calib.txt, times.txt) written here is 
 into a bag and read back: the topic contract's four topics per pair at one stamp, mono8
 images equal to the capture node's grey conversion, CameraInfo with right P[0,3] = -f*B,
 the rate of times.txt, each pair repeated; then the real KITTI sequence in ../shared/data
-when present.
+(which ships beside the project: its test fails when it is missing).
 """
 from pathlib import Path
 
@@ -16,9 +16,11 @@ from asmonc_vision.io import bagio
 from asmonc_vision.io.images_bag import folder_rate, write_images_bag
 from asmonc_vision.cli.main import main as asmonc_main
 
+from conftest import SHARED
+
 F, CX, CY = 700.0, 40.0, 30.0
 TX2, TX3 = 40.0, -330.0                  # P[0,3] of cameras 2 and 3 (relative to camera 0)
-KITTI = Path(__file__).resolve().parent.parent.parent / 'shared' / 'data' / 'kitti_road_seq'
+KITTI = SHARED / 'data' / 'kitti_road_seq'
 
 
 def _calib_text() -> str:
@@ -97,8 +99,8 @@ def test_cli_refuses_what_it_cannot_use(tmp_path, capsys):
     assert folder_rate(tmp_path / 'seq') == 10.0
 
 
-@pytest.mark.skipif(not KITTI.is_dir(), reason='KITTI sample not available')
 def test_kitti_sequence_bag(tmp_path, capsys):
+    assert (KITTI / 'calib.txt').is_file(), f'the KITTI sequence is missing: {KITTI}'
     assert asmonc_main(['images-bag', str(KITTI), str(tmp_path / 'k'), '--count', '1',
                         '--repeat', '2']) == 0
     assert '2 stereo pairs' in capsys.readouterr().out

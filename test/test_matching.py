@@ -83,7 +83,8 @@ def test_constant_shift_with_gain_difference():
     right = cv2.remap(tex, uu + shift, vv, cv2.INTER_CUBIC) * 1.05 + 4.0   # gain, offset
     left = np.clip(left + rng.normal(0, 2.0, left.shape), 0, 255).astype(np.uint8)
     right = np.clip(right + rng.normal(0, 2.0, right.shape), 0, 255).astype(np.uint8)
-    el, er = detect_vertical_edges(left, min_string_length=3), detect_vertical_edges(right, min_string_length=3)
+    el = detect_vertical_edges(left, min_string_length=3)
+    er = detect_vertical_edges(right, min_string_length=3)
     m = match_edges(el, er, 1.0, 60.0)
     assert len(m) > 0.6 * len(el)
     assert np.median(np.abs(m.d - shift)) < 0.1        # sub-pixel disparities
@@ -105,7 +106,8 @@ def test_a_right_camera_with_its_own_gain_is_compared_on_the_lefts_scale(gain):
     left = np.clip(tex[:, :200] + rng.normal(0, 1.0, (120, 200)), 0, 255).astype(np.uint8)
     right = cv2.remap(tex, uu + shift, vv, cv2.INTER_CUBIC) * gain + 30.0 * (1 - gain)
     right = np.clip(right + rng.normal(0, 1.0, right.shape), 0, 255).astype(np.uint8)
-    el, er = detect_vertical_edges(left, min_string_length=3), detect_vertical_edges(right, min_string_length=3)
+    el = detect_vertical_edges(left, min_string_length=3)
+    er = detect_vertical_edges(right, min_string_length=3)
     true = {}
     for told in (1.0, 1.0 / gain):
         c = candidate_matches(el, er, 1.0, 40.0, min_strength_ratio=0.7, right_gain=told)

@@ -40,6 +40,7 @@ def test_every_method_is_exact_without_noise(method):
     assert est.num_inliers == len(tr.corr)
 
 
+@pytest.mark.slow
 def test_modern_method_meets_the_targets_and_beats_the_papers():
     """The brief's targets for the best method: at 0.5 px pitch <= 0.1 deg and translation
     <= 10 mm, at 1 px pitch <= 0.2 deg; with 30% wrong matches within 1.5x. 25 trials

@@ -31,6 +31,7 @@ def _shift(img, du, dv=0.0):
 
 
 @pytest.mark.parametrize('kind', CORNER_KINDS)
+@pytest.mark.slow
 def test_subpixel_corners_are_accurate(kind):
     """Shi-Tomasi + the cornerSubPix condition: the measured localisation (docs/motion.md)."""
     r = corner_localisation('shi_tomasi', kind, trials=60)
@@ -55,6 +56,7 @@ def test_vectorised_subpix_matches_opencv_corner_subpix():
     assert np.mean(errs_ours) < 0.1 and np.mean(errs_ours) < 1.3 * np.mean(errs_cv)
 
 
+@pytest.mark.slow
 def test_wang_brady_finds_corners_and_its_correction_helps():
     img, truth = render_corner('L', [6, 0])
     pts = wang_brady_corners(img, max_corners=5, border=4)

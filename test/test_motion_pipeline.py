@@ -104,6 +104,7 @@ def test_a_vigorous_walkers_sway_is_found_by_the_wide_search(wide):
 
 
 @pytest.mark.parametrize('align', [True, False])
+@pytest.mark.slow
 def test_a_rig_off_its_calibration_still_gives_motions(align):
     """The right camera turned 0.3 degrees about its x axis (after rectification) parts the
     rows by 1.6 px, beyond the stereo matching's 1 px row tolerance: without the

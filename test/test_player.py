@@ -14,7 +14,6 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import test_bagplay_helpers as h  # noqa: E402
-from test_bagplay_helpers import ros_context  # noqa: E402,F401 - fixture
 
 from asmonc_vision.io.bagio import typestore  # noqa: E402
 from asmonc_vision.io.bagplay import BagError, PlayerConfig  # noqa: E402

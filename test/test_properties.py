@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
@@ -179,6 +179,7 @@ def test_nmea_round_trip(h, p, r):
 @settings(max_examples=300, deadline=None)
 @given(st.text(max_size=120) | st.from_regex(r'\$(PTNTHPR|C)[-0-9.,NPRTEa-z]*(\*[0-9A-F]{2})?',
                                               fullmatch=True))
+@pytest.mark.slow
 def test_nmea_parser_raises_only_nmea_errors(line):
     try:
         a = parse_sentence(line)
@@ -200,6 +201,7 @@ def test_line_splitter_any_bytes(chunks):
 
 
 @pytest.mark.parametrize('target', ['nmea', 'bag'])
+@pytest.mark.slow
 def test_fuzz_command_runs_clean_for_a_few_seconds(target, tmp_path):
     # the bag reader once ended in MemoryError, OverflowError, TypeError and rosbags'
     # SerdeError on damaged files instead of BagError

@@ -15,7 +15,6 @@ import yaml
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import test_bagplay_helpers as h  # noqa: E402
-from test_bagplay_helpers import ros_context  # noqa: E402,F401 - fixture
 
 from asmonc_vision.core.config import to_dict  # noqa: E402
 from asmonc_vision.nodes.recorder_node import RecorderConfig  # noqa: E402
@@ -152,7 +151,7 @@ def test_records_topics_types_counts_contents(tmp_path, ros_context, compression
         assert {c.compression for c in summary.chunk_indexes} == {
             'zstd' if compression == 'zstd' else ''}
         decoded = {}
-        for schema, channel, message, msg in reader.iter_decoded_messages():
+        for _schema, channel, _message, msg in reader.iter_decoded_messages():
             decoded.setdefault(channel.topic, []).append(msg)
     assert [a.text for a in decoded[h.ALARMS]] == ['obstacle, 2 metres', '']
     assert [a.level for a in decoded[h.ALARMS]] == [2, 0]

@@ -555,6 +555,7 @@ def _small_scenario(tmp_seed: int = 0) -> Scenario:
     return Scenario('test', 'test scenario', tmp_seed, 0.6, rig, world, traj)
 
 
+@pytest.mark.slow
 def test_bag_roundtrip(tmp_path):
     from rosbags.rosbag2 import Reader
 
@@ -691,6 +692,7 @@ def test_cli(tmp_path, capsys):
     assert meta['gait']['pitch_amp_deg'] == 5.0 and meta['gait']['bob_amp'] == 0.08
 
 
+@pytest.mark.slow
 def test_render_speed_report(capsys):
     """Reports the render time (not asserted: machines differ)."""
     sc = make_scenario('walk_obstacles', seed=0, duration=4.0)

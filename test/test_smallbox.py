@@ -36,6 +36,7 @@ def test_score_frame_found_on_box_and_false():
     assert smallbox.summarise(smallbox.new_tally())['found'] == 0.0
 
 
+@pytest.mark.slow
 def test_scene_places_the_box_at_the_range():
     sc = smallbox.small_box_scene(0.04, 2.5, seed=3, box_frames=3, clear_frames=2)
     assert sc.n_frames == 5
@@ -55,6 +56,7 @@ def test_cells_pair_or_grid():
         == [(0.05, 2.0), (0.05, 3.0)]
 
 
+@pytest.mark.slow
 def test_command_runs_both_methods_on_the_same_frames(tmp_path, capsys):
     out = tmp_path / 'sb.json'
     rc = smallbox_cli.main(['--heights', '0.08', '--ranges', '2.5', '--seeds', '1',

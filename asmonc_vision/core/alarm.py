@@ -441,7 +441,7 @@ class AlarmLogic:
         and no fresh gait verdict of standing."""
         if self._fresh(self._gait_t, t) and not self._walking:
             return False
-        return (self._fresh(self._speed_t, t)
+        return (self._fresh(self._speed_t, t) and self._speed is not None
                 and self._speed >= max(self._cfg.min_walking_speed, 1e-6))
 
     def standing(self, t: float) -> bool:
@@ -449,7 +449,8 @@ class AlarmLogic:
         below ``min_walking_speed``. (Unknown motion is neither moving nor standing.)"""
         if self._fresh(self._gait_t, t) and not self._walking:
             return True
-        return self._fresh(self._speed_t, t) and self._speed < self._cfg.min_walking_speed
+        return (self._fresh(self._speed_t, t) and self._speed is not None
+                and self._speed < self._cfg.min_walking_speed)
 
     def walking_frame(self, t: float, obstacles: Iterable[ObstacleInfo]) -> list[ObstacleInfo]:
         """The obstacles with their bearings taken from the walking direction (while the
@@ -465,7 +466,7 @@ class AlarmLogic:
     def time_to_contact(self, t: float, ob: ObstacleInfo | None) -> float:
         """Seconds until the wearer reaches ob at the walking speed (its distance along
         the walking direction over the speed); inf while standing or unknown."""
-        if ob is None or not self.moving(t):
+        if ob is None or not self.moving(t) or self._speed is None:
             return math.inf
         return max(ob.forward, 0.0) / self._speed
 
@@ -504,7 +505,7 @@ class AlarmLogic:
             key = (-int(level), not ob.is_drop, self.time_to_contact(t, ob), ob.range)
             if best_key is None or key < best_key:
                 best, best_key = ob, key
-        return best, (AlarmLevel(-best_key[0]) if best is not None else AlarmLevel.CLEAR)
+        return best, (AlarmLevel(-best_key[0]) if best_key is not None else AlarmLevel.CLEAR)
 
     def last_obstacles_age(self, t: float) -> float | None:
         """Seconds since the last obstacle list, None if none yet."""
@@ -642,7 +643,8 @@ class AlarmLogic:
         if self._ground is None and c.require_ground_plane:
             # The ground plane's grace runs from the first obstacle list (the detector may
             # take long to start, e.g. compiling), not from this node's start.
-            since = max(self._t0, self._first_obstacles_t)
+            first = self._first_obstacles_t
+            since = self._t0 if first is None else max(self._t0, first)
             return 'starting' if t - since <= c.startup_grace else 'ground_lost'
         if not self._ground_fresh and c.require_ground_plane:
             return 'no_data'      # lists after a gap, no ground status since (`update`)

@@ -127,7 +127,8 @@ def _lk_both_ways(left: np.ndarray, right: np.ndarray, p: np.ndarray,
     left, (N,) bool kept) for the (N, 1, 2) float32 points p (``guess``: their initial
     positions in the right image, or None)."""
     flags = cv2.OPTFLOW_USE_INITIAL_FLOW if guess is not None else 0
-    q, st, _ = cv2.calcOpticalFlowPyrLK(left, right, p, None if guess is None else guess.copy(),
+    q, st, _ = cv2.calcOpticalFlowPyrLK(left, right, p,
+                                        None if guess is None else guess.copy(),  # type: ignore[arg-type]
                                         winSize=(15, 15), maxLevel=level,
                                         criteria=_LK_CRITERIA, flags=flags)
     pb, st2, _ = cv2.calcOpticalFlowPyrLK(right, left, q, p.copy(), winSize=(15, 15),
@@ -171,9 +172,9 @@ def brightness_gain_offset(left: np.ndarray, right: np.ndarray) -> tuple[float, 
         dimensionless, offset grey levels); None when either image is uniform (standard
         deviation below 1e-3 grey levels).
     """
-    mu_l, sd_l = cv2.meanStdDev(left)
-    mu_r, sd_r = cv2.meanStdDev(right)
-    sd_l, sd_r = float(sd_l[0, 0]), float(sd_r[0, 0])
+    mu_l, sdev_l = cv2.meanStdDev(left)
+    mu_r, sdev_r = cv2.meanStdDev(right)
+    sd_l, sd_r = float(sdev_l[0, 0]), float(sdev_r[0, 0])
     if sd_l < 1e-3 or sd_r < 1e-3:
         return None
     gain = sd_l / sd_r
@@ -286,7 +287,7 @@ class VerticalAlignment:
 
     def reset(self) -> None:
         """Forget the misalignment (a new camera)."""
-        self.x = np.zeros(2)
+        self.x: np.ndarray = np.zeros(2)
         self.P = np.diag(np.square(_P0_SD))
         self.measurements = 0
         self.applied = False
@@ -302,6 +303,7 @@ class VerticalAlignment:
     # ----------------------------------------------------------------- estimate
     def _sides_x(self) -> np.ndarray:
         """(2, 2) rows (1, x) of the image's first and last columns."""
+        assert self._cam is not None and self._shape is not None   # set by update()
         f, cx, _ = self._cam
         w = self._shape[1]
         return np.array([[1.0, -cx / f], [1.0, (w - 1.0 - cx) / f]])
@@ -418,6 +420,7 @@ class VerticalAlignment:
             (H, W) uint8: right'(u, v) = right(u, v + dv(u)) (bilinear, edges
             replicated).
         """
+        assert self._shape is not None                             # set by update()
         h, w = self._shape
         if self._maps is None or np.max(np.abs(self._sides_x() @ (self.x - self._map_x))) > 0.02:
             uu, vv = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))

@@ -276,8 +276,8 @@ class SgbmBaseline:
     def __init__(self, config: SgbmConfig | None = None) -> None:
         self.config = config if config is not None else SgbmConfig()
         self._rng = np.random.default_rng(self.config.seed)
-        self._matcher = None
-        self._matcher_nd = None
+        self._matcher: object | None = None
+        self._matcher_nd: int | None = None
 
     def _sgbm(self, nd: int):
         import cv2
@@ -287,7 +287,7 @@ class SgbmBaseline:
             modes = {'sgbm': cv2.STEREO_SGBM_MODE_SGBM, 'hh': cv2.STEREO_SGBM_MODE_HH,
                      '3way': cv2.STEREO_SGBM_MODE_SGBM_3WAY, 'hh4': cv2.STEREO_SGBM_MODE_HH4}
             bs = c.block_size
-            self._matcher = cv2.StereoSGBM_create(
+            self._matcher = cv2.StereoSGBM.create(
                 minDisparity=0, numDisparities=nd, blockSize=bs,
                 P1=int(round(c.p1_factor * bs * bs)), P2=int(round(c.p2_factor * bs * bs)),
                 disp12MaxDiff=c.disp12_max_diff_px, preFilterCap=c.pre_filter_cap,
@@ -398,8 +398,8 @@ class SgbmBaseline:
         mask = np.zeros(disp.shape, np.uint8)
         mask[iy[keep], ix[keep]] = 1
         if c.opening_px > 0:
-            k = 2 * c.opening_px + 1
-            mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((k, k), np.uint8))
+            size = 2 * c.opening_px + 1
+            mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((size, size), np.uint8))
         n_lab, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
         min_area = max(1, int(math.ceil(c.min_component_fraction * cam.width * cam.height)))
         fwd = np.array([0.0, 0.0, 1.0]) - n_up[2] * n_up

@@ -324,8 +324,10 @@ class StereoRectifier:
 
     def camera(self, width: int | None = None, height: int | None = None) -> StereoCamera:
         """The rectified pair as a core StereoCamera (size from the maps or given)."""
-        return StereoCamera.from_projection(self.p_left, self.p_right,
-                                            width or self.width, height or self.height)
+        w, h = width or self.width, height or self.height
+        if w is None or h is None:
+            raise ValueError('the image size is unknown: give width and height')
+        return StereoCamera.from_projection(self.p_left, self.p_right, w, h)
 
     # -- work
     def rectify(self, left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -402,7 +404,7 @@ def _load_opencv(path: Path) -> dict:
 
     fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
     try:
-        out = {}
+        out: dict[str, object] = {}
         for key in ('K1', 'D1', 'K2', 'D2', 'R', 'T', 'image_width', 'image_height',
                     'image_size'):
             node = fs.getNode(key)
@@ -602,7 +604,7 @@ class DevicePairSource(FrameSource):
         self.width, self.height, self.fps, self.loop = width, height, fps, loop
         self.clock = clock
         self.live = not (_is_file(left) and _is_file(right))
-        self._caps = None
+        self._caps: tuple | None = None
 
     def describe(self) -> str:
         return f'cameras {self.devices[0]!r} (left) and {self.devices[1]!r} (right)'
@@ -620,7 +622,7 @@ class DevicePairSource(FrameSource):
     def _rewind(self) -> None:
         import cv2
 
-        for cap in self._caps:
+        for cap in self._caps or ():
             cap.set(cv2.CAP_PROP_POS_FRAMES, 0)
 
     def read(self) -> StereoFrame:

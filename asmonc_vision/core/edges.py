@@ -320,7 +320,7 @@ def detect_vertical_edges(image: np.ndarray, *, abs_threshold: float = 4.0,
         # |sum| / 8 >= float32(thr)  <=>  |sum| >= ceil(8 * float32(thr)) (as the float
         # path compares in single precision).
         t8 = np.float32(thr) * np.float32(8.0)
-        thr_c = 1021 if np.isnan(t8) else int(np.clip(np.ceil(t8), -1, 1021))
+        thr_c: float = 1021 if np.isnan(t8) else int(np.clip(np.ceil(t8), -1, 1021))
     else:
         thr_c = thr
     # Angle of the edge from the vertical = angle of the gradient from the horizontal.

@@ -161,7 +161,8 @@ class EvidenceMapConfig:
         "was cleared for want of a motion) the detector's reports are published unfiltered",
         range=(0, 1000))
     default_sigma_px: float = param(0.4, 'σ_d of a match when the detector gives '
-                                    'neither a per-pixel threshold nor a sigma, px', range=(0.01, 10.0))
+                                    'neither a per-pixel threshold nor a sigma, px',
+                                    range=(0.01, 10.0))
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -454,7 +455,7 @@ class EvidenceMap:
         n_r[seen_through] = 0
         raised = np.flatnonzero(n_r)
         dropc = np.flatnonzero(n_d & (n_r == 0))
-        free = (n_g >= c.min_ground_pixels) & (n_g > n_r + n_d)
+        free: np.ndarray = (n_g >= c.min_ground_pixels) & (n_g > n_r + n_d)
         if c.clear_guard_cells > 0:
             # ground seen beside a thing seen in this pair (its foot, the ground in front
             # of its face in the same cell) does not clear it
@@ -582,6 +583,7 @@ class EvidenceMap:
         """((k,) bool, (k,) bool): cells (flat indices) whose evidence point, at the
         ground or at its height, projects into the left image of the current pair; and
         those out of it below the image (in front of the wearer, walked up to)."""
+        assert self._plane is not None                 # in_view follows an update
         Rcg, o = ground_frame(self._plane)
         g = self.to_ground(self.pt_xy.reshape(-1, 2)[cells].astype(np.float64))
         feet = g @ Rcg[:, :2].T + o[None, :]
@@ -626,7 +628,7 @@ class EvidenceMap:
         for drop, mask in masks:
             if not mask.any():
                 continue
-            m8 = mask.astype(np.uint8)
+            m8: np.ndarray = mask.astype(np.uint8)
             if c.join_cells > 0:
                 k = 2 * c.join_cells + 1
                 m8 = cv2.dilate(m8, np.ones((k, k), np.uint8))
@@ -680,7 +682,8 @@ class EvidenceMap:
                     height=height, width=float(lat.max() - lat.min()) + c.cell_m,
                     confidence=conf, cells=int(cs.size),
                     fresh_pixels=(int(self._pair_count[cs].sum())
-                                  if self._pair_count is not None else 0), age_s=max(stamp_s - last, 0.0)))
+                                  if self._pair_count is not None else 0),
+                    age_s=max(stamp_s - last, 0.0)))
         self.ids = new_ids
         out.sort(key=lambda o: float(np.hypot(*o.nearest_xy)))
         return tuple(out)

@@ -290,9 +290,9 @@ def fit_ground_surface(points: np.ndarray, plane: MetricPlane,
     """
     c = config if config is not None else GroundSurfaceConfig()
     surface = GroundSurface.flat(plane, c.near_m)
-    s, l, h = surface.coordinates(points)
-    use = np.abs(l) <= c.half_width_m
-    s, l, h = s[use], l[use], h[use]
+    s, lat, h = surface.coordinates(points)
+    use = np.abs(lat) <= c.half_width_m
+    s, lat, h = s[use], lat[use], h[use]
     # The profile starts at near_m, or where the ground is first seen if that is
     # farther (a car's cameras see the road from 5 m): the 5th percentile of the
     # distances of the features on the plane.
@@ -327,7 +327,7 @@ def fit_ground_surface(points: np.ndarray, plane: MetricPlane,
         gate = c.gate_m + length * c.max_grade_change
         inseg = (s >= s_a) & (s < s_b) & (np.abs(h - z_line) <= gate)
         n_in = int(inseg.sum())
-        ss, ll, hh = s[inseg], l[inseg], h[inseg]
+        ss, ll, hh = s[inseg], lat[inseg], h[inseg]
         width = float(np.percentile(ll, 90) - np.percentile(ll, 10)) if n_in else 0.0
         refused = ''
         z_b, step, spread, change = z_a + grade * length, math.nan, math.nan, math.nan

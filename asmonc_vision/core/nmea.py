@@ -133,7 +133,7 @@ def _parse_hpr(body: str) -> AttitudeReading:
     roll = _number(f[5], 'roll')
     st = [s[:1] if s else '' for s in (f[2], f[4], f[6])]
     _check_ranges(heading, pitch, roll)
-    flags = tuple(s != 'N' for s in st)
+    flags = (st[0] != 'N', st[1] != 'N', st[2] != 'N')
     return AttitudeReading('PTNTHPR', heading, pitch, roll, flags, ''.join(s or '-' for s in st))
 
 

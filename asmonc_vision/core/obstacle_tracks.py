@@ -127,11 +127,11 @@ class ObstacleTracker:
                 raise ValueError(f'ObstacleTracker.{name} = {val} is out of range '
                                  f'[{lo}, {hi}]')
         #: x (T, 3) feet, P (T, 3, 3) covariances, ids, hits, stamps last detected
-        self._x = np.zeros((0, 3))
-        self._P = np.zeros((0, 3, 3))
-        self._id = np.zeros(0, np.int64)
-        self._hits = np.zeros(0, np.int64)
-        self._frames = np.zeros(0, np.int64)
+        self._x: np.ndarray = np.zeros((0, 3))
+        self._P: np.ndarray = np.zeros((0, 3, 3))
+        self._id: np.ndarray = np.zeros(0, np.int64)
+        self._hits: np.ndarray = np.zeros(0, np.int64)
+        self._frames: np.ndarray = np.zeros(0, np.int64)
         self._last_seen = np.zeros(0)
         self._payload: list = []
         self._stamp: float | None = None
@@ -183,7 +183,7 @@ class ObstacleTracker:
         if len(self) == 0:
             return
         if motion is None or dt < 0:
-            keep = np.zeros(len(self), bool)
+            keep: np.ndarray = np.zeros(len(self), bool)
             if motion is None and dt >= 0 and hold is not None:
                 keep = np.array([self._sure(i) and bool(hold(self._payload[i],
                                                              self._x[i].copy()))

@@ -112,5 +112,6 @@ class Perception:
         kind[f.is_drop] = DROP
         kind[f.is_obstacle] = RAISED
         u = 0.5 * (np.asarray(f.u_left, float) + np.asarray(f.u_right, float))
+        assert result.metric_plane is not None         # evidence of a tracked ground only
         return pair_evidence(cam, result.metric_plane, u, f.v, f.d, sigma_d, kind,
                              self.map_config.max_range_m)

@@ -4,8 +4,8 @@
 stamps as its clock: the logic starts (FAULT "starting up") just before the first pair;
 for each pair the detector answered, its obstacle list (`update`) and then its ground
 status (`ground_status`), in the order the detector node publishes them (/obstacles,
-then /ground_plane); and the node's timer (`check_timeout`, every `CHECK_PERIOD_S`) between pairs, so a
-run of pairs without an answer gives the FAULT the node would give. Alarms about a pair
+then /ground_plane); and the node's timer (`check_timeout`, every `CHECK_PERIOD_S`) between
+pairs, so a run of pairs without an answer gives the FAULT the node would give. Alarms about a pair
 carry its stamp (as the node's do); timer alarms carry the tick's bag time.
 """
 from __future__ import annotations

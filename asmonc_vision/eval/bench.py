@@ -185,7 +185,7 @@ def score_runs(frames: list[Frame], runs: list[FrameRun], evaluation=None, warmu
 
 def time_detector(pairs, warmup: int = 5) -> dict:
     """Run GpodDetector over the pairs; per-stage median/p90 ms of the timed ones."""
-    frames = [Frame(i, l, r, c) for i, (l, r, c) in enumerate(pairs)]
+    frames = [Frame(i, left, right, c) for i, (left, right, c) in enumerate(pairs)]
     return _timing(run_method(frames, 'gpod'), warmup, pairs[0][2] if pairs else None)
 
 

@@ -443,7 +443,9 @@ def path_warnings(truth: dict[int, FrameObstacles], alarms: Sequence[dict],
     for stamp, level in zip(stamps, levels):
         best: dict[int, tuple[float, float]] = {}       # id -> (range, height) that counts
         for fo in (truth[stamp], (remembered or {}).get(stamp)):
-            for k in range(len(fo) if fo is not None else 0):
+            if fo is None:
+                continue
+            for k in range(len(fo)):
                 ob = ObstacleInfo(int(fo.ids[k]), float(fo.range[k]), float(fo.bearing[k]),
                                   float(fo.height[k]))
                 if logic.in_corridor(ob) and (ob.id not in best or ob.range < best[ob.id][0]):
@@ -573,8 +575,8 @@ class SequenceEvaluation:
     height_bins: tuple = HEIGHT_BINS_M
     range_bins: tuple = RANGE_BINS_M
     score: DetectionScore = field(default_factory=DetectionScore)
-    bin_eligible: np.ndarray = None
-    bin_detected: np.ndarray = None
+    bin_eligible: np.ndarray = None  # type: ignore[assignment]  # set in __post_init__
+    bin_detected: np.ndarray = None  # type: ignore[assignment]
     #: one row per matched true obstacle: (true range m, range error m, bearing error rad,
     #: true height m, 1 if eligible else 0)
     matches: list = field(default_factory=list)
@@ -745,7 +747,7 @@ class SequenceEvaluation:
                             'median_abs_pct_of_range': _median(rel)},
             'bearing_error': {'n': len(s.bearing_errors),
                               'median_abs_deg': gt['bearing_error_median_deg'],
-                              'median_deg': (math.degrees(_median(s.bearing_errors))
+                              'median_deg': (math.degrees(float(np.median(s.bearing_errors)))
                                              if s.bearing_errors else None)},
             'ground_plane': {'frames_with_plane': len(pa),
                              'frames_without_plane': self.frames_without_plane,

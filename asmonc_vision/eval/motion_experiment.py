@@ -102,7 +102,7 @@ def make_trial(rng, s: TrialSettings, noise_px: float, outlier_fraction: float =
     d = rng.normal(size=3)
     t_pc = d / np.linalg.norm(d) * rng.uniform(*s.translation_range)
     r_cp, t_cp = invert(r_pc, t_pc)
-    pts = np.zeros((0, 3))
+    pts: np.ndarray = np.zeros((0, 3))
     for _ in range(100):
         k = 4 * s.n_points
         u = rng.uniform(0, s.width - 1, k)
@@ -187,7 +187,7 @@ def run_level(methods, noise_px: float, trials: int, outlier_fraction: float = 0
     """
     cam = settings.camera()
     st = ransac or default_ransac(noise_px)
-    errs = {m: [] for m in methods}
+    errs: dict[str, list] = {m: [] for m in methods}
     fails = {m: 0 for m in methods}
     secs = {m: 0.0 for m in methods}
     for i in range(trials):
@@ -255,8 +255,8 @@ def run_minimal_level(noise_px: float, trials: int, settings: TrialSettings = Tr
             if not cands:
                 fails += 1
                 continue
-            e = [motion_errors(r, t, tr.R, tr.t) for r, t in cands]
-            errs.append(min(e, key=lambda x: float(np.sum(x[:3]) / 10 + np.sum(x[3:]))))
+            ce = [motion_errors(r, t, tr.R, tr.t) for r, t in cands]
+            errs.append(min(ce, key=lambda x: float(np.sum(x[:3]) / 10 + np.sum(x[3:]))))
         e = np.array(errs) if errs else np.full((1, 6), np.nan)
         out[method] = LevelResult(method, noise_px, 0.0, trials, e.mean(axis=0),
                                   np.median(e, axis=0), fails, secs / max(trials, 1) * 1e3)

@@ -28,7 +28,6 @@ its log and in /diagnostics (WARN "silent output") and keeps working: the WAV (i
 from __future__ import annotations
 
 import json
-import math
 import threading
 import time
 from collections import deque

@@ -427,13 +427,13 @@ class BagPlayerNode(Node):
                 data = self._decode(p, msg.data) if p.decompress else msg.data
                 if not self._wait_until(sched, msg.timestamp):
                     return
-                for data in self._inject(p, data, msg.timestamp):
+                for out in self._inject(p, data, msg.timestamp):
                     if p.out_topic == self._pace_topic:
                         self._pace(sched)
                         if self._stop.is_set():
                             return
-                        self._paced_sent(data)    # before publishing: its answer may be quick
-                    self._publish(p, data, msg.timestamp)
+                        self._paced_sent(out)     # before publishing: its answer may be quick
+                    self._publish(p, out, msg.timestamp)
         except BagError as exc:  # a cut or damage: logged once when playing ends
             if self.error is None:
                 self.error = str(exc)
@@ -515,7 +515,8 @@ def main(args: list[str] | None = None) -> None:
     Exits 0 when the bag has been played (or on Ctrl-C), 2 when the bag is missing,
     unreadable, empty or truncated, or the settings are invalid.
     """
-    run_node(BagPlayerNode, args, name='bag_player_node', errors=(BagError,), failed=lambda n: bool(n.error))
+    run_node(BagPlayerNode, args, name='bag_player_node', errors=(BagError,),
+             failed=lambda n: bool(n.error))
 
 
 if __name__ == '__main__':

@@ -32,7 +32,7 @@ class AudioRenderer:
             engine='none' if self.cfg.verbosity == 'tones' else 'auto')
         if self.speech.available and self.cfg.verbosity == 'normal':
             self.speech.prerender(PHRASES)
-        self._cues = {}
+        self._cues: dict = {}
         #: (t, kind name or 'phrase: ...') of every event placed
         self.log: list[tuple[float, str]] = []
 

@@ -21,8 +21,8 @@ class Soundtrack:
     def __init__(self, rate: int):
         self.rate = int(rate)
         self._base = 0                          # sample index of the buffers' first row
-        self._tones = np.zeros((0, 2), np.float32)
-        self._speech = np.zeros((0, 2), np.float32)
+        self._tones: np.ndarray = np.zeros((0, 2), np.float32)
+        self._speech: np.ndarray = np.zeros((0, 2), np.float32)
         #: (start, end) sample indices of the phrases placed (absolute)
         self._phrases: list[tuple[int, int]] = []
         #: (onset sample, kind) of every event placed, for inspection and timelines
@@ -99,7 +99,8 @@ class Soundtrack:
     def mix(self, duration: float | None = None) -> np.ndarray:
         """The whole time line from the first sample kept, (n, 2) float32 in [-1, 1];
         ``duration`` (s) pads with silence (or cuts) to that length from time 0."""
-        n = self.end - self._base if duration is None else int(round(duration * self.rate)) - self._base
+        n = (self.end - self._base if duration is None
+             else int(round(duration * self.rate)) - self._base)
         return self.read(self._base, max(n, 0))
 
     def trim(self, before: int) -> None:

@@ -137,7 +137,8 @@ class CuePlanner:
             if not repeat or self.level != prev:
                 phrase = self._words(text)
                 if phrase:
-                    out += self._phrase(t + self._tone_len[kind] + 0.02, phrase, t)
+                    tone = self._tone_len[kind] if kind is not None else 0.0
+                    out += self._phrase(t + tone + 0.02, phrase, t)
         return out
 
     def contact(self, t: float, level: int, bearing: float, range_m: float, ttc: float,

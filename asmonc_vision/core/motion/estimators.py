@@ -79,6 +79,7 @@ class Correspondences:
         return len(self.prev_left)
 
     def subset(self, idx) -> 'Correspondences':
+        assert self.curr_right is not None             # filled in __post_init__
         return Correspondences(self.prev_left[idx], self.prev_right[idx], self.curr_left[idx],
                                self.curr_right[idx])
 

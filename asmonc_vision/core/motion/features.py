@@ -91,7 +91,7 @@ def subpix_refine(img: np.ndarray, pts: np.ndarray, half_window: int = 5, iters:
     f = img if img.dtype == np.float32 else img.astype(np.float32)
     h, w = f.shape
     if len(pts) == 0 or hw <= 0 or h <= 2 * hw + 4 or w <= 2 * hw + 4:
-        out = [pts.copy()]
+        out: list[np.ndarray] = [pts.copy()]
         if return_strength:
             out.append(np.zeros(len(pts)))
         if return_ok:
@@ -103,7 +103,7 @@ def subpix_refine(img: np.ndarray, pts: np.ndarray, half_window: int = 5, iters:
     dy, dx = (a.ravel().astype(np.float32) for a in np.meshgrid(r, r, indexing='ij'))
     off = (dy * w + dx).astype(int)
     inv = np.float32(1.0 / (hw * hw))
-    q = pts.copy()
+    q: np.ndarray = pts.copy()
     alive = np.ones(len(pts), bool)
     sa = sb = sc = ws = np.zeros(len(pts), np.float32)
     for _ in range(max(int(iters), 1)):
@@ -206,7 +206,7 @@ def wang_brady_response(img: np.ndarray, sigma: float = 1.0, s: float = 0.05
     ``C = (d2I/dt2)^2 - s |grad I|^2`` on the image smoothed by a Gaussian of ``sigma``
     px, with ``d2I/dt2 = (Ixx Iy^2 - 2 Ixy Ix Iy + Iyy Ix^2) / |grad I|^2``.
     """
-    f = img.astype(np.float32)
+    f: np.ndarray = img.astype(np.float32)
     if sigma > 0:
         f = cv2.GaussianBlur(f, (0, 0), sigma)
     ix = cv2.Sobel(f, cv2.CV_32F, 1, 0, ksize=3, scale=1 / 8)

@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import cv2
 import numpy as np
@@ -216,7 +217,7 @@ class EgomotionEstimator:
                  stamp_ns: int | None = None) -> StereoFeatures:
         """Corners of both images and their stereo matches."""
         c = self.config
-        kw = dict(method=c.detector, max_corners=c.max_corners,
+        kw: dict[str, Any] = dict(method=c.detector, max_corners=c.max_corners,
                   min_distance=c.min_corner_distance_px,
                   border=max(6, c.patch_half_size + 1), subpix_half_window=c.subpix_half_window,
                   quality=c.corner_quality, min_strength=c.min_corner_strength)
@@ -261,7 +262,7 @@ class EgomotionEstimator:
         feats = self.features(left, right, cam, stamp_ns)
         times['detect'] = (time.thread_time() - c0) * 1e3
         n_stereo = int(feats.stereo.sum())
-        base = dict(n_corners=(len(feats.left), feats.n_right), n_stereo=n_stereo)
+        base: dict[str, Any] = dict(n_corners=(len(feats.left), feats.n_right), n_stereo=n_stereo)
 
         def done(res: EgomotionResult) -> EgomotionResult:
             res.timings_ms = dict(times, cpu=(time.thread_time() - c0) * 1e3,

@@ -116,7 +116,8 @@ def _pose_terms(r, t, pts, obs, cam, huber):
 
 
 def _converged(old_cost, new_cost, step) -> bool:
-    return (old_cost - new_cost) <= 1e-8 * max(old_cost, 1e-12) or np.linalg.norm(step) < 1e-9
+    return bool((old_cost - new_cost) <= 1e-8 * max(old_cost, 1e-12)
+                or np.linalg.norm(step) < 1e-9)
 
 
 def refine_pose(r, t, points, curr_left, curr_right, cam: StereoCamera, iters: int = 10,
@@ -134,7 +135,7 @@ def refine_pose(r, t, points, curr_left, curr_right, cam: StereoCamera, iters: i
     lam = 1e-4
     cost, h, g, nobs = _pose_terms(r, t, points, obs, cam, huber_px)
     it = 0
-    for it in range(1, iters + 1):
+    for it in range(1, iters + 1):  # noqa: B007 - the count is returned
         a = h + lam * np.diag(np.diag(h) + 1e-9)
         try:
             d = -np.linalg.solve(a, g)
@@ -229,7 +230,7 @@ def refine_joint(r, t, points, prev_left, prev_right, curr_left, curr_right,
     it = 0
     s_mat = None
     eye3 = np.eye(3)
-    for it in range(1, iters + 1):
+    for it in range(1, iters + 1):  # noqa: B007 - the count is returned
         cost, hcc, gc, hcp, hpp, gp, nobs = terms
         hpp_d = hpp + lam * (hpp * eye3 + 1e-9 * eye3)
         hcc_d = hcc + lam * np.diag(np.diag(hcc) + 1e-9)
@@ -286,7 +287,7 @@ def refine_object_space(r, t, points, rays, iters: int = 30, tol: float = 1e-10)
     u = np.asarray(rays, float)
     u = u / np.linalg.norm(u, axis=1, keepdims=True)
     it = 0
-    for it in range(1, iters + 1):
+    for it in range(1, iters + 1):  # noqa: B007 - the count is returned
         x1 = points @ r.T + t
         q = u * np.einsum('ni,ni->n', u, x1)[:, None]
         r2, t2 = kabsch(points, q)
