@@ -10,7 +10,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.asmonc-installed
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 
-.PHONY: all venv demo test bags clean-venv
+.PHONY: all venv demo test bags bench-soak clean-venv
 
 all: demo
 
@@ -34,6 +34,10 @@ demo: venv
 
 test: venv
 	$(PY) -m pytest -q test
+
+# Loop a walking bag through the whole graph for 10 minutes: per-process memory and fd growth.
+bench-soak: venv
+	$(VENV)/bin/asmonc soak bags/walk_obstacles --minutes 10 --rate 1
 
 # Regenerate the committed bags (bags/README.md): about a minute.
 BUNDLED_BAGS := static_obstacles:5.5 clear_static:3 walk_obstacles:7.5 clear_walk:4 walk_stop_turn:7.5 slope:3

@@ -10,6 +10,7 @@
     asmonc campaign [--minutes M] [--workers N]   random walks scored for safety: ours vs SGBM
     asmonc images-bag FOLDER OUT [--repeat N]   a contract bag from a folder of stereo pairs
     asmonc fuzz {nmea,bag} --seconds N         fuzz the NMEA parser or the bag reader
+    asmonc soak BAG [--minutes M]              loop a bag through the graph; memory, fds
 """
 from __future__ import annotations
 
@@ -59,6 +60,8 @@ def build_parser() -> argparse.ArgumentParser:
     fuzz.add_arguments(sub.add_parser(
         'fuzz', help='fuzz the NMEA parser or the bag reader for a given time',
         description=fuzz.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
+    from asmonc_vision.cli import soak
+    soak.add_arguments(sub.add_parser('soak', help='loop a bag through the graph; per-process memory and fd growth', description=soak.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
     return parser
 
 
