@@ -28,7 +28,7 @@ def add_arguments(p) -> None:
 def run(args) -> int:
     from asmonc_vision import bagio
     from asmonc_vision.soak import format_table, soak
-    err = lambda s: print(f'asmonc soak: {s}', file=sys.stderr)  # noqa: E731
+    err = lambda s: print(f'asmonc soak: {s}', file=sys.stderr)
     if not (0.01 <= args.rate <= 100) or args.minutes <= 0 or args.period <= 0 \
             or args.warmup < 0:
         err('--rate in [0.01, 100], --minutes and --period > 0, --warmup >= 0')
