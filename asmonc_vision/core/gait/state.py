@@ -152,6 +152,23 @@ class GaitConfig:
                                   'skill_memory s (measured against the model\'s attitude '
                                   'horizon s later), per axis')
     skill_memory: float = param(0.5, 'memory of the skill weighting, s', range=(0.1, 60.0))
+    fallback: bool = param(True, 'publish the last measurement held instead of the '
+                           "prediction on an axis where the prediction's own RMS error "
+                           'over fallback_window s exceeds holding\'s by the factor '
+                           '1 + fallback_margin (core/gait/fallback.py)')
+    fallback_window: float = param(15.0, 'window of the fallback rule\'s errors, s',
+                                   range=(3.0, 600.0))
+    fallback_margin: float = param(0.1, 'the fallback rule holds when RMS(model) > (1 + '
+                                   'margin) RMS(hold), and returns to the model when '
+                                   'RMS(model) < RMS(hold)', range=(0.0, 2.0))
+    jump_deg: float = param(25.0, 'an inclinometer roll or pitch change larger than this '
+                            'between two samples, at jump_rate_deg or faster, is a fault '
+                            '(core/gait/jump.py), deg', range=(1.0, 180.0))
+    jump_rate_deg: float = param(400.0, 'the rate of change (deg/s) above which a jump of '
+                                 'jump_deg is a fault', range=(10.0, 100000.0))
+    jump_settle: float = param(1.0, 'after a jump the inclinometer must stay at its new '
+                               'attitude this long before the walk model restarts from it '
+                               '(a spike that comes back is dropped), s', range=(0.1, 60.0))
     max_gap: float = param(0.5, 'an inclinometer gap longer than this restarts the '
                            'prefilter and the detector, s', range=(0.05, 10.0))
 
