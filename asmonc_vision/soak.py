@@ -187,7 +187,8 @@ def soak(bag: Path, minutes: float, rate: float = 1.0, warmup: float = 60.0,
         echo: where the lines go (a node's errors, the table).
     Returns:
         {'growth': {process: growth(...) or None}, 'counts': SoakCounts as a dict,
-        'died': [processes that exited], 'minutes', 'rate', 'warmup', 'period'}.
+        'died': [processes that exited], 'minutes', 'rate', 'warmup', 'period',
+        'samples': {process: [[t s, RSS KiB, fds], ...]}}.
     Raises:
         RuntimeError: the nodes did not start; asmonc_vision.bagio.BagError: bad bag.
     """
@@ -237,7 +238,9 @@ def soak(bag: Path, minutes: float, rate: float = 1.0, warmup: float = 60.0,
     shutil.rmtree(log_dir, ignore_errors=True)
     return {'growth': {n: growth(s, warmup) for n, s in samples.items()},
             'counts': vars(counter.snapshot()), 'died': died, 'minutes': minutes,
-            'rate': rate, 'warmup': warmup, 'period': period}
+            'rate': rate, 'warmup': warmup, 'period': period,
+            'samples': {n: [[round(x.t, 1), x.rss_kb, x.fds] for x in s]
+                        for n, s in samples.items()}}
 
 
 def _sample(children: dict, duration: float, period: float, died: list[str], echo,

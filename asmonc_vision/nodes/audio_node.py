@@ -58,7 +58,7 @@ LIVE_STAMP_GAP = 60.0
 #: little in the past); older sound is dropped, or streamed to the WAV first
 KEEP_S = 10.0
 #: latencies kept for the diagnostics' percentiles (all of them with ``latency_path``)
-LATENCY_KEEP = 10_000
+LATENCY_KEEP = 1000
 #: the time line is trimmed at most this often, seconds of steady time
 TRIM_PERIOD = 1.0
 #: the walk model's diagnostic status and the message that means "inclinometer silent"
