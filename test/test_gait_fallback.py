@@ -214,6 +214,9 @@ def test_the_gait_node_reports_a_jump_and_keeps_it_out_of_its_filter(ros):
     spin_until(lambda: any('jump' in s.message and s.level == b'\x01' for s in diags),
                'a jump WARN')
     # not poisoned: still walking, no jump in the states, the prediction still good
+    # (the stream's own states: on a loaded machine the node may also publish a
+    # "silent" hold stamped by its clock between two samples)
+    states = [s for s in states if abs(s.header.stamp.sec - t0_ns // 10 ** 9) < 3600]
     pitch = np.array([s.predicted[1] for s in states])
     assert np.ptp(pitch) < D(10.0)             # the walk's pitch spans < 5 deg; 90 is off
     last = states[-1]
