@@ -61,7 +61,9 @@ def build_parser() -> argparse.ArgumentParser:
         'fuzz', help='fuzz the NMEA parser or the bag reader for a given time',
         description=fuzz.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
     from asmonc_vision.cli import soak
-    soak.add_arguments(sub.add_parser('soak', help='loop a bag through the graph; per-process memory and fd growth', description=soak.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
+    soak.add_arguments(sub.add_parser(
+        'soak', help='loop a bag through the graph: per-process memory and fd growth',
+        description=soak.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
     return parser
 
 
