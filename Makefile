@@ -12,7 +12,7 @@ PIP    := $(PY) -m pip
 STAMP  := $(VENV)/.asmonc-installed
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 
-.PHONY: all venv demo test test-fast lint bags clean-venv
+.PHONY: all venv demo test test-fast lint bags bench-soak clean-venv
 
 all: demo
 
@@ -50,6 +50,10 @@ MYPY_FILES = $(filter-out $(MYPY_EXCLUDE_PENDING),$(sort $(shell find asmonc_vis
 lint: venv
 	$(PY) -m ruff check --no-cache $(LINT_PATHS); ruff=$$?; \
 	  $(PY) -m mypy $(MYPY_FILES) && exit $$ruff
+
+# Loop a walking bag through the whole graph for 10 minutes: per-process memory and fd growth.
+bench-soak: venv
+	$(VENV)/bin/asmonc soak bags/walk_obstacles --minutes 10 --rate 1
 
 # Regenerate the committed bags (bags/README.md): about a minute.
 BUNDLED_BAGS := static_obstacles:5.5 clear_static:3 walk_obstacles:7.5 clear_walk:4 walk_stop_turn:7.5 slope:3

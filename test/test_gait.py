@@ -442,7 +442,7 @@ def test_skill_weighting_falls_back_on_the_measurement():
     res = {}
     for on in (True, False):
         run = ev.run_tracker(t, rpy, math.radians(0.1) ** 2,
-                             GaitConfig(sensor_lag=0.0, skill_weighting=on))
+                             GaitConfig(sensor_lag=0.0, skill_weighting=on, fallback=False))
         sel = run.walking & (run.times > 6) & (run.times + 0.5 < t[-1])
         later = np.column_stack([np.interp(run.times + 0.5, t, rpy[:, a]) for a in range(3)])
         res[on] = _rms(scoring.angle_errors_deg(run.predicted[sel], later[sel]))

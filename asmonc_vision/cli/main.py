@@ -11,6 +11,7 @@
     asmonc images-bag FOLDER OUT [--repeat N]   a contract bag from a folder of stereo pairs
     asmonc fuzz {nmea,bag} --seconds N         fuzz the NMEA parser or the bag reader
     asmonc params [--markdown]                 every node's parameters (docs/parameters.md)
+    asmonc soak BAG [--minutes M]              loop a bag through the graph; memory, fds
 """
 from __future__ import annotations
 
@@ -64,6 +65,10 @@ def build_parser() -> argparse.ArgumentParser:
     paramdoc.add_arguments(sub.add_parser(
         'params', help="every node's parameters: default, range, description",
         description=paramdoc.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
+    from asmonc_vision.cli import soak
+    soak.add_arguments(sub.add_parser(
+        'soak', help='loop a bag through the graph: per-process memory and fd growth',
+        description=soak.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
     return parser
 
 

@@ -28,12 +28,15 @@ from asmonc_vision.core.config import check_fields, param
 
 __all__ = ['PlayerConfig', 'BagError', 'BagTopic', 'BagInfo', 'BagMessage', 'BagSource',
            'PlayTopic', 'plan_topics', 'normalize_topic', 'ReplaySchedule',
-           'IMAGE_TYPE', 'COMPRESSED_TYPE', 'read_errors']
+           'IMAGE_TYPE', 'COMPRESSED_TYPE', 'read_errors', 'has_header',
+           'restamp_cdr', 'loop_period_ns', 'LOOP_GAP']
 
 IMAGE_TYPE = 'sensor_msgs/msg/Image'
 CAMERA_INFO_TYPE = 'sensor_msgs/msg/CameraInfo'
 COMPRESSED_TYPE = 'sensor_msgs/msg/CompressedImage'
 COMPRESSED_SUFFIX = '/compressed'
+#: seconds between the last message of a pass and the first of the next, restamped
+LOOP_GAP = 0.1
 #: topics published latched (TRANSIENT_LOCAL) even when the bag does not record QoS
 LATCHED_TOPICS = frozenset({'/alarms', '/tf_static'})
 
@@ -46,6 +49,9 @@ class PlayerConfig:
     rate: float = param(1.0, 'replay speed factor: 2.0 plays twice as fast',
                         range=(0.01, 100.0))
     loop: bool = param(False, 'play the bag again and again')
+    loop_restamp: bool = param(
+        False, 'when looping, shift every header stamp (and /clock) of pass k by k times '
+               "the bag's length plus LOOP_GAP, so stamps keep increasing from pass to pass")
     start_offset: float = param(0.0, 'seconds from the start of the bag to begin playing at',
                                 range=(0.0, 1.0e6))
     topics: tuple = param((), 'topics to play (bag names, or the image topic of a '
@@ -575,3 +581,34 @@ class ReplaySchedule:
     def bag_time(self, now: float) -> int:
         """Bag time (ns) that corresponds to wall time `now` (for /clock)."""
         return self.bag_start_ns + int(max(0.0, now - self.wall_start) * self.rate * 1e9)
+
+
+# --- looping -----------------------------------------------------------------------
+
+def has_header(msgtype: str) -> bool:
+    """Whether a message type starts with a std_msgs/Header (its stamp then sits at CDR
+    offset 4, right after the encapsulation header); False for unknown types."""
+    from asmonc_vision.io.bagio import typestore
+    try:
+        fields = typestore().fielddefs[msgtype][1]
+    except (KeyError, FileNotFoundError):
+        return False
+    return bool(fields) and fields[0][1][1] == 'std_msgs/msg/Header'
+
+
+def restamp_cdr(data: bytes, offset_ns: int) -> bytes:
+    """A CDR message that starts with a std_msgs/Header, its stamp moved by ``offset_ns``."""
+    if not offset_ns:
+        return data
+    end = '<' if len(data) > 1 and data[1] == 1 else '>'   # CDR_LE or CDR_BE
+    sec, nsec = struct.unpack_from(end + 'iI', data, 4)
+    t = sec * 1_000_000_000 + nsec + int(offset_ns)
+    out = bytearray(data)
+    struct.pack_into(end + 'iI', out, 4, t // 1_000_000_000, t % 1_000_000_000)
+    return bytes(out)
+
+
+def loop_period_ns(info: 'BagInfo', start_ns: int) -> int:
+    """How far (ns) each restamped pass is shifted from the one before: the played span
+    of the bag (from ``start_ns``) plus `LOOP_GAP`."""
+    return max(0, info.end_ns - start_ns) + int(LOOP_GAP * 1e9)

@@ -27,6 +27,8 @@ its log and in /diagnostics (WARN "silent output") and keeps working: the WAV (i
 """
 from __future__ import annotations
 
+import math
+
 import json
 import threading
 import time
@@ -40,7 +42,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo
 
-from asmonc_vision.core.audio import AudioConfig, AudioRenderer, Soundtrack, write_wav
+from asmonc_vision.core.audio import AudioConfig, AudioRenderer, Soundtrack
 from asmonc_vision.core.audio.render import URGENT
 from asmonc_vision.core.config import check_fields, param
 from asmonc_vision.nodes.alarm_node import CONTACT_TOPIC, contact_from_msg
@@ -53,6 +55,13 @@ from asmonc_vision_msgs.msg import Alarm, ObstacleArray
 TICK = 0.01
 #: a stamp further than this from the camera time line is the alarm node's own clock
 LIVE_STAMP_GAP = 60.0
+#: seconds of the time line kept in memory behind its present (a cue may be placed a
+#: little in the past); older sound is dropped, or streamed to the WAV first
+KEEP_S = 10.0
+#: latencies kept for the diagnostics' percentiles (all of them with ``latency_path``)
+LATENCY_KEEP = 1000
+#: the time line is trimmed at most this often, seconds of steady time
+TRIM_PERIOD = 1.0
 #: the walk model's diagnostic status and the message that means "inclinometer silent"
 GAIT_STATUS, GAIT_SILENT = 'gait_filter_node', 'inclinometer silent'
 
@@ -134,6 +143,33 @@ class LiveOutput:
             self._stream.close()
 
 
+class WavStream:
+    """A WAV file written as the time line goes (16-bit stereo): the samples before an
+    index are written once they are final, so memory holds only the recent sound."""
+
+    def __init__(self, path: str, rate: int):
+        import wave
+        self.path = path
+        self.rate = int(rate)
+        self.written = 0              # samples written (absolute index of the next one)
+        self._w = wave.open(str(path), 'wb')
+        self._w.setnchannels(2)
+        self._w.setsampwidth(2)
+        self._w.setframerate(self.rate)
+
+    def write_until(self, track: Soundtrack, end: int) -> None:
+        """Write the mix of ``track`` up to absolute sample ``end`` (exclusive)."""
+        if end > self.written:
+            pcm = (track.read(self.written, end - self.written) * 32767.0).round()
+            self._w.writeframes(pcm.astype('<i2').tobytes())
+            self.written = end
+
+    def finish(self, track: Soundtrack, end: int) -> None:
+        """Write up to ``end`` and close the file."""
+        self.write_until(track, end)
+        self._w.close()
+
+
 class AudioNode(Node):
     """Turns alarms into sound (see module doc)."""
 
@@ -154,17 +190,24 @@ class AudioNode(Node):
         #: seconds from a pair's arrival to the onset of a cue it decided (+ the device's
         #: output latency), and to the arrival of its /alarms/contact (when a cue could
         #: start for any pair)
-        self.latencies: list[float] = []
-        self.contact_latencies: list[float] = []
+        keep = None if self.node_config.latency_path else LATENCY_KEEP
+        self.latencies: deque[float] = deque(maxlen=keep)
+        self.contact_latencies: deque[float] = deque(maxlen=keep)
         #: the contact latency split: pair -> its /obstacles here (detector), and
         #: /obstacles -> /alarms/contact (alarm node)
-        self.detector_latencies: list[float] = []
-        self.alarm_latencies: list[float] = []
+        self.detector_latencies: deque[float] = deque(maxlen=keep)
+        self.alarm_latencies: deque[float] = deque(maxlen=keep)
         self._obstacle_arrivals: deque = deque(maxlen=512)
         self._closed = False
         self._last_alarm: tuple | None = None
-        #: every alarm heard, where it was placed on the time line
+        #: every alarm heard, where it was placed on the time line (with a WAV; else the
+        #: last `KEEP_S` seconds of them)
         self.alarm_log: list[dict] = []
+        #: cues and phrases given that are no longer in the renderer's log (trimmed)
+        self._dropped_cues = self._dropped_phrases = 0
+        self._last_trim = -math.inf
+        self._wav = WavStream(self.node_config.wav_path, self.config.sample_rate) \
+            if self.node_config.wav_path else None
 
         self._diag = Diagnostics(self, 'audio_node')
         self.create_subscription(Alarm, '/alarms', self._on_alarm, ALARM_QOS)
@@ -290,6 +333,31 @@ class AudioNode(Node):
             t = self.timeline_now()
             if t is not None:
                 self._emit(self.renderer.advance(t), None)
+                if self._now() - self._last_trim >= TRIM_PERIOD:
+                    self._last_trim = self._now()
+                    # never past the newest pair: the WAV ends by it (wav_tail)
+                    newest = (self._anchor[0] - self._t0_ns) * 1e-9
+                    self._trim(min(t, newest) - KEEP_S)
+
+    def _trim(self, before: float) -> None:
+        """Forget the time line before ``before`` (s): its sound (streamed to the WAV
+        first, when one is written) and, without a WAV, its cue and alarm logs (the
+        diagnostics keep their counts)."""
+        track = self.renderer.track
+        idx = int(before * self.config.sample_rate)
+        if idx <= 0:
+            return
+        if self._wav is not None:
+            self._wav.write_until(track, idx)
+        track.trim(idx)
+        track.events = [e for e in track.events if e[0] >= before]
+        if self._wav is None:
+            log = self.renderer.log
+            old = [k for t, k in log if t < before]
+            self._dropped_phrases += sum(1 for k in old if k.startswith('phrase'))
+            self._dropped_cues += len(old) - sum(1 for k in old if k.startswith('phrase'))
+            self.renderer.log = [e for e in log if e[0] >= before]
+            self.alarm_log = [a for a in self.alarm_log if a['t'] >= before]
 
     # -- output
     def _emit(self, events, stamp_ns: int | None) -> None:
@@ -319,8 +387,10 @@ class AudioNode(Node):
         values = dict(
             output='sound device' if self.live.available else 'none (silent)',
             speech=self.renderer.speech.engine_name, wav_path=self.node_config.wav_path or '-',
-            cues=sum(1 for _, k in self.renderer.log if not k.startswith('phrase')),
-            phrases=sum(1 for _, k in self.renderer.log if k.startswith('phrase')),
+            cues=self._dropped_cues + sum(1 for _, k in self.renderer.log
+                                          if not k.startswith('phrase')),
+            phrases=self._dropped_phrases + sum(1 for _, k in self.renderer.log
+                                                if k.startswith('phrase')),
             latency_p50_ms='-' if lat is None else f'{np.percentile(lat, 50) * 1e3:.1f}',
             latency_p99_ms='-' if lat is None else f'{np.percentile(lat, 99) * 1e3:.1f}')
         if self.live.available:
@@ -341,7 +411,7 @@ class AudioNode(Node):
                     dur = (self._anchor[0] - self._t0_ns) * 1e-9 + cfg.wav_tail
                 else:
                     dur = self.renderer.track.end / self.config.sample_rate
-                write_wav(cfg.wav_path, self.renderer.track.mix(dur), self.config.sample_rate)
+                self._wav.finish(self.renderer.track, int(round(dur * self.config.sample_rate)))
                 log_path = Path(cfg.wav_path).with_suffix('.cues.json')
                 log_path.write_text(json.dumps(
                     {'sample_rate': self.config.sample_rate, 't0_ns': self._t0_ns,

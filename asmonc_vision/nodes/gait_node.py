@@ -22,7 +22,11 @@ Publishes:
         (header). Translation is not modelled (zero). A message for DGPR, not for /tf.
     /diagnostics: OK while the inclinometer streams (and for ``startup_grace`` s after
         the start while waiting for its first sample); WARN when it is silent (walking
-        false unless visual motion keeps the walk model going) or stamps go backwards.
+        false unless visual motion keeps the walk model going) or stamps go backwards;
+        WARN "inclinometer jump" while a jump of the attitude is kept out of the walk
+        model and for JUMP_WARN s after (core/gait/jump.py: roll or pitch leaping by more
+        than gait.jump_deg faster than gait.jump_rate_deg/s; meanwhile /gait/state carries
+        the walk model's own estimate).
 
 Stamps older than the last one are ignored (throttled warning); a jump back of more than
 5 s (a restarted replay) restarts the filter. Silence is judged on the node's steady
@@ -44,6 +48,7 @@ from sensor_msgs.msg import Imu
 
 from asmonc_vision.core.config import check_fields, param
 from asmonc_vision.core.gait import GaitConfig, GaitEstimate, GaitTracker
+from asmonc_vision.core.gait.jump import JumpRule
 from asmonc_vision.io.bagio import imu_to_rpy_var
 from asmonc_vision.core.gait.rotations import (matrix_to_quaternion, quaternion_to_matrix,
                                                wrap_angle)
@@ -59,6 +64,8 @@ CHECK_PERIOD = 0.1
 THROTTLE = 5.0
 #: an /egomotion interval longer than this times the median interval is skipped
 EGO_GAP_FACTOR = 1.6
+#: /diagnostics says WARN for this long (s) after the last sample a jump kept out
+JUMP_WARN = 5.0
 
 
 @dataclass(frozen=True)
@@ -112,6 +119,9 @@ class GaitFilterNode(Node):
         self._lock = threading.Lock()
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.tracker = GaitTracker(self.gait_config)
+        g = self.gait_config
+        self.jump_rule = JumpRule(g.jump_deg, g.jump_rate_deg, g.jump_settle)
+        self._last_jump_steady: float | None = None
         self._last_imu_ns: int | None = None
         self._last_imu_steady: float | None = None
         self._started_steady = self._now()
@@ -121,7 +131,8 @@ class GaitFilterNode(Node):
         self._last_est: GaitEstimate | None = None
         self._silent_published = -1e9
         self.counts = {'imu': 0, 'out_of_order': 0, 'bad_imu': 0, 'egomotion': 0,
-                       'egomotion_skipped': 0, 'resets': 0}
+                       'egomotion_skipped': 0, 'resets': 0, 'imu_jumps': 0,
+                       'imu_jump_samples': 0}
         self._step_times: deque = deque(maxlen=200)
 
         self._state_pub = self.create_publisher(GaitState, '/gait/state', RESULT_QOS)
@@ -165,6 +176,8 @@ class GaitFilterNode(Node):
                         f'({self.counts["out_of_order"]} so far)',
                         throttle_duration_sec=THROTTLE)
                     return
+            if not self._jump_checked(ns, rpy, msg.header.stamp):
+                return
             t0 = time.perf_counter()
             est = self.tracker.add_inclinometer(ns * 1e-9, rpy, var)
             self._step_times.append(time.perf_counter() - t0)
@@ -177,6 +190,37 @@ class GaitFilterNode(Node):
             self._publish(est, msg.header.stamp)
             if est.event in ('start', 'stop', 'movement', 'gap'):
                 self.get_logger().info(f'walk model: {est.event} at {ns * 1e-9:.2f} s')
+
+    def _jump_checked(self, ns: int, rpy, stamp) -> bool:
+        """The jump rule on one sample (core/gait/jump.py): True to pass it to the walk
+        model. A rejected sample still counts as a sign of life (the sensor is faulty,
+        not silent) and the walk model's own estimate is published for its stamp."""
+        verdict = self.jump_rule.check(ns * 1e-9, rpy)
+        if verdict == 'ok':
+            return True
+        if verdict == 'settled':
+            self.get_logger().warning(
+                'inclinometer: the attitude after the jump has held for '
+                f'{self.gait_config.jump_settle:g} s; the walk model restarts from it')
+            self._reset()
+            self.jump_rule.check(ns * 1e-9, rpy)       # the new attitude is the good one
+            return True
+        now = self._now()
+        self._last_jump_steady = now
+        self.counts['imu_jump_samples'] += 1
+        if verdict == 'jump':
+            self.counts['imu_jumps'] += 1
+            self.get_logger().warning(
+                f'inclinometer jump at {ns * 1e-9:.2f} s (roll or pitch by more than '
+                f'{self.gait_config.jump_deg:g} deg faster than '
+                f'{self.gait_config.jump_rate_deg:g} deg/s): a sensor fault, kept out of '
+                f'the walk model ({self.counts["imu_jumps"]} so far)',
+                throttle_duration_sec=THROTTLE)
+        self._last_imu_ns = ns
+        self._last_imu_steady = now
+        if self.tracker.last_stamp is not None:
+            self._publish(self.tracker.estimate(ns * 1e-9), stamp)
+        return False
 
     def _on_egomotion(self, msg: TransformStamped) -> None:
         ns = stamp_to_ns(msg.header.stamp)
@@ -242,6 +286,9 @@ class GaitFilterNode(Node):
                                       throttle_duration_sec=THROTTLE)
         elif self._last_imu_steady is None:
             self._diag.update(Diagnostics.OK, 'waiting for the inclinometer', **values)
+        elif self._jumped_lately(now):
+            self._diag.update(Diagnostics.WARN, 'inclinometer jump (sensor fault; samples '
+                              'kept out of the walk model)', **values)
         elif self.counts['out_of_order']:
             self._diag.update(Diagnostics.WARN, 'inclinometer stamps out of order',
                               **values)
@@ -250,6 +297,11 @@ class GaitFilterNode(Node):
                               'not walking', **values)
 
     # ------------------------------------------------------------------ helpers
+    def _jumped_lately(self, now: float) -> bool:
+        """A jump is being held, or one was within the last JUMP_WARN s."""
+        return self.jump_rule.faulty or (self._last_jump_steady is not None
+                                         and now - self._last_jump_steady <= JUMP_WARN)
+
     def _imu_silent(self) -> bool:
         """No inclinometer sample for ``timeout`` s; before the first one, for
         ``startup_grace`` s since the node started."""
@@ -259,6 +311,7 @@ class GaitFilterNode(Node):
 
     def _reset(self) -> None:
         self.tracker = GaitTracker(self.gait_config)
+        self.jump_rule.reset()
         self._last_imu_ns = None
         self._ego_prev_ns = None
         self._ego_intervals.clear()

@@ -37,7 +37,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from asmonc_vision.io.bagio import compressed_to_image_cdr
 from asmonc_vision.io.bagplay import (BagError, BagSource, PlayerConfig, PlayTopic,
-                                      ReplaySchedule, normalize_topic, plan_topics)
+                                      ReplaySchedule, has_header, loop_period_ns,
+                                      normalize_topic, plan_topics, restamp_cdr)
 from asmonc_vision.nodes.common import config_overrides, declare_config, run_node
 from asmonc_vision.nodes.conversions import stamp_to_ns
 
@@ -132,6 +133,7 @@ class BagPlayerNode(Node):
         self.pace_holds = 0
         self.pace_held_s = 0.0
         self._pace_topic: str | None = None
+        self._has_header: dict[str, bool] = {}
         try:
             self.config: PlayerConfig = declare_config(self, PlayerConfig)
             self._setup()
@@ -421,22 +423,34 @@ class BagPlayerNode(Node):
         cfg = self.config
         selected = {p.bag_topic: p.bag_type for p in self.plan}
         sched = ReplaySchedule(self._start_ns, time.monotonic(), cfg.rate)
+        # loop_restamp: pass k is shifted by k bag lengths, so its stamps follow the last
+        shift = (self.passes * loop_period_ns(self.source.info, self._start_ns)
+                 if cfg.loop and cfg.loop_restamp else 0)
         try:
             for msg in self.source.messages(selected, self._start_ns):
                 p = self._by_bag_topic[msg.topic]
                 data = self._decode(p, msg.data) if p.decompress else msg.data
-                if not self._wait_until(sched, msg.timestamp):
+                if not self._wait_until(sched, msg.timestamp, shift):
                     return
-                for out in self._inject(p, data, msg.timestamp):
+                if shift and data is not None and self._stamped(p):
+                    data = restamp_cdr(data, shift)
+                for out in self._inject(p, data, msg.timestamp + shift):
                     if p.out_topic == self._pace_topic:
                         self._pace(sched)
                         if self._stop.is_set():
                             return
                         self._paced_sent(out)     # before publishing: its answer may be quick
-                    self._publish(p, out, msg.timestamp)
+                    self._publish(p, out, msg.timestamp + shift)
         except BagError as exc:  # a cut or damage: logged once when playing ends
             if self.error is None:
                 self.error = str(exc)
+
+    def _stamped(self, p: PlayTopic) -> bool:
+        """Whether the messages of ``p`` start with a Header (cached per topic)."""
+        known = self._has_header.get(p.out_topic)
+        if known is None:
+            known = self._has_header[p.out_topic] = has_header(p.out_type)
+        return known
 
     def _inject(self, p: PlayTopic, data: bytes | None, t_ns: int) -> list[bytes]:
         """``data`` as the ``faults`` setting changes it (none, one or more messages)."""
@@ -451,8 +465,9 @@ class BagPlayerNode(Node):
                 self.get_logger().warning(f'fault injected from {t:.2f} s: {f}')
         return self._faults.apply(p.out_topic, data, t_ns)
 
-    def _wait_until(self, sched: ReplaySchedule, t_ns: int) -> bool:
-        """Sleep until bag time `t_ns` is due, publishing /clock meanwhile; False on stop."""
+    def _wait_until(self, sched: ReplaySchedule, t_ns: int, shift: int = 0) -> bool:
+        """Sleep until bag time `t_ns` is due, publishing /clock (moved by ``shift`` ns)
+        meanwhile; False on stop."""
         while True:
             now = time.monotonic()
             delay = sched.delay(t_ns, now)
@@ -462,7 +477,7 @@ class BagPlayerNode(Node):
                 return True
             if self._clock_pub is not None:
                 if now - self._last_clock >= 1.0 / CLOCK_HZ:
-                    self._publish_clock(sched.bag_time(now))
+                    self._publish_clock(sched.bag_time(now) + shift)
                     self._last_clock = now
                 delay = min(delay, 1.0 / CLOCK_HZ)
             self._stop.wait(delay)

@@ -391,7 +391,8 @@ class WalkDetector:
                 sqrt(sum_k |c_k|^2) (measured domain).
         The stop test (``stop_amplitudes``, roll and pitch: turns bend the yaw): over the
         window (``stop_window``) the *gait amplitude* (a matched filter with the model's
-        own oscillation, its frequency, phase and shape) below ``stop_fraction`` of its running mean (3 s),
+        own oscillation, its frequency, phase and shape) below ``stop_fraction`` of its
+        running mean (3 s),
         and the *motion amplitude* (whatever the shape) below ``STOP_MOTION_FRACTION``
         of its own, twice running, is a stop. The first is quick and phase-proof, the
         second keeps irregular real walking (which the model describes badly) from

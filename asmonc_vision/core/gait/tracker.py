@@ -14,11 +14,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from asmonc_vision.core.gait.detector import WalkDetector, WalkFit
+from asmonc_vision.core.gait.fallback import PredictionFallback
 from asmonc_vision.core.gait.model import I_F, I_O, I_R, I_YA, GaitConfig, WalkModelEKF
 from asmonc_vision.core.gait.prefilter import Prefilter
-from asmonc_vision.core.gait.rotations import (egomotion_to_body, euler_rate_matrix,
-                                               relative_rotation, rpy_increment,
-                                               wrap_angle)
+from asmonc_vision.core.gait.rotations import (
+    egomotion_to_body,
+    euler_rate_matrix,
+    relative_rotation,
+    rpy_increment,
+    wrap_angle,
+)
 from asmonc_vision.core.jit import jit, warmed
 
 _D2R = np.pi / 180.0
@@ -146,6 +151,8 @@ class GaitEstimate:
             while walking, else None.
         predicted_model, predicted_model_covariance: the walk model's own prediction
             (``predicted`` weights it with the attitude held by their recent skill).
+        fallback: (3,) bool, the axes whose ``predicted`` is the measurement held by the
+            fallback rule (core/gait/fallback.py); None when the rule is off.
     """
 
     stamp: float
@@ -164,6 +171,7 @@ class GaitEstimate:
     event: str | None = None
     predicted_model: np.ndarray | None = None
     predicted_model_covariance: np.ndarray | None = None
+    fallback: np.ndarray | None = None
 
 
 @dataclass
@@ -224,6 +232,9 @@ class GaitTracker:
         self._yaw_cont = 0.0
         self._default_var = (0.5 * _D2R) ** 2
         self._model_var = (c.model_error_deg * _D2R) ** 2
+        self.fallback = (PredictionFallback(c.horizon, c.fallback_window, c.fallback_margin)
+                         if c.fallback else None)
+        self._pred_weighted: np.ndarray | None = None   # before the fallback rule
         _warm_up()
 
     @property
@@ -327,7 +338,11 @@ class GaitTracker:
         self._z_raw = z
         self._score_past(t, zc)
         self._zc_prev = (t, zc)
+        if self.fallback is not None:
+            self.fallback.score(t, zc)
         est = self.estimate(t, event)
+        if self.fallback is not None:
+            self.fallback.push(t, self._pred_weighted, z)
         yaw_j = self.ekf.predict_models(t - self.ekf.t + c.horizon)[:, 2]
         self._past.append((t, est.predicted_model, z, yaw_j))
         return est
@@ -612,6 +627,18 @@ class GaitTracker:
                              for j in range(3)] for i in range(3)])
             # the motion likewise: holding predicts none
             target = np.array(_towards(att_l, pm, w))
+        self._pred_weighted = pred
+        held = None
+        if self.fallback is not None and fresh:
+            held = self.fallback.holding.copy()
+            if held.any():
+                e2h = self.fallback.mean_squares()[1]
+                pred = self.fallback.apply(pred, self._z_raw)
+                target = np.where(held, att, target)
+                cov = cov.copy()
+                cov[held, :] = 0.0
+                cov[:, held] = 0.0
+                cov[held, held] = e2h[held]
         amplitude, phase = ekf.amplitude_phase(s)
         o_r, o_p, o_y, r, ya = x[2:7].tolist()                     # I_O, I_R, I_YA
         offset = np.array([o_r, o_p, o_y + (r * s + 0.5 * ya * s * s)])
@@ -621,4 +648,4 @@ class GaitTracker:
             phase=phase, offset=offset, yaw_rate=float(x[I_R]), attitude=att,
             horizon=h, predicted=pred, predicted_covariance=cov,
             motion=relative_rotation(att, target), event=event, predicted_model=pred_model,
-            predicted_model_covariance=cov_model)
+            predicted_model_covariance=cov_model, fallback=held)
