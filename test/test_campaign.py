@@ -54,7 +54,7 @@ def test_one_walk_end_to_end_and_cached(tmp_path, capsys):
     js = tmp_path / 'c.json'
     argv = ['campaign', '--minutes', '0.01', '--duration', '1.5', '--tuning', '--classes',
             SCENE_CLASSES[0], '--rigs', 'backpack', '--cache', str(tmp_path / 'cache'),
-            '--json', str(js), '--no-progress']
+            '--json', str(js), '--markdown', str(tmp_path / 'c.md'), '--no-progress']
     from asmonc_vision.cli.main import main
     assert main(argv) == 0
     out = capsys.readouterr().out
@@ -66,6 +66,11 @@ def test_one_walk_end_to_end_and_cached(tmp_path, capsys):
     for m in ('gpod', 'sgbm'):
         s = walk['safety'][m]
         assert s['frames'] == 15 and s['false_reports']['frames_scored'] == 15
+    md = (tmp_path / 'c.md').read_text().splitlines()
+    assert md[0] == '**TUNING seeds 1000-1999: 1 walks of 1.5 s**'
+    assert md[2].startswith('|  | walks | min | ours (GPOD) warned |') and md[3] == '|---' * 9 + '|'
+    assert md[4].startswith(f'| class {SCENE_CLASSES[0]} | 1 | 0.0 | ')
+    assert md[-1].startswith('| **all** | 1 |') and md[-1].count('|') == 10
     entries = list((tmp_path / 'cache').iterdir())
     assert len(entries) == 1 and (entries[0] / 'truth.json').is_file()
     assert main(argv) == 0                                    # rendered once, reused
