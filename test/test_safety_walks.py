@@ -22,7 +22,7 @@ from asmonc_vision.sim.scenes import make_scene
 WALKS = {
     ('step_down', 1004, 5.0): (1, 1, 0, 0.06),
     ('kerb_up', 1004, 5.0): (1, 1, 0, 0.12),
-    ('slope_ahead', 1002, 5.0): (0, 0, 1, 0.10),     # CAUTION: unseen ground ahead
+    ('slope_ahead', 1002, 5.0): (0, 0, 0, 0.04),
     ('grate', 1003, 5.0): (0, 0, 0, 0.04),
 }
 
