@@ -37,9 +37,10 @@ reported). Unseen ground is not evidence of a thing: a plain wall hides it, but 
 painted marking or a grate whose edges the matcher rejects. The detector reports it in
 its obstacle list as an entry at R straight ahead whose height is ``UNKNOWN_HEIGHT``
 (NaN: nothing was measured there; `is_unknown`); the alarm logic says "cannot see the
-ground ahead" (`core.alarm`), never "all clear" and never an obstacle's level, and the
-safety score does not count it as an obstacle report. R is the last ground edge pixel seen, moved on to where
-the ground's fine texture gives way to a plain face (`_foot_and_face`).
+way ahead" (`core.alarm`), never "all clear" and never an obstacle's level, and the
+safety score does not count it as an obstacle report. R is the last ground edge pixel
+seen, moved on to where the ground's fine texture gives way to a plain face
+(`_foot_and_face`).
 
 Limits, which no passive stereo cue avoids: ground that itself has no edges for metres (a
 smooth floor after a textured one) looks the same as a wall with none, and is reported;
