@@ -41,8 +41,8 @@ Definitions (`SafetyCriteria` holds every number):
 * **False report**: a reported obstacle (not an unknown-ahead entry, whose height is
   NaN: it says the ground there cannot be seen, `core.unseen_ground`) whose ground
   point lies farther than max(``report_tolerance_m``, ``report_tolerance_frac`` x its
-  range) from the footprint of every obstacle present; a drop is matched only by a report of negative height.
-  Per frame scored (frames with a report list).
+  range) from the footprint of every obstacle present; a drop is matched only by a
+  report of negative height. Per frame scored (frames with a report list).
 * **Recall**: (obstacle, frame) pairs of obstacles in view with at least
   ``recall_min_pixels`` pixels seen in both images (all listed ones when the counts are
   unknown), matched one to one to reports, nearest pair first, within the same
