@@ -137,11 +137,12 @@ class _Counter:
 
 def _player_cmd(bag: Path, rate: float, nodes: dict, topics: dict) -> list[str]:
     from asmonc_vision.io import bagio
-    from asmonc_vision.cli.run import PACE_LEAD, _wait_topics
+    from asmonc_vision.replay.children import wait_topics
+    from asmonc_vision.replay.params import PACE_LEAD
     cmd = [sys.executable, '-m', 'asmonc_vision.nodes.player_node', '--ros-args',
            '-p', f'bag:={bag.resolve()}', '-p', f'rate:={float(rate)}',
            '-p', 'loop:=true', '-p', 'loop_restamp:=true', '-p', 'exit_when_done:=false',
-           '-p', f'wait_topics:={json.dumps(_wait_topics(nodes, topics))}']
+           '-p', f'wait_topics:={json.dumps(wait_topics(nodes, topics))}']
     if 'detector' in nodes:
         cmd += ['-p', 'pace_topic:=/obstacles',
                 '-p', 'pace_type:=asmonc_vision_msgs/msg/ObstacleArray',
@@ -152,7 +153,7 @@ def _player_cmd(bag: Path, rate: float, nodes: dict, topics: dict) -> list[str]:
 
 def _start_nodes(nodes: dict, counter: _Counter, log_dir: Path, echo, env: dict) -> dict:
     """Start the graph's nodes (late ones after the others are connected)."""
-    from asmonc_vision.cli.run import _Child, _connected
+    from asmonc_vision.replay.children import Child, connected
     children = {}
     early = [n for n, s in nodes.items() if not s.start_late]
     for group in [early] + [[n] for n, s in nodes.items() if s.start_late]:
@@ -161,9 +162,9 @@ def _start_nodes(nodes: dict, counter: _Counter, log_dir: Path, echo, env: dict)
                    *nodes[name].ros_args()]
             if name == 'audio':
                 cmd += ['-p', 'output:=none']
-            children[name] = _Child(name, cmd, log_dir, echo, env, echo_warnings=False)
+            children[name] = Child(name, cmd, log_dir, echo, env, echo_warnings=False)
         deadline = time.monotonic() + 90.0
-        while not all(_connected(counter.node, nodes[n], False) for n in group):
+        while not all(connected(counter.node, nodes[n], False) for n in group):
             dead = [n for n in group if not children[n].alive()]
             if dead or time.monotonic() > deadline:
                 for c in children.values():
@@ -197,7 +198,8 @@ def soak(bag: Path, minutes: float, rate: float = 1.0, warmup: float = 60.0,
 
     from asmonc_vision import graph
     from asmonc_vision.io import bagio
-    from asmonc_vision.cli.run import _Child, claim_domain
+    from asmonc_vision.replay.children import Child
+    from asmonc_vision.replay.domain import claim_domain
 
     topics, _ = bagio.bag_summary(bag)
     inputs = {k for k, key in (('images', 'left_image'), ('imu', 'imu'))
@@ -223,7 +225,7 @@ def soak(bag: Path, minutes: float, rate: float = 1.0, warmup: float = 60.0,
     died: list[str] = []
     try:
         children = _start_nodes(nodes, counter, log_dir, echo, env)
-        children['player'] = _Child('player', _player_cmd(bag, rate, nodes, topics),
+        children['player'] = Child('player', _player_cmd(bag, rate, nodes, topics),
                                     log_dir, echo, env, echo_warnings=False)
         echo(f"soak: {bag} looped at rate {rate:g} for {minutes:g} min through "
              f"{', '.join(children)}; sampling every {period:g} s, warm-up {warmup:g} s")

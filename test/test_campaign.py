@@ -12,9 +12,9 @@ def test_scenes_api():
     assert RIGS == ('backpack', 'chest') and SCENE_CLASSES
     a = make_scene(SCENE_CLASSES[0], 1000, duration=2.0, rig='chest')
     chest = a.rig
-    assert (chest.width, chest.height, chest.baseline, chest.camera_height) == (640, 480, 0.12,
-                                                                               1.3)
-    assert chest.focal == pytest.approx(520.0, rel=0.05)
+    assert (chest.width, chest.height, chest.baseline) == (640, 480, 0.12)
+    assert 1.2 <= chest.camera_height <= 1.4          # drawn from the seed within the kind
+    assert chest.focal == pytest.approx(560.0, rel=0.05)         # 57 degrees across
     assert a.n_frames == 20
     b = make_scene(SCENE_CLASSES[0], 1000, duration=2.0)
     assert (b.rig.width, b.rig.height) == (320, 240)
@@ -26,14 +26,16 @@ def test_plan_walks_seed_ranges_and_rigs():
     w = C.plan_walks('tuning', 2.0, list(SCENE_CLASSES), list(RIGS), 20.0)
     assert len(w) == 6
     assert [x.seed for x in w] == list(range(1000, 1006))
-    assert [x.scene_class for x in w[:5]] == list(SCENE_CLASSES)
+    assert [x.scene_class for x in w] == list(SCENE_CLASSES[:6])
     assert {x.rig for x in w} == set(RIGS)
     b = C.plan_walks('blind', 0.1, list(SCENE_CLASSES), list(RIGS), 20.0)
     assert [x.seed for x in b] == [900000]
     # every class meets every rig within classes x rigs walks
-    ten = C.plan_walks('tuning', 10 * 20 / 60, list(SCENE_CLASSES), list(RIGS), 20.0)
-    assert {(x.scene_class, x.rig) for x in ten} == {(c, r) for c in SCENE_CLASSES
-                                                    for r in RIGS}
+    n = len(SCENE_CLASSES) * len(RIGS)
+    every = C.plan_walks('tuning', n * 20 / 60, list(SCENE_CLASSES), list(RIGS), 20.0)
+    assert len(every) == n
+    assert {(x.scene_class, x.rig) for x in every} == {(c, r) for c in SCENE_CLASSES
+                                                      for r in RIGS}
     with pytest.raises(ValueError):
         C.plan_walks('tuning', 1e6, list(SCENE_CLASSES), list(RIGS), 20.0)
 
@@ -52,7 +54,7 @@ def test_one_walk_end_to_end_and_cached(tmp_path, capsys):
     js = tmp_path / 'c.json'
     argv = ['campaign', '--minutes', '0.01', '--duration', '1.5', '--tuning', '--classes',
             SCENE_CLASSES[0], '--rigs', 'backpack', '--cache', str(tmp_path / 'cache'),
-            '--json', str(js), '--no-progress']
+            '--json', str(js), '--markdown', str(tmp_path / 'c.md'), '--no-progress']
     from asmonc_vision.cli.main import main
     assert main(argv) == 0
     out = capsys.readouterr().out
@@ -64,6 +66,11 @@ def test_one_walk_end_to_end_and_cached(tmp_path, capsys):
     for m in ('gpod', 'sgbm'):
         s = walk['safety'][m]
         assert s['frames'] == 15 and s['false_reports']['frames_scored'] == 15
+    md = (tmp_path / 'c.md').read_text().splitlines()
+    assert md[0] == '**TUNING seeds 1000-1999: 1 walks of 1.5 s**'
+    assert md[2].startswith('|  | walks | min | ours (GPOD) warned |') and md[3] == '|---' * 9 + '|'
+    assert md[4].startswith(f'| class {SCENE_CLASSES[0]} | 1 | 0.0 | ')
+    assert md[-1].startswith('| **all** | 1 |') and md[-1].count('|') == 10
     entries = list((tmp_path / 'cache').iterdir())
     assert len(entries) == 1 and (entries[0] / 'truth.json').is_file()
     assert main(argv) == 0                                    # rendered once, reused

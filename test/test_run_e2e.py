@@ -336,8 +336,9 @@ def test_inclinometer_only_bag_runs_the_walk_model_alone(tmp_path):
 def test_a_plain_wall_is_announced_through_the_graph(tmp_path):
     """Camera to alarm, a wall with no texture across the path (simulated, seed 0): it has
     no vertical edges, so only the ground it hides (the unseen-ground cue) shows it. The
-    graph must report it at its foot while the walker approaches, and the alarm node must
-    warn of an obstacle ahead while it is still more than 3 m away."""
+    graph must report the ground unknown from its foot on while the walker approaches,
+    and the alarm node must say that it cannot see the way ahead (not "all clear", not
+    an obstacle of a height nobody measured) while the wall is still more than 3 m away."""
     from asmonc_vision.replay.summary import read_truth
     from asmonc_vision.sim.bagwriter import write_bag
     from asmonc_vision.sim.scenarios import make_scenario
@@ -358,7 +359,7 @@ def test_a_plain_wall_is_announced_through_the_graph(tmp_path):
     alarms = [(bagio.header_stamp_ns(m), m.level, m.text)
               for _, _, m in bagio.read_messages(tmp_path / 'out', ['/alarms'])]
     far = {st for st, t in truth.items() if len(t.range) and t.range.min() > 3.0}
-    assert any(st in far and 1 <= level <= 3 and 'obstacle' in text
+    assert any(st in far and level == 4 and text.startswith('cannot see the way ahead')
                for st, level, text in alarms), alarms
 
 

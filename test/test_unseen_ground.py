@@ -12,7 +12,7 @@ import pytest
 
 from asmonc_vision.core.camera import MetricPlane, StereoCamera
 from asmonc_vision.core.gpod import GpodConfig, GpodDetector, GpodObstacle
-from asmonc_vision.core.unseen_ground import UnseenGroundMonitor, _texture_energy
+from asmonc_vision.core.unseen_ground import UnseenGroundMonitor, _texture_energy, is_unknown
 
 CAM = StereoCamera(f=300.0, cx=159.5, cy=119.5, baseline=0.35, width=320, height=240)
 PITCH = math.radians(20.0)
@@ -246,10 +246,10 @@ def _plain_wall_frames(seed: int = 3, n: int = 20):
     return rig.camera(), [simulate_frame(scene, k, ren) for k in range(n)]
 
 
-def _wall_hits(det, cam, frames) -> int:
+def _wall_hits(det, cam, frames, unknown_only: bool = False) -> int:
     """Frames after the wall appeared (two to report it) in which a report that the alarm
-    would announce (in the corridor, confidence >= 0.3, >= 5 cm) lies within 0.3 m of
-    the wall's range."""
+    would announce (in the corridor, confidence >= 0.3, >= 5 cm or unknown ahead) lies
+    within 0.3 m of the wall's range (``unknown_only``: an unknown-ahead entry)."""
     hits = 0
     for f in frames:
         r = det.process(f.left, f.right, cam, stamp_ns=int(f.time * 1e9))
@@ -257,16 +257,19 @@ def _wall_hits(det, cam, frames) -> int:
             continue
         truth = min(o.range for o in f.obstacles)
         ahead = [o for o in r.obstacles if abs(o.range * math.sin(o.bearing)) <= 0.5
-                 and o.confidence >= 0.3 and abs(o.height) >= 0.05]
+                 and o.confidence >= 0.3 and (abs(o.height) >= 0.05 or is_unknown(o.height))
+                 and (is_unknown(o.height) or not unknown_only)]
         hits += any(abs(o.range - truth) <= 0.3 for o in ahead)
     return hits
 
 
 def test_a_plain_wall_that_appears_ahead_is_reported_at_its_foot():
     """The plain wall appears 2.4 m ahead of the rig standing still: no vertical edge on
-    it, so GPOD alone does not find it, and the ground it hides does."""
+    it, so GPOD alone does not find it, and the ground it hides does: unknown ahead from
+    the wall's foot (height NaN), not an obstacle of some height."""
     cam, frames = _plain_wall_frames()
-    found = {ratio: _wall_hits(GpodDetector(GpodConfig(unseen_max_ratio=ratio)), cam, frames)
+    found = {ratio: _wall_hits(GpodDetector(GpodConfig(unseen_max_ratio=ratio)), cam, frames,
+                               unknown_only=ratio > 0)
              for ratio in (0.15, 0.0)}
     assert found[0.15] >= 9, found                  # of 10 frames (measured 10)
     assert found[0.0] <= 1, found                   # the scene needs the cue (measured 0)

@@ -2,7 +2,8 @@
 
     asmonc campaign [--minutes 20] [--workers 2] [--blind | --tuning]
                     [--classes CLASS ...] [--rigs backpack chest] [--duration 20]
-                    [--methods gpod sgbm] [--cache DIR] [--json FILE] [--no-progress]
+                    [--methods gpod gpod_map sgbm] [--cache DIR] [--json FILE]
+                    [--markdown FILE] [--no-progress]
 
 Picks walks (scene class, seed, rig) from `sim.scenes` until the minutes are covered,
 cycling through the classes with the rigs alternating (`plan_walks`), seeds counting up
@@ -11,8 +12,10 @@ into a cache outside the repository (default ~/.cache/asmonc_vision/campaign/<ke
 key a hash of the scene class, seed, rig, duration and the simulator's source code) as
 a rosbag2 bag with the pixels that see each obstacle in both images beside it
 (`truth.json`), and reused when present. On every walk, offline (no ROS), our detector
-(GPOD, default settings) and the SGBM peer (`core.baseline`, as `asmonc eval --method
-sgbm`) each run over the stereo pairs in order, the alarm node's logic (`core.alarm`,
+(GPOD, default settings: no evidence map), our detector with the evidence map
+(``gpod_map``: the map on, each pair's motion from the egomotion estimator, as the node
+graph runs them) and the SGBM peer (`core.baseline`, as `asmonc eval --method sgbm`)
+each run over the stereo pairs in order, the alarm node's logic (`core.alarm`,
 default settings) is replayed over their outputs in bag time (`eval.alarm_replay`), and
 the safety score is taken (`eval.safety`, the definitions of docs/evaluation.md).
 
@@ -23,7 +26,8 @@ sets are run, half the minutes each, and reported apart; --blind or --tuning run
 Prints per set a table per scene class and per rig, ours and the peer side by side:
 warned in time (warned/on the path), false alarm events per 10 minutes of walking,
 false reports per frame, recall; then the set's totals; and the time per walk-minute
-(rendering, each detector). A progress bar goes to stderr. `--workers N` runs N walks
+(rendering, each detector). `--markdown FILE` writes the tables as Markdown (a results
+table a document can include). A progress bar goes to stderr. `--workers N` runs N walks
 at once (one process each, one OpenCV thread each). Exit status 0; 2 on bad arguments.
 """
 from __future__ import annotations
@@ -42,7 +46,7 @@ from pathlib import Path
 #: seed ranges (inclusive start, exclusive end)
 TUNING_SEEDS = (1000, 2000)
 BLIND_SEEDS = (900000, 901000)
-METHOD_NAMES = {'gpod': 'ours (GPOD)', 'sgbm': 'peer (SGBM)'}
+METHOD_NAMES = {'gpod': 'ours (GPOD)', 'gpod_map': 'ours (GPOD + map)', 'sgbm': 'peer (SGBM)'}
 
 
 def default_cache() -> Path:
@@ -69,10 +73,14 @@ def add_arguments(p) -> None:
                    help='rigs (default all)')
     p.add_argument('--duration', type=float, default=20.0, help='seconds per walk (default 20)')
     p.add_argument('--methods', nargs='+', choices=tuple(METHOD_NAMES), default=['gpod', 'sgbm'],
-                   help='detectors to run (default ours and the SGBM peer)')
+                   help='detectors to run: gpod (no map), gpod_map (the evidence map, '
+                        'with the egomotion estimator), sgbm (the peer); default gpod '
+                        'and sgbm')
     p.add_argument('--cache', type=Path, default=None,
                    help='rendered walks are kept here (default ~/.cache/asmonc_vision/campaign)')
     p.add_argument('--json', type=Path, default=None, help='write every number here as JSON')
+    p.add_argument('--markdown', type=Path, default=None,
+                   help='write the tables here as Markdown')
     p.add_argument('--no-progress', action='store_true', help='no progress bar')
     p.set_defaults(func=run)
 
@@ -175,7 +183,9 @@ def score_walk(w: Walk, cache: Path, methods: list[str], version: str) -> dict:
     scores, detect_s, detect_cpu_s = {}, {}, {}
     for m in methods:
         t0, c0 = time.perf_counter(), time.process_time()
-        runs = run_method(frames, m)
+        runs = (run_method(frames, 'gpod', map_enabled=True, egomotion=True)
+                if m == 'gpod_map' else run_method(frames, m, map_enabled=False)
+                if m == 'gpod' else run_method(frames, m))
         detect_s[m] = time.perf_counter() - t0
         detect_cpu_s[m] = time.process_time() - c0
         alarms = replay_alarms([(r.stamp_ns, r.status, r.obstacles) for r in runs])
@@ -223,6 +233,29 @@ def table(results: list[dict], methods: list[str], title: str) -> list[str]:
         for v in sorted({getattr(r['walk'], key) for r in results}):
             out.append(row(f'{name} {v}', [r for r in results if getattr(r['walk'], key) == v]))
     out.append(row('all', results))
+    return out
+
+
+def markdown_table(results: list[dict], methods: list[str], title: str) -> list[str]:
+    """The table of one seed set as Markdown: per class, per rig, totals; per method
+    warned x/y, false alarm events per 10 minutes of walking, false reports per frame."""
+    from asmonc_vision.eval.safety import SafetyScore
+
+    head = ['', 'walks', 'min'] + [f'{METHOD_NAMES[m]} {h}' for m in methods
+                                   for h in ('warned', 'FA/10 min', 'FR/frame')]
+    out = [f'**{title}**', '', '| ' + ' | '.join(head) + ' |',
+           '|' + '---|' * len(head)]
+
+    def row(label: str, rs: list[dict]) -> str:
+        cells = [label, str(len(rs)), f"{sum(r['walk'].duration for r in rs) / 60.0:.1f}"]
+        for m in methods:
+            cells += _cell(SafetyScore.merge([r['scores'][m] for r in rs]))[:3]
+        return '| ' + ' | '.join(cells) + ' |'
+
+    for key, name in (('scene_class', 'class'), ('rig', 'rig')):
+        for v in sorted({getattr(r['walk'], key) for r in results}):
+            out.append(row(f'{name} {v}', [r for r in results if getattr(r['walk'], key) == v]))
+    out.append(row('**all**', results))
     return out
 
 
@@ -367,6 +400,17 @@ def run(args) -> int:
     print()
     print('\n'.join(timing_lines(results, list(args.methods))))
     print(f'campaign wall time {(time.monotonic() - t0) / 60:.1f} min')
+    if args.markdown is not None:
+        md = []
+        for s in sets:
+            rs = [r for r in results if r['walk'].seed_set == s]
+            lo, hi = TUNING_SEEDS if s == 'tuning' else BLIND_SEEDS
+            md += markdown_table(rs, list(args.methods),
+                                 f'{s.upper()} seeds {lo}-{hi - 1}: {len(rs)} walks of '
+                                 f'{args.duration:g} s') + ['']
+        args.markdown.parent.mkdir(parents=True, exist_ok=True)
+        args.markdown.write_text('\n'.join(md))
+        print(f'markdown: {args.markdown}')
     if args.json is not None:
         from asmonc_vision.eval.evaluation import json_ready
         doc = summary_json(results, list(args.methods))

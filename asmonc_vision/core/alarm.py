@@ -33,6 +33,15 @@ number of plain-speech announcements for a blind pedestrian:
   lists, only once a ground status has come after it (a detector that died and was
   restarted has no ground plane yet; the status from before the gap is stale).
 
+* **Unknown ahead**: an entry of the obstacle list whose height is NaN is no obstacle
+  but ground the detector cannot see from its range on (`core.unseen_ground`: a plain
+  face hides it, or a surface whose edges do not match). In the corridor (as an obstacle,
+  its height aside), it is said as such: FAULT "cannot see the way ahead, N metres, walk
+  with care" (``fault`` 'unknown_ahead'; the Alarm's range and bearing are its), in place
+  of "all clear" and never as an obstacle's level. An obstacle's level (CAUTION or
+  higher) outranks it and is announced at once; it is repeated every ``repeat_period``
+  (not while the wearer stands), and once it is gone, "all clear" waits ``hold_time``.
+
 * **Time to contact** (when the wearer's motion is given; without it the levels are by
   range only, as above). ``walk_motion`` gives the walking speed (m/s, smoothed, e.g.
   ``WalkingSpeed`` over ``/egomotion``) and heading (the walking direction from the
@@ -91,6 +100,11 @@ TEXT_NO_DATA = 'fault, obstacle detection has stopped, walk with care'
 TEXT_NOT_STARTED = 'fault, obstacle detection has not started, walk with care'
 TEXT_GROUND_LOST = 'fault, cannot see the ground, walk with care'
 TEXT_CLEAR = 'all clear'
+
+
+def unknown_text(r: float) -> str:
+    """The spoken text for ground unknown from r metres ahead."""
+    return f'cannot see the way ahead, {range_words(r)}, walk with care'
 
 
 @dataclass(frozen=True)
@@ -224,6 +238,11 @@ class ObstacleInfo:
     @property
     def is_drop(self) -> bool:
         return self.height < 0.0
+
+    @property
+    def is_unknown(self) -> bool:
+        """Ground unknown from this range on (height NaN), not an obstacle."""
+        return math.isnan(self.height)
 
 
 @dataclass(frozen=True)
@@ -409,7 +428,8 @@ class AlarmLogic:
     @property
     def fault(self) -> str | None:
         """None, or why the level is FAULT: 'starting', 'not_started' (no obstacle list
-        within ``startup_grace``), 'no_data' (none for ``timeout``) or 'ground_lost'."""
+        within ``startup_grace``), 'no_data' (none for ``timeout``), 'ground_lost' or
+        'unknown_ahead' (ground ahead that cannot be seen)."""
         return self._fault if self._current.level == AlarmLevel.FAULT else None
 
     def set_config(self, config: AlarmConfig) -> None:
@@ -524,6 +544,14 @@ class AlarmLogic:
                 and abs(ob.height) >= c.min_height
                 and ob.confidence >= c.min_confidence)
 
+    def unknown_ahead(self, unknown: Iterable[ObstacleInfo]) -> ObstacleInfo | None:
+        """The nearest unknown-ahead entry (already in the walking frame) that counts as
+        an obstacle would (``in_corridor``, its height aside), or None."""
+        c = self._cfg
+        ok = [u for u in unknown
+              if self.in_corridor(dataclasses.replace(u, height=max(c.min_height, 1.0)))]
+        return min(ok, key=lambda u: u.range, default=None)
+
     def target(self, obstacles: Iterable[ObstacleInfo]) -> ObstacleInfo | None:
         """The obstacle that counts (see ``in_corridor``) and calls for the highest level
         (a drop first, then the nearest), judged by range only; or None."""
@@ -567,6 +595,10 @@ class AlarmLogic:
 
         cur = self._current
         obstacles = self.walking_frame(t, obstacles)
+        unknown = self.unknown_ahead(o for o in obstacles if o.is_unknown)
+        obstacles = [o for o in obstacles if not o.is_unknown]
+        if cur.level == AlarmLevel.FAULT and self._fault == 'unknown_ahead':
+            return self._from_unknown(t, obstacles, unknown)
         if cur.level == AlarmLevel.FAULT:
             # Data are back: announce the real level at once, without memory -- but
             # with the ground LOST an empty path is no evidence: "all clear" waits.
@@ -577,6 +609,8 @@ class AlarmLogic:
             self._below_since = None
             if level == AlarmLevel.CLEAR and self._ground == GroundStatus.LOST:
                 return None
+            if level == AlarmLevel.CLEAR and unknown is not None:
+                return self._announce_unknown(t, unknown)
             return self._announce(self._decide(t, level, tgt))
 
         tgt, level = self.select(t, obstacles, cur.level)
@@ -594,10 +628,14 @@ class AlarmLogic:
                     self._below_since = t
                 if t - self._below_since >= self._cfg.hold_time:
                     self._below_since = None
+                    if level == AlarmLevel.CLEAR and unknown is not None:
+                        return self._announce_unknown(t, unknown)
                     return self._announce(self._decide(t, level, tgt))
             # Held at the current level: describe the nearest target if there is one.
             return self._maybe_repeat(t, tgt)
         self._below_since = None
+        if level == AlarmLevel.CLEAR and unknown is not None:
+            return self._announce_unknown(t, unknown)
         if (tgt is not None and level != AlarmLevel.CLEAR and tgt.id != 0
                 and cur.obstacle_id != 0 and tgt.id != cur.obstacle_id
                 and t - self._last_announce_t >= self._cfg.hold_time):
@@ -677,6 +715,42 @@ class AlarmLogic:
                         obstacle_id=int(tgt.id), range=float(tgt.range),
                         bearing=float(tgt.bearing), t=t, repeat=repeat,
                         time_to_contact=self.time_to_contact(t, tgt))
+
+    def _from_unknown(self, t: float, obstacles: list[ObstacleInfo],
+                      unknown: ObstacleInfo | None) -> Decision | None:
+        """An obstacle list while "cannot see the way ahead" is in force: an obstacle's
+        level at once; the unknown ground repeated; "all clear" after ``hold_time``
+        without either (not while the ground is LOST)."""
+        tgt, level = self.select(t, obstacles)
+        self._set_contact(t, tgt, level)
+        if level > AlarmLevel.CLEAR:
+            self._below_since = None
+            self._last_target = tgt
+            return self._announce(self._decide(t, level, tgt))
+        if unknown is not None:
+            self._below_since = None
+            if (t - self._last_announce_t < self._cfg.repeat_period
+                    or (not self._cfg.repeat_when_standing and self.standing(t))):
+                return None
+            return self._announce_unknown(t, unknown, repeat=True)
+        if self._ground == GroundStatus.LOST:
+            self._below_since = None
+            return None
+        if self._below_since is None:
+            self._below_since = t
+        if t - self._below_since < self._cfg.hold_time:
+            return None
+        self._below_since = None
+        return self._announce(self._decide(t, AlarmLevel.CLEAR, None))
+
+    def _announce_unknown(self, t: float, unknown: ObstacleInfo,
+                          repeat: bool = False) -> Decision:
+        self._below_since = None
+        d = self._announce(Decision(AlarmLevel.FAULT, unknown_text(unknown.range),
+                                    range=float(unknown.range),
+                                    bearing=float(unknown.bearing), t=t, repeat=repeat))
+        self._fault = 'unknown_ahead'
+        return d
 
     def _set_contact(self, t: float, tgt: ObstacleInfo | None, level: AlarmLevel) -> None:
         self._contact = Contact(t, level, tgt, self.time_to_contact(t, tgt), self.moving(t))

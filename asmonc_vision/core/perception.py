@@ -86,6 +86,9 @@ class Perception:
             obstacles = (tuple(objects_to_obstacles(objects, cam, plane, result.obstacles,
                                                     self.map_config.attach_m))
                          if plane is not None else ())
+            # the detector's unknown ahead (height NaN, `core.unseen_ground`) is no
+            # evidence for the map, and goes out as it is
+            obstacles += tuple(o for o in result.obstacles if np.isnan(o.height))
         ms = (time.perf_counter() - t0) * 1e3
         timings = dict(result.timings_ms)
         timings['map'] = ms

@@ -30,11 +30,17 @@ from R out to the corridor's far end (at least ``MIN_CELLS`` of them):
   texture: a blurred camera or faint far joints give fewer matched edges over ground that
   is still there, while a surface with no edges is plain (`_foot_and_face`).
 The nearest such R, found in ``frames`` pairs in a row (within a cell of the previous
-one; a pair whose band shows the ground's texture breaks the row), is reported as an
-obstacle at R straight ahead, unless a detected obstacle or drop-off already stands in
-the corridor no farther than R + ``EXPLAINED_M`` (what hides the ground is already
-reported). R is the last ground edge pixel seen, moved on to where
-the ground's fine texture gives way to a plain face (`_foot_and_face`).
+one; a pair whose band shows the ground's texture breaks the row), is reported as
+*unknown ahead* from R, unless a detected obstacle or drop-off already stands in the
+corridor no farther than R + ``EXPLAINED_M`` (what hides the ground is already
+reported). Unseen ground is not evidence of a thing: a plain wall hides it, but so do a
+painted marking or a grate whose edges the matcher rejects. The detector reports it in
+its obstacle list as an entry at R straight ahead whose height is ``UNKNOWN_HEIGHT``
+(NaN: nothing was measured there; `is_unknown`); the alarm logic says "cannot see the
+way ahead" (`core.alarm`), never "all clear" and never an obstacle's level, and the
+safety score does not count it as an obstacle report. R is the last ground edge pixel
+seen, moved on to where the ground's fine texture gives way to a plain face
+(`_foot_and_face`).
 
 Limits, which no passive stereo cue avoids: ground that itself has no edges for metres (a
 smooth floor after a textured one) looks the same as a wall with none, and is reported;
@@ -57,6 +63,8 @@ from .camera import MetricPlane, StereoCamera, ground_axes
 
 #: Depth of a corridor cell along the walking direction, metres.
 CELL_DEPTH_M = 0.25
+#: Height of an unknown-ahead entry in an obstacle list: not a number (not measured).
+UNKNOWN_HEIGHT = float('nan')
 #: Weight of a frame's count in a cell's running mean of ground pixels.
 EMA_RATE = 0.1
 #: The same weight for a cell whose count is below ``max_ratio`` times its mean.
@@ -89,6 +97,12 @@ PLAIN_MIN_SAMPLES = int(round(0.5 * FOOT_SEARCH_M / FOOT_STEP_M))
 FOOT_RUN = 3
 #: Least number of trusted cells in view in a reported band.
 MIN_CELLS = 2
+
+
+def is_unknown(height: float) -> bool:
+    """Whether an obstacle list's entry of this height is unknown ground ahead (the
+    unseen band, ``UNKNOWN_HEIGHT``), not a thing."""
+    return math.isnan(height)
 
 
 @dataclass(frozen=True)

@@ -38,10 +38,11 @@ Definitions (`SafetyCriteria` holds every number):
   obstacle id differs from the previous alarm's. Per minute of *walking*: frames whose
   camera moved faster than ``walking_speed`` over a centred window of
   ``walking_window_s``, each counted for its frame interval.
-* **False report**: a reported obstacle whose ground point lies farther than
-  max(``report_tolerance_m``, ``report_tolerance_frac`` x its range) from the footprint of
-  every obstacle present; a drop is matched only by a report of negative height.
-  Per frame scored (frames with a report list).
+* **False report**: a reported obstacle (not an unknown-ahead entry, whose height is
+  NaN: it says the ground there cannot be seen, `core.unseen_ground`) whose ground
+  point lies farther than max(``report_tolerance_m``, ``report_tolerance_frac`` x its
+  range) from the footprint of every obstacle present; a drop is matched only by a
+  report of negative height. Per frame scored (frames with a report list).
 * **Recall**: (obstacle, frame) pairs of obstacles in view with at least
   ``recall_min_pixels`` pixels seen in both images (all listed ones when the counts are
   unknown), matched one to one to reports, nearest pair first, within the same
@@ -53,6 +54,7 @@ not an obstacle, while the point below the camera is inside it.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Sequence
@@ -503,9 +505,22 @@ def score_safety(truth: SafetyTruth, alarms: Sequence[dict],
     return out
 
 
+def obstacle_reports(det: FrameObstacles) -> FrameObstacles:
+    """The frame's reports without its unknown-ahead entries (height NaN: ground that
+    cannot be seen, `core.unseen_ground`), which report no obstacle."""
+    keep = ~np.isnan(np.asarray(det.height, float))
+    if keep.all():
+        return det
+    return dataclasses.replace(
+        det, ids=det.ids[keep], position=det.position[keep], height=det.height[keep],
+        range=det.range[keep], bearing=det.bearing[keep], roi=det.roi[keep],
+        confidence=None if det.confidence is None else det.confidence[keep])
+
+
 def _score_reports(c: SafetyCriteria, f: TruthFrame, obs: list[TrueObstacle],
                    det: FrameObstacles, out: SafetyScore) -> None:
     """False reports and recall of one frame, added to ``out``."""
+    det = obstacle_reports(det)
     n = len(det)
     pts = f.to_world(det.range, det.bearing) if n else np.zeros((0, 2))
     tol = np.array([_report_tolerance(c, r) for r in det.range]) if n else np.zeros(0)

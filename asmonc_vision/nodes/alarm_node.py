@@ -18,6 +18,10 @@ Publishes:
         unknown). Level 0: no obstacle on the path.
     /diagnostics
 
+An /obstacles entry whose height is NaN is ground the detector cannot see from its
+range on (``core.unseen_ground``), not an obstacle: it is said as FAULT "cannot see the
+way ahead" in place of "all clear" (``core.alarm``).
+
 The decisions are made by ``core.alarm.AlarmLogic`` on the node's *steady* clock (time
 of arrival), never on message stamps or sim time, so a stalled pipeline gives FAULT
 even when /clock stops too. A FAULT "starting up" is published at start: silence is
@@ -198,6 +202,8 @@ class AlarmNode(Node):
                               **values)
         elif fault == 'no_data':
             self._diag.update(Diagnostics.ERROR, 'no /obstacles within the timeout', **values)
+        elif fault == 'unknown_ahead':
+            self._diag.update(Diagnostics.WARN, 'cannot see the way ahead', **values)
         elif fault == 'not_started':
             self._diag.update(Diagnostics.ERROR, 'no /obstacles since the start', **values)
         else:

@@ -8,7 +8,9 @@ callbacks that receive images stay fast. Publishes, per processed pair:
   Published for every good pair, empty when nothing stands above the ground. ``id`` is
   the obstacle's track id (stable while it is tracked, 0 for drop-offs, which are not
   tracked); an obstacle whose evidence dips for a frame or two is still reported at
-  its tracked place (`core.obstacle_tracks`; moved by `/egomotion`, below).
+  its tracked place (`core.obstacle_tracks`; moved by `/egomotion`, below). An entry
+  whose ``height`` is NaN is no obstacle: the walking corridor's ground from its
+  ``range`` on cannot be seen (`core.unseen_ground`); the alarm node says so.
 * `/ground_plane` (asmonc_vision_msgs/GroundPlane)
 * `/obstacles/markers` (visualization_msgs/MarkerArray), `/detector/debug_image` (bgr8)
 * `/obstacle_map` (nav_msgs/OccupancyGrid, RELIABLE, depth 1), with the evidence map

@@ -15,6 +15,7 @@ from ..alignment import AlignmentConfig, VerticalAlignment, brightness_gain_offs
 from ..camera import MetricPlane, StereoCamera
 from ..edges import detect_vertical_edges, image_noise_sigma, textured_edge_threshold
 from ..matching import pmf_match
+from ..unseen_ground import UNKNOWN_HEIGHT
 from . import kernels as kn
 from .coarse import _coarse_consistent, _disparity_image, bin_pair
 from .faces import _ground_points
@@ -224,10 +225,11 @@ class GpodDetector(Tracking):
                        ) -> tuple[GpodObstacle, ...]:
         """The frame's band of unseen corridor ground (`core.unseen_ground`), unless an
         obstacle or drop-off in ``known`` at least ``unseen_explain_min_confidence``
-        confident explains it, as an untracked obstacle straight
-        ahead (``track_id`` 0; ``disparity_excess`` 0: nothing was measured on it;
-        ``num_edge_pixels`` 0; ``confidence`` 1 - seen / expected). Empty when there is
-        none or ``unseen_max_ratio`` is 0."""
+        confident explains it, as unknown ground straight ahead: an untracked entry
+        (``track_id`` 0) whose ``height`` is ``UNKNOWN_HEIGHT`` (NaN: ground that cannot
+        be seen is not a thing; ``disparity_excess`` 0, ``num_edge_pixels`` 0;
+        ``confidence`` 1 - seen / expected). Empty when there is none or
+        ``unseen_max_ratio`` is 0."""
         if self._unseen is None:
             return ()
         # the known feet on the ground: (forward, left) from their range and bearing; a
@@ -247,7 +249,7 @@ class GpodDetector(Tracking):
         x1 = int(np.clip(np.ceil(max(u)), x0 + 1, cam.width))
         y1 = int(np.clip(np.ceil(max(v)), y0 + 1, cam.height))
         return (GpodObstacle(
-            position=r.position, height=r.height, range=r.range, bearing=0.0,
+            position=r.position, height=UNKNOWN_HEIGHT, range=r.range, bearing=0.0,
             width=r.width, disparity_excess=0.0,
             confidence=float(np.clip(1.0 - r.seen / r.expected, 0.0, 1.0)),
             roi=(x0, y0, x1 - x0, y1 - y0), num_edge_pixels=0,
