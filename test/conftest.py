@@ -31,7 +31,7 @@ _domains = itertools.count()
 
 def next_domain_id() -> int:
     """A DDS domain for one test (102..230, spread by process id so parallel runs rarely
-    meet; the ``ros`` fixture uses 1..100, the session 10..89)."""
+    meet; the ``ros`` fixture uses 1..100, the session-scoped one 10..89)."""
     return 102 + (os.getpid() * 7 + next(_domains)) % 129
 
 

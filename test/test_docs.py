@@ -18,14 +18,7 @@ README = ROOT / 'README.md'
 
 #: files whose work-log references are being removed elsewhere at the same time; this
 #: set is emptied once those edits are in
-PENDING_WORK_LOG_CLEANUP = {
-    'asmonc_vision/cli/run.py',
-    'asmonc_vision/bagio.py',
-    'test/conftest.py',
-    'test/test_gpod.py',
-    'test/test_run_e2e.py',
-    'docs/gpod.md',
-}
+PENDING_WORK_LOG_CLEANUP: set[str] = set()
 
 #: a dated note, a numbered work session or issue, an experiment log entry
 WORK_LOG = re.compile(r'\b[Ss]ession[ -]\d+|\b[Ii]ssue #?\d+|[Tt]ried, not kept'

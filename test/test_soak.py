@@ -53,7 +53,8 @@ def test_the_soak_command_refuses_bad_arguments(capsys):
 
 
 def test_restamp_moves_a_header_stamp_and_only_header_types_have_one():
-    from asmonc_vision.bagplay import has_header, loop_period_ns, restamp_cdr, LOOP_GAP
+    from asmonc_vision.io.bagio import has_header
+    from asmonc_vision.io.bagplay import LOOP_GAP, loop_period_ns, restamp_cdr
     for end, enc in (('<', 1), ('>', 0)):
         data = bytes([0, enc, 0, 0]) + struct.pack(end + 'iI', 7, 900_000_000) + b'rest'
         out = restamp_cdr(data, 250_000_000)
@@ -74,7 +75,7 @@ def test_a_restamped_loop_keeps_stamps_increasing(tmp_path, ros_context):
     from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import CameraInfo
 
-    from asmonc_vision.bagplay import PlayerConfig
+    from asmonc_vision.io.bagplay import PlayerConfig
     from asmonc_vision.nodes.player_node import BagPlayerNode
 
     bag = h.write_bag(tmp_path / 'bag', h.sample_messages(3))

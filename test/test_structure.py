@@ -54,11 +54,25 @@ def _base(name: str, path: Path, node: ast.ImportFrom) -> str:
     return '.'.join(parts + ([node.module] if node.module else []))
 
 
+def _type_only(tree: ast.Module) -> set[int]:
+    """ids of the import nodes under ``if TYPE_CHECKING:`` (for the type checker only: they
+    never run, so they make no cycle)."""
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and 'TYPE_CHECKING' in ast.unparse(node.test):
+            out |= {id(n) for b in node.body for n in ast.walk(b)}
+    return out
+
+
 def imports(name: str) -> list[tuple[str, str | None]]:
-    """(imported module, imported name or None) of every import in a module."""
+    """(imported module, imported name or None) of every import in a module that runs
+    (at module level or in a function; not the type checker's own)."""
     path, tree = modules()[name]
     out: list[tuple[str, str | None]] = []
+    skip = _type_only(tree)
     for node in ast.walk(tree):
+        if id(node) in skip:
+            continue
         if isinstance(node, ast.Import):
             out += [(a.name, None) for a in node.names]
         elif isinstance(node, ast.ImportFrom):

@@ -319,3 +319,13 @@ def compressed_to_image_cdr(data: bytes) -> bytes:
     out = image_cls(header=msg.header, height=h, width=w, encoding='mono8', is_bigendian=0,
                     step=w, data=np.ascontiguousarray(img, dtype=np.uint8).reshape(-1))
     return bytes(store.serialize_cdr(out, 'sensor_msgs/msg/Image'))
+
+
+def has_header(msgtype: str) -> bool:
+    """Whether a message type starts with a std_msgs/Header (its stamp then sits at CDR
+    offset 4, right after the encapsulation header); False for unknown types."""
+    try:
+        fields = typestore().fielddefs[msgtype][1]
+    except (KeyError, FileNotFoundError):
+        return False
+    return bool(fields) and fields[0][1][1] == 'std_msgs/msg/Header'

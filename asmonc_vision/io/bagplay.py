@@ -28,7 +28,7 @@ from asmonc_vision.core.config import check_fields, param
 
 __all__ = ['PlayerConfig', 'BagError', 'BagTopic', 'BagInfo', 'BagMessage', 'BagSource',
            'PlayTopic', 'plan_topics', 'normalize_topic', 'ReplaySchedule',
-           'IMAGE_TYPE', 'COMPRESSED_TYPE', 'read_errors', 'has_header',
+           'IMAGE_TYPE', 'COMPRESSED_TYPE', 'read_errors',
            'restamp_cdr', 'loop_period_ns', 'LOOP_GAP']
 
 IMAGE_TYPE = 'sensor_msgs/msg/Image'
@@ -585,15 +585,6 @@ class ReplaySchedule:
 
 # --- looping -----------------------------------------------------------------------
 
-def has_header(msgtype: str) -> bool:
-    """Whether a message type starts with a std_msgs/Header (its stamp then sits at CDR
-    offset 4, right after the encapsulation header); False for unknown types."""
-    from asmonc_vision.io.bagio import typestore
-    try:
-        fields = typestore().fielddefs[msgtype][1]
-    except (KeyError, FileNotFoundError):
-        return False
-    return bool(fields) and fields[0][1][1] == 'std_msgs/msg/Header'
 
 
 def restamp_cdr(data: bytes, offset_ns: int) -> bytes:

@@ -35,9 +35,9 @@ from typing import Any
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from asmonc_vision.io.bagio import compressed_to_image_cdr
+from asmonc_vision.io.bagio import compressed_to_image_cdr, has_header
 from asmonc_vision.io.bagplay import (BagError, BagSource, PlayerConfig, PlayTopic,
-                                      ReplaySchedule, has_header, loop_period_ns,
+                                      ReplaySchedule, loop_period_ns,
                                       normalize_topic, plan_topics, restamp_cdr)
 from asmonc_vision.nodes.common import config_overrides, declare_config, run_node
 from asmonc_vision.nodes.conversions import stamp_to_ns
