@@ -8,7 +8,7 @@ import numpy as np
 
 from asmonc_vision.core.alarm import (TEXT_CLEAR, AlarmConfig, AlarmLevel, AlarmLogic,
                                       GroundStatus, ObstacleInfo, unknown_text)
-from asmonc_vision.core.evaluation import FrameObstacles
+from asmonc_vision.eval.evaluation import FrameObstacles
 from asmonc_vision.eval.safety import obstacle_reports
 
 L = AlarmLevel

@@ -83,7 +83,7 @@ def select_matches(cand: Candidates, links: SupportLinks, left: EdgeMap, right: 
         # used by one: exactly the candidates still alive here.
         if it == 0:
             support = link_support(links, links.weight)
-            val = support
+            val: np.ndarray = support
         else:
             support = link_support(links, np.where(alive[links.pair_cand], links.weight, 0.0))
             val = np.where(alive, support, -np.inf)
