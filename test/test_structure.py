@@ -17,9 +17,7 @@ MAX_FUNCTION_LINES = 100
 #: modules being split by their owners right now; this list only shrinks
 PENDING_SPLIT = ('core/gpod', 'core/gait/')
 #: functions over MAX_FUNCTION_LINES outside PENDING_SPLIT, to be split; only shrinks
-LONG_FUNCTIONS_PENDING = {
-    ('eval/safety.py', 'score_safety'),
-}
+LONG_FUNCTIONS_PENDING: set[tuple[str, str]] = set()
 #: what core/ must not import: ROS, messages, bags, and the layers above it
 CORE_FORBIDDEN = ('rclpy', 'rosbags', 'asmonc_vision_msgs', 'sensor_msgs', 'geometry_msgs',
                   'std_msgs', 'nav_msgs', 'visualization_msgs', 'diagnostic_msgs',

@@ -428,7 +428,27 @@ def score_safety(truth: SafetyTruth, alarms: Sequence[dict],
     out.walking_s = float(interval[walking].sum())
     present = [truth.present(f) for f in frames]
 
-    # -- warned in time
+    _score_warnings(c, truth, alarms, stamps, present, out)
+    _score_false_alarms(c, truth, alarms, stamps, present, out)
+
+    # -- false reports and recall
+    if reports is not None:
+        for f, obs in zip(frames, present):
+            det = reports.get(f.stamp_ns)
+            if det is None:
+                out.frames_missing += 1
+                continue
+            out.frames_scored += 1
+            _score_reports(c, f, obs, det, out)
+    return out
+
+
+def _score_warnings(c: SafetyCriteria, truth: SafetyTruth, alarms: Sequence[dict],
+                    stamps: list[int], present: list, out: SafetyScore) -> None:
+    """Warned in time: per obstacle on the path, the alarm in force at its first pair on
+    the path (warned, under FAULT, late or never), and the pairs on the path by level;
+    into ``out``."""
+    frames = truth.frames
     levels = alarm_levels_at(stamps, alarms)
     track: dict[int, dict] = {}
     for f, level, obs in zip(frames, levels, present):
@@ -470,7 +490,11 @@ def score_safety(truth: SafetyTruth, alarms: Sequence[dict],
     out.on_path = len(track)
     out.path_obstacles = [track[k] for k in sorted(track)]
 
-    # -- false alarms
+
+def _score_false_alarms(c: SafetyCriteria, truth: SafetyTruth, alarms: Sequence[dict],
+                        stamps: list[int], present: list, out: SafetyScore) -> None:
+    """False alarms: CAUTION/WARNING/STOP placed on the ground farther than the tolerance
+    from every obstacle present; an event where such an alarm starts; into ``out``."""
     index = {s: i for i, s in enumerate(stamps)}
     prev = None
     for a in alarms:
@@ -492,17 +516,6 @@ def score_safety(truth: SafetyTruth, alarms: Sequence[dict],
                         range_m=rng, bearing_deg=math.degrees(brg),
                         nearest_true_m=near if math.isfinite(near) else None))
         prev = key
-
-    # -- false reports and recall
-    if reports is not None:
-        for f, obs in zip(frames, present):
-            det = reports.get(f.stamp_ns)
-            if det is None:
-                out.frames_missing += 1
-                continue
-            out.frames_scored += 1
-            _score_reports(c, f, obs, det, out)
-    return out
 
 
 def obstacle_reports(det: FrameObstacles) -> FrameObstacles:
