@@ -178,7 +178,7 @@ def fit_walk(tau: np.ndarray, z: np.ndarray, freqs: np.ndarray,
             cache[k] = (np.sin(k * w) * sw, np.cos(k * w) * sw)
         return cache[k]
 
-    per = np.zeros((freqs.size, 3))
+    per: np.ndarray = np.zeros((freqs.size, 3))
     for a in range(3):
         ks = criterion[a]
         if not ks:
@@ -256,7 +256,7 @@ class WalkDetector:
         #: running mean of the gait amplitude while walking (rad), for the stop test
         self.reference_amplitude = 0.0
         self._ref_t: float | None = None
-        self._reference = np.zeros(2)
+        self._reference: np.ndarray = np.zeros(2)
         self._started: float | None = None
 
     def start_reference(self) -> None:

@@ -48,7 +48,7 @@ class PredictionFallback:
         self.horizon = float(horizon)
         self.window = float(window)
         self.margin = float(margin)
-        self.holding = np.zeros(3, bool)
+        self.holding: np.ndarray = np.zeros(3, bool)
         self.switches = 0
         self._pending: deque = deque()    # (t, predicted (3,), held (3,)) not yet scored
         self._scored: deque = deque()     # (target t, model e^2 (3,), hold e^2 (3,))
@@ -58,7 +58,7 @@ class PredictionFallback:
 
     def reset(self) -> None:
         """Forget everything (a restart of the filter)."""
-        self.__init__(self.horizon, self.window, self.margin)
+        self.__init__(self.horizon, self.window, self.margin)  # type: ignore[misc]  # final here
 
     def mean_squares(self) -> tuple[np.ndarray, np.ndarray, int]:
         """(model MSE (3,), hold MSE (3,), scored samples) over the window."""

@@ -57,8 +57,9 @@ class JumpRule:
         self._good = None
         self._since = None
 
-    def _change(self, rpy: np.ndarray) -> float:
-        d = rpy[:2] - self._good[1][:2]
+    @staticmethod
+    def _change(rpy: np.ndarray, good: np.ndarray) -> float:
+        d = rpy[:2] - good[:2]
         return float(np.max(np.abs((d + math.pi) % (2.0 * math.pi) - math.pi)))
 
     def check(self, t: float, rpy) -> str:
@@ -70,7 +71,7 @@ class JumpRule:
         if self._good is None:
             self._good = (float(t), rpy)
             return 'ok'
-        change = self._change(rpy)
+        change = self._change(rpy, self._good[1])
         if self._since is not None:
             if change <= self.jump:
                 self._since = None

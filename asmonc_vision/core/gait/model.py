@@ -597,8 +597,9 @@ class WalkModelEKF:
             self.iterations_used = it + 1
             if done:
                 break
-        IKH = self._eye - K @ H
-        P_new = IKH @ P @ IKH.T + K @ R @ K.T                  # Joseph form
+        # iterations >= 1 (its settings range), so the loop has set K and H
+        IKH = self._eye - K @ H  # type: ignore[operator]
+        P_new = IKH @ P @ IKH.T + K @ R @ K.T  # type: ignore[union-attr]                 # Joseph form
         xi = xi.copy()
         xi[I_TH] = wrap_angle(float(xi[I_TH]))
         lo, hi = self.frequency_bounds

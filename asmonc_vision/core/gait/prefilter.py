@@ -73,7 +73,7 @@ class Prefilter:
         self._b_rev = self.b[::-1].tolist()         # ... highest power of z^-1 first
         self._a_rev = self.a[::-1].tolist()
         self._resp_key: bytes | None = None
-        self._resp_value = None
+        self._resp_value: np.ndarray | None = None
         h = signal.lfilter(self.b, self.a, np.r_[1.0, np.zeros(int(20 * rate) + 64)])
         #: white-noise variance gain sum(h^2): R of the filtered stream = gain * R
         self.noise_gain = float(np.sum(h * h))
@@ -94,7 +94,7 @@ class Prefilter:
         self._dp = np.gradient(self._p, self._df)
         self._table = np.column_stack([self._g, self._p, self._dg, self._dp])
         self._last_key: bytes | None = None
-        self._last_value = None
+        self._last_value: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def reset(self) -> None:
         """Forget the filter state (the next sample restarts it in steady state)."""
@@ -129,7 +129,7 @@ class Prefilter:
         """Complex response H(f) of prefilter times sensor lag at frequencies f (Hz)."""
         f = np.asarray(f, float)
         key = f.tobytes()
-        if key == self._resp_key:                   # asked again for the same frequencies
+        if key == self._resp_key and self._resp_value is not None:   # asked again
             return self._resp_value
         zinv = np.exp(_MINUS_2J_PI * f / self.rate)
         num = _polyval(self._b_rev, zinv)
@@ -159,12 +159,13 @@ class Prefilter:
         (frequencies beyond the Nyquist frequency are clamped to it)."""
         f = np.asarray(f, float)
         key = f.tobytes()
-        if key == self._last_key:                  # the EKF asks again for the same f
+        if key == self._last_key and self._last_value is not None:   # asked again for f
             return self._last_value
         u = np.clip(f / self._df, 0.0, 4096.0 - 1e-9)
         i = u.astype(int)
         w = (u - i)[..., None]
         tab = self._table
         v = tab[i] * (1.0 - w) + tab[i + 1] * w
-        self._last_key, self._last_value = key, (v[..., 0], v[..., 1], v[..., 2], v[..., 3])
-        return self._last_value
+        value = (v[..., 0], v[..., 1], v[..., 2], v[..., 3])
+        self._last_key, self._last_value = key, value
+        return value

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 
@@ -213,17 +214,17 @@ class GaitTracker:
         self._last_t: float | None = None
         self._last_any: float | None = None       # latest stamp of any accepted measurement
         self._settle = 0                          # prefiltered samples still settling
-        self._resid2 = np.zeros(3)                # running mean squared post-fit residual
+        self._resid2: np.ndarray = np.zeros(3)    # running mean squared post-fit residual
         self._next_lock_check = 0.0
         self._walk_start = 0.0
         self._was_turning = False
         # (t, model prediction, measurement, each IMM model's own yaw prediction (2,))
         self._past: deque = deque()
         self._zc_prev: tuple | None = None        # (t, lag-corrected measurement)
-        self._z_raw = np.zeros(3)                 # latest raw measurement (yaw continuous)
+        self._z_raw: np.ndarray = np.zeros(3)     # latest raw measurement (yaw continuous)
         # running mean squared error of the model per IMM model (rows straight,
         # turning: they differ in yaw only, the roll and pitch columns are the same)
-        self._e2m = np.zeros((2, 3))
+        self._e2m: np.ndarray = np.zeros((2, 3))
         self._e2h = np.zeros(3)                   # ... of "hold the attitude"
         self._emh = np.zeros((2, 3))              # ... and their mean product
         self._long = np.zeros((3, 3))             # the same over SKILL_LONG_MEMORY s walking
@@ -268,7 +269,7 @@ class GaitTracker:
             return None
         c = self.cfg
         if c.inclinometer_sigma_deg > 0:
-            v = np.full(3, (c.inclinometer_sigma_deg * _D2R) ** 2)
+            v: np.ndarray = np.full(3, (c.inclinometer_sigma_deg * _D2R) ** 2)
         else:
             v = np.full(3, self._default_var) if var is None else np.asarray(var, float)
             if not all(math.isfinite(vi) and vi > 0 for vi in v.ravel().tolist()):
@@ -285,7 +286,7 @@ class GaitTracker:
                 self.prefilter.reset()
                 self.detector.reset()
                 self._settle = self.prefilter.settle_samples
-                if self.ekf.walking and t - self._last_any > c.max_gap:
+                if self.ekf.walking and t - cast(float, self._last_any) > c.max_gap:
                     self.ekf.stop_walking()
                     event = 'gap'
         self._last_yaw_raw = rpy[2]
@@ -297,7 +298,7 @@ class GaitTracker:
             self.ekf.initialise(t, z, v)
         zf = self.prefilter(z)                              # the prefiltered measurement
         self.ekf.predict_to(t)
-        s = t - self.ekf.t                                  # <= 0 if visual motion led
+        s = t - cast(float, self.ekf.t)                     # <= 0 if visual motion led
         # R: the unfiltered variance. The prefilter lowers the noise by its noise gain but
         # correlates it over about 1/gain samples, so the information per filtered sample
         # is about that of one raw sample.
@@ -324,7 +325,8 @@ class GaitTracker:
             self._turn_check()
             if self.ekf.walking and nis is not None:
                 # non-walking movement shows in roll and pitch (yaw jumps at turns)
-                y, S = self.ekf.last_y, self.ekf.last_S
+                # (set by the update that returned nis)
+                y, S = cast(np.ndarray, self.ekf.last_y), cast(np.ndarray, self.ekf.last_S)
                 self.detector.push_nis(t, _nis2(y, S) / 2.0)
             if event is None:
                 event = self._detect(t)
@@ -333,7 +335,7 @@ class GaitTracker:
             self.stats.events.append((t, event))
         # the measurement with the known lag of its walk-model part undone:
         # z_c = z_f + (model(true) - model(through the prefilter and sensor lag))
-        s = t - self.ekf.t
+        s = t - cast(float, self.ekf.t)
         zc = zf + self.ekf.lag_correction(s, self.prefilter)
         self._z_raw = z
         self._score_past(t, zc)
@@ -343,7 +345,7 @@ class GaitTracker:
         est = self.estimate(t, event)
         if self.fallback is not None:
             self.fallback.push(t, self._pred_weighted, z)
-        yaw_j = self.ekf.predict_models(t - self.ekf.t + c.horizon)[:, 2]
+        yaw_j = self.ekf.predict_models(t - cast(float, self.ekf.t) + c.horizon)[:, 2]
         self._past.append((t, est.predicted_model, z, yaw_j))
         return est
 
@@ -405,7 +407,7 @@ class GaitTracker:
                 self._next_lock_check = t + self.cfg.relock_period
                 return 'start'
             return None
-        d = self.ekf.t - t
+        d = cast(float, self.ekf.t) - t
         reason = self.detector.check_stop(
             float(self.ekf.x[I_F]),
             lambda tau: (self.ekf.oscillation(tau - d, self.prefilter),
@@ -450,7 +452,7 @@ class GaitTracker:
         old_P = ekf.P.copy()
         old_yaw = ekf.coefficients()[lay.of_axis(2)]
         f = fit.frequency
-        d = ekf.t - t                         # >= 0: the filter time may be ahead
+        d = cast(float, ekf.t) - t            # >= 0: the filter time may be ahead
         resp = pf.response(0.5 * lay.k * f)
         # measured -> true (divide by the response), then advance the phase to the
         # filter time (stride phase 0 there)
@@ -632,13 +634,13 @@ class GaitTracker:
         if self.fallback is not None and fresh:
             held = self.fallback.holding.copy()
             if held.any():
-                e2h = self.fallback.mean_squares()[1]
+                e2h_held = self.fallback.mean_squares()[1]
                 pred = self.fallback.apply(pred, self._z_raw)
                 target = np.where(held, att, target)
                 cov = cov.copy()
                 cov[held, :] = 0.0
                 cov[:, held] = 0.0
-                cov[held, held] = e2h[held]
+                cov[held, held] = e2h_held[held]
         amplitude, phase = ekf.amplitude_phase(s)
         o_r, o_p, o_y, r, ya = x[2:7].tolist()                     # I_O, I_R, I_YA
         offset = np.array([o_r, o_p, o_y + (r * s + 0.5 * ya * s * s)])

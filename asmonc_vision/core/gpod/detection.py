@@ -6,6 +6,7 @@ extent, confidence).
 from __future__ import annotations
 
 import math
+from typing import cast
 
 import numpy as np
 
@@ -140,7 +141,8 @@ class Detection(PlaneTracking):
         if kn.nb_temporal is not None:
             # The same neighbours, gate and sums, compiled.
             use = bool(still and self._acc is not None and lam > 0 and k)
-            ps, pw = self._acc if use else (np.zeros((1, 1), np.float32),) * 2
+            ps, pw = (self._acc if use and self._acc is not None     # (use: it is set)
+                      else (np.zeros((1, 1), np.float32),) * 2)
             gate_thr = thr is not None and c.temporal_gate_thr > 0
             s_new, w_new, acc_s, acc_w = kn.nb_temporal(
                 m.v, m.u_left, np.asarray(excess, np.float64),
@@ -162,7 +164,7 @@ class Detection(PlaneTracking):
             w0 = wp[np.arange(k), j].astype(np.float64)
             s0 = ps[vv, cols[np.arange(k), j]].astype(np.float64)
             with np.errstate(divide='ignore', invalid='ignore'):
-                gate = c.temporal_gate_px
+                gate: float | np.ndarray = c.temporal_gate_px
                 if thr is not None and c.temporal_gate_thr > 0:
                     gate = np.minimum(gate, c.temporal_gate_thr * thr)
                 ok = (w0 > 0) & (np.abs(excess - s0 / w0) <= gate)
@@ -196,7 +198,7 @@ class Detection(PlaneTracking):
         # larger excess -- an edge standing on the ground rises by |b| px of excess per
         # row, so an excess E needs about E / |b| rows of it (a fraction of them, up to
         # max_required_run, must be matched in one run).
-        slope = max(abs(float(self._abc[1])), 1e-3)
+        slope = max(abs(float(cast(np.ndarray, self._abc)[1])), 1e-3)   # (tracking: set)
         need = np.clip(np.ceil(c.obstacle_run_fraction * np.abs(ex_mean) / slope),
                        c.min_matched_run, max(c.max_required_run, c.min_matched_run))
         reliable = run >= need
@@ -253,7 +255,8 @@ class Detection(PlaneTracking):
         self._frame_thr = thr
         # Ground features: reliably matched edge pixels on the plane (free space).
         ground = (np.abs(ex_mean) <= thr) & usable & ~obst_string[sid]
-        self._ctx = _FrameContext(cam=cam, metric=metric, abc=self._abc.copy(), u=u, v=v,
+        abc = cast(np.ndarray, self._abc)              # (tracking: the plane is set)
+        self._ctx = _FrameContext(cam=cam, metric=metric, abc=abc.copy(), u=u, v=v,
                                   pd=pd, excess_mean=ex_mean, sigma=thr / c.threshold_k,
                                   prev=prev, ground_points=pts[ground], left=self._left,
                                   u_left=m.u_left, usable=usable, nxt=nxt)
@@ -399,7 +402,7 @@ class Detection(PlaneTracking):
         (> ``_AMBIGUOUS_EXCESS_PX``) but, for at least ``ambiguity_fraction`` of them,
         the left edge also had a candidate match on the ground (|excess| <= threshold):
         a repetitive pattern matched one period off."""
-        on_ground = _ground_candidates(cand, el, er, self._abc, threshold)
+        on_ground = _ground_candidates(cand, el, er, cast(np.ndarray, self._abc), threshold)
         alt = obst & (excess > _AMBIGUOUS_EXCESS_PX) & on_ground[m.left_index]
         n_alt = np.bincount(m.string_id[alt], minlength=n_s)
         n_obst = np.bincount(m.string_id[obst], minlength=n_s)
@@ -448,7 +451,7 @@ class Detection(PlaneTracking):
                                g2[sel], m, excess, cam, metric, fwd, lft)
         owner = np.zeros(len(parts), np.int64)
         owner[part] = label[sel]
-        ctx = self._ctx
+        ctx = cast(_FrameContext, self._ctx)          # (set by this frame's _detect)
         whole = described_by_part(whole, parts, owner, radius, metric.normal_up,
                                   lambda: ctx.ground_xy)
         at, p_at = _ground_points(whole), _ground_points(parts)
@@ -477,7 +480,7 @@ class Detection(PlaneTracking):
         silhouette can reveal a hidden near corner, not move the obstacle away). They
         never change which obstacles exist, their pixels, ROI, height or confidence.
         """
-        ctx = self._ctx
+        ctx = cast(_FrameContext, self._ctx)          # (set by this frame's _detect)
         # The lowest obstacle pixel of each (cluster, string): where its foot search starts.
         vv = m.v[idx].astype(np.int64)
         o = np.lexsort((-vv, sid, label))
@@ -557,7 +560,7 @@ class Detection(PlaneTracking):
         # the cluster's depth D (the median height), lands at r_ray (H + D) / H,
         # H the camera's height -- its row places it, not its noisy disparity. The
         # nearest: the pixel of rank _DROP_RANK.
-        ctx = self._ctx
+        ctx = cast(_FrameContext, self._ctx)          # (set by this frame's _detect)
         g_ray = ctx.to_xy(cam.triangulate(ctx.u[idx], ctx.v[idx], ctx.pd[idx]))
         depth = np.maximum(-_group_quantile(label, hh, 0.5, n_c), 0.0)
         scale = ((metric.height + depth) / metric.height)[label]

@@ -7,7 +7,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from typing import Callable
+from typing import Any, Callable, cast
 
 import numpy as np
 
@@ -113,6 +113,7 @@ class GpodDetector(Tracking):
                        else stamp_ns * 1e-9)
             if callable(motion):            # the frame that completed the calibration
                 motion = motion()
+            metric = cast(MetricPlane, metric)   # (a pass stays 'tracking' only with one)
             obstacles = self._track(detections, stamp_s, p.still, cam, metric, motion)
             unseen = self._unseen_ground(p.features, p.threshold, cam, metric,
                                          detections + obstacles)
@@ -132,8 +133,9 @@ class GpodDetector(Tracking):
         fit = self._last_fit
         return GpodResult(
             status=status, frame_index=self._frame,
-            plane_abc=self._abc.copy() if have_plane else None,
-            plane_cov=self._cov.copy() if have_plane else None,
+            # (a tracking status has a plane)
+            plane_abc=cast(np.ndarray, self._abc).copy() if have_plane else None,
+            plane_cov=cast(np.ndarray, self._cov).copy() if have_plane else None,
             plane_num_features=fit.num_features if (fit is not None and have_plane) else 0,
             plane_residual_rms=(fit.residual_rms if (fit is not None and have_plane)
                                 else float('nan')),
@@ -166,7 +168,7 @@ class GpodDetector(Tracking):
 
         t0 = time.perf_counter()
         self._estimate_noise(left)
-        edge_kw = dict(abs_threshold=self._edge_threshold(left),
+        edge_kw: dict[str, Any] = dict(abs_threshold=self._edge_threshold(left),
                        rel_threshold=c.edge_rel_threshold,
                        max_angle_deg=c.edge_max_angle_deg, min_string_length=c.min_string_length,
                        blur_sigma=c.edge_blur_sigma)
@@ -206,7 +208,7 @@ class GpodDetector(Tracking):
         metric = None
         detections: tuple[GpodObstacle, ...] = ()
         if status == 'tracking':
-            metric = _state_metric(cam, self._abc)
+            metric = _state_metric(cam, cast(np.ndarray, self._abc))   # (tracking: a plane)
         threshold = self.pixel_thresholds(np.zeros(0))[1]
         if status == 'tracking' and metric is not None:
             features, detections = self._detect(m, u, v, d, cam, metric, d_min, d_max, el,

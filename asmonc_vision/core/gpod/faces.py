@@ -455,13 +455,13 @@ def face_gap_points(xy: np.ndarray, group: np.ndarray, n_groups: int, q: np.ndar
             ground = ground_xy() if callable(ground_xy) else ground_xy
         if ground.shape[0] == 0:
             continue
-        n_front, n_behind, n_wedge, *band = _ground_across_line(
+        n_front, n_behind, n_wedge, b_front, b_behind, w_front, w_behind = _ground_across_line(
             ground, ct, d, ct + lo_t * d, ct + hi_t * d)
         # Near the line, the ground behind the gap seen about as densely as in front of
         # it: two objects with a way between them (a bollard and a wall 3.6 m apart once
         # made a "face" 6 m away), not one face.
         if (n_front < _FACE_BEHIND_MIN or _ground_behind(n_behind, n_wedge)
-                or _seen_through(*band)):
+                or _seen_through(b_front, b_behind, w_front, w_behind)):
             continue
         k = a if r_q[a] <= r_q[b] else b
         foot = ct + t_p * d

@@ -4,6 +4,8 @@ the walk of each string down to its foot (`string_feet`).
 """
 from __future__ import annotations
 
+from typing import cast
+
 import cv2
 import numpy as np
 
@@ -246,7 +248,7 @@ class _FrameContext:
             flat = (vi + oy) * pw + (ui + ox)
             val = np.abs(gxf[flat] * nu + gyf[flat] * nv)
             best = val if best is None else np.maximum(best, val)
-        total = best.mean(axis=-1) * length
+        total = cast(np.ndarray, best).mean(axis=-1) * length   # (the loop set best)
         score = (total[:, 0] + total[:, 1]) / np.maximum(length[:, 0] + length[:, 1], 1e-9)
         return np.where(ok, score, -inf)
 

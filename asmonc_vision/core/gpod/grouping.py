@@ -57,7 +57,8 @@ def _components(n: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
             rx, ry = root(x), root(y)
             if rx != ry:
                 parent[max(rx, ry)] = min(rx, ry)
-        out, names = [], {}
+        out: list[int] = []
+        names: dict[int, int] = {}
         for x in range(n):
             out.append(names.setdefault(root(x), len(names)))
         return np.array(out, np.int64)
@@ -66,7 +67,7 @@ def _components(n: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         while True:
             la, lb = label[a], label[b]
             m = np.minimum(la, lb)
-            new = label.copy()
+            new: np.ndarray = label.copy()
             np.minimum.at(new, la, m)
             np.minimum.at(new, lb, m)
             while True:                       # pointer jumping to the roots

@@ -97,7 +97,7 @@ def _soft_nearest_groups(xy: np.ndarray, sr: np.ndarray, group: np.ndarray, n_gr
     w = np.exp(arg)                  # numpy's exp (the compiled one differs in last bits)
     if ground_xy is None:
         far = np.zeros(idx.shape[0], bool)
-        g = np.zeros((0, 2))
+        g: np.ndarray = np.zeros((0, 2))
     else:
         far = kg.nb_soft_far(xy, idx, start, near, w)
         g = np.zeros((0, 2))
@@ -173,7 +173,8 @@ def hidden_corners(a: np.ndarray, b: np.ndarray, sigma: np.ndarray, ground_xy,
             return out
         cj, rj, a0j, spanj = c_all[jobs], rho_all[jobs], a0_all[jobs], span_all[jobs]
     else:
-        jobs, cs, rhos, a0s, spans = [], [], [], [], []
+        job_list: list[int] = []
+        cs, rhos, a0s, spans = [], [], [], []
         for t in range(t_n):
             at, bt = a[t], b[t]
             c = 0.5 * (at + bt)
@@ -185,14 +186,14 @@ def hidden_corners(a: np.ndarray, b: np.ndarray, sigma: np.ndarray, ground_xy,
             span = (math.atan2(bt[1] - c[1], bt[0] - c[0]) - a0) % (2 * math.pi)  # a -> b, ccw
             if (math.atan2(-c[1], -c[0]) - a0) % (2 * math.pi) > span:   # the near half is cw
                 span -= 2 * math.pi
-            jobs.append(t)
+            job_list.append(t)
             cs.append(c)
             rhos.append(rho)
             a0s.append(a0)
             spans.append(span)
-        if not jobs:
+        if not job_list:
             return out
-        jobs = np.array(jobs)
+        jobs = np.array(job_list)
         cj, rj, a0j, spanj = np.array(cs), np.array(rhos), np.array(a0s), np.array(spans)
     aj, bj = a[jobs], b[jobs]
     ang = a0j[:, None] + _ARC_LIN * spanj[:, None]

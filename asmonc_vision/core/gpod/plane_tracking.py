@@ -5,6 +5,7 @@ and the obstacle thresholds from the calibration's residual spread.
 from __future__ import annotations
 
 import math
+from typing import Any, cast
 
 import numpy as np
 
@@ -42,7 +43,8 @@ class PlaneTracking(DetectorState):
             u, v, d, cam=cam, method=c.plane_method, inlier_threshold_px=c.plane_inlier_px,
             iterations=c.ransac_iterations, weights=np.maximum(d, 0.0) ** 3,
             min_features=c.min_plane_features, min_spread_px=c.plane_min_spread_px,
-            min_support_fraction=min_support, rng=self._rng, **c.plausibility())
+            min_support_fraction=min_support, rng=self._rng,
+            **cast(dict[str, Any], c.plausibility()))
 
     def _near_calibration(self, fit: PlaneFit) -> bool:
         """Whether an ungated refit is close enough to the calibrated plane to trust."""
@@ -60,11 +62,12 @@ class PlaneTracking(DetectorState):
         motion (R, t, ...) since the previous frame: x = f(x), P = F P F^T
         (`ground_plane.predict_plane`); the plane before it is kept as ``_unmoved``.
         False, with nothing changed, when it cannot."""
-        r = predict_plane(cam, self._abc, motion[0], motion[1])
+        abc = cast(np.ndarray, self._abc)       # (calibrated: the plane state is set)
+        r = predict_plane(cam, abc, motion[0], motion[1])
         if r is None:
             return False
         R, t = np.asarray(motion[0], float), np.asarray(motion[1], float)
-        self._unmoved = _state_metric(cam, self._abc)
+        self._unmoved = _state_metric(cam, abc)
         self._abc, F = r
         self._cov = F @ self._cov @ F.T
         if self._still_plane is not None:
@@ -88,7 +91,7 @@ class PlaneTracking(DetectorState):
         else:
             max_h, max_a = c.refit_max_height_change_m, c.refit_max_angle_change_deg
         if cur is None:
-            cur = _state_metric(cam, self._abc)
+            cur = _state_metric(cam, cast(np.ndarray, self._abc))   # (calibrated)
         if cur is None or fit.metric is None:
             return False
         if tight and self._unmoved is not None and self._within(fit.metric, self._unmoved,
@@ -253,7 +256,7 @@ class PlaneTracking(DetectorState):
         if motion is not None and still and not _still_motion(motion):
             motion = (np.eye(3), np.zeros(3))
         predicted = motion is not None and self._predict_plane(cam, motion)
-        current = _state_metric(cam, self._abc)
+        current = _state_metric(cam, cast(np.ndarray, self._abc))   # (calibrated)
         # moving: the plane the rig stopped with is kept, carried through the motion,
         # while the camera is still near where it stopped (on the same ground)
         if not still and not (predicted and self._still_plane is not None
@@ -373,7 +376,7 @@ class PlaneTracking(DetectorState):
         self._init_window.clear()
         return 'tracking', True
 
-    def _coarse_then_fine(self, u, v, d, cam: StereoCamera, current: MetricPlane,
+    def _coarse_then_fine(self, u, v, d, cam: StereoCamera, current: MetricPlane | None,
                           tight: bool, gate_m: float, gate_px: float
                           ) -> tuple[PlaneFit | None, bool]:
         """The refit of `_update_plane`: a coarse refit from the nearer half of the
@@ -388,7 +391,8 @@ class PlaneTracking(DetectorState):
         coarse = self._fit(u[gate], v[gate], d[gate], cam)
         out = None
         if coarse is not None:
-            height = coarse.metric.signed_height(cam.triangulate(u, v, d))
+            # (fitted with a camera: it has a metric plane)
+            height = cast(MetricPlane, coarse.metric).signed_height(cam.triangulate(u, v, d))
             gate = ((np.abs(d - plane_disparity(coarse.abc, u, v)) <= gate_px)
                     & (np.abs(height) <= gate_m))
             out = self._fit(u[gate], v[gate], d[gate], cam)
@@ -464,7 +468,7 @@ class PlaneTracking(DetectorState):
             return True
         if med < 0:
             return False
-        return bool(_robust_row_slope(un, vn, dn) < 0.5 * float(self._abc[1]))
+        return bool(_robust_row_slope(un, vn, dn) < 0.5 * float(cast(np.ndarray, self._abc)[1]))
 
     def disparity_range(self, cam: StereoCamera) -> tuple[float, float]:
         """Disparity search range (d_min, d_max) of the matcher, pixels, from

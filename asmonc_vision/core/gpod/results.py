@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
@@ -187,7 +188,8 @@ class GpodResult:
         """The plane fields as one object, or None when the frame has no plane."""
         if self.plane_abc is None or self.metric_plane is None:
             return None
-        return GpodPlane(abc=self.plane_abc, cov=self.plane_cov,
+        # (the detector sets plane_cov together with plane_abc)
+        return GpodPlane(abc=self.plane_abc, cov=cast(np.ndarray, self.plane_cov),
                          num_features=self.plane_num_features,
                          residual_rms=self.plane_residual_rms, metric=self.metric_plane,
                          updated=self.plane_updated)

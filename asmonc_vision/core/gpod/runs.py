@@ -220,7 +220,7 @@ def hanging_runs(edges: EdgeMap, m: Matches, prev: np.ndarray, h: np.ndarray,
     if only is not None:
         # ... of edge strings with a match of ``only``.
         sid = m.string_id
-        has = np.zeros(int(sid.max()) + 1 if k else 0, bool)
+        has: np.ndarray = np.zeros(int(sid.max()) + 1 if k else 0, bool)
         has[sid[only]] = True
         cand &= has[sid]
     bottom = np.flatnonzero(cand)
@@ -522,7 +522,7 @@ def smooth_along_runs(x: np.ndarray, prev: np.ndarray, window: int) -> np.ndarra
     nxt[prev[has]] = np.flatnonzero(has)
     total, count = x.copy(), np.ones(k)
     for step in (prev, nxt):
-        cur = np.arange(k)
+        cur: np.ndarray = np.arange(k)
         for _ in range(half):
             ok = cur >= 0
             cur = np.where(ok, step[np.maximum(cur, 0)], -1)

@@ -53,7 +53,7 @@ class DetectorState:
         #: residual spread of the initial fit: global, and per edge strength (bin
         #: strengths, bin sigmas), pixels
         self._sigma = float('nan')
-        self._sigma_bins: tuple[np.ndarray, np.ndarray] | None = None
+        self._sigma_bins: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
         #: the residual spread is to be taken again (the right image's correction changed)
         self._sigma_stale = False
         #: the previous frame's left edge pixels (H, W+2) bool, and the running sums of

@@ -5,7 +5,7 @@ region, noise keys and MAD sigma.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import Callable, NamedTuple
 
 import numpy as np
 
@@ -38,7 +38,7 @@ class _Pass(NamedTuple):
     timings: dict[str, float]
     #: the camera's motion since the previous pair as `GpodDetector.process` takes it
     #: (a callable resolved once the plane was calibrated), or None
-    motion: tuple | None = None
+    motion: tuple | Callable[[], tuple | None] | None = None
 
 
 def _state_metric(cam: StereoCamera, abc: np.ndarray) -> MetricPlane | None:

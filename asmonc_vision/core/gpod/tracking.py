@@ -7,12 +7,14 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections import deque
+from typing import cast
 
 import cv2
 import numpy as np
 
 from ..camera import MetricPlane, StereoCamera, ground_range_bearing
 from .detection import Detection
+from .footing import _FrameContext
 from .grouping import _same_object
 from .results import GpodObstacle
 from .support import _below_view, _moved_roi
@@ -63,7 +65,8 @@ class Tracking(Detection):
         feet = np.array([o.position - o.height * n for o in obst]).reshape(-1, 3)
         cov = self._foot_covariance(feet, cam)
 
-        def is_free(ob: GpodObstacle, foot: np.ndarray) -> bool:
+        def is_free(payload: object, foot: np.ndarray) -> bool:
+            ob = cast(GpodObstacle, payload)        # (the tracks' payloads are obst)
             roi = _moved_roi(ob, foot, n, cam, require_in_view=True) if moved else ob.roi
             return self._track_is_free(ob, foot, roi)
         # While the view stands still an obstacle's nearest visible point is one fixed
@@ -77,16 +80,19 @@ class Tracking(Detection):
         radius = self.config.cluster_radius_m
         tracks = self._tracker.update(
             feet, cov, obst, is_free,
-            (lambda a, b: _same_object(a, b, radius)) if still else None,
+            (lambda a, b: _same_object(cast(GpodObstacle, a), cast(GpodObstacle, b), radius))
+            if still else None,
             lambda ob, foot: _below_view(cam, foot))
         out = list(drops)
         feet_t = np.array([tr.foot for tr in tracks]).reshape(-1, 3)
         rngs, brgs = ground_range_bearing(metric, feet_t)
         confs = self._track_confidences(tracks, still)
         for tr, rng_k, brg_k, conf in zip(tracks, rngs.tolist(), brgs.tolist(), confs):
-            ob = tr.payload
+            ob = cast(GpodObstacle, tr.payload)
             seen = tr.index >= 0
-            roi = ob.roi if (seen or not moved) else _moved_roi(ob, tr.foot, n, cam)
+            # (without require_in_view _moved_roi always gives a region)
+            roi = (ob.roi if (seen or not moved)
+                   else cast('tuple[int, int, int, int]', _moved_roi(ob, tr.foot, n, cam)))
             out.append(dataclasses.replace(
                 ob, position=tr.foot + ob.height * n, range=rng_k, roi=roi, confidence=conf,
                 bearing=brg_k, track_id=tr.track_id, age_s=tr.age_s,
@@ -193,7 +199,8 @@ class Tracking(Detection):
             as many as above it. A foot below the image (an obstacle walked up to) is
             free only by that evidence, from the part of its region still in view.
         """
-        cam, ctx = self._cam, self._ctx
+        # (set by the frame's pass before its tracks are updated)
+        cam, ctx = cast(StereoCamera, self._cam), cast(_FrameContext, self._ctx)
         if foot[2] <= 1e-3:
             return True
         uf, vf = (float(w[0]) for w in cam.project_left(foot))
