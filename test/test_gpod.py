@@ -1672,7 +1672,7 @@ def _holder(modules, name):
 
 def _need_numba():
     from asmonc_vision.core import gpod
-    from asmonc_vision.core import matching as mt
+    from asmonc_vision.core.matching import kernels as mt
     gk.warm_up()
     if any(getattr(_holder(_GPOD, k), k) is None for k in _NEW_GPOD_KERNELS) or any(
             getattr(mt, k) is None for k in _NEW_MATCHING_KERNELS):
