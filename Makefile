@@ -42,11 +42,9 @@ test-fast: venv
 	$(PY) -m pytest -q -m "not ros and not e2e and not slow" test
 
 # ruff (ruff.toml) over the package, the tests and the launch files; mypy (setup.cfg) over
-# core/, less the modules in MYPY_EXCLUDE_PENDING (make patterns).
+# core/.
 LINT_PATHS := asmonc_vision test launch
-MYPY_EXCLUDE_PENDING := asmonc_vision/core/gpod.py asmonc_vision/core/gpod/% \
-  asmonc_vision/core/gait/% asmonc_vision/core/matching.py
-MYPY_FILES = $(filter-out $(MYPY_EXCLUDE_PENDING),$(sort $(shell find asmonc_vision/core -name '*.py')))
+MYPY_FILES = $(sort $(shell find asmonc_vision/core -name '*.py'))
 lint: venv
 	$(PY) -m ruff check --no-cache $(LINT_PATHS); ruff=$$?; \
 	  $(PY) -m mypy $(MYPY_FILES) && exit $$ruff

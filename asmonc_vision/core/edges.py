@@ -378,8 +378,9 @@ def _edges_numpy(c, left, right, thr_c, thr: float, h: int, w: int, scale, gx_fl
             new_id = np.cumsum(kept_strings, dtype=np.int32) - 1
             new_index = np.full(keep.shape[0], -1, np.int32)
             new_index[sel] = np.arange(sel.size, dtype=np.int32)
-            vv, uu, u_sub, pol, prev, gxe, gye, ml, mr, mc, denom, off = (
-                a[sel] for a in (vv, uu, u_sub, pol, prev, gxe, gye, ml, mr, mc, denom, off))
+            kept: list[np.ndarray] = [a[sel] for a in (vv, uu, u_sub, pol, prev, gxe, gye, ml,
+                                                       mr, mc, denom, off)]
+            vv, uu, u_sub, pol, prev, gxe, gye, ml, mr, mc, denom, off = kept
             prev = np.where(prev >= 0, new_index[np.maximum(prev, 0)], -1).astype(np.int32)
             sid = new_id[sid[sel]]
             slen = slen[kept_strings]
