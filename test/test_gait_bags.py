@@ -94,7 +94,7 @@ def test_a_bag_without_inclinometer_is_refused(tmp_path):
 
 
 def test_the_copies_are_readable_but_for_the_dropped_topic(tmp_path):
-    from asmonc_vision.cli.motion import load_sequence
+    from asmonc_vision.eval.motion_bags import load_sequence
 
     frames = load_sequence(_copy_without(BAGS / 'clear_static', tmp_path / 'a', '/inclinometer/'))
     assert len(frames) == 30 and all(f['pose'] is not None for f in frames)

@@ -109,11 +109,12 @@ def test_the_tracker_publishes_the_held_measurement_on_falling_back_axes():
     is at times worse than holding: the fallback rule holds there, the estimate says
     which axes it holds and carries the measurement on them, and over the walk the
     result is no worse than the model alone."""
-    from asmonc_vision.cli import gait
+    from asmonc_vision.eval import gait_real as gait
+    from asmonc_vision.eval.gait_walks import DEFAULT_DATA
 
-    assert (gait.DEFAULT_DATA / 'data_csv').is_dir(), \
-        f'the real walking recordings are missing: {gait.DEFAULT_DATA}'
-    rec = gait.load_real(gait.DEFAULT_DATA, tests=('Test11',))[0]
+    assert (DEFAULT_DATA / 'data_csv').is_dir(), \
+        f'the real walking recordings are missing: {DEFAULT_DATA}'
+    rec = gait.load_real(DEFAULT_DATA, tests=('Test11',))[0]
     cfg = gait.real_config()
     off = GaitTracker(dataclasses.replace(cfg, fallback=False))
     on = GaitTracker(cfg)
@@ -179,7 +180,7 @@ def test_the_gait_node_reports_a_jump_and_keeps_it_out_of_its_filter(ros):
     from rclpy.parameter import Parameter
     from sensor_msgs.msg import Imu
 
-    from asmonc_vision.cli import gait as ev
+    from asmonc_vision.eval import gait_walks as ev
     from asmonc_vision.nodes.common import RESULT_QOS, SENSOR_QOS
     from asmonc_vision.nodes.compass_node import imu_message
     from asmonc_vision.nodes.conversions import ns_to_stamp
