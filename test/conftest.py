@@ -1,4 +1,4 @@
-"""Test isolation for ROS (local discovery only, a domain id of this session's own, an
+"""Test isolation for ROS (local discovery only, a domain id of this test run's own, an
 rclpy Context per test) and the test markers.
 
 Markers (registered in setup.cfg): ``ros`` (needs rclpy and DDS), ``e2e`` (starts processes:
@@ -31,7 +31,7 @@ _domains = itertools.count()
 
 def next_domain_id() -> int:
     """A DDS domain for one test (102..230, spread by process id so parallel runs rarely
-    meet; the ``ros`` fixture uses 1..100, the session-scoped one 10..89)."""
+    meet; the ``ros`` fixture uses 1..100, the one shared by the whole run 10..89)."""
     return 102 + (os.getpid() * 7 + next(_domains)) % 129
 
 
@@ -156,8 +156,8 @@ def _is_slow(item) -> bool:
 
 
 def _module_fixtures(item) -> set:
-    """(module, name) of the module- or session-scoped fixtures of the test folder that
-    `item` uses."""
+    """(module, name) of the test folder's fixtures shared by a module or by the whole
+    run that `item` uses."""
     info = getattr(item, '_fixtureinfo', None)
     out = set()
     for name, defs in (info.name2fixturedefs.items() if info else ()):
