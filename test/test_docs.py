@@ -160,5 +160,6 @@ def test_work_log_pattern_catches_what_it_names():
     for bad in (f'as in {period.lower()} 37', f'the {period.lower()}-12 kernels',
                 f'{period} 4', 'Issue 48 asks', 'Tried, not kept: x', 'on 2026-01-05'):
         assert WORK_LOG.search(bad), bad
-    for fine in (f'{period.lower()}s of walking', 'a stamp of 2023-11-14T22:13:20Z', 'no issue here'):
+    for fine in (f'{period.lower()}s of walking', 'a stamp of 2023-11-14T22:13:20Z',
+                 'no issue here'):
         assert not WORK_LOG.search(fine), fine
