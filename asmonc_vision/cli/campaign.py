@@ -2,7 +2,7 @@
 
     asmonc campaign [--minutes 20] [--workers 2] [--blind | --tuning]
                     [--classes CLASS ...] [--rigs backpack chest] [--duration 20]
-                    [--methods gpod gpod_map sgbm] [--cache DIR] [--json FILE]
+                    [--methods gpod gpod_ego gpod_map sgbm] [--cache DIR] [--json FILE]
                     [--markdown FILE] [--no-progress]
 
 Picks walks (scene class, seed, rig) from `sim.scenes` until the minutes are covered,
@@ -12,9 +12,10 @@ into a cache outside the repository (default ~/.cache/asmonc_vision/campaign/<ke
 key a hash of the scene class, seed, rig, duration and the simulator's source code) as
 a rosbag2 bag with the pixels that see each obstacle in both images beside it
 (`truth.json`), and reused when present. On every walk, offline (no ROS), our detector
-(GPOD, default settings: no evidence map), our detector with the evidence map
-(``gpod_map``: the map on, each pair's motion from the egomotion estimator, as the node
-graph runs them) and the SGBM peer (`core.baseline`, as `asmonc eval --method sgbm`)
+(GPOD, default settings: no evidence map, no motion input), the same given each pair's
+motion from the egomotion estimator (``gpod_ego``), our detector with the evidence map
+(``gpod_map``: the map on, with the motion) and the SGBM peer (`core.baseline`, as
+`asmonc eval --method sgbm`)
 each run over the stereo pairs in order, the alarm node's logic (`core.alarm`,
 default settings) is replayed over their outputs in bag time (`eval.alarm_replay`), and
 the safety score is taken (`eval.safety`, the definitions of docs/evaluation.md).
@@ -46,7 +47,8 @@ from pathlib import Path
 #: seed ranges (inclusive start, exclusive end)
 TUNING_SEEDS = (1000, 2000)
 BLIND_SEEDS = (900000, 901000)
-METHOD_NAMES = {'gpod': 'ours (GPOD)', 'gpod_map': 'ours (GPOD + map)', 'sgbm': 'peer (SGBM)'}
+METHOD_NAMES = {'gpod': 'ours (GPOD)', 'gpod_ego': 'ours (GPOD + motion)',
+                'gpod_map': 'ours (GPOD + map)', 'sgbm': 'peer (SGBM)'}
 
 
 def default_cache() -> Path:
@@ -73,8 +75,9 @@ def add_arguments(p) -> None:
                    help='rigs (default all)')
     p.add_argument('--duration', type=float, default=20.0, help='seconds per walk (default 20)')
     p.add_argument('--methods', nargs='+', choices=tuple(METHOD_NAMES), default=['gpod', 'sgbm'],
-                   help='detectors to run: gpod (no map), gpod_map (the evidence map, '
-                        'with the egomotion estimator), sgbm (the peer); default gpod '
+                   help='detectors to run: gpod (no map, no motion), gpod_ego (no map, '
+                        'each pair\'s motion from the egomotion estimator), gpod_map (the '
+                        'evidence map, with the motion), sgbm (the peer); default gpod '
                         'and sgbm')
     p.add_argument('--cache', type=Path, default=None,
                    help='rendered walks are kept here (default ~/.cache/asmonc_vision/campaign)')
@@ -183,9 +186,9 @@ def score_walk(w: Walk, cache: Path, methods: list[str], version: str) -> dict:
     scores, detect_s, detect_cpu_s = {}, {}, {}
     for m in methods:
         t0, c0 = time.perf_counter(), time.process_time()
-        runs = (run_method(frames, 'gpod', map_enabled=True, egomotion=True)
-                if m == 'gpod_map' else run_method(frames, m, map_enabled=False)
-                if m == 'gpod' else run_method(frames, m))
+        runs = (run_method(frames, 'gpod', map_enabled=m == 'gpod_map',
+                           egomotion=m != 'gpod')
+                if m.startswith('gpod') else run_method(frames, m))
         detect_s[m] = time.perf_counter() - t0
         detect_cpu_s[m] = time.process_time() - c0
         alarms = replay_alarms([(r.stamp_ns, r.status, r.obstacles) for r in runs])
