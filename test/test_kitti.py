@@ -13,8 +13,7 @@ ground plane (the road ahead is clear of obstacles near the car). Checked:
   passing on the left in the frames it is within range (``max_range_m``, 10 m: frames
   12-13; nothing is reported farther).
 
-The image regions were read off debug images (core.draw.draw_debug) of the sequence; the
-car drives straight along its lane, so the painted lane stays in the same image region.
+The image regions are in kitti_regions.py (shared with test_kitti_run.py).
 
 The detector runs with the default settings (those of the wearable rig of Molton et al.,
 f = 300 px, B = 0.35 m): every gate that depends on the rig is derived from the camera
@@ -29,42 +28,20 @@ import pytest
 from asmonc_vision.core.camera import StereoCamera, metric_from_plane
 from asmonc_vision.core.gpod import GpodConfig, GpodDetector
 
-from conftest import SHARED
-
-KITTI = SHARED / 'data' / 'kitti_road_seq'
+from kitti_regions import KITTI, foot_pixel, in_painted_road, is_car_left, is_kerb, \
+    require_kitti
 
 #: every test shares the one run over the sequence (seconds)
 pytestmark = pytest.mark.slow
 
-NEAR_ROW = 230          # image rows of the near road start here
 
-
-def lane_left(v):
-    """Left edge (u, px) of the hatched marking zone at image row v."""
-    return 545.0 + (235.0 - 545.0) * (np.asarray(v, float) - 195.0) / (376.0 - 195.0)
-
-
-def lane_right(v):
-    """Right edge (u, px) of the ego lane (the lane line before the kerb) at row v."""
-    return 612.0 + (780.0 - 612.0) * (np.asarray(v, float) - 195.0) / (376.0 - 195.0)
-
-
-def in_painted_road(u, v):
-    """Whether image points lie on the near painted road (lane, hatching, arrows)."""
-    v = np.asarray(v, float)
-    u = np.asarray(u, float)
-    return (v >= NEAR_ROW) & (u > lane_left(v)) & (u < lane_right(v))
-
-
-def foot_pixel(ob, plane, cam):
-    """(u, v) image point of an obstacle's reported foot on the ground."""
-    foot = ob.position - ob.height * plane.normal_up
-    return (cam.f * foot[0] / foot[2] + cam.cx, cam.f * foot[1] / foot[2] + cam.cy)
+def _foot(ob, plane, cam):
+    return foot_pixel(ob.position, ob.height, plane.normal_up, cam)
 
 
 @pytest.fixture(scope='module')
 def run():
-    assert (KITTI / 'calib.txt').is_file(), f'the KITTI sequence is missing: {KITTI}'
+    require_kitti()
     files_l = sorted(glob.glob(str(KITTI / 'image_2' / '*.png')))
     files_r = sorted(glob.glob(str(KITTI / 'image_3' / '*.png')))
     assert len(files_l) == len(files_r) == 20, (len(files_l), len(files_r))
@@ -99,23 +76,17 @@ def test_nothing_on_the_lane_markings_or_the_arrows(run):
         assert on_road.sum() > 1000                 # the road is matched densely ...
         assert not (f.is_obstacle & on_road).any(), i   # ... and none of it is an obstacle
         for ob in r.obstacles:
-            assert not in_painted_road(*foot_pixel(ob, r.metric_plane, cam)), (i, ob.roi)
+            assert not in_painted_road(*_foot(ob, r.metric_plane, cam)), (i, ob.roi)
 
 
 def test_kerb_and_cars_are_found(run):
     cam, _, results = run
 
     def kerb(r):
-        """A low obstacle (the kerb, 10-20 cm) whose foot is right of the lane line."""
-        for ob in r.obstacles:
-            u, v = foot_pixel(ob, r.metric_plane, cam)
-            if v >= 240 and lane_right(v) < u < lane_right(v) + 250 and 0.04 < ob.height < 0.4:
-                return True
-        return False
+        return any(is_kerb(*_foot(ob, r.metric_plane, cam), ob.height) for ob in r.obstacles)
 
     def car_left(r):
-        return any(x + w / 2 < 330 and 180 < y + h / 2 < 340 and ob.range < 10
-                   and ob.height > 0.25 for ob in r.obstacles for x, y, w, h in [ob.roi])
+        return any(is_car_left(ob.roi, ob.range, ob.height) for ob in r.obstacles)
 
     tracking = results[2:]
     assert np.mean([kerb(r) for r in tracking]) >= 0.8
