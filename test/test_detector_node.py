@@ -31,6 +31,13 @@ def graph(ros_context):
         yield g
 
 
+@pytest.fixture
+def graph_ego(ros_context):
+    """The detector with the motion input on (``use_egomotion``; off by default)."""
+    with detector_graph(ros_context, [Parameter('use_egomotion', value=True)]) as g:
+        yield g
+
+
 @contextlib.contextmanager
 def detector_graph(ctx, overrides):
     """(detector, executor, send, received) with the detector's parameters
@@ -117,7 +124,7 @@ def test_a_rig_off_its_calibration_is_corrected_and_reported(ros_context):
         probe.destroy_node()
 
 
-def test_walking_tracks_take_egomotion_as_their_motion_input(graph):
+def test_walking_tracks_take_egomotion_as_their_motion_input(graph_ego):
     """Walking: with the pair's /egomotion (here from the core estimator on the same
     frames) the node's obstacle tracks are carried from frame to frame and keep their
     ids; the detector uses one motion per pair after the first."""
@@ -127,7 +134,7 @@ def test_walking_tracks_take_egomotion_as_their_motion_input(graph):
     from asmonc_vision.core.rotations import matrix_to_quaternion
     from asmonc_vision.nodes.conversions import image_msg_to_gray, stereo_camera_from_infos
 
-    det, ex, send, got = graph
+    det, ex, send, got = graph_ego
     probe = Node('ego_probe', context=det.context)
     pub = probe.create_publisher(TransformStamped, '/egomotion', RESULT_QOS)
     ex.add_node(probe)
@@ -167,13 +174,13 @@ def test_walking_tracks_take_egomotion_as_their_motion_input(graph):
     probe.destroy_node()
 
 
-def test_a_silent_egomotion_publisher_never_stalls_detection(graph, capfd):
+def test_a_silent_egomotion_publisher_never_stalls_detection(graph_ego, capfd):
     """Someone publishes /egomotion but no usable motion comes (one malformed message):
     every pair is still detected and published (each waits at most egomotion_wait, none
     while others are queued)."""
     from geometry_msgs.msg import TransformStamped
 
-    det, ex, send, got = graph
+    det, ex, send, got = graph_ego
     probe = Node('silent_ego', context=det.context)
     pub = probe.create_publisher(TransformStamped, '/egomotion', RESULT_QOS)
     ex.add_node(probe)

@@ -8,7 +8,7 @@ callbacks that receive images stay fast. Publishes, per processed pair:
   Published for every good pair, empty when nothing stands above the ground. ``id`` is
   the obstacle's track id (stable while it is tracked, 0 for drop-offs, which are not
   tracked); an obstacle whose evidence dips for a frame or two is still reported at
-  its tracked place (`core.obstacle_tracks`; moved by `/egomotion`, below). An entry
+  its tracked place (`core.obstacle_tracks`; moved by `/egomotion` when taken, below). An entry
   whose ``height`` is NaN is no obstacle: the walking corridor's ground from its
   ``range`` on cannot be seen (`core.unseen_ground`); the alarm node says so.
 * `/ground_plane` (asmonc_vision_msgs/GroundPlane)
@@ -23,15 +23,17 @@ With ``map.enabled`` the obstacles reported are those the evidence map confirms
 (`core.perception.Perception`, `core.evidence_map`): seen from two viewpoints, not
 cleared by ground seen where they stood.
 
-Subscribes to `/egomotion` (geometry_msgs/TransformStamped, the visual egomotion node's
-motion of the left camera from the previous pair to this one) as the motion input of the
-ground plane and the obstacle tracks: once a pair's edges are matched the worker waits
-up to ``egomotion_wait`` for that pair's motion (the egomotion node works on the pair
-meanwhile); the ground plane is predicted through the motion (`gpod.motion_*`) and the
-tracks are carried through it (an obstacle whose evidence dips for a frame is still
-reported, moved to where it now is). With no motion (no egomotion node, a pair it could
-not estimate, a pair dropped here) the plane is refitted without a prediction, and the
-tracks are carried only while the rig stands still.
+With ``use_egomotion`` (off by default) or the evidence map, subscribes to `/egomotion`
+(geometry_msgs/TransformStamped, the visual egomotion node's motion of the left camera from
+the previous pair to this one) as the motion input of the ground plane and the obstacle
+tracks: once a pair's edges are matched the worker waits up to ``egomotion_wait`` for that
+pair's motion (the egomotion node works on the pair meanwhile); the ground plane is
+predicted through the motion (`gpod.motion_*`) and the tracks are carried through it.
+The wait puts the egomotion node's time (about 35 ms a pair at 320x240) on the path from
+camera to ear, and on the campaign's walks the motion input gave more false reports, not
+fewer; so by default the plane is refitted on each pair without a prediction, and the
+tracks are carried only while the rig stands still (as with no motion: no egomotion node,
+a pair it could not estimate, a pair dropped here).
 
 Focal length, principal point and baseline come from the CameraInfo on the wire, the
 ground plane from the images: the node works on any rectified rig and image size.
@@ -92,12 +94,16 @@ class DetectorNodeConfig(StereoInputConfig):
         range=(0, 10000))
     publish_markers: bool = param(True, 'publish /obstacles/markers')
     use_egomotion: bool = param(
-        True, 'use /egomotion (the visual egomotion node) as the motion input of the '
-        'ground plane and the obstacle tracks')
+        False, 'take /egomotion (the visual egomotion node) as the motion input of the '
+        'ground plane and the obstacle tracks: each pair then waits up to egomotion_wait '
+        'for its motion, which adds the egomotion node\'s time to every pair\'s latency. '
+        'Off, the plane is refitted on each pair and the tracks are carried only while the '
+        'rig stands still (fewer false reports, asmonc campaign --methods gpod gpod_ego). '
+        'The evidence map (map.enabled) takes the motion whatever this says')
     egomotion_wait: float = param(
-        0.1, 'longest wait, once a pair is matched, for its /egomotion message (wall time, '
-        's); without it the plane is refitted unpredicted and the tracks are carried only '
-        'while the rig stands still',
+        0.1, 'with the motion input, the longest wait, once a pair is matched, for its '
+        '/egomotion message (wall time, s); without it the plane is refitted unpredicted '
+        'and the tracks are carried only while the rig stands still',
         range=(0.0, 2.0))
 
 
@@ -123,7 +129,9 @@ class DetectorNode(StereoInputNode):
         self._newest_motion_ns = -1
         self._prev_seq: int | None = None
         self.motions_used = 0
-        if self.node_config.use_egomotion:
+        #: the motion input is taken (the evidence map needs it)
+        self.use_motion = self.node_config.use_egomotion or self.map_config.enabled
+        if self.use_motion:
             self.create_subscription(TransformStamped, '/egomotion', self._on_egomotion,
                                      RESULT_QOS)
         # The debug image is drawn and published on its own thread, newest frame only:
@@ -199,7 +207,7 @@ class DetectorNode(StereoInputNode):
         egomotion node); None when the previous pair was not the one processed before
         it, nobody publishes /egomotion, a later motion arrived instead (none will come
         for this pair) or time ran out."""
-        if not (self.node_config.use_egomotion and follows_previous):
+        if not (self.use_motion and follows_previous):
             return None
         if self.count_publishers('/egomotion') == 0:
             return None
