@@ -11,6 +11,7 @@ To add a node, append one `GraphNode` to `GRAPH` (and its console script to setu
 """
 from __future__ import annotations
 
+import shutil
 from dataclasses import dataclass, field
 
 #: inputs a node may need: stereo images ('images'), the inclinometer ('imu'), or
@@ -37,6 +38,9 @@ class GraphNode:
         respawn: restarted when it dies (by `asmonc run` and by the launch file).
         on_request: `asmonc run` starts it only when asked (the audio node, with
             ``--audio``); the launch file always starts it.
+        nice: added to the process's niceness (Linux scheduling priority; 0 = as its
+            starter): a node off the path from camera to ear runs lower, so that on a
+            loaded or one-core machine it takes only the time that path leaves over.
     """
 
     name: str
@@ -51,11 +55,22 @@ class GraphNode:
     start_late: bool = False
     respawn: bool = True
     on_request: bool = False
+    nice: int = 0
 
     def __post_init__(self) -> None:
         if self.needs not in NEEDS:
             raise ValueError(f'GraphNode {self.name}: needs must be one of {NEEDS}, '
                              f'got {self.needs!r}')
+        if not 0 <= self.nice <= 19:
+            raise ValueError(f'GraphNode {self.name}: nice must be in [0, 19], '
+                             f'got {self.nice!r}')
+
+    def command_prefix(self) -> list[str]:
+        """The words put before the node's command: ``nice -n N`` for a lowered
+        priority (where the ``nice`` program exists), else none."""
+        if self.nice and shutil.which('nice'):
+            return ['nice', '-n', str(self.nice)]
+        return []
 
     def ros_args(self) -> list[str]:
         """Command-line ROS arguments for the remappings (``-r from:=to`` each)."""
@@ -74,8 +89,11 @@ GRAPH: tuple[GraphNode, ...] = (
     GraphNode('detector', 'detector_node', 'asmonc_vision.nodes.detector_node',
               'detector_node', 'images', ('/obstacles',), (LEFT_IMAGE, RIGHT_IMAGE),
               'detector.yaml'),
+    # the egomotion node is off the path from camera to ear (the detector does not wait
+    # for it; the alarm node smooths the walking speed over its motions): it runs lower
     GraphNode('egomotion', 'egomotion_node', 'asmonc_vision.nodes.egomotion_node',
-              'egomotion_node', 'images', ('/egomotion',), (LEFT_IMAGE,), 'egomotion.yaml'),
+              'egomotion_node', 'images', ('/egomotion',), (LEFT_IMAGE,), 'egomotion.yaml',
+              nice=10),
     GraphNode('gait', 'gait_filter_node', 'asmonc_vision.nodes.gait_node',
               'gait_filter_node', 'imu', ('/gait/state',), (IMU,), 'gait_filter.yaml',
               start_late=True),
@@ -146,8 +164,9 @@ def launch_entries(source: str, config_dir: str, bag: str = '', rate: float = 1.
                    params_files: tuple[str, ...] = ()) -> list[dict]:
     """The nodes a launch file starts, as keyword arguments of ``launch_ros.actions.Node``
     (``package``, ``executable``, ``name``, ``parameters``, ``remappings``, ``respawn``,
-    ``respawn_delay``, ``output``): the sources of ``source`` ('bag' or 'live'), then every
-    node of `GRAPH` (all of them: a live rig has cameras and an inclinometer).
+    ``respawn_delay``, ``output``; ``prefix`` for a node with a ``nice``): the sources of
+    ``source`` ('bag' or 'live'), then every node of `GRAPH` (all of them: a live rig has
+    cameras and an inclinometer).
 
     Args:
         source: a key of `SOURCES`.
@@ -167,7 +186,11 @@ def launch_entries(source: str, config_dir: str, bag: str = '', rate: float = 1.
         params: list = [f'{config_dir}/{n.params_file}', *params_files]
         if n.executable == 'bag_player_node':
             params.append({'bag': bag, 'rate': float(rate)})
-        out.append(dict(package='asmonc_vision', executable=n.executable, name=n.ros_name,
-                        parameters=params, remappings=list(n.remappings),
-                        respawn=n.respawn, respawn_delay=RESPAWN_DELAY, output='screen'))
+        entry = dict(package='asmonc_vision', executable=n.executable, name=n.ros_name,
+                     parameters=params, remappings=list(n.remappings),
+                     respawn=n.respawn, respawn_delay=RESPAWN_DELAY, output='screen')
+        prefix = n.command_prefix() if isinstance(n, GraphNode) else []
+        if prefix:
+            entry['prefix'] = ' '.join(prefix)
+        out.append(entry)
     return out

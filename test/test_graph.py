@@ -129,3 +129,16 @@ def test_launch_file_builds_the_graph(monkeypatch, tmp_path):
     nodes = ld.entities[-1].execute(ctx)
     assert all(isinstance(n, Node) for n in nodes)
     assert len(nodes) == 1 + len(graph.GRAPH)
+
+
+def test_nodes_off_the_path_to_the_ear_run_at_a_lower_priority():
+    """The egomotion node (the detector does not wait for it) is started under ``nice``
+    by both starters; the detector, alarm and audio nodes are not."""
+    entries = {e['name']: e for e in graph.launch_entries('bag', '/cfg', bag='/b')}
+    assert entries['egomotion_node']['prefix'] == 'nice -n 10'
+    for name in ('detector_node', 'alarm_node', 'audio_node', 'bag_player_node'):
+        assert 'prefix' not in entries[name], name
+    assert graph.by_name('egomotion').command_prefix() == ['nice', '-n', '10']
+    assert graph.by_name('detector').command_prefix() == []
+    with pytest.raises(ValueError, match='nice must be in'):
+        graph.GraphNode('x', 'x', 'x', 'x', 'images', (), (), 'x.yaml', nice=25)

@@ -1,7 +1,7 @@
 """Benchmark of what the wearer hears: latency from a stereo pair to its sound, and the
 soundtrack's counts, over `asmonc run --audio` replays of bags at rate 1.
 
-    python -m asmonc_vision.eval.audio_bench [BAG ...] [--out DIR] [--rate R]
+    python -m asmonc_vision.eval.audio_bench [BAG ...] [--out DIR] [--rate R] [--cpus LIST]
 
 For each bag (default: every bundled bag) it runs `asmonc run BAG --audio DIR/<bag>.wav`
 in a subprocess, then prints, from the audio node's ``.latency.json`` and
@@ -10,12 +10,14 @@ process -- for a live camera, its stamp -- to the onset of the cue it decided, p
 device's output latency), the pair-to-contact latency (to the arrival of that pair's
 /alarms/contact, when a cue for any pair could start), p50 and p99; the cues and
 phrases given, the shortest gap between two phrases, and the FAULTs other than
-"starting up". A benchmark prints numbers; it asserts nothing.
+"starting up". ``--cpus 0`` runs each replay, every node of it, on CPU 0 alone (Linux
+``taskset``): the latency on one core. A benchmark prints numbers; it asserts nothing.
 """
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -35,7 +37,12 @@ def main(argv=None) -> int:
     p.add_argument('bags', nargs='*', type=Path)
     p.add_argument('--out', type=Path, default=None, help='keep the WAVs etc. here')
     p.add_argument('--rate', type=float, default=1.0)
+    p.add_argument('--cpus', default=None,
+                   help='run each replay on these CPUs only (taskset list, e.g. 0)')
     args = p.parse_args(argv)
+    pin = ['taskset', '-c', args.cpus] if args.cpus else []
+    print(f'load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; replays '
+          + (f'on CPU(s) {args.cpus} only' if pin else 'on every core'))
     bags = args.bags or sorted(d for d in BAGS.iterdir() if (d / 'metadata.yaml').exists())
     out = args.out or Path(tempfile.mkdtemp(prefix='asmonc-audio-bench-'))
     out.mkdir(parents=True, exist_ok=True)
@@ -44,8 +51,8 @@ def main(argv=None) -> int:
           f'{"cue p50/p99 ms":>15s}  {"contact p50/p99 ms":>18s}')
     for bag in bags:
         wav = out / f'{bag.name}.wav'
-        res = subprocess.run([sys.executable, '-m', 'asmonc_vision.cli.main', 'run', str(bag),
-                              '--audio', str(wav), '--rate', str(args.rate), '--quiet',
+        res = subprocess.run([*pin, sys.executable, '-m', 'asmonc_vision.cli.main', 'run',
+                              str(bag), '--audio', str(wav), '--rate', str(args.rate), '--quiet',
                               '--no-progress', '--out', str(out / bag.name)],
                              capture_output=True, text=True)
         if res.returncode != 0 or not wav.exists():

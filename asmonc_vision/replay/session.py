@@ -221,8 +221,9 @@ class Replay:
     # --- the nodes ------------------------------------------------------------------
 
     def spawn(self, name: str, log_name: str | None = None) -> Child:
-        cmd = [sys.executable, '-m', self.nodes[name].module, '--ros-args', *self.ros_params,
-               *self.nodes[name].ros_args()]
+        node = self.nodes[name]
+        cmd = [*node.command_prefix(), sys.executable, '-m', node.module, '--ros-args',
+               *self.ros_params, *node.ros_args()]
         if name == 'audio':
             cmd += audio_params(self.args, self.t0)
         # the alarm node's warnings are its alarms, which are printed anyway
