@@ -104,3 +104,40 @@ def test_sim_bags_carry_the_footprints(tmp_path):
     assert len(truth.obstacles) == len(fp) and not any(o.points for o in truth.obstacles)
     assert len(truth.frames) == sc.n_frames
     np.testing.assert_allclose(truth.frames[0].heading, [1.0, 0.0], atol=0.05)
+
+
+def test_walking_people_are_scored_where_they_are():
+    """The footprint of a walking person in the bag metadata is its first place; the
+    safety truth places it at each frame's stamp, from the scene rebuilt from the
+    metadata, or, when that is not possible, from the listings."""
+    import dataclasses
+
+    import numpy as np
+
+    from asmonc_vision.eval.truth import (listed_tracks, moving_tracks, scene_world,
+                                          world_tracks)
+    from asmonc_vision.sim.bagwriter import EPOCH_NS, stamp_ns
+    from asmonc_vision.sim.footprints import world_footprints
+
+    from asmonc_vision.sim.scenes import make_scene
+
+    sc = make_scene('people_crossing', 1008, duration=20.0, rig='backpack')
+    fp = world_footprints(sc.world)
+    meta = {'scenario': sc.name, 'seed': sc.seed, 'duration': sc.duration,
+            'rig': dataclasses.asdict(sc.rig), 'footprints': fp, 'epoch_ns': EPOCH_NS}
+    world = scene_world(meta)
+    assert world is not None and world_footprints(world) == fp
+    assert scene_world(dict(meta, seed=sc.seed + 1)) is None
+    people = [o for o in sc.world.obstacles if o.kind == 'person']
+    stamps = [stamp_ns(t) for t in np.arange(0.0, 20.0, 0.1)]
+    tracks = world_tracks(world, stamps, EPOCH_NS)
+    assert sorted(tracks) == sorted(o.id for o in people)
+    for o in people:
+        st, feet = tracks[o.id]
+        for k in (0, 75, 150):
+            x, y, _ = o.place((int(st[k]) - EPOCH_NS) / 1e9)
+            np.testing.assert_allclose(feet[k].mean(axis=0), [x, y], atol=1e-3)
+        assert np.hypot(*(feet[-1].mean(axis=0) - feet[0].mean(axis=0))) > 5.0
+    assert moving_tracks([], dict(meta, footprints=[dict(d, kind='box') for d in fp])) == (
+        {}, False)
+    assert listed_tracks([], {1}) == {}

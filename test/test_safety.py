@@ -257,3 +257,33 @@ def test_run_summary_has_the_safety_score():
     assert s['false_reports']['total'] == 0 and s['false_reports']['frames_scored'] == len(truth)
     assert s['false_alarms']['events'] == 0
     assert s['recall']['recall'] == 1.0
+
+
+def test_a_moving_obstacle_is_scored_where_it_is_at_each_frame():
+    """A person crossing the path 3 m ahead: its footprint follows its track, so a
+    report on it at each frame is not false, and a report where it stood at the start
+    is; it is on the path only while it crosses the corridor."""
+    frames = walk(30, speed=0.0, visible={1: 100})
+    stamps = np.array([f.stamp_ns for f in frames], np.int64)
+    ys = np.linspace(-3.0, 3.0, len(frames))
+    feet = [rect(3.0, 3.3, y - 0.2, y + 0.2) for y in ys]
+    person = TrueObstacle(1, 1.7, feet[0], kind='person', track=(stamps, feet))
+    truth = SafetyTruth([person], frames)
+    assert np.array_equal(truth.present(frames[20])[0].footprint, feet[20])
+    assert np.array_equal(person.placed(S0 - DT).footprint, feet[0])
+    on_track = {f.stamp_ns: FrameObstacles(
+        f.stamp_ns, np.array([7]), np.zeros((1, 3)), np.array([1.7]),
+        np.array([math.hypot(3.15, y)]), np.array([math.atan2(y, 3.15)]),
+        np.zeros((1, 4), int)) for f, y in zip(frames, ys)}
+    at_start = {f.stamp_ns: FrameObstacles(
+        f.stamp_ns, np.array([7]), np.zeros((1, 3)), np.array([1.7]),
+        np.array([math.hypot(3.15, ys[0])]), np.array([math.atan2(ys[0], 3.15)]),
+        np.zeros((1, 4), int)) for f in frames}
+    s = score_safety(truth, [alarm(0, AlarmLevel.CLEAR)], on_track)
+    assert s.false_reports == 0 and s.recall == 1.0
+    s = score_safety(truth, [alarm(0, AlarmLevel.CLEAR)], at_start)
+    tol = 0.1 * math.hypot(3.15, ys[0])          # the report tolerance there (> 0.3 m)
+    assert s.false_reports == int(np.sum(np.abs(ys - ys[0]) - 0.2 > tol)) > len(frames) // 2
+    s = score_safety(truth, [alarm(0, AlarmLevel.CLEAR)], on_track, SafetyCriteria(
+        on_path_range=4.0))
+    assert s.on_path == 1 and 0 < s.frames_on_path < len(frames)

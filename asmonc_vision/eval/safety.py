@@ -3,9 +3,10 @@
 Inputs (all in bag time, nanosecond stamps):
 
 * the truth (`SafetyTruth`): every true obstacle of the world with its footprint on
-  the ground (world x, y, metres; z up), its height (negative for a drop) and when it
-  exists; and per camera frame the true pose of the left optical frame in the world and
-  which obstacles are in view (with the pixels that see them in both images, if known);
+  the ground (world x, y, metres; z up; a moving one's, e.g. a walking person's, where
+  it is at each frame's stamp), its height (negative for a drop) and when it exists;
+  and per camera frame the true pose of the left optical frame in the world and which
+  obstacles are in view (with the pixels that see them in both images, if known);
 * the alarms given (dicts ``stamp_ns``, ``level``, ``obstacle_id``, ``range`` m,
   ``bearing`` rad, as /alarms carries them), in the order they were announced;
 * the obstacles reported per frame (``eval.evaluation.FrameObstacles``: ``height``,
@@ -100,7 +101,7 @@ class SafetyCriteria:
 
 @dataclass(frozen=True)
 class TrueObstacle:
-    """One true obstacle, fixed in the world.
+    """One true obstacle, fixed in the world or moving on it (``track``).
 
     Attributes:
         id: ground-truth id.
@@ -112,6 +113,9 @@ class TrueObstacle:
         ground_region: a terrace (kerb up, step down): ground, not an obstacle, while the
             point below the camera is inside its footprint.
         kind: free text ('box', 'drop', ...).
+        track: a moving obstacle's footprints: (stamps_ns (K,) int, increasing; K
+            footprints, each as ``footprint``); at a stamp it is the one at or before it
+            (the first before them all), `placed`. None: fixed at ``footprint``.
     """
 
     id: int
@@ -122,6 +126,16 @@ class TrueObstacle:
     vanish_ns: int | None = None
     ground_region: bool = False
     kind: str = ''
+    track: tuple | None = None
+
+    def placed(self, stamp_ns: int) -> 'TrueObstacle':
+        """The obstacle where it is at ``stamp_ns``: itself unless it moves."""
+        if self.track is None:
+            return self
+        stamps, feet = self.track
+        i = int(np.searchsorted(np.asarray(stamps, np.int64), int(stamp_ns), side='right'))
+        return dataclasses.replace(self, footprint=np.asarray(feet[max(i - 1, 0)], float),
+                                   track=None)
 
 
 @dataclass
@@ -188,13 +202,15 @@ class SafetyTruth:
         return self.frames[max(i, 0)]
 
     def present(self, frame: TruthFrame) -> list[TrueObstacle]:
-        """The obstacles that exist at the frame and are not ground under the wearer."""
+        """The obstacles that exist at the frame and are not ground under the wearer, a
+        moving one where it is at the frame's stamp."""
         out = []
         for ob in self.obstacles:
             if ob.appear_ns is not None and frame.stamp_ns < ob.appear_ns:
                 continue
             if ob.vanish_ns is not None and frame.stamp_ns >= ob.vanish_ns:
                 continue
+            ob = ob.placed(frame.stamp_ns)
             if ob.ground_region and not ob.points and polygon_distance(
                     ob.footprint, frame.foot) == 0.0:
                 continue

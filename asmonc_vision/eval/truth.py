@@ -13,12 +13,17 @@
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
 from asmonc_vision.eval.safety import SafetyTruth, TrueObstacle, TruthFrame
+
+#: kinds of obstacle that move (their footprint in the metadata is their first place)
+MOVING_KINDS = ('person',)
 
 
 def visible_pixels(labels: np.ndarray, depth: np.ndarray, fb: float, cx_shift: float = 0.0
@@ -106,8 +111,84 @@ def obstacles_from_listings(truth: dict, poses: dict, planes: dict) -> list[True
             for i in sorted(feet)]
 
 
+def world_tracks(world, stamps_ns, epoch_ns: int) -> dict[int, tuple]:
+    """The footprints of a `sim.world.World`'s moving obstacles at the stamps.
+
+    Args:
+        world: the world; stamps_ns: increasing frame stamps; epoch_ns: the stamp of
+            simulation time 0.
+    Returns:
+        id -> (stamps_ns (K,) int64, [(M, 2) world x, y polygon per stamp]) for each
+        obstacle whose footprint (`sim.footprints.world_footprints`) changes over them.
+    """
+    from asmonc_vision.sim.footprints import world_footprints
+
+    stamps = np.asarray(stamps_ns, np.int64)
+    polys: dict[int, list] = {int(o.id): [] for o in world.obstacles}
+    for ns in stamps:
+        t = (int(ns) - int(epoch_ns)) / 1e9
+        placed = SimpleNamespace(obstacles=[o.at(t, world) for o in world.obstacles])
+        for d in world_footprints(placed):
+            polys[int(d['id'])].append(np.asarray(d['polygon'], float).reshape(-1, 2))
+    return {i: (stamps, p) for i, p in polys.items()
+            if p and any(q.shape != p[0].shape or not np.array_equal(q, p[0]) for q in p)}
+
+
+def scene_world(meta: dict):
+    """The `sim.world.World` of a simulated bag, rebuilt from its metadata (scene class,
+    seed, duration, rig: `sim.scenes.build_scene`), or None when that is not possible or
+    its footprints differ from the metadata's (a bag from another simulator version)."""
+    from asmonc_vision.sim.footprints import world_footprints
+    from asmonc_vision.sim.rig import RigSettings
+    from asmonc_vision.sim.scenes import SCENE_CLASSES, build_scene
+
+    try:
+        if meta.get('scenario') not in SCENE_CLASSES:
+            return None
+        world = build_scene(meta['scenario'], int(meta['seed']), float(meta['duration']),
+                            RigSettings(**meta['rig']), realism=False).world
+    except (KeyError, TypeError, ValueError):
+        return None
+    return world if world_footprints(world) == meta.get('footprints') else None
+
+
+def listed_tracks(frames, ids) -> dict[int, tuple]:
+    """Point footprints of obstacles ``ids`` from the listings: per frame that lists
+    one, its top lowered along the true ground normal, put into the world with the true
+    pose (as `obstacles_from_listings`). id -> (stamps_ns (K,), [(1, 2) per stamp])."""
+    out: dict[int, tuple] = {}
+    for f in frames:
+        if f.pose is None or f.truth is None or f.truth_plane is None:
+            continue
+        R, t = (np.asarray(x, float) for x in f.pose)
+        n = np.asarray(f.truth_plane.normal_up, float)
+        for k in range(len(f.truth)):
+            i = int(f.truth.ids[k])
+            if i in ids:
+                foot = np.asarray(f.truth.position[k], float) - float(f.truth.height[k]) * n
+                st, feet = out.setdefault(i, ([], []))
+                st.append(int(f.stamp_ns))
+                feet.append((R @ foot + t)[None, :2])
+    return {i: (np.array(st, np.int64), feet) for i, (st, feet) in out.items()}
+
+
+def moving_tracks(frames, meta: dict | None) -> tuple[dict, bool]:
+    """The tracks of a simulated bag's moving obstacles (module doc): (id -> track as
+    `world_tracks`, True when they are point footprints from the listings)."""
+    fp = (meta or {}).get('footprints') or []
+    ids = {int(d['id']) for d in fp if d.get('kind') in MOVING_KINDS}
+    if not ids:
+        return {}, False
+    stamps = sorted(f.stamp_ns for f in frames if f.pose is not None)
+    world = scene_world(meta)
+    if world is not None:
+        return world_tracks(world, stamps, int(meta.get('epoch_ns', 0))), False
+    return listed_tracks(frames, ids), True
+
+
 def truth_from_frames(frames, footprints: list[dict] | None = None, epoch_ns: int = 0,
-                      visible: dict | None = None) -> SafetyTruth:
+                      visible: dict | None = None, tracks: dict | None = None,
+                      track_points: bool = False) -> SafetyTruth:
     """SafetyTruth of loaded frames (`io.frames.Frame`: stamp, truth, truth_plane, pose).
 
     Args:
@@ -116,6 +197,8 @@ def truth_from_frames(frames, footprints: list[dict] | None = None, epoch_ns: in
         epoch_ns: the stamp of simulation time 0 (for the footprints' times).
         visible: stamp_ns -> {id: pixels in both images} (None: the listed ids, unknown
             counts).
+        tracks: id -> a moving obstacle's footprints (`safety.TrueObstacle.track`).
+        track_points: the tracks' footprints are point sets.
     """
     have = [f for f in frames if f.pose is not None]
     if footprints is not None:
@@ -125,6 +208,9 @@ def truth_from_frames(frames, footprints: list[dict] | None = None, epoch_ns: in
             {f.stamp_ns: f.truth for f in have if f.truth is not None},
             {f.stamp_ns: f.pose for f in have},
             {f.stamp_ns: f.truth_plane for f in have if f.truth_plane is not None})
+    tracks = tracks or {}
+    obstacles = [dataclasses.replace(o, track=tracks[o.id], points=o.points or track_points)
+                 if o.id in tracks else o for o in obstacles]
     out = []
     for f in have:
         if visible is not None and f.stamp_ns in visible:
@@ -153,8 +239,9 @@ def truth_from_bag(bag: Path, frames=None, visible: dict | None = None) -> Safet
         return None
     meta = sim_metadata(bag)
     fp = meta.get('footprints') if meta else None
+    tracks, points = moving_tracks(frames, meta) if fp else ({}, False)
     return truth_from_frames(frames, fp, int(meta.get('epoch_ns', 0)) if meta else 0,
-                             visible)
+                             visible, tracks, points)
 
 
 def render_scene(scenario) -> tuple[list, SafetyTruth]:
@@ -179,5 +266,7 @@ def render_scene(scenario) -> tuple[list, SafetyTruth]:
         frames.append(Frame(ns, f.left, f.right, cam, frame_from_detections(ns, f.obstacles),
                             f.plane, pose))
         tf.append(TruthFrame(ns, pose[0], pose[1], visible_pixels(f.labels, f.depth, cam.fb)))
-    return frames, SafetyTruth(obstacles_from_footprints(world_footprints(scenario.world),
-                                                         EPOCH_NS), tf)
+    tracks = world_tracks(scenario.world, [f.stamp_ns for f in tf], EPOCH_NS)
+    obstacles = [dataclasses.replace(o, track=tracks[o.id]) if o.id in tracks else o
+                 for o in obstacles_from_footprints(world_footprints(scenario.world), EPOCH_NS)]
+    return frames, SafetyTruth(obstacles, tf)
