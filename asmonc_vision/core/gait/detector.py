@@ -162,6 +162,47 @@ def fit_walk(tau: np.ndarray, z: np.ndarray, freqs: np.ndarray,
     freqs = np.asarray(freqs, float)
     sw = np.exp(0.5 * tau / recency) if recency > 0 else np.ones(n)   # sqrt of weights
     zw = z * sw[:, None]
+    per = _grid_periodicity(tau, zw, sw, freqs, criterion)
+    raw = per @ w_axes
+    score = raw
+    if frequency_prior is not None and frequency_prior[1] > 0:
+        score = raw * np.exp(-0.5 * ((freqs - frequency_prior[0]) / frequency_prior[1]) ** 2)
+    if scores is not None:
+        scores['freqs'], scores['score'], scores['periodicity'] = freqs, score, per
+        scores['raw'] = raw
+    i = int(np.argmax(score))
+    f = float(freqs[i])
+    coef, csd = [], []
+    off, tr, res = np.empty(3), np.empty(3), np.empty(3)
+    otc = np.zeros((3, 2, 2))
+    main = (1, 2, 1)
+    for a in range(3):
+        c, cov, res[a] = _ridge_refit_axis(tau, zw[:, a], sw, f, harmonics[a], main[a],
+                                           prior_sd, noise_sd)
+        off[a], tr[a] = c[0], c[1]
+        otc[a] = cov[:2, :2]
+        coef.append(c[2::2] + 1j * c[3::2])
+        csd.append(np.sqrt(0.5 * (np.diag(cov)[2::2] + np.diag(cov)[3::2])))
+    return WalkFit(frequency=f, coefficients=tuple(coef), coefficient_sd=tuple(csd),
+                   offset=off, trend=tr, periodicity=per[i].copy(), score=float(score[i]),
+                   residual=res, offset_trend_cov=otc)
+
+
+def _grid_periodicity(tau: np.ndarray, zw: np.ndarray, sw: np.ndarray, freqs: np.ndarray,
+                      criterion) -> np.ndarray:
+    """The grid criterion of `fit_walk` per axis: the share of the axis's detrended
+    variance explained by sinusoids at its ``criterion`` harmonics of the stride, for
+    every step frequency (the trend columns are projected out once).
+
+    Args:
+        tau: (N,) float64 sample times relative to the last sample (<= 0), s.
+        zw: (N, 3) float64 roll, pitch, yaw (rad) times the samples' weights ``sw``.
+        sw: (N,) float64 square roots of the samples' weights.
+        freqs: (F,) float64 candidate step frequencies, Hz.
+        criterion: per axis, the stride harmonics k (empty: the axis is not scored).
+    Returns:
+        (F, 3) float64 in [0, 1] (0 for an axis not scored).
+    """
     base = np.column_stack([sw, tau * sw])
     q, _ = np.linalg.qr(base)                                  # orthonormal trend basis
     zr = zw - q @ (q.T @ zw)                                   # detrended samples
@@ -185,45 +226,48 @@ def fit_walk(tau: np.ndarray, z: np.ndarray, freqs: np.ndarray,
             continue
         cc = [c for k in ks for c in cols(k)]
         per[:, a] = _explained(zr[:, a], cc, proj) / rss0[a]
-    per = np.clip(per, 0.0, 1.0)
-    raw = per @ w_axes
-    score = raw
-    if frequency_prior is not None and frequency_prior[1] > 0:
-        score = raw * np.exp(-0.5 * ((freqs - frequency_prior[0]) / frequency_prior[1]) ** 2)
-    if scores is not None:
-        scores['freqs'], scores['score'], scores['periodicity'] = freqs, score, per
-        scores['raw'] = raw
-    i = int(np.argmax(score))
-    f = float(freqs[i])
-    coef, csd = [], []
-    off, tr, res = np.empty(3), np.empty(3), np.empty(3)
-    otc = np.zeros((3, 2, 2))
-    main = (1, 2, 1)
-    for a in range(3):
-        ks = np.arange(1, harmonics[a] + 1)
-        wk = np.pi * f * tau
-        X = [np.ones(n), tau]
-        for k in ks:
-            X += [np.sin(k * wk), np.cos(k * wk)]
-        X = np.column_stack(X) * sw[:, None]
-        # ridge: (X^T X / s^2 + L) c = X^T z / s^2, L = diag(1 / prior^2) (none on the
-        # offset and trend)
-        lam = np.zeros(X.shape[1])
-        sd = np.where(ks == min(main[a], harmonics[a]), prior_sd[0], prior_sd[1])
-        lam[2::2] = lam[3::2] = (noise_sd / sd) ** 2
-        G = X.T @ X + np.diag(lam)
-        G.flat[::G.shape[0] + 1] *= 1.0 + 1e-12
-        c = np.linalg.solve(G, X.T @ zw[:, a])
-        cov = np.linalg.inv(G) * noise_sd ** 2
-        off[a], tr[a] = c[0], c[1]
-        otc[a] = cov[:2, :2]
-        e = X @ c - zw[:, a]
-        res[a] = math.sqrt(float(e @ e) / float(sw @ sw))
-        coef.append(c[2::2] + 1j * c[3::2])
-        csd.append(np.sqrt(0.5 * (np.diag(cov)[2::2] + np.diag(cov)[3::2])))
-    return WalkFit(frequency=f, coefficients=tuple(coef), coefficient_sd=tuple(csd),
-                   offset=off, trend=tr, periodicity=per[i].copy(), score=float(score[i]),
-                   residual=res, offset_trend_cov=otc)
+    return np.clip(per, 0.0, 1.0)
+
+
+def _ridge_refit_axis(tau: np.ndarray, zw_a: np.ndarray, sw: np.ndarray, f: float,
+                      harmonics: int, main: int, prior_sd, noise_sd: float
+                      ) -> tuple[np.ndarray, np.ndarray, float]:
+    """The refit of one attitude axis at the step frequency ``f`` by ridge regression:
+    offset + trend + ``harmonics`` stride harmonics, whose coefficients have a zero-mean
+    prior, samples the noise ``noise_sd``: (X^T X / s^2 + L) c = X^T z / s^2,
+    L = diag(1 / prior^2) (none on the offset and trend).
+
+    Args:
+        tau: (N,) float64 sample times relative to the last sample (<= 0), s.
+        zw_a: (N,) float64 the axis's angle (rad) times the samples' weights ``sw``.
+        sw: (N,) float64 square roots of the samples' weights.
+        f: step frequency, Hz (the stride harmonic k is at k f / 2).
+        harmonics: number K of stride harmonics.
+        main: the main harmonic (prior ``prior_sd[0]``; the others ``prior_sd[1]``);
+            K when K is smaller.
+        prior_sd: (main, other) prior standard deviation of the coefficients, rad.
+        noise_sd: sample noise, rad.
+    Returns:
+        c: (2 + 2K,) float64 offset (rad), trend (rad/s), then per harmonic k the sine
+            and cosine coefficients (rad); cov: (2 + 2K, 2 + 2K) float64 their posterior
+            covariance; the weighted rms residual, rad.
+    """
+    n = tau.size
+    ks = np.arange(1, harmonics + 1)
+    wk = np.pi * f * tau
+    X = [np.ones(n), tau]
+    for k in ks:
+        X += [np.sin(k * wk), np.cos(k * wk)]
+    X = np.column_stack(X) * sw[:, None]
+    lam = np.zeros(X.shape[1])
+    sd = np.where(ks == min(main, harmonics), prior_sd[0], prior_sd[1])
+    lam[2::2] = lam[3::2] = (noise_sd / sd) ** 2
+    G = X.T @ X + np.diag(lam)
+    G.flat[::G.shape[0] + 1] *= 1.0 + 1e-12
+    c = np.linalg.solve(G, X.T @ zw_a)
+    cov = np.linalg.inv(G) * noise_sd ** 2
+    e = X @ c - zw_a
+    return c, cov, math.sqrt(float(e @ e) / float(sw @ sw))
 
 
 class WalkDetector:

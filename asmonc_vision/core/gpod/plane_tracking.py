@@ -234,10 +234,18 @@ class PlaneTracking(DetectorState):
 
     def _update_plane(self, u, v, d, s, cam: StereoCamera, still: bool = False,
                       motion: tuple | None = None) -> tuple[str, bool]:
-        """Advance the plane state with this frame's features (s: their
-        :func:`_noise_key`, for the residual spread; ``still``: the rig stood still since
-        the previous frame; ``motion``: the camera's (R, t, ...) since the previous frame,
-        as `process` takes it, or None). Returns (status, updated)."""
+        """Advance the plane state with this frame's features.
+
+        Args:
+            u, v, d: (N,) float the features' column, row and disparity, pixels.
+            s: (N,) their :func:`_noise_key` (for the residual spread).
+            cam: the rectified stereo camera.
+            still: the rig stood still since the previous frame.
+            motion: the camera's (R (3, 3), t (3,) m, ...) since the previous frame, as
+                `process` takes it, or None.
+        Returns:
+            (status: 'initialising' | 'tracking' | 'lost', whether the plane was refitted).
+        """
         c = self.config
         if self._calib is None:
             return self._calibrate(u, v, d, s, cam)
@@ -246,7 +254,6 @@ class PlaneTracking(DetectorState):
             # The plane is known, but a frame with too few features cannot vouch that
             # nothing stands on it: lost, as in 'refit' mode.
             return ('tracking', False) if enough else ('lost', False)
-        fit = None
         # Kalman predict: through the camera's motion when it is known (the paper's
         # dynamic recalibration), else the constant-plane model below. While the rig
         # stands still (its edges stayed in place) a motion larger than a standing
@@ -265,7 +272,6 @@ class PlaneTracking(DetectorState):
         elif self._still_plane is None:
             self._still_plane = current             # the plane when the rig stopped
             self._still_travel = 0.0
-        anchored = self._still_plane is not None
         # Refits near the prediction through the motion: a narrower gate and tighter
         # change limits, unless refits were rejected by those limits max_coast_frames
         # times in a row (the motion may be wrong: then as without one, around the
@@ -280,6 +286,43 @@ class PlaneTracking(DetectorState):
         gate_m = c.motion_gate_m if tight else c.refit_gate_m
         coast_frames = (c.motion_coast_frames if predicted and not self._stale
                         else c.max_coast_frames)
+        fit, rejected = self._refit_plane(u, v, d, cam, current, enough, predicted, tight,
+                                          gate_m, coast_frames)
+        noise = c.motion_process_noise_px if predicted else c.refit_process_noise_px
+        sq = noise ** 2
+        q = np.diag([sq / (0.5 * cam.width) ** 2, sq / (0.5 * cam.height) ** 2, sq])
+        if fit is None:
+            return self._without_refit(u, v, d, q, rejected, predicted, still, enough,
+                                       coast_frames)
+        self._kalman_update(fit, q)
+        return 'tracking', True
+
+    def _refit_plane(self, u, v, d, cam: StereoCamera, current: MetricPlane | None,
+                     enough: bool, predicted: bool, tight: bool, gate_m: float,
+                     coast_frames: int) -> tuple[PlaneFit | None, bool]:
+        """The refit of `_update_plane`, each way tried while the ones before found
+        none: `_coarse_then_fine` (not while the plane the rig stopped with is kept); a
+        fit of the features within ``gate_m`` of that plane (else of ``current``), then,
+        kept but not predicted, `_coarse_then_fine`; while the prediction is stale or
+        missing, `_coarse_then_fine` with the wider ``refit_retry_gate_px``; `_recover`
+        once coasted ``coast_frames``.
+
+        Args:
+            u, v, d: (N,) float the features' column, row and disparity, pixels.
+            cam: the rectified stereo camera.
+            current: the plane state's metric plane (left optical frame), or None.
+            enough: at least ``min_plane_features`` features.
+            predicted: the plane was carried through this frame's motion.
+            tight: the change limits around the motion's prediction apply
+                (`_close_to_current`).
+            gate_m: metres from the plane of the features refitted.
+            coast_frames: frames the plane may be carried without a refit.
+        Returns:
+            (the refit or None, whether a refit was rejected by the change limits).
+        """
+        c = self.config
+        fit = None
+        anchored = self._still_plane is not None
         rejected = False
 
         def coarse_then_fine(gate_px: float = c.refit_gate_px) -> PlaneFit | None:
@@ -325,14 +368,7 @@ class PlaneTracking(DetectorState):
             fit = coarse_then_fine(c.refit_retry_gate_px)
         if fit is None and enough and self._coast >= coast_frames:
             fit = self._recover(u, v, d, cam)
-        noise = c.motion_process_noise_px if predicted else c.refit_process_noise_px
-        sq = noise ** 2
-        q = np.diag([sq / (0.5 * cam.width) ** 2, sq / (0.5 * cam.height) ** 2, sq])
-        if fit is None:
-            return self._without_refit(u, v, d, q, rejected, predicted, still, enough,
-                                       coast_frames)
-        self._kalman_update(fit, q)
-        return 'tracking', True
+        return fit, rejected
 
     def _calibrate(self, u, v, d, s, cam: StereoCamera) -> tuple[str, bool]:
         """The calibration step of `_update_plane`: this frame's features join the

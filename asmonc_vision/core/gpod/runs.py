@@ -436,64 +436,133 @@ def continuation_alternatives(edges: EdgeMap, m: Matches, prev: np.ndarray,
     sel = np.flatnonzero(select)
     if sel.size == 0 or len(cand) == 0 or np.count_nonzero(lower) < min_support:
         return out
-    # The bottom of each match's run.
-    nxt = np.full(k, -1, np.int64)
-    has = prev >= 0
-    nxt[prev[has]] = np.flatnonzero(has)
-    jump = chain_roots(nxt)
-    bottoms, b_of = np.unique(jump[sel], return_inverse=True)
+    bottoms, b_of = _run_bottoms(prev, sel)
     feat_of_edge = np.full(len(edges), -1, np.int64)
     feat_of_edge[m.left_index] = np.arange(k)
     below = np.full(len(edges), -1, np.int64)
     has_e = edges.string_prev >= 0
     below[edges.string_prev[has_e]] = np.flatnonzero(has_e)
     # The matched pixels of each bottom's string in the max_gap rows below it.
-    nb = bottoms.size
     under = _matches_below(m.left_index[bottoms].astype(np.int64), below, feat_of_edge,
                            max_gap)
     d = m.d.astype(np.float64)
     pd = np.asarray(plane_d, np.float64)
-    d0 = d[bottoms]
     # The continuation: the first lower match below. (It is farther than the bottom
     # wherever the run hangs: a lower match nearer than the bottom is within the slope
     # allowance of its depth, below, and holds the run up.) Where the string has none
     # below (the run ends it, at a kerb's brink), the nearest lower match above the run.
     found = _continuations(edges, m, prev, bottoms, under, lower, feat_of_edge, max_gap)
+    ratio, ok = _lower_ground(found, d, pd, lower, tolerance_px, min_support)
+    if not ok.any():
+        return out
+    # Which matches of such runs had a candidate on that lower ground.
+    mine = sel[ok[b_of]]
+    has_alt = _candidates_at(edges, m, cand, mine, ratio[b_of[ok[b_of]]] * pd[mine],
+                             tolerance_px)
+    return _hanging_with_alternative(under, d, d[bottoms], sel, b_of, has_alt,
+                                     tolerance_px, slope)
+
+
+def _run_bottoms(prev: np.ndarray, sel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The bottom match of the run of each match in ``sel``.
+
+    Args:
+        prev: (K,) int64 :func:`run_links` of the matches.
+        sel: (S,) int64 indices of matches.
+    Returns:
+        bottoms: (B,) int64 the distinct bottoms (last match down the run), sorted;
+        b_of: (S,) int64 the index into ``bottoms`` of each match of ``sel``.
+    """
+    nxt = np.full(prev.shape[0], -1, np.int64)
+    has = prev >= 0
+    nxt[prev[has]] = np.flatnonzero(has)
+    jump = chain_roots(nxt)
+    bottoms, b_of = np.unique(jump[sel], return_inverse=True)
+    return bottoms, b_of
+
+
+def _lower_ground(found: np.ndarray, d: np.ndarray, pd: np.ndarray, lower: np.ndarray,
+                  tolerance_px: float, min_support: int) -> tuple[np.ndarray, np.ndarray]:
+    """The lower ground of each continuation of `continuation_alternatives`, taken
+    parallel to the plane: its disparity the continuation's fraction d / plane_d of the
+    plane's. It must itself be seen: ``min_support`` ``lower`` matches on it (within
+    ``tolerance_px``).
+
+    Args:
+        found: (B,) int64 the continuation match of each run bottom (-1: none).
+        d: (K,) float64 the matches' disparities, pixels.
+        pd: (K,) float64 the plane's disparity at each match, pixels.
+        lower: (K,) bool matches on lower ground.
+        tolerance_px: pixels of disparity.
+        min_support: matches.
+    Returns:
+        ratio: (B,) float64 the fraction d / plane_d (NaN where there is no usable
+        continuation); ok: (B,) bool, a lower ground that is seen.
+    """
     ok = found >= 0
     ok[ok] = pd[found[ok]] > 0
-    # The lower ground, taken parallel to the plane: its disparity the continuation's
-    # fraction d / plane_d of the plane's. It must itself be seen: min_support lower
-    # matches on it.
-    ratio = np.full(nb, np.nan)
+    ratio = np.full(found.shape[0], np.nan)
     q = np.flatnonzero(ok)
     ratio[q] = d[found[q]] / pd[found[q]]
     lo = np.flatnonzero(lower)
     n_on = (np.abs(d[lo][None, :] - ratio[q, None] * pd[lo][None, :])
             <= tolerance_px).sum(axis=1)
     ok[q] = n_on >= min_support
-    if not ok.any():
-        return out
-    # Which matches of such runs had a candidate on that lower ground.
-    mine = sel[ok[b_of]]
+    return ratio, ok
+
+
+def _candidates_at(edges: EdgeMap, m: Matches, cand: Candidates, mine: np.ndarray,
+                   target_d: np.ndarray, tolerance_px: float) -> np.ndarray:
+    """Which matches ``mine`` had a candidate match (of their left edge pixel) within
+    ``tolerance_px`` of a disparity ``target_d``.
+
+    Args:
+        edges: the left EdgeMap the matches and the candidates index.
+        m: the matches; cand: the frame's candidate matches.
+        mine: (M,) int64 indices of matches.
+        target_d: (M,) float64 disparity looked for at each, pixels.
+        tolerance_px: pixels.
+    Returns:
+        (K,) bool, False outside ``mine``.
+    """
     n_edges = len(edges)
     t_d = np.full(n_edges, np.nan)
     le = m.left_index[mine]
-    t_d[le] = ratio[b_of[ok[b_of]]] * pd[mine]
+    t_d[le] = target_d
     cl = cand.left
     with np.errstate(invalid='ignore'):
         alt = np.abs(cand.d - t_d[cl]) <= tolerance_px
     hit_edge = np.zeros(n_edges, bool)
     hit_edge[cl[alt]] = True
-    has_alt = np.zeros(k, bool)
+    has_alt = np.zeros(len(m), bool)
     has_alt[mine] = hit_edge[le]
-    # The run must hang: no pixel below at its depth, other than such pixels themselves
-    # (two stretches matched the same period off, one above the other).
+    return has_alt
+
+
+def _hanging_with_alternative(under: np.ndarray, d: np.ndarray, d0: np.ndarray,
+                              sel: np.ndarray, b_of: np.ndarray, has_alt: np.ndarray,
+                              tolerance_px: float, slope: float) -> np.ndarray:
+    """The matches of ``sel`` with the alternative (``has_alt``) whose run hangs: no
+    matched pixel below its bottom is at the bottom's depth (within ``tolerance_px +
+    slope * r``, r rows down), other than such matches themselves (two stretches matched
+    the same period off, one above the other).
+
+    Args:
+        under: (R, B) int64 :func:`_matches_below` of the run bottoms.
+        d: (K,) float64 the matches' disparities, pixels; d0: (B,) float64 the bottoms'.
+        sel: (S,) int64 the matches tested; b_of: (S,) int64 the bottom of each.
+        has_alt: (K,) bool.
+        tolerance_px: pixels; slope: |b| of the plane, pixels of disparity per row.
+    Returns:
+        (K,) bool.
+    """
+    out = np.zeros(has_alt.shape[0], bool)
     rows = np.arange(1, under.shape[0] + 1, dtype=np.float64)[:, None]
     near = (under >= 0) & (np.abs(d[np.maximum(under, 0)] - d0[None, :])
                            <= tolerance_px + slope * rows)
     for _ in range(under.shape[1] + 1):     # until nothing changes (runs only join)
         held = (near & ~out[np.maximum(under, 0)]).any(axis=0)
-        new = np.zeros(k, bool)
+        new = np.zeros(has_alt.shape[0], bool)
         new[sel] = has_alt[sel] & ~held[b_of]
         if np.array_equal(new, out):
             break
