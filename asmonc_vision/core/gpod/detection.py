@@ -203,7 +203,8 @@ class Detection(PlaneTracking):
                        c.min_matched_run, max(c.max_required_run, c.min_matched_run))
         reliable = run >= need
         usable = reliable & in_range
-        obst = (ex_mean > thr) & (h <= c.max_obstacle_height_m) & usable
+        amb_obst, amb_drop = self._ambiguous_matches(m, pd, thr)
+        obst = (ex_mean > thr) & (h <= c.max_obstacle_height_m) & usable & ~amb_obst
         below = (ex_mean < -thr) & (h >= -c.max_drop_depth_m)
         if obst.any():
             self._rejected_runs(el, m, cand, prev, run, reliable & in_range, h, excess, pd,
@@ -212,7 +213,7 @@ class Detection(PlaneTracking):
         if c.detect_drops:
             # Below the plane where the plane itself is within the detection range.
             pd_far = cam.fb / c.max_range_m
-            drop = below & (pd >= pd_far) & (pd <= d_max) & usable
+            drop = below & (pd >= pd_far) & (pd <= d_max) & usable & ~amb_drop
         sid = m.string_id
         n_s = max(el.num_strings, int(sid.max()) + 1 if sid.size else 0)
         weight = self._evidence_weight(m.strength)
@@ -394,6 +395,23 @@ class Detection(PlaneTracking):
             top = np.maximum.reduceat(h[wi], np.flatnonzero(head))
             return wi[head], top
         return None
+
+    def _ambiguous_matches(self, m: Matches, pd: np.ndarray, thr: np.ndarray
+                           ) -> tuple[np.ndarray, np.ndarray]:
+        """((K,) bool, (K,) bool): the matches that are no evidence of an obstacle, and
+        those that are none of a drop-off: a rival of the match (`match_rivals`) with at
+        least ``ambiguous_match_ratio`` of its first-round support lies, farther, within
+        the threshold ``thr`` (K,) of the ground disparity ``pd`` (K,) or below it (for
+        an obstacle), or, nearer, within it or above it (for a drop-off)."""
+        k = len(m)
+        r = self.config.ambiguous_match_ratio
+        if r <= 0 or m.rival_ratio is None or m.rival_d is None or k == 0:
+            return np.zeros(k, bool), np.zeros(k, bool)
+        with np.errstate(invalid='ignore'):         # NaN: no rival
+            rival_ex = m.rival_d - pd[:, None]
+            no_obst = (m.rival_ratio[:, 0] >= r) & (rival_ex[:, 0] <= thr)
+            no_drop = (m.rival_ratio[:, 1] >= r) & (rival_ex[:, 1] >= -thr)
+        return no_obst, no_drop
 
     def _ambiguous_strings(self, m: Matches, excess: np.ndarray, obst: np.ndarray,
                            cand: Candidates, el: EdgeMap, er: EdgeMap, threshold: float,

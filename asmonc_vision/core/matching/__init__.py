@@ -31,10 +31,11 @@ The pair, grouping and selection loops run compiled by numba when it is installe
 from asmonc_vision.core.matching.candidates import (candidate_matches, disc_offsets,
                                                    disparity_gradient_interval)
 from asmonc_vision.core.matching.kernels import warm_up
-from asmonc_vision.core.matching.selection import match_edges, pmf_match, select_matches
+from asmonc_vision.core.matching.selection import (match_edges, match_rivals, pmf_match,
+                                                   select_matches)
 from asmonc_vision.core.matching.support import pmf_support, support_links
 from asmonc_vision.core.matching.types import Candidates, Matches, SupportLinks
 
 __all__ = ['Candidates', 'SupportLinks', 'Matches', 'candidate_matches', 'disc_offsets',
            'disparity_gradient_interval', 'support_links', 'pmf_support', 'select_matches',
-           'pmf_match', 'match_edges', 'warm_up']
+           'pmf_match', 'match_edges', 'match_rivals', 'warm_up']
