@@ -400,18 +400,18 @@ class Detection(PlaneTracking):
                            ) -> tuple[np.ndarray, np.ndarray]:
         """((K,) bool, (K,) bool): the matches that are no evidence of an obstacle, and
         those that are none of a drop-off: a rival of the match (`match_rivals`) with at
-        least ``ambiguous_match_ratio`` of its first-round support lies, farther, within
-        the threshold ``thr`` (K,) of the ground disparity ``pd`` (K,) or below it (for
-        an obstacle), or, nearer, within it or above it (for a drop-off)."""
+        least ``ambiguous_match_ratio`` of its first-round support lies on the ground
+        (within the pixel's threshold ``thr`` (K,) of the ground disparity ``pd`` (K,)),
+        farther than the match (for an obstacle) or nearer (for a drop-off): the edge
+        may as well be ground matched a period off."""
         k = len(m)
         r = self.config.ambiguous_match_ratio
         if r <= 0 or m.rival_ratio is None or m.rival_d is None or k == 0:
             return np.zeros(k, bool), np.zeros(k, bool)
         with np.errstate(invalid='ignore'):         # NaN: no rival
-            rival_ex = m.rival_d - pd[:, None]
-            no_obst = (m.rival_ratio[:, 0] >= r) & (rival_ex[:, 0] <= thr)
-            no_drop = (m.rival_ratio[:, 1] >= r) & (rival_ex[:, 1] >= -thr)
-        return no_obst, no_drop
+            ground = np.abs(m.rival_d - pd[:, None]) <= thr[:, None]
+        ambiguous = ground & (m.rival_ratio >= r)
+        return ambiguous[:, 0], ambiguous[:, 1]
 
     def _ambiguous_strings(self, m: Matches, excess: np.ndarray, obst: np.ndarray,
                            cand: Candidates, el: EdgeMap, er: EdgeMap, threshold: float,
