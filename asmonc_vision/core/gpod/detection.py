@@ -405,13 +405,19 @@ class Detection(PlaneTracking):
         farther than the match (for an obstacle) or nearer (for a drop-off): the edge
         may as well be ground matched a period off."""
         k = len(m)
+        no_obst, no_drop = np.zeros(k, bool), np.zeros(k, bool)
         r = self.config.ambiguous_match_ratio
-        if r <= 0 or m.rival_ratio is None or m.rival_d is None or k == 0:
-            return np.zeros(k, bool), np.zeros(k, bool)
-        with np.errstate(invalid='ignore'):         # NaN: no rival
-            ground = np.abs(m.rival_d - pd[:, None]) <= thr[:, None]
-        ambiguous = ground & (m.rival_ratio >= r)
-        return ambiguous[:, 0], ambiguous[:, 1]
+        if (r <= 0 or m.rival_match is None or m.rival_d is None or m.rival_ratio is None
+                or k == 0):
+            return no_obst, no_drop
+        j = m.rival_match
+        rd = m.rival_d.astype(np.float64)
+        sel = np.flatnonzero((m.rival_ratio >= r) & (np.abs(rd - pd[j]) <= thr[j]))
+        if sel.size:
+            nearer = rd[sel] > m.d[j[sel]]
+            no_drop[j[sel[nearer]]] = True
+            no_obst[j[sel[~nearer]]] = True
+        return no_obst, no_drop
 
     def _ambiguous_strings(self, m: Matches, excess: np.ndarray, obst: np.ndarray,
                            cand: Candidates, el: EdgeMap, er: EdgeMap, threshold: float,

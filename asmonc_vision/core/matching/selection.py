@@ -124,7 +124,7 @@ def pmf_match(left: EdgeMap, right: EdgeMap, d_min: float, d_max: float, *,
     acc, support = select_matches(cand, links, left, right, iterations=iterations,
                                   min_support=min_support)
     k = np.flatnonzero(acc)
-    rival_ratio, rival_d = match_rivals(cand, link_support(links, links.weight), k)
+    rival_match, rival_d, rival_ratio = match_rivals(cand, link_support(links, links.weight), k)
     li = cand.left[k]
     rj = cand.right[k]
     m = Matches(u_left=left.u[li].astype(np.float32), u_right=right.u[rj].astype(np.float32),
@@ -133,34 +133,30 @@ def pmf_match(left: EdgeMap, right: EdgeMap, d_min: float, d_max: float, *,
                 string_id=left.string_id[li].astype(np.int32),
                 left_index=li.astype(np.int32), right_index=rj.astype(np.int32),
                 support=support[k].astype(np.float32), precision=_precision(left, right, li, rj),
-                rival_ratio=rival_ratio, rival_d=rival_d)
+                rival_match=rival_match, rival_d=rival_d, rival_ratio=rival_ratio)
     return m, cand, support
 
 
 def match_rivals(cand: Candidates, support: np.ndarray, k: np.ndarray
-                 ) -> tuple[np.ndarray, np.ndarray]:
-    """The strongest rivals of the accepted candidates ``k``: the other candidates of
-    their left or of their right edge, by their first-round PMF support ``support``
-    (every candidate alive), one at a smaller disparity (farther) and one at a larger
-    disparity (nearer). A rival nearly as well supported as the match makes it
-    ambiguous (a uniqueness ratio, as in SGBM's): on a periodic pattern the candidates a
-    period apart are supported alike by the neighbouring edges, and the winner may be
-    the one a period off.
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The rivals of the accepted candidates ``k``: the other candidates of their left or
+    of their right edge, with their first-round PMF support ``support`` (every
+    candidate alive) over the match's. A rival nearly as well supported as the match
+    makes it ambiguous (a uniqueness ratio, as in SGBM's): on a periodic pattern the
+    candidates a period apart are supported alike, and the winner may be a period off.
 
     Args:
         cand: candidates (M).
         support: (M,) float64 first-round support (``link_support`` of all links).
         k: (K,) indices of the accepted candidates.
     Returns:
-        (ratio (K, 2) float32: each rival's support over the match's, column 0 the
-        farther rival, 1 the nearer, 0 if none; d (K, 2) float32: their disparities,
-        NaN if none).
+        (match (R,) int32: the index into ``k`` each rival rivals, ascending;
+        d (R,) float32: the rival's disparity, pixels; ratio (R,) float32: its support
+        over the match's).
     """
     n = k.shape[0]
-    ratio = np.zeros((n, 2), np.float32)
-    rival_d = np.full((n, 2), np.nan, np.float32)
     if n == 0:
-        return ratio, rival_d
+        return np.zeros(0, np.int32), np.zeros(0, np.float32), np.zeros(0, np.float32)
     own_l, own_r = cand.left[k], cand.right[k]
     o_l, c_l = _expand(np.searchsorted(cand.left, own_l, 'left'),
                        np.searchsorted(cand.left, own_l, 'right'))
@@ -169,20 +165,11 @@ def match_rivals(cand: Candidates, support: np.ndarray, k: np.ndarray
     o_r, p_r = _expand(np.searchsorted(s_r, own_r, 'left'), np.searchsorted(s_r, own_r, 'right'))
     owner = np.concatenate((o_l, o_r))
     comp = np.concatenate((c_l, by_r[p_r]))
-    keep = np.flatnonzero(comp != k[owner])
-    owner, comp = owner[keep], comp[keep]
-    if owner.size == 0:
-        return ratio, rival_d
-    side = (cand.d[comp] > cand.d[k[owner]]).astype(np.int64)
-    r = support[comp] / np.maximum(support[k[owner]], 1e-12)
-    key = owner * 2 + side
-    o = np.lexsort((r, key))
-    last = np.ones(o.size, bool)
-    last[:-1] = key[o][1:] != key[o][:-1]
-    best = o[last]
-    ratio[owner[best], side[best]] = r[best]
-    rival_d[owner[best], side[best]] = cand.d[comp[best]]
-    return ratio, rival_d
+    keep = comp != k[owner]
+    order = np.argsort(owner[keep], kind='stable')
+    owner, comp = owner[keep][order], comp[keep][order]
+    ratio = support[comp] / np.maximum(support[k[owner]], 1e-12)
+    return owner.astype(np.int32), cand.d[comp].astype(np.float32), ratio.astype(np.float32)
 
 
 def _precision(left: EdgeMap, right: EdgeMap, li: np.ndarray, rj: np.ndarray) -> np.ndarray | None:

@@ -82,11 +82,10 @@ class Matches:
         precision: (K,) float32 ``1 / sqrt(1/cL^2 + 1/cR^2)`` of the left and right edges'
             curvatures c (``EdgeMap.curvature``): the disparity's noise is about
             ``0.7 * gradient noise / precision`` pixels. None if unknown.
-        rival_ratio: (K, 2) float32, the strongest rival of each match (`match_rivals`)
-            at a smaller disparity (column 0: farther) and at a larger one (column 1:
-            nearer): its first-round PMF support over the match's; 0 if none. None if
-            unknown.
-        rival_d: (K, 2) float32 those rivals' disparities, pixels (NaN if none).
+        rival_match, rival_d, rival_ratio: the rivals of the matches (`match_rivals`),
+            one entry each: (R,) int32 the match it rivals (ascending), (R,) float32 its
+            disparity, pixels, and (R,) float32 its first-round PMF support over the
+            match's. None if unknown.
     """
 
     u_left: np.ndarray
@@ -99,8 +98,9 @@ class Matches:
     right_index: np.ndarray
     support: np.ndarray
     precision: np.ndarray | None = None
-    rival_ratio: np.ndarray | None = None
+    rival_match: np.ndarray | None = None
     rival_d: np.ndarray | None = None
+    rival_ratio: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.v.shape[0])
