@@ -88,7 +88,7 @@ class GpodConfig(PlausiblePlaneConfig):
         'repetitive pattern, e.g. paving joints matched one tile off); 0 = off',
         range=(0.0, 1.0))
     ambiguous_match_ratio: float = param(
-        0.6, 'A matched edge pixel is no evidence of an obstacle (of a drop-off) when '
+        0.8, 'A matched edge pixel is no evidence of an obstacle (of a drop-off) when '
         'another candidate match of its left or right edge, at a smaller (larger) disparity '
         'on the ground (within the threshold), had at least this fraction of its '
         'first-round PMF support: an ambiguous match, perhaps ground matched a period off '

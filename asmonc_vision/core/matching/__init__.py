@@ -23,11 +23,10 @@ After Pollard, Mayhew & Frisby (PMF, 1985), as used by GPOD (Molton et al. 1998,
    has been matched supports only through its accepted match -- for ``iterations``
    rounds.
 
-4. Rivals (:func:`match_rivals`): for each accepted match, the best supported other
-   candidate of its left or right edge on either side of its disparity, and its support
-   over the match's (first round, every candidate alive): a uniqueness ratio, for the
-   user to call a match ambiguous (a periodic pattern supports candidates a period apart
-   alike).
+4. Rivals (:func:`match_rivals`): for each accepted match, the other candidates of its
+   left and right edge, with their first-round support (every candidate alive) over the
+   match's: a uniqueness ratio, by which the user may call a match ambiguous (a
+   periodic pattern supports candidates a period apart alike).
 
 Disparities are sub-pixel, from the sub-pixel edge positions in both images.
 
