@@ -98,13 +98,13 @@ def reports_ahead(profile, surface: bool, frames: int = 4, seed: int = 0,
                                   'crest at 5 m'])
 @pytest.mark.slow
 def test_a_bend_ahead_is_ground(name, seed):
-    """With the surface at most two reports per frame from 3 m on, at most a quarter of
-    those of the plane alone (up to 30 per frame on the rise; a drop of 45 cm on the
-    fall and the crest)."""
+    """With the surface at most two reports per frame from 3 m on, and at most a quarter of
+    those of the plane alone or one frame's two (up to 30 per frame on the rise; a drop of
+    45 cm on the fall and the crest)."""
     with_surface = reports_ahead(PROFILES[name], True, seed=seed)
     plane_only = reports_ahead(PROFILES[name], False, seed=seed)
     assert len(with_surface) >= 2 and max(with_surface) <= 2, with_surface
-    assert sum(with_surface) <= max(0.25 * sum(plane_only), 1), (with_surface, plane_only)
+    assert sum(with_surface) <= max(0.25 * sum(plane_only), 2), (with_surface, plane_only)
     if name.startswith('rise'):
         assert sum(plane_only) >= 5 * len(plane_only)        # the case it is for
 

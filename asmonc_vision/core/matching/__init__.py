@@ -23,6 +23,11 @@ After Pollard, Mayhew & Frisby (PMF, 1985), as used by GPOD (Molton et al. 1998,
    has been matched supports only through its accepted match -- for ``iterations``
    rounds.
 
+4. Rivals (:func:`match_rivals`): for each accepted match, the other candidates of its
+   left and right edge, with their first-round support (every candidate alive) over the
+   match's: a uniqueness ratio, by which the user may call a match ambiguous (a
+   periodic pattern supports candidates a period apart alike).
+
 Disparities are sub-pixel, from the sub-pixel edge positions in both images.
 
 The pair, grouping and selection loops run compiled by numba when it is installed
@@ -31,10 +36,11 @@ The pair, grouping and selection loops run compiled by numba when it is installe
 from asmonc_vision.core.matching.candidates import (candidate_matches, disc_offsets,
                                                    disparity_gradient_interval)
 from asmonc_vision.core.matching.kernels import warm_up
-from asmonc_vision.core.matching.selection import match_edges, pmf_match, select_matches
+from asmonc_vision.core.matching.selection import (match_edges, match_rivals, pmf_match,
+                                                   select_matches)
 from asmonc_vision.core.matching.support import pmf_support, support_links
 from asmonc_vision.core.matching.types import Candidates, Matches, SupportLinks
 
 __all__ = ['Candidates', 'SupportLinks', 'Matches', 'candidate_matches', 'disc_offsets',
            'disparity_gradient_interval', 'support_links', 'pmf_support', 'select_matches',
-           'pmf_match', 'match_edges', 'warm_up']
+           'pmf_match', 'match_edges', 'match_rivals', 'warm_up']

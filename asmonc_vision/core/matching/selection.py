@@ -6,7 +6,7 @@ import numpy as np
 
 from asmonc_vision.core.edges import EdgeMap
 from asmonc_vision.core.matching import kernels
-from asmonc_vision.core.matching.candidates import candidate_matches
+from asmonc_vision.core.matching.candidates import _expand, candidate_matches
 from asmonc_vision.core.matching.support import link_support, support_links
 from asmonc_vision.core.matching.types import Candidates, Matches, SupportLinks
 
@@ -124,6 +124,7 @@ def pmf_match(left: EdgeMap, right: EdgeMap, d_min: float, d_max: float, *,
     acc, support = select_matches(cand, links, left, right, iterations=iterations,
                                   min_support=min_support)
     k = np.flatnonzero(acc)
+    rival_match, rival_d, rival_ratio = match_rivals(cand, link_support(links, links.weight), k)
     li = cand.left[k]
     rj = cand.right[k]
     m = Matches(u_left=left.u[li].astype(np.float32), u_right=right.u[rj].astype(np.float32),
@@ -131,8 +132,44 @@ def pmf_match(left: EdgeMap, right: EdgeMap, d_min: float, d_max: float, *,
                 strength=(0.5 * (left.strength[li] + right.strength[rj])).astype(np.float32),
                 string_id=left.string_id[li].astype(np.int32),
                 left_index=li.astype(np.int32), right_index=rj.astype(np.int32),
-                support=support[k].astype(np.float32), precision=_precision(left, right, li, rj))
+                support=support[k].astype(np.float32), precision=_precision(left, right, li, rj),
+                rival_match=rival_match, rival_d=rival_d, rival_ratio=rival_ratio)
     return m, cand, support
+
+
+def match_rivals(cand: Candidates, support: np.ndarray, k: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The rivals of the accepted candidates ``k``: the other candidates of their left or
+    of their right edge, with their first-round PMF support ``support`` (every
+    candidate alive) over the match's. A rival nearly as well supported as the match
+    makes it ambiguous (a uniqueness ratio, as in SGBM's): on a periodic pattern the
+    candidates a period apart are supported alike, and the winner may be a period off.
+
+    Args:
+        cand: candidates (M).
+        support: (M,) float64 first-round support (``link_support`` of all links).
+        k: (K,) indices of the accepted candidates.
+    Returns:
+        (match (R,) int32: the index into ``k`` each rival rivals, ascending;
+        d (R,) float32: the rival's disparity, pixels; ratio (R,) float32: its support
+        over the match's).
+    """
+    n = k.shape[0]
+    if n == 0:
+        return np.zeros(0, np.int32), np.zeros(0, np.float32), np.zeros(0, np.float32)
+    own_l, own_r = cand.left[k], cand.right[k]
+    o_l, c_l = _expand(np.searchsorted(cand.left, own_l, 'left'),
+                       np.searchsorted(cand.left, own_l, 'right'))
+    by_r = np.argsort(cand.right, kind='stable')
+    s_r = cand.right[by_r]
+    o_r, p_r = _expand(np.searchsorted(s_r, own_r, 'left'), np.searchsorted(s_r, own_r, 'right'))
+    owner = np.concatenate((o_l, o_r))
+    comp = np.concatenate((c_l, by_r[p_r]))
+    keep = comp != k[owner]
+    order = np.argsort(owner[keep], kind='stable')
+    owner, comp = owner[keep][order], comp[keep][order]
+    ratio = support[comp] / np.maximum(support[k[owner]], 1e-12)
+    return owner.astype(np.int32), cand.d[comp].astype(np.float32), ratio.astype(np.float32)
 
 
 def _precision(left: EdgeMap, right: EdgeMap, li: np.ndarray, rj: np.ndarray) -> np.ndarray | None:

@@ -82,6 +82,10 @@ class Matches:
         precision: (K,) float32 ``1 / sqrt(1/cL^2 + 1/cR^2)`` of the left and right edges'
             curvatures c (``EdgeMap.curvature``): the disparity's noise is about
             ``0.7 * gradient noise / precision`` pixels. None if unknown.
+        rival_match, rival_d, rival_ratio: the rivals of the matches (`match_rivals`),
+            one entry each: (R,) int32 the match it rivals (ascending), (R,) float32 its
+            disparity, pixels, and (R,) float32 its first-round PMF support over the
+            match's. None if unknown.
     """
 
     u_left: np.ndarray
@@ -94,6 +98,9 @@ class Matches:
     right_index: np.ndarray
     support: np.ndarray
     precision: np.ndarray | None = None
+    rival_match: np.ndarray | None = None
+    rival_d: np.ndarray | None = None
+    rival_ratio: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.v.shape[0])

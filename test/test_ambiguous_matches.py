@@ -1,0 +1,123 @@
+"""Ambiguous matches: each match's strongest rivals (core.matching.match_rivals) and
+GPOD's rule that a match whose nearly as well supported rival lies on the ground is no
+evidence of an obstacle or a drop-off."""
+import dataclasses
+
+import cv2
+import numpy as np
+import pytest
+
+from asmonc_vision.core.edges import detect_vertical_edges
+from asmonc_vision.core.gpod import GpodConfig, GpodDetector
+from asmonc_vision.core.matching import Candidates, Matches, match_rivals, pmf_match
+
+
+def test_the_rivals_are_the_other_candidates_of_the_left_and_right_edge():
+    # candidates: (left, right, d); 0 is a match; 1, 2 share its left edge, 4 its
+    # right edge; 3 shares neither
+    cand = Candidates(left=np.array([0, 0, 0, 1, 2]), right=np.array([5, 3, 7, 3, 5]),
+                      d=np.array([10.0, 12.0, 7.0, 4.0, 8.5]))
+    support = np.array([2.0, 1.0, 1.5, 9.0, 1.8])
+    match, d, ratio = match_rivals(cand, support, np.array([3, 0]))
+    assert match.dtype == np.int32 and d.dtype == np.float32 and ratio.dtype == np.float32
+    # match 0 (candidate 3): alone on its left edge; its right edge's other candidate, 1
+    # match 1 (candidate 0): candidates 1 and 2 (its left edge) and 4 (its right edge)
+    np.testing.assert_array_equal(match, [0, 1, 1, 1])
+    got = sorted(zip(match.tolist(), d.tolist(), ratio.tolist()))
+    np.testing.assert_allclose(got, [(0, 12.0, 1.0 / 9.0), (1, 7.0, 0.75), (1, 8.5, 0.9),
+                                     (1, 12.0, 0.5)], rtol=1e-6)
+    match, d, ratio = match_rivals(cand, support, np.zeros(0, np.intp))
+    assert match.shape == d.shape == ratio.shape == (0,)
+
+
+def _pair(period, shift, h=120, w=200, seed=3):
+    """Rows of a faint random texture, with vertical bars of ``period`` px (or none),
+    the right image shifted by ``shift`` px."""
+    rng = np.random.default_rng(seed)
+    t = cv2.GaussianBlur(rng.normal(0.0, 1.0, (h, w + 60)).astype(np.float32), (0, 0), 1.5)
+    tex = 128.0 + t / t.std() * 10.0
+    if period:
+        bars = (np.cos(2.0 * np.pi * np.arange(w + 60) / period) > 0)[None, :]
+        tex = cv2.GaussianBlur((tex + 60.0 * bars).astype(np.float32), (0, 0), 1.0)
+    uu, vv = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    right = cv2.remap(tex.astype(np.float32), uu + shift, vv, cv2.INTER_CUBIC)
+    out = [np.clip(img + rng.normal(0.0, 1.0, img.shape), 0, 255).astype(np.uint8)
+           for img in (tex[:, :w], right)]
+    return [detect_vertical_edges(img, min_string_length=3) for img in out]
+
+
+def _strongest(m):
+    """(K,) the strongest rival's support ratio and disparity of each match (0, NaN if
+    none)."""
+    ratio = np.zeros(len(m))
+    d = np.full(len(m), np.nan)
+    order = np.lexsort((m.rival_ratio, m.rival_match))
+    last = np.r_[m.rival_match[order][1:] != m.rival_match[order][:-1], True]
+    best = order[last]
+    ratio[m.rival_match[best]] = m.rival_ratio[best]
+    d[m.rival_match[best]] = m.rival_d[best]
+    return ratio, d
+
+
+def test_a_periodic_pattern_gives_rivals_a_period_off_as_strong_as_the_match():
+    period, shift = 9.0, 12.3
+    m = pmf_match(*_pair(period, shift), 1.0, 40.0)[0]
+    assert np.all(np.diff(m.rival_match) >= 0) and m.rival_match.max() < len(m)
+    # bars a period apart are supported alike: the matcher picks a period off on most
+    assert np.mean(np.abs(m.d - shift) > 1.0) > 0.5
+    ratio, d = _strongest(m)
+    assert np.mean(ratio >= 0.9) > 0.95
+    off = (d - m.d) / period
+    assert np.mean(np.abs(off - np.rint(off)) * period < 1.0) > 0.9
+    assert np.mean(np.abs(np.rint(off)) >= 1) > 0.9
+    # the true disparity is among the rivals of nearly every match a period off
+    wrong = np.flatnonzero(np.abs(m.d - shift) > 1.0)
+    true = (np.abs(m.rival_d - shift) < 1.0) & (m.rival_ratio >= 0.6)
+    assert np.isin(wrong, m.rival_match[true]).mean() > 0.9
+    # without the bars, a nearly as strong rival is much rarer
+    m0 = pmf_match(*_pair(0.0, shift), 1.0, 40.0)[0]
+    assert np.mean(np.abs(m0.d - shift) > 1.0) < 0.05
+    assert np.mean(_strongest(m0)[0] >= 0.9) < 0.35
+
+
+def _matches(d, rivals):
+    """Matches of disparities ``d`` with rivals (match, disparity, support ratio)."""
+    k = len(d)
+    z = np.zeros(k, np.float32)
+    r = np.asarray(rivals, np.float64).reshape(-1, 3)
+    return Matches(u_left=z + 50, u_right=z + 50 - d, v=np.arange(k, dtype=np.int32),
+                   d=np.asarray(d, np.float32), strength=z + 20, string_id=np.zeros(k, np.int32),
+                   left_index=np.arange(k, dtype=np.int32), right_index=np.arange(k, dtype=np.int32),
+                   support=z + 1, rival_match=r[:, 0].astype(np.int32),
+                   rival_d=r[:, 1].astype(np.float32), rival_ratio=r[:, 2].astype(np.float32))
+
+
+@pytest.mark.parametrize('ratio', [0.6, 0.0])
+def test_a_rival_on_the_ground_takes_the_evidence_away(ratio):
+    det = GpodDetector(GpodConfig(ambiguous_match_ratio=ratio))
+    pd = np.full(6, 10.0)                 # the ground's disparity at every match
+    thr = np.full(6, 0.8)
+    m = _matches([15.5, 15.5, 15.5, 4.6, 4.6, 4.6],
+                 [(0, 10.4, 0.7), (0, 4.5, 1.0),        # one on the ground, one beyond
+                  (1, 10.0, 0.5),                       # too weak
+                  (2, 12.0, 0.9), (2, 8.0, 0.9),        # beside the ground, not on it
+                  (3, 21.0, 1.0), (3, 9.5, 0.95),       # one on the ground, one above
+                  (4, 13.0, 0.95),                      # above the ground
+                  (5, 10.0, 0.2), (5, 3.0, 0.8)])       # on the ground too weak
+    no_obst, no_drop = det._ambiguous_matches(m, pd, thr)
+    if ratio == 0.0:                      # off
+        assert not no_obst.any() and not no_drop.any()
+        return
+    # a rival on the ground nearly as strong, farther than an obstacle's match or
+    # nearer than a drop's: no evidence of either
+    np.testing.assert_array_equal(no_obst, [True, False, False, False, False, False])
+    np.testing.assert_array_equal(no_drop, [False, False, False, True, False, False])
+    # a rival marks the side it lies on only (here, matches on the ground themselves)
+    m = _matches([15.5, 4.6], [(0, 16.0, 1.0), (1, 4.0, 1.0)])
+    no_obst, no_drop = det._ambiguous_matches(m, np.array([15.3, 4.4]), thr[:2])
+    np.testing.assert_array_equal(no_obst, [False, True])
+    np.testing.assert_array_equal(no_drop, [True, False])
+    # matches made without rivals (other matchers) are never ambiguous
+    plain = dataclasses.replace(_matches([15.5], []), rival_match=None, rival_d=None,
+                                rival_ratio=None)
+    assert not any(a.any() for a in det._ambiguous_matches(plain, pd[:1], thr[:1]))
