@@ -87,7 +87,8 @@ def _matches(d, rivals):
     r = np.asarray(rivals, np.float64).reshape(-1, 3)
     return Matches(u_left=z + 50, u_right=z + 50 - d, v=np.arange(k, dtype=np.int32),
                    d=np.asarray(d, np.float32), strength=z + 20, string_id=np.zeros(k, np.int32),
-                   left_index=np.arange(k, dtype=np.int32), right_index=np.arange(k, dtype=np.int32),
+                   left_index=np.arange(k, dtype=np.int32),
+                   right_index=np.arange(k, dtype=np.int32),
                    support=z + 1, rival_match=r[:, 0].astype(np.int32),
                    rival_d=r[:, 1].astype(np.float32), rival_ratio=r[:, 2].astype(np.float32))
 

@@ -9,7 +9,7 @@ from asmonc_vision.core.matching import kernels
 from asmonc_vision.core.matching.types import Candidates
 
 
-def _expand(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def expand_ranges(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Expand index ranges [lo_i, hi_i) to (owner i, index) pairs, vectorised.
 
     Returns:
@@ -76,7 +76,7 @@ def candidate_matches(left: EdgeMap, right: EdgeMap, d_min: float, d_max: float,
     hi = np.empty(len(left), np.intp)
     lo[order_l] = np.searchsorted(key_r, key_l - d_max, side='left')
     hi[order_l] = np.searchsorted(key_r, key_l - d_min, side='right')
-    li, pos = _expand(lo, hi)
+    li, pos = expand_ranges(lo, hi)
     rj = order_r[pos]
     sl = left.strength[li]
     sr = right_strength[rj]
