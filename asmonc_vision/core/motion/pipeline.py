@@ -59,7 +59,7 @@ class EgomotionConfig:
                         'opencv', choices=METHODS)
     detector: str = param('shi_tomasi', 'corner detector: shi_tomasi (+ cornerSubPix) or '
                           'wang_brady (the paper\'s)', choices=DETECTORS)
-    max_corners: int = param(300, 'most corners per image, spread over a 4x4 grid',
+    max_corners: int = param(500, 'most corners per image, spread over a 4x4 grid',
                              range=(20, 5000))
     min_corner_distance_px: float = param(5.0, 'least distance between corners, pixels',
                                           range=(1.0, 50.0))
@@ -71,16 +71,17 @@ class EgomotionConfig:
     subpix_half_window: int = param(5, 'shi_tomasi: sub-pixel window half size (the '
                                     'cornerSubPix condition), pixels (0: integer positions)',
                                     range=(0, 15))
-    smoothing_sigma_px: float = param(1.0, 'Gaussian smoothing of both images before the '
+    smoothing_sigma_px: float = param(1.5, 'Gaussian smoothing of both images before the '
                                       'corners and NCC windows, sigma in pixels (0: none); '
                                       'on faint texture (smooth pavement, motion blur) the '
                                       'finest-scale corners are camera noise and move from '
                                       'frame to frame', range=(0.0, 5.0))
-    min_corner_strength: float = param(0.3, 'least absolute corner strength (smaller '
+    min_corner_strength: float = param(0.15, 'least absolute corner strength (smaller '
                                        'structure-tensor eigenvalue of the smoothed image), '
                                        '(grey levels/px)^2; camera noise of 2 grey levels '
-                                       'alone gives about 0.1 after a 1 px smoothing (about '
-                                       '1 without), so a dark or blank view yields no corners',
+                                       'alone gives about 0.05 after a 1.5 px smoothing '
+                                       '(about 1 without), so a dark or blank view yields no '
+                                       'corners',
                                        range=(0.0, 1000.0))
     patch_half_size: int = param(4, 'NCC window half size (windows are 2n+1 square), pixels',
                                  range=(2, 15))
