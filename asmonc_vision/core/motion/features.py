@@ -156,7 +156,7 @@ def shi_tomasi_corners(img: np.ndarray, max_corners: int = 300, quality: float =
     """Shi–Tomasi corners refined by ``cv2.cornerSubPix``.
 
     Args:
-        img: (H, W) uint8.
+        img: (H, W) uint8 or float32.
         max_corners: most corners returned (spread over a ``grid`` of cells).
         quality: minimum eigenvalue relative to the strongest corner's.
         min_distance: pixels between corners.
@@ -172,7 +172,7 @@ def shi_tomasi_corners(img: np.ndarray, max_corners: int = 300, quality: float =
         (N, 2) float64 (u, v) pixels.
     """
     h, w = img.shape
-    mask = np.zeros_like(img)
+    mask = np.zeros((h, w), np.uint8)
     mask[border:h - border, border:w - border] = 255
     c = cv2.goodFeaturesToTrack(img, maxCorners=4 * max_corners, qualityLevel=quality,
                                 minDistance=min_distance, mask=mask, blockSize=block_size,

@@ -59,19 +59,30 @@ class EgomotionConfig:
                         'opencv', choices=METHODS)
     detector: str = param('shi_tomasi', 'corner detector: shi_tomasi (+ cornerSubPix) or '
                           'wang_brady (the paper\'s)', choices=DETECTORS)
-    max_corners: int = param(300, 'most corners per image, spread over a 4x4 grid',
+    max_corners: int = param(500, 'most corners per image, spread over a 4x4 grid',
                              range=(20, 5000))
     min_corner_distance_px: float = param(5.0, 'least distance between corners, pixels',
                                           range=(1.0, 50.0))
-    corner_quality: float = param(0.005, 'shi_tomasi: least corner strength relative to the '
-                                  'strongest', range=(1e-5, 0.5))
+    corner_quality: float = param(0.0005, 'shi_tomasi: least corner strength relative to the '
+                                  'strongest (kept low: one high-contrast object, a pole '
+                                  'against the sky, must not hide the pavement; '
+                                  'min_corner_strength is the absolute bound)',
+                                  range=(1e-5, 0.5))
     subpix_half_window: int = param(5, 'shi_tomasi: sub-pixel window half size (the '
                                     'cornerSubPix condition), pixels (0: integer positions)',
                                     range=(0, 15))
-    min_corner_strength: float = param(1.5, 'least absolute corner strength (smaller '
-                                       'structure-tensor eigenvalue), (grey levels/px)^2; '
-                                       'camera noise alone gives about 1, so a dark or blank '
-                                       'view yields no corners', range=(0.0, 1000.0))
+    smoothing_sigma_px: float = param(1.5, 'Gaussian smoothing of both images before the '
+                                      'corners and NCC windows, sigma in pixels (0: none); '
+                                      'on faint texture (smooth pavement, motion blur) the '
+                                      'finest-scale corners are camera noise and move from '
+                                      'frame to frame', range=(0.0, 5.0))
+    min_corner_strength: float = param(0.15, 'least absolute corner strength (smaller '
+                                       'structure-tensor eigenvalue of the smoothed image), '
+                                       '(grey levels/px)^2; camera noise of 2 grey levels '
+                                       'alone gives about 0.05 after a 1.5 px smoothing '
+                                       '(about 1 without), so a dark or blank view yields no '
+                                       'corners',
+                                       range=(0.0, 1000.0))
     patch_half_size: int = param(4, 'NCC window half size (windows are 2n+1 square), pixels',
                                  range=(2, 15))
     min_ncc: float = param(0.7, 'least normalised cross-correlation of a match',
@@ -221,9 +232,12 @@ class EgomotionEstimator:
                   min_distance=c.min_corner_distance_px,
                   border=max(6, c.patch_half_size + 1), subpix_half_window=c.subpix_half_window,
                   quality=c.corner_quality, min_strength=c.min_corner_strength)
-        pl = detect_corners(left, **kw)
-        pr = detect_corners(right, **kw)
         lf, rf = left.astype(np.float32), right.astype(np.float32)
+        if c.smoothing_sigma_px > 0:
+            lf = cv2.GaussianBlur(lf, (0, 0), c.smoothing_sigma_px)
+            rf = cv2.GaussianBlur(rf, (0, 0), c.smoothing_sigma_px)
+        pl = detect_corners(lf, **kw)
+        pr = detect_corners(rf, **kw)
         dl, vl = patches(lf, pl, c.patch_half_size)
         dr, vr = patches(rf, pr, c.patch_half_size)
         pl, dl = pl[vl], dl[vl]
