@@ -1,6 +1,6 @@
 """Ambiguous matches: each match's strongest rivals (core.matching.match_rivals) and
 GPOD's rule that a match whose nearly as well supported rival lies on the ground is no
-evidence of an obstacle or a drop-off."""
+evidence of a drop-off (obstacle evidence is not judged by it)."""
 import dataclasses
 
 import cv2
@@ -105,20 +105,18 @@ def test_a_rival_on_the_ground_takes_the_evidence_away(ratio):
                   (3, 21.0, 1.0), (3, 9.5, 0.95),       # one on the ground, one above
                   (4, 13.0, 0.95),                      # above the ground
                   (5, 10.0, 0.2), (5, 3.0, 0.8)])       # on the ground too weak
-    no_obst, no_drop = det._ambiguous_matches(m, pd, thr)
+    no_drop = det._ambiguous_drops(m, pd, thr)
     if ratio == 0.0:                      # off
-        assert not no_obst.any() and not no_drop.any()
+        assert not no_drop.any()
         return
-    # a rival on the ground nearly as strong, farther than an obstacle's match or
-    # nearer than a drop's: no evidence of either
-    np.testing.assert_array_equal(no_obst, [True, False, False, False, False, False])
+    # a rival on the ground nearly as strong and nearer than a drop's match: no evidence
+    # of a drop (an obstacle's match with a farther rival on the ground is kept)
     np.testing.assert_array_equal(no_drop, [False, False, False, True, False, False])
     # a rival marks the side it lies on only (here, matches on the ground themselves)
     m = _matches([15.5, 4.6], [(0, 16.0, 1.0), (1, 4.0, 1.0)])
-    no_obst, no_drop = det._ambiguous_matches(m, np.array([15.3, 4.4]), thr[:2])
-    np.testing.assert_array_equal(no_obst, [False, True])
+    no_drop = det._ambiguous_drops(m, np.array([15.3, 4.4]), thr[:2])
     np.testing.assert_array_equal(no_drop, [True, False])
     # matches made without rivals (other matchers) are never ambiguous
     plain = dataclasses.replace(_matches([15.5], []), rival_match=None, rival_d=None,
                                 rival_ratio=None)
-    assert not any(a.any() for a in det._ambiguous_matches(plain, pd[:1], thr[:1]))
+    assert not det._ambiguous_drops(plain, pd[:1], thr[:1]).any()

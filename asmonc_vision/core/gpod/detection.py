@@ -203,8 +203,8 @@ class Detection(PlaneTracking):
                        c.min_matched_run, max(c.max_required_run, c.min_matched_run))
         reliable = run >= need
         usable = reliable & in_range
-        amb_obst, amb_drop = self._ambiguous_matches(m, pd, thr)
-        obst = (ex_mean > thr) & (h <= c.max_obstacle_height_m) & usable & ~amb_obst
+        amb_drop = self._ambiguous_drops(m, pd, thr)
+        obst = (ex_mean > thr) & (h <= c.max_obstacle_height_m) & usable
         below = (ex_mean < -thr) & (h >= -c.max_drop_depth_m)
         if obst.any():
             self._rejected_runs(el, m, cand, prev, run, reliable & in_range, h, excess, pd,
@@ -396,28 +396,27 @@ class Detection(PlaneTracking):
             return wi[head], top
         return None
 
-    def _ambiguous_matches(self, m: Matches, pd: np.ndarray, thr: np.ndarray
-                           ) -> tuple[np.ndarray, np.ndarray]:
-        """((K,) bool, (K,) bool): the matches that are no evidence of an obstacle, and
-        those that are none of a drop-off: a rival of the match (`match_rivals`) with at
-        least ``ambiguous_match_ratio`` of its first-round support lies on the ground
-        (within the pixel's threshold ``thr`` (K,) of the ground disparity ``pd`` (K,)),
-        farther than the match (for an obstacle) or nearer (for a drop-off): the edge
-        may as well be ground matched a period off."""
+    def _ambiguous_drops(self, m: Matches, pd: np.ndarray, thr: np.ndarray) -> np.ndarray:
+        """(K,) bool: the matches that are no evidence of a drop-off: a rival of the match
+        (`match_rivals`) with at least ``ambiguous_match_ratio`` of its first-round support
+        lies on the ground (within the pixel's threshold ``thr`` (K,) of the ground
+        disparity ``pd`` (K,)) and nearer than the match: the edge may as well be ground
+        matched a period off (a grate's bars). Obstacle evidence is not judged so: the face
+        of a 10 cm kerb has ground rivals as strong as its match, and a kerb must not be
+        lost to a grate's false reports."""
         k = len(m)
-        no_obst, no_drop = np.zeros(k, bool), np.zeros(k, bool)
+        no_drop = np.zeros(k, bool)
         r = self.config.ambiguous_match_ratio
         if (r <= 0 or m.rival_match is None or m.rival_d is None or m.rival_ratio is None
                 or k == 0):
-            return no_obst, no_drop
+            return no_drop
         j = m.rival_match
         rd = m.rival_d.astype(np.float64)
         sel = np.flatnonzero((m.rival_ratio >= r) & (np.abs(rd - pd[j]) <= thr[j]))
         if sel.size:
             nearer = rd[sel] > m.d[j[sel]]
             no_drop[j[sel[nearer]]] = True
-            no_obst[j[sel[~nearer]]] = True
-        return no_obst, no_drop
+        return no_drop
 
     def _ambiguous_strings(self, m: Matches, excess: np.ndarray, obst: np.ndarray,
                            cand: Candidates, el: EdgeMap, er: EdgeMap, threshold: float,

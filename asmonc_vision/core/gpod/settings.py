@@ -88,12 +88,13 @@ class GpodConfig(PlausiblePlaneConfig):
         'repetitive pattern, e.g. paving joints matched one tile off); 0 = off',
         range=(0.0, 1.0))
     ambiguous_match_ratio: float = param(
-        0.8, 'A matched edge pixel is no evidence of an obstacle (of a drop-off) when '
-        'another candidate match of its left or right edge, at a smaller (larger) disparity '
-        'on the ground (within the threshold), had at least this fraction of its '
-        'first-round PMF support: an ambiguous match, perhaps ground matched a period off '
-        '(a uniqueness ratio; on a periodic pattern, such as the bars of a grate, the '
-        'candidates a period apart are supported alike); 0 = off', range=(0.0, 10.0))
+        0.8, 'A matched edge pixel is no evidence of a drop-off when another candidate '
+        'match of its left or right edge, at a larger disparity on the ground (within the '
+        'threshold), had at least this fraction of its first-round PMF support: an '
+        'ambiguous match, perhaps ground matched a period off (a uniqueness ratio; on a '
+        'periodic pattern, such as the bars of a grate, the candidates a period apart are '
+        'supported alike). Obstacle evidence is not judged so (a kerb face has ground '
+        'rivals as strong); 0 = off', range=(0.0, 10.0))
     min_range_m: float = param(
         1.0, 'Nearest depth searched by the matcher, metres along the optical axis '
         '(largest disparity f*B/min_range)', range=(0.05, 100.0))
