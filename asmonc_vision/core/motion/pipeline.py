@@ -232,7 +232,8 @@ class EgomotionEstimator:
                   min_distance=c.min_corner_distance_px,
                   border=max(6, c.patch_half_size + 1), subpix_half_window=c.subpix_half_window,
                   quality=c.corner_quality, min_strength=c.min_corner_strength)
-        lf, rf = left.astype(np.float32), right.astype(np.float32)
+        lf: np.ndarray = left.astype(np.float32)
+        rf: np.ndarray = right.astype(np.float32)
         if c.smoothing_sigma_px > 0:
             lf = cv2.GaussianBlur(lf, (0, 0), c.smoothing_sigma_px)
             rf = cv2.GaussianBlur(rf, (0, 0), c.smoothing_sigma_px)
