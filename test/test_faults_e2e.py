@@ -84,14 +84,17 @@ def test_image_and_camera_info_faults(image_faults):
                  'bad camera_info: StereoCamera.f must be a finite value > 0 pixels, got inf',
                  'bad camera_info: StereoCamera.baseline must be in (0, 10) metres, got 0.0'):
         one_line(det, text)
-    # the reordered pair and the duplicate: each once (2.4 s apart). The reordered pair
-    # comes after a newer one; the duplicate's four messages arrive on four topics in an
-    # order the machine's timing decides: a second pair that is not newer, or a second
+    # the reordered pair and the duplicates (2.4 s apart). The reordered pair comes after
+    # a newer one: said once. A duplicated pair's four messages arrive on four topics in
+    # an order the machine's timing decides: a second pair that is not newer, or a second
     # image of one side that overwrites the first and leaves the other side's second
-    # image without a partner. Either way it is said once and nothing is done twice.
-    not_newer = sum('is not newer than the last one' in ln for ln in det.splitlines())
-    no_partner = sum('has no partner with the same stamp' in ln for ln in det.splitlines())
-    assert not_newer >= 1 and not_newer + no_partner == 2, (not_newer, no_partner)
+    # image without a partner; and the 0.1 s window may catch one side of the next pair
+    # too. Each is said (once or twice in all) and nothing is done twice.
+    lines = det.splitlines()
+    not_newer = [ln for ln in lines if 'is not newer than the last one' in ln]
+    no_partner = [ln for ln in lines if 'has no partner with the same stamp' in ln]
+    assert 1 <= len(not_newer) <= 2 and 2 <= len(not_newer) + len(no_partner) <= 3, \
+        (not_newer, no_partner)
     for name in (DET, EGO):
         said(diags, name, 'bad image: unsupported image encoding', 2)
         said(diags, name, 'bad image: image data has', 2)
