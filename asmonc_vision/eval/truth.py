@@ -83,6 +83,21 @@ def sim_metadata(bag: Path) -> dict | None:
         return None
 
 
+def _listed_feet(truth: dict, poses: dict, planes: dict):
+    """(stamp_ns, id, (2,) world x, y of the foot, height m) of every listed obstacle,
+    stamps ascending: its top lowered along the true ground normal, put into the world
+    with the true pose (arguments as `obstacles_from_listings`)."""
+    for stamp in sorted(truth):
+        T, pose, plane = truth[stamp], poses.get(stamp), planes.get(stamp)
+        if T is None or pose is None or plane is None:
+            continue
+        R, t = (np.asarray(x, float) for x in pose)
+        n = np.asarray(plane.normal_up, float)
+        for k in range(len(T)):
+            foot = np.asarray(T.position[k], float) - float(T.height[k]) * n
+            yield int(stamp), int(T.ids[k]), (R @ foot + t)[:2], float(T.height[k])
+
+
 def obstacles_from_listings(truth: dict, poses: dict, planes: dict) -> list[TrueObstacle]:
     """Point-set footprints from the listed obstacles (see the module doc).
 
@@ -94,18 +109,10 @@ def obstacles_from_listings(truth: dict, poses: dict, planes: dict) -> list[True
     feet: dict[int, list] = {}
     heights: dict[int, list] = {}
     first: dict[int, int] = {}
-    for stamp in sorted(truth):
-        T, pose, plane = truth[stamp], poses.get(stamp), planes.get(stamp)
-        if pose is None or plane is None:
-            continue
-        R, t = (np.asarray(x, float) for x in pose)
-        n = np.asarray(plane.normal_up, float)
-        for k in range(len(T)):
-            i = int(T.ids[k])
-            foot = np.asarray(T.position[k], float) - float(T.height[k]) * n
-            feet.setdefault(i, []).append((R @ foot + t)[:2])
-            heights.setdefault(i, []).append(float(T.height[k]))
-            first.setdefault(i, int(stamp))
+    for stamp, i, foot, height in _listed_feet(truth, poses, planes):
+        feet.setdefault(i, []).append(foot)
+        heights.setdefault(i, []).append(height)
+        first.setdefault(i, stamp)
     return [TrueObstacle(id=i, height=float(np.median(heights[i])),
                          footprint=np.array(feet[i]), points=True, appear_ns=first[i])
             for i in sorted(feet)]
@@ -157,18 +164,13 @@ def listed_tracks(frames, ids) -> dict[int, tuple]:
     one, its top lowered along the true ground normal, put into the world with the true
     pose (as `obstacles_from_listings`). id -> (stamps_ns (K,), [(1, 2) per stamp])."""
     out: dict[int, tuple] = {}
-    for f in frames:
-        if f.pose is None or f.truth is None or f.truth_plane is None:
-            continue
-        R, t = (np.asarray(x, float) for x in f.pose)
-        n = np.asarray(f.truth_plane.normal_up, float)
-        for k in range(len(f.truth)):
-            i = int(f.truth.ids[k])
-            if i in ids:
-                foot = np.asarray(f.truth.position[k], float) - float(f.truth.height[k]) * n
-                st, feet = out.setdefault(i, ([], []))
-                st.append(int(f.stamp_ns))
-                feet.append((R @ foot + t)[None, :2])
+    for stamp, i, foot, _ in _listed_feet({f.stamp_ns: f.truth for f in frames},
+                                          {f.stamp_ns: f.pose for f in frames},
+                                          {f.stamp_ns: f.truth_plane for f in frames}):
+        if i in ids:
+            st, feet = out.setdefault(i, ([], []))
+            st.append(stamp)
+            feet.append(foot[None, :])
     return {i: (np.array(st, np.int64), feet) for i, (st, feet) in out.items()}
 
 

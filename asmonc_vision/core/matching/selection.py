@@ -6,7 +6,7 @@ import numpy as np
 
 from asmonc_vision.core.edges import EdgeMap
 from asmonc_vision.core.matching import kernels
-from asmonc_vision.core.matching.candidates import expand_ranges, candidate_matches
+from asmonc_vision.core.matching.candidates import candidate_matches, expand_ranges
 from asmonc_vision.core.matching.support import link_support, support_links
 from asmonc_vision.core.matching.types import Candidates, Matches, SupportLinks
 
@@ -159,7 +159,7 @@ def match_rivals(cand: Candidates, support: np.ndarray, k: np.ndarray
         return np.zeros(0, np.int32), np.zeros(0, np.float32), np.zeros(0, np.float32)
     own_l, own_r = cand.left[k], cand.right[k]
     o_l, c_l = expand_ranges(np.searchsorted(cand.left, own_l, 'left'),
-                       np.searchsorted(cand.left, own_l, 'right'))
+                             np.searchsorted(cand.left, own_l, 'right'))
     by_r = np.argsort(cand.right, kind='stable')
     s_r = cand.right[by_r]
     o_r, p_r = expand_ranges(np.searchsorted(s_r, own_r, 'left'),
