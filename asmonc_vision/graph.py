@@ -94,9 +94,10 @@ GRAPH: tuple[GraphNode, ...] = (
     GraphNode('egomotion', 'egomotion_node', 'asmonc_vision.nodes.egomotion_node',
               'egomotion_node', 'images', ('/egomotion',), (LEFT_IMAGE,), 'egomotion.yaml',
               nice=10),
+    # the walk model's state changes at the pace of steps, not frames: it yields too
     GraphNode('gait', 'gait_filter_node', 'asmonc_vision.nodes.gait_node',
               'gait_filter_node', 'imu', ('/gait/state',), (IMU,), 'gait_filter.yaml',
-              start_late=True),
+              start_late=True, nice=5),
     GraphNode('alarm', 'alarm_node', 'asmonc_vision.nodes.alarm_node', 'alarm_node',
               'images', ('/alarms',), ('/obstacles',), 'alarm.yaml', start_late=True),
     GraphNode('audio', 'audio_node', 'asmonc_vision.nodes.audio_node', 'audio_node',

@@ -132,13 +132,41 @@ def test_launch_file_builds_the_graph(monkeypatch, tmp_path):
 
 
 def test_nodes_off_the_path_to_the_ear_run_at_a_lower_priority():
-    """The egomotion node (the detector does not wait for it) is started under ``nice``
-    by both starters; the detector, alarm and audio nodes are not."""
+    """The egomotion node (the detector does not wait for it) and the walk model are
+    started under ``nice`` by both starters; the detector, alarm and audio nodes are not."""
     entries = {e['name']: e for e in graph.launch_entries('bag', '/cfg', bag='/b')}
     assert entries['egomotion_node']['prefix'] == 'nice -n 10'
+    assert entries['gait_filter_node']['prefix'] == 'nice -n 5'
     for name in ('detector_node', 'alarm_node', 'audio_node', 'bag_player_node'):
         assert 'prefix' not in entries[name], name
     assert graph.by_name('egomotion').command_prefix() == ['nice', '-n', '10']
     assert graph.by_name('detector').command_prefix() == []
     with pytest.raises(ValueError, match='nice must be in'):
         graph.GraphNode('x', 'x', 'x', 'x', 'images', (), (), 'x.yaml', nice=25)
+
+
+_AUTOGROUP = Path('/proc/self/autogroup')
+_SHOW = ('import sys; from asmonc_vision.nodes.common import share_cpu_by_nice; '
+         'print(share_cpu_by_nice()); print(open("/proc/self/autogroup").read())')
+
+
+@pytest.mark.skipif(not _AUTOGROUP.exists(), reason='no autogroup scheduling (not Linux)')
+@pytest.mark.parametrize('own_session', [True, False])
+def test_a_niced_node_in_a_session_of_its_own_gives_its_autogroup_its_nice(own_session):
+    """With autogroups the kernel shares a CPU between sessions first: a niced node that
+    leads its own session sets its autogroup's nice to its own (else it would take a whole
+    session's share); one in the graph's session leaves the shared autogroup alone. The
+    graph's starter keeps its children in its session (process groups of their own)."""
+    import subprocess
+    import sys
+    out = subprocess.run(['nice', '-n', '7', sys.executable, '-c', _SHOW], capture_output=True,
+                         text=True, check=True, start_new_session=own_session).stdout.split('\n')
+    parent = _AUTOGROUP.read_text().split()
+    if own_session:
+        assert out[0] == 'True' and out[1].split()[-1] == '7', out
+    else:
+        assert out[0] == 'False' and out[1].split() == parent, out
+    import inspect
+    from asmonc_vision.replay import children
+    src = inspect.getsource(children.Child.__init__)
+    assert 'process_group=0' in src and 'start_new_session' not in src

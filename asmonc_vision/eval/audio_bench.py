@@ -2,9 +2,11 @@
 soundtrack's counts, over `asmonc run --audio` replays of bags at rate 1.
 
     python -m asmonc_vision.eval.audio_bench [BAG ...] [--out DIR] [--rate R] [--cpus LIST]
+        [--params-file YAML ...] [--record]
 
 For each bag (default: every bundled bag) it runs `asmonc run BAG --audio DIR/<bag>.wav`
-in a subprocess, then prints, from the audio node's ``.latency.json`` and
+in a subprocess (recording nothing, as the live graph; ``--record`` adds the
+recorder), then prints, from the audio node's ``.latency.json`` and
 ``.cues.json``: the pair-to-cue-onset latency (a pair's arrival at the audio node's
 process -- for a live camera, its stamp -- to the onset of the cue it decided, plus the
 device's output latency), the pair-to-contact latency (to the arrival of that pair's
@@ -37,6 +39,14 @@ def main(argv=None) -> int:
     p.add_argument('bags', nargs='*', type=Path)
     p.add_argument('--out', type=Path, default=None, help='keep the WAVs etc. here')
     p.add_argument('--rate', type=float, default=1.0)
+    p.add_argument('--params-file', type=Path, action='append', default=[],
+                   help='a ros__parameters YAML passed to the nodes (repeatable)')
+    p.add_argument('--warmup', type=float, default=1.0,
+                   help='also print the latencies of the pairs from this many seconds after '
+                        'the first one (the graph\'s start-up left out), s (default 1)')
+    p.add_argument('--record', action='store_true',
+                   help='also record every output topic (asmonc run --out): the recorder '
+                        'is no part of the live graph, and its CPU is counted then')
     p.add_argument('--cpus', default=None,
                    help='run each replay on these CPUs only (taskset list, e.g. 0)')
     args = p.parse_args(argv)
@@ -47,13 +57,16 @@ def main(argv=None) -> int:
     out = args.out or Path(tempfile.mkdtemp(prefix='asmonc-audio-bench-'))
     out.mkdir(parents=True, exist_ok=True)
     all_cue, all_contact, all_det, all_alarm = [], [], [], []
+    warm_cue, warm_contact = [], []
     print(f'{"bag":18s} {"cues":>4s} {"phr":>3s} {"min phrase gap":>14s} {"FAULTs":>6s}  '
           f'{"cue p50/p99 ms":>15s}  {"contact p50/p99 ms":>18s}')
     for bag in bags:
         wav = out / f'{bag.name}.wav'
         res = subprocess.run([*pin, sys.executable, '-m', 'asmonc_vision.cli.main', 'run',
                               str(bag), '--audio', str(wav), '--rate', str(args.rate), '--quiet',
-                              '--no-progress', '--out', str(out / bag.name)],
+                              '--no-progress',
+                              *(['--out', str(out / bag.name)] if args.record else []),
+                              *[a for f in args.params_file for a in ('--params-file', str(f))]],
                              capture_output=True, text=True)
         if res.returncode != 0 or not wav.exists():
             print(f'{bag.name:18s} run failed (exit {res.returncode}): '
@@ -61,12 +74,16 @@ def main(argv=None) -> int:
             continue
         lat = json.loads(wav.with_suffix('.latency.json').read_text())
         cues = json.loads(wav.with_suffix('.cues.json').read_text())
-        summary = json.loads((out / bag.name / 'summary.json').read_text())
-        faults = [a for a in summary['alarm_log']
+        faults = [a for a in cues['alarms']
                   if a['level'] == 4 and not a['text'].startswith('starting')]
         phrases = [e['t'] for e in cues['events'] if e['what'].startswith('phrase')]
         n_cues = sum(1 for e in cues['events'] if not e['what'].startswith('phrase'))
         gap = f'{np.diff(sorted(phrases)).min():.2f} s' if len(phrases) > 1 else '-'
+        for vals, times, into in ((lat['latency_s'], lat.get('latency_t_s'), warm_cue),
+                                  (lat.get('contact_latency_s', []), lat.get('contact_t_s'),
+                                   warm_contact)):
+            if times is not None:
+                into += [v for v, t in zip(vals, times) if t >= args.warmup]
         all_cue += lat['latency_s']
         all_contact += lat.get('contact_latency_s', [])
         all_det += lat.get('detector_latency_s', [])
@@ -78,6 +95,9 @@ def main(argv=None) -> int:
     print(f'{"all":18s} {"":4s} {"":3s} {"":14s} {"":6s}  {_pct(all_cue, 50)}/{_pct(all_cue, 99)}'
           f'  {_pct(all_contact, 50):>11s}/{_pct(all_contact, 99)}   '
           f'({len(all_cue)} cues, {len(all_contact)} pairs)')
+    print(f'{"from " + format(args.warmup, "g") + " s on":18s} {"":4s} {"":3s} {"":14s} {"":6s}  '
+          f'{_pct(warm_cue, 50)}/{_pct(warm_cue, 99)}  {_pct(warm_contact, 50):>11s}/'
+          f'{_pct(warm_contact, 99)}   ({len(warm_cue)} cues, {len(warm_contact)} pairs)')
     print(f'pair -> contact split, p50/p99 ms: pair -> its /obstacles (detector, egomotion) '
           f'{_pct(all_det, 50).strip()}/{_pct(all_det, 99).strip()}; /obstacles -> '
           f'/alarms/contact (alarm node) {_pct(all_alarm, 50).strip()}/'

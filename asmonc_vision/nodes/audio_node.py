@@ -51,7 +51,7 @@ from asmonc_vision.nodes.common import (ALARM_QOS, RESULT_QOS, SENSOR_QOS, Diagn
 from asmonc_vision.nodes.conversions import stamp_to_ns
 from asmonc_vision_msgs.msg import Alarm, ObstacleArray
 
-#: period of the cue timer on the steady clock, seconds
+#: period of the cue clock (a thread on the steady clock), seconds
 TICK = 0.01
 #: a stamp further than this from the camera time line is the alarm node's own clock
 LIVE_STAMP_GAP = 60.0
@@ -193,6 +193,9 @@ class AudioNode(Node):
         keep = None if self.node_config.latency_path else LATENCY_KEEP
         self.latencies: deque[float] = deque(maxlen=keep)
         self.contact_latencies: deque[float] = deque(maxlen=keep)
+        #: the pairs' times on the time line (s), beside the two above
+        self.latency_times: deque[float] = deque(maxlen=keep)
+        self.contact_times: deque[float] = deque(maxlen=keep)
         #: the contact latency split: pair -> its /obstacles here (detector), and
         #: /obstacles -> /alarms/contact (alarm node)
         self.detector_latencies: deque[float] = deque(maxlen=keep)
@@ -216,7 +219,12 @@ class AudioNode(Node):
                                  SENSOR_QOS)
         self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
         self.create_subscription(ObstacleArray, '/obstacles', self._on_obstacles, RESULT_QOS)
-        self._timer = self.create_timer(TICK, self._on_tick, clock=self._steady)
+        # the cue clock is a plain thread, not an rclpy timer: a hundred executor wake-ups
+        # a second cost about a tenth of a core on a small CPU, which the detector needs
+        self._tick_stop = threading.Event()
+        self._tick_thread = threading.Thread(target=self._tick_loop, name='audio_cue_clock',
+                                             daemon=True)
+        self._tick_thread.start()
 
         sp = self.renderer.speech
         if self.config.verbosity != 'tones' and not sp.available:
@@ -309,6 +317,7 @@ class AudioNode(Node):
             now = self._now()
             if arrived is not None:
                 self.contact_latencies.append(now - arrived + self.live.latency)
+                self.contact_times.append(self._stamp_time(ns) or 0.0)
             ob = next((a for s, a in reversed(self._obstacle_arrivals) if s == ns), None)
             if ob is not None:
                 self.alarm_latencies.append(now - ob)
@@ -327,6 +336,20 @@ class AudioNode(Node):
                 t = self.timeline_now()
                 if t is not None:
                     self._emit(self.renderer.degraded(t, silent), None)
+
+    def _tick_loop(self) -> None:
+        """Every TICK seconds: the repeats that are due (`_on_tick`), until `close`."""
+        due = time.monotonic()
+        while True:
+            due = max(due + TICK, time.monotonic())
+            if self._tick_stop.wait(due - time.monotonic()):
+                return
+            try:
+                self._on_tick()
+            except Exception as exc:  # noqa: BLE001 - the cue clock must keep running
+                if self._tick_stop.is_set():
+                    return
+                self.get_logger().error(f'cue clock: {exc!r}', throttle_duration_sec=5.0)
 
     def _on_tick(self) -> None:
         with self._lock:
@@ -376,6 +399,7 @@ class AudioNode(Node):
             arrived = self._arrival(stamp_ns)
             if arrived is not None:
                 self.latencies.append(self._now() - arrived + self.live.latency)
+                self.latency_times.append(self._stamp_time(stamp_ns) or 0.0)
         self._update_diagnostics()
 
     def _arrival(self, stamp_ns: int) -> float | None:
@@ -403,6 +427,9 @@ class AudioNode(Node):
         if self._closed:
             return
         self._closed = True
+        self._tick_stop.set()
+        if self._tick_thread is not threading.current_thread():
+            self._tick_thread.join(timeout=2.0)
         self.live.close()
         with self._lock:
             cfg = self.node_config
@@ -425,6 +452,8 @@ class AudioNode(Node):
                 Path(cfg.latency_path).write_text(json.dumps(
                     {'latency_s': [round(x, 5) for x in self.latencies],
                      'contact_latency_s': [round(x, 5) for x in self.contact_latencies],
+                     'latency_t_s': [round(x, 3) for x in self.latency_times],
+                     'contact_t_s': [round(x, 3) for x in self.contact_times],
                      'detector_latency_s': [round(x, 5) for x in self.detector_latencies],
                      'alarm_latency_s': [round(x, 5) for x in self.alarm_latencies],
                      'output_latency_s': self.live.latency}) + '\n')

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import os
 import signal
 import threading
 from typing import Any, Callable, TypeVar
@@ -246,6 +247,28 @@ def spin_until_shutdown(node: Node, interrupted: threading.Event | None = None,
             executor.remove_node(node)
 
 
+def share_cpu_by_nice() -> bool:
+    """Make this process's nice value count against the graph's other processes.
+
+    Linux's autogroup scheduling (``kernel.sched_autogroup_enabled``) shares a CPU between
+    sessions first and between the processes of a session second: a node started in a
+    session of its own (``setsid``, as some launchers start children) gets a whole
+    session's share whatever its nice value, and a niced node (the egomotion node, nice
+    10) then takes as much of a single core as the detector. A process that leads its own
+    session gives its autogroup its own nice value; one that shares its session changes
+    nothing (the autogroup is the others' too). Returns True when it set the autogroup.
+    """
+    try:
+        nice = os.getpriority(os.PRIO_PROCESS, 0)
+        if nice <= 0 or os.getsid(0) != os.getpid():
+            return False
+        with open('/proc/self/autogroup', 'w') as f:
+            f.write(str(nice))
+        return True
+    except OSError:             # no autogroups (not Linux, or turned off): nothing to do
+        return False
+
+
 def run_node(factory: Callable[..., Node], args: list[str] | None = None, *,
              name: str = 'asmonc_vision', errors: tuple[type[BaseException], ...] = (),
              failed: Callable[[Node], bool] | None = None, **kwargs: Any) -> None:
@@ -264,6 +287,7 @@ def run_node(factory: Callable[..., Node], args: list[str] | None = None, *,
         failed: called with the node before it is destroyed; true means exit status 2.
     """
     interrupted = quiet_interrupts()
+    share_cpu_by_nice()
     rclpy.init(args=args)
     node = None
     status = 0

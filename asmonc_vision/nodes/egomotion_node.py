@@ -13,8 +13,11 @@ queue messages. Publishes, per pair:
   previous one. ``header.stamp`` = the pair's stamp; ``header.frame_id`` =
   ``child_frame_id`` = the left image's frame id (``stereo_left_optical_frame``). It is a
   relative motion, not a tf frame (never broadcast on /tf). Published only when the
-  motion is from the pair received just before this one (no pair dropped, failed or
-  skipped in between).
+  motion is from the pair this node estimated just before (none failed or skipped in
+  between), so a subscriber's interval is the time since the previous /egomotion. The
+  node keeps to the newest pair (``max_pending_pairs`` 1): on a CPU too busy for every
+  pair it estimates over a longer interval rather than fall behind the camera, and the
+  pairs it had no time for are not in between.
 * ``/egomotion/odometry`` (nav_msgs/Odometry): the chained motions, the left optical
   frame's pose in ``odom_frame`` (the left optical frame of the first pair: x right, y
   down, z forward), with its covariance (6x6, x y z then rotation about x y z, in
@@ -60,6 +63,10 @@ class EgomotionNodeConfig(StereoInputConfig):
     core.motion.EgomotionConfig, under ``motion.``); the stereo input's are
     `StereoInputConfig`'s."""
 
+    max_pending_pairs: int = param(
+        1, 'pairs waiting for the estimator before the oldest is dropped: 1 keeps to the '
+        'newest pair (the motion then spans the pairs dropped; on a busy CPU the motion '
+        'stays current instead of falling behind the camera)', range=(1, 1000))
     odom_frame: str = param(
         'egomotion_origin', 'frame id of /egomotion/odometry: the left optical frame of the '
         'first pair (x right, y down, z forward)')
@@ -111,8 +118,8 @@ class EgomotionNode(StereoInputNode):
                      cam: StereoCamera) -> None:
         res = self.estimator.process(left, right, cam, pair.stamp_ns)
         self.last_result = res
-        consecutive = (self._ref_seq is not None and self._last_seq is not None
-                       and self._ref_seq == self._last_seq and pair.seq == self._last_seq + 1)
+        # from the pair estimated just before: pairs dropped from the queue are not between
+        consecutive = self._ref_seq is not None and self._ref_seq == self._last_seq
         self._last_seq = pair.seq
         frame_id = pair.left.header.frame_id or DEFAULT_LEFT_FRAME
         if res.ok:

@@ -246,6 +246,8 @@ class StereoInputNode(Node):
             while len(self._pending) > self._settings.max_pending_pairs:
                 old = self._pending.popleft()
                 self.frames_dropped += 1
+                if self._settings.max_pending_pairs == 1:
+                    continue            # a queue of one keeps to the newest pair by design
                 self.get_logger().warn(
                     f'{self.label} falling behind: dropped the pair at '
                     f'{old.stamp_ns / 1e9:.3f} s ({self.frames_dropped} dropped so far)',

@@ -31,8 +31,11 @@ class Child:
         self.log_path = log_dir / f'{log_name or name}.log'
         self._log = self.log_path.open('w')
         self._echo = echo
+        # a process group of its own (signalled as a group, no terminal Ctrl-C), in this
+        # session: the kernel's autogroup scheduling shares a CPU between sessions first,
+        # so a session per node would void the nodes' nice values (GraphNode.nice)
         self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                     env=env, text=True, bufsize=1, start_new_session=True)
+                                     env=env, text=True, bufsize=1, process_group=0)
         self._thread = threading.Thread(target=self._pump, daemon=True)
         self._thread.start()
 
