@@ -345,7 +345,7 @@ def fit_ground_surface(points: np.ndarray, plane: MetricPlane,
         inseg = (s >= s_a) & (s < s_b) & (np.abs(h - z_line) <= gate)
         n_in = int(inseg.sum())
         ss, ll, hh = s[inseg], lat[inseg], h[inseg]
-        width = float(np.percentile(ll, 90) - np.percentile(ll, 10)) if n_in else 0.0
+        width = float(np.subtract(*np.percentile(ll, [90, 10]))) if n_in else 0.0
         refused = ''
         z_b, step, spread, change = z_a + grade * length, math.nan, math.nan, math.nan
         halves = (int(np.count_nonzero(ss < s_a + 0.5 * length)),
