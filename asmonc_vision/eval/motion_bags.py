@@ -263,9 +263,11 @@ def score_recorded_egomotion(bag: Path, outputs: Path) -> dict | None:
     """Per-frame error of the /egomotion recorded by `asmonc run BAG --out OUTPUTS` against
     BAG's /ground_truth/camera_pose.
 
-    Each /egomotion is the left camera's motion T_prev_curr from the pair before its stamp
-    (the node publishes only for consecutive pairs). Returns None when the outputs hold no
-    /egomotion or the bag has no ground-truth pose; else {'motions', 'pairs', 'errors'}.
+    Each /egomotion is the left camera's motion T_prev_curr from the pair of the previous
+    /egomotion (the pair the node estimated before; pairs it dropped on a busy CPU lie in
+    between), as its subscribers take it; the first from the pair before its stamp.
+    Returns None when the outputs hold no /egomotion or the bag has no ground-truth pose;
+    else {'motions', 'pairs', 'errors'}.
     """
     from asmonc_vision.io import bagio
     from asmonc_vision.core.motion.geometry import (compose, invert, quaternion_to_matrix,
@@ -285,16 +287,19 @@ def score_recorded_egomotion(bag: Path, outputs: Path) -> dict | None:
         return None
     stamps = sorted(poses)
     previous = dict(zip(stamps[1:], stamps[:-1]))
-    errs, n = [], 0
+    errs, n, last = [], 0, None
     for _, _, m in bagio.read_messages(outputs, [t_ego]):
         n += 1
         stamp = bagio.header_stamp_ns(m)
-        if stamp not in previous:
+        ref = last if last is not None and last in poses and last < stamp \
+            else previous.get(stamp)
+        last = stamp
+        if stamp not in poses or ref is None:
             continue
         q, tr = m.transform.rotation, m.transform.translation
         r_est = quaternion_to_matrix([q.x, q.y, q.z, q.w])
         t_est = np.array([tr.x, tr.y, tr.z])
-        rt, tt = compose(*invert(*poses[previous[stamp]]), *poses[stamp])
+        rt, tt = compose(*invert(*poses[ref]), *poses[stamp])
         w = np.degrees(np.abs(rotation_error_components(r_est, rt)))
         errs.append((w[0], w[2], w[1], float(np.linalg.norm(t_est - tt)) * 1e3))
     return {'motions': n, 'pairs': len(stamps), 'errors': _error_stats(errs)}

@@ -13,9 +13,10 @@ queue messages. Publishes, per pair:
   previous one. ``header.stamp`` = the pair's stamp; ``header.frame_id`` =
   ``child_frame_id`` = the left image's frame id (``stereo_left_optical_frame``). It is a
   relative motion, not a tf frame (never broadcast on /tf). Published only when the
-  motion is from the pair this node estimated just before (none failed or skipped in
-  between), so a subscriber's interval is the time since the previous /egomotion. The
-  node keeps to the newest pair (``max_pending_pairs`` 1): on a CPU too busy for every
+  motion is from the pair this node estimated just before, so a subscriber's interval is
+  the time since the previous /egomotion (except the first motion after a pair that gave
+  none, which is from that pair: the interval a subscriber takes is then too long by
+  the pairs without a motion). The node keeps to the newest pair (``max_pending_pairs`` 1): on a CPU too busy for every
   pair it estimates over a longer interval rather than fall behind the camera, and the
   pairs it had no time for are not in between.
 * ``/egomotion/odometry`` (nav_msgs/Odometry): the chained motions, the left optical
