@@ -16,9 +16,9 @@ queue messages. Publishes, per pair:
   motion is from the pair this node estimated just before, so a subscriber's interval is
   the time since the previous /egomotion (except the first motion after a pair that gave
   none, which is from that pair: the interval a subscriber takes is then too long by
-  the pairs without a motion). The node keeps to the newest pair (``max_pending_pairs`` 1): on a CPU too busy for every
-  pair it estimates over a longer interval rather than fall behind the camera, and the
-  pairs it had no time for are not in between.
+  the pairs without a motion). The node keeps to the newest pair (``max_pending_pairs``
+  1): on a CPU too busy for every pair it estimates over a longer interval rather than
+  fall behind the camera, and the pairs it had no time for are not in between.
 * ``/egomotion/odometry`` (nav_msgs/Odometry): the chained motions, the left optical
   frame's pose in ``odom_frame`` (the left optical frame of the first pair: x right, y
   down, z forward), with its covariance (6x6, x y z then rotation about x y z, in
