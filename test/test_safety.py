@@ -9,8 +9,8 @@ from asmonc_vision.core.alarm import AlarmConfig, AlarmLevel
 from asmonc_vision.eval.evaluation import FrameObstacles
 from asmonc_vision.eval.alarm_replay import replay_alarms
 from asmonc_vision.eval.safety import (SafetyCriteria, SafetyTruth, TrueObstacle, TruthFrame,
-                                       corridor_range, polygon_distance, score_safety,
-                                       walking_mask)
+                                       corridor_range, format_safety, polygon_distance,
+                                       score_safety, walking_mask)
 
 #: left optical frame looking along world +x, level: optical z = world x, x = -y, y = -z
 R_X = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
@@ -65,6 +65,27 @@ def test_warned_when_the_alarm_is_stamped_exactly_at_the_first_frame_on_the_path
     assert s.frames_on_path_clear == 1
     # the frames on the path: x from 0.5 to 2.4, 20
     assert s.frames_on_path == 20
+
+
+def test_cue_lead_is_the_range_where_the_cue_began_over_the_walking_speed():
+    # walking at 1 m/s towards the box (near edge at 3 m): a CAUTION at frame 0 (3.0 m)
+    # leads contact by 3 s; one at frame 2 (2.8 m) by 2.8 s: warned in time both, cued
+    # 3 s ahead only the first
+    truth = SafetyTruth([BOX], walk(25))
+    s = score_safety(truth, [alarm(0, AlarmLevel.CAUTION, 1, 3.0)])
+    assert (s.warned, s.cued_ahead) == (1, 1)
+    assert s.path_obstacles[0]['cue_lead_s'] == pytest.approx(3.0)
+    s = score_safety(truth, [alarm(0, AlarmLevel.CLEAR), alarm(2, AlarmLevel.CAUTION, 1, 2.8)])
+    assert (s.warned, s.cued_ahead) == (1, 0)
+    assert s.path_obstacles[0]['cue_lead_s'] == pytest.approx(2.8)
+    # at 2 m/s the same 3 m are 1.5 s
+    s = score_safety(SafetyTruth([BOX], walk(15, speed=2.0)), [alarm(0, AlarmLevel.CAUTION)])
+    assert s.path_obstacles[0]['cue_lead_s'] == pytest.approx(1.5) and s.cued_ahead == 0
+    # a standing wearer has no contact time: a cue counts as ahead
+    s = score_safety(SafetyTruth([TrueObstacle(1, 0.2, rect(2.0, 2.3, -0.1, 0.1))],
+                                 walk(10, speed=0.0)), [alarm(0, AlarmLevel.WARNING)])
+    assert s.cued_ahead == 1 and s.path_obstacles[0]['cued_standing']
+    assert 'cued at least 3 s before contact 1/1' in '\n'.join(format_safety(s.as_dict()))
 
 
 def test_fault_at_the_first_frame_on_the_path_counts_apart_and_clear_is_never():

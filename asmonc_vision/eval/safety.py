@@ -94,6 +94,10 @@ class SafetyCriteria:
                                  range=(0.0, 10.0))
     walking_window_s: float = param(1.0, 'window of the walking speed, centred, seconds',
                                     range=(0.0, 10.0))
+    cue_lead_s: float = param(3.0, 'an obstacle on the path is cued ahead when CAUTION or '
+                              'higher was in force while it lay in the corridor at least '
+                              'this long before contact at the walking speed, seconds',
+                              range=(0.0, 60.0))
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -288,6 +292,7 @@ class SafetyScore:
     late: int = 0
     never: int = 0
     under_fault: int = 0
+    cued_ahead: int = 0
     frames: int = 0
     frames_on_path: int = 0
     frames_on_path_clear: int = 0
@@ -334,7 +339,8 @@ class SafetyScore:
         """The totals of several walks (events and obstacles listed together)."""
         out = cls(criteria=scores[0].criteria if scores else {})
         for s in scores:
-            for k in ('on_path', 'warned', 'late', 'never', 'under_fault', 'frames',
+            for k in ('on_path', 'warned', 'late', 'never', 'under_fault', 'cued_ahead',
+                      'frames',
                       'frames_on_path', 'frames_on_path_clear', 'frames_on_path_fault',
                       'duration_s', 'walking_s', 'alarms_false', 'alarms_warning',
                       'frames_scored', 'frames_missing', 'reports', 'false_reports',
@@ -357,6 +363,7 @@ class SafetyScore:
             'warned_in_time': {'on_path': self.on_path, 'warned': self.warned,
                                'late': self.late, 'never': self.never,
                                'under_fault': self.under_fault,
+                               'cued_ahead': self.cued_ahead,
                                'obstacles': self.path_obstacles},
             'frames': self.frames, 'duration_s': self.duration_s,
             'walking_s': self.walking_s,
@@ -390,10 +397,18 @@ def walking_mask(truth: SafetyTruth, speed: float, window_s: float) -> tuple[np.
     the camera moved faster than ``speed`` m/s between the frames at the ends of a
     ``window_s`` window centred on it (clipped to the sequence); its interval is the time
     to the next frame (the median interval for the last)."""
+    v, interval = walking_speed(truth, window_s)
+    return v > speed, interval
+
+
+def walking_speed(truth: SafetyTruth, window_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """(speed (F,) m/s, frame interval (F,) s): the speed of the point below the camera
+    between the frames at the ends of a ``window_s`` window centred on each frame
+    (clipped to the sequence), and the time to the next frame (`walking_mask`)."""
     st = np.array([f.stamp_ns for f in truth.frames], np.int64)
     n = st.size
     if n < 2:
-        return np.zeros(n, bool), np.zeros(n)
+        return np.zeros(n), np.zeros(n)
     xy = np.array([f.foot for f in truth.frames])
     ts = (st - st[0]) / 1e9
     dt = np.diff(ts)
@@ -404,7 +419,7 @@ def walking_mask(truth: SafetyTruth, speed: float, window_s: float) -> tuple[np.
     dist = np.hypot(*(xy[hi] - xy[lo]).T)
     with np.errstate(invalid='ignore', divide='ignore'):
         v = np.where(span > 0, dist / np.where(span > 0, span, 1.0), 0.0)
-    return v > speed, interval
+    return v, interval
 
 
 def _report_tolerance(c: SafetyCriteria, rng: float) -> float:
@@ -462,17 +477,22 @@ def score_safety(truth: SafetyTruth, alarms: Sequence[dict],
 def _score_warnings(c: SafetyCriteria, truth: SafetyTruth, alarms: Sequence[dict],
                     stamps: list[int], present: list, out: SafetyScore) -> None:
     """Warned in time: per obstacle on the path, the alarm in force at its first pair on
-    the path (warned, under FAULT, late or never), and the pairs on the path by level;
-    into ``out``."""
+    the path (warned, under FAULT, late or never), the pairs on the path by level, and
+    the cue's lead: the range in the corridor where CAUTION or higher was first in force
+    over the walking speed then (infinite for a standing wearer); into ``out``."""
     frames = truth.frames
     levels = alarm_levels_at(stamps, alarms)
+    speed, _ = walking_speed(truth, c.walking_window_s)
     track: dict[int, dict] = {}
-    for f, level, obs in zip(frames, levels, present):
+    cued: dict[int, float] = {}                 # obstacle id -> lead of its first cue, s
+    for f, level, obs, v in zip(frames, levels, present, speed):
         on = []
         for ob in obs:
             if abs(ob.height) < c.min_height:
                 continue
             r = corridor_range(ob, f, c.corridor_half_width, c.corridor_length)
+            if r is not None and level in WARNING_LEVELS and ob.id not in cued:
+                cued[ob.id] = r / v if v > c.walking_speed else math.inf
             if r is not None and r <= c.on_path_range:
                 on.append((ob, r))
         if not on:
@@ -494,6 +514,11 @@ def _score_warnings(c: SafetyCriteria, truth: SafetyTruth, alarms: Sequence[dict
                     and level in WARNING_LEVELS):
                 o['warned_later_at_m'] = r
     for o in track.values():
+        lead = cued.get(o['id'])
+        # (None: never cued in the corridor; cued while the wearer stood: no contact time)
+        o['cue_lead_s'] = lead if lead is not None and math.isfinite(lead) else None
+        o['cued_standing'] = lead == math.inf
+        out.cued_ahead += int(lead is not None and lead >= c.cue_lead_s)
         if o['first_level'] in WARNING_LEVELS:
             o['outcome'] = 'warned'
         elif o['first_level'] == AlarmLevel.FAULT:
@@ -600,7 +625,9 @@ def format_safety(s: dict, indent: str = '') -> list[str]:
         f"warned in time: {w['warned']}/{w['on_path']} obstacles on the path (late "
         f"{w['late']}, never {w['never']}, under FAULT {w['under_fault']}); frames on the "
         f"path {s['frames_on_path']}, CLEAR in force in {s['frames_on_path_clear']}, FAULT in "
-        f"{s['frames_on_path_fault']}",
+        f"{s['frames_on_path_fault']}"
+        + (f"; cued at least {s['criteria']['cue_lead_s']:g} s before contact "
+           f"{w['cued_ahead']}/{w['on_path']}" if 'cued_ahead' in w else ''),
         f"false alarm events: {fa['events']} in {s['walking_s'] / 60:.2f} min of walking = "
         + (f'{pm:.2f} per minute' if pm is not None else '- per minute')
         + f" ({fa['false_alarm_messages']} of {fa['warning_messages']} CAUTION/WARNING/STOP "
