@@ -516,8 +516,8 @@ def _score_warnings(c: SafetyCriteria, truth: SafetyTruth, alarms: Sequence[dict
     for o in track.values():
         lead = cued.get(o['id'])
         # (None: never cued in the corridor; cued while the wearer stood: no contact time)
-        o['cue_lead_s'] = lead if lead is not None and math.isfinite(lead) else None
-        o['cued_standing'] = lead == math.inf
+        o['cue_lead_s'] = float(lead) if lead is not None and math.isfinite(lead) else None
+        o['cued_standing'] = bool(lead == math.inf)
         out.cued_ahead += int(lead is not None and lead >= c.cue_lead_s)
         if o['first_level'] in WARNING_LEVELS:
             o['outcome'] = 'warned'
