@@ -56,6 +56,26 @@ def test_vectorised_subpix_matches_opencv_corner_subpix():
     assert np.mean(errs_ours) < 0.1 and np.mean(errs_ours) < 1.3 * np.mean(errs_cv)
 
 
+def test_compiled_subpix_agrees_with_the_numpy_path(monkeypatch):
+    """The numba kernel (double-precision sums) and the numpy path (single precision) give
+    the same corners, strengths and refusals on a textured image, corners started off
+    by up to a pixel, some near the border and one on blank ground."""
+    from asmonc_vision.core.motion import features
+    if features._nb_subpix is None:
+        pytest.skip('numba not installed: only the numpy path exists')
+    img = _texture(3)
+    img[:, 150:] = 100.0                                      # blank: refused
+    rng = np.random.default_rng(1)
+    pts = shi_tomasi_corners(img, max_corners=200, subpix_half_window=0).astype(float)
+    pts = np.vstack([pts + rng.uniform(-1, 1, pts.shape), [[175.0, 60.0], [7.0, 7.0]]])
+    fast = subpix_refine(img, pts, 5, return_strength=True, return_ok=True)
+    monkeypatch.setattr(features, '_NUMPY_ONLY', [True])
+    slow = subpix_refine(img, pts, 5, return_strength=True, return_ok=True)
+    assert np.array_equal(fast[2], slow[2]) and not fast[2][-2]
+    assert np.abs(fast[0] - slow[0]).max() < 1e-3
+    assert np.allclose(fast[1], slow[1], rtol=1e-4, atol=1e-4)
+
+
 @pytest.mark.slow
 def test_wang_brady_finds_corners_and_its_correction_helps():
     img, truth = render_corner('L', [6, 0])
