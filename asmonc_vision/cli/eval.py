@@ -9,17 +9,17 @@ enabled: `core.perception.Perception`, as the detector node runs them) in this p
 without ROS, over each bag's stereo pairs in order (with no motion input: its obstacle
 tracks and map are carried only while the rig stands still; `--egomotion` runs the
 egomotion estimator here and feeds its motion as the node graph does when it waits for
-it (``use_egomotion``), `--motion-lag N` with it gives the detector no motion and the map
-its motion predicted from those of the pairs N or more before, as the graph that does
-not wait (`core.map_motion`); `--map on|off` sets the evidence map; or score a graph run with `asmonc run BAG --out DIR` and
-`--outputs DIR`); `--method sgbm` runs the OpenCV StereoSGBM baseline
-(core.baseline) instead, and several methods or `--threshold-px` values give one run
-each. With `--outputs DIR` (one per BAG) nothing is run: the /obstacles and
-/ground_plane recorded by `asmonc run BAG --out DIR` are scored against BAG's truth,
-and its recorded /alarms tell whether each true obstacle on the walking path was warned of
-in time (`eval.evaluation.path_warnings`, the alarm node's default criteria; as the
-summary of `asmonc run`). Both paths are scored by the same code
-(eval.evaluation.SequenceEvaluation):
+it (``use_egomotion``), `--motion-lag N` with it gives the detector no motion and the
+map its motion predicted from those of the pairs N or more before, as the graph that
+does not wait (`core.map_motion`); `--map on|off` sets the evidence map; or score a
+graph run with `asmonc run BAG --out DIR` and `--outputs DIR`); `--method sgbm` runs the
+OpenCV StereoSGBM baseline (core.baseline) instead, and several methods or
+`--threshold-px` values give one run each. With `--outputs DIR` (one per BAG) nothing is
+run: the /obstacles and /ground_plane recorded by `asmonc run BAG --out DIR` are scored
+against BAG's truth, and its recorded /alarms tell whether each true obstacle on the
+walking path was warned of in time (`eval.evaluation.path_warnings`, the alarm node's
+default criteria; as the summary of `asmonc run`). Both paths are scored by the same
+code (eval.evaluation.SequenceEvaluation):
 
 * recall per frame, per |height| x range bin of the true obstacles (0-5, 5-10, 10-20,
   20-50, >= 50 cm x 1-2, 2-3, 3-4, 4-5, 5-8 m) with counts: a true obstacle is found in a
