@@ -94,36 +94,41 @@ class MotionPredictor:
         """A measured motion from the pair at ``ref_stamp_ns`` to the one at ``stamp_ns``
         (``X_ref = R X_curr + t``); False when it is ignored (not forward in time, not
         finite) or breaks the chain (too fast: the trajectory starts again)."""
-        R, t = np.asarray(R, float), np.asarray(t, float)
-        dt = int(stamp_ns) - int(ref_stamp_ns)
-        if dt <= 0 or not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
-            return False
         with self._lock:
-            if self._too_fast(R, t, dt):
-                self._restart_at(int(stamp_ns))
-                return False
-            base = self._poses.get(int(ref_stamp_ns))
-            if base is None:
-                base = self._estimate(int(ref_stamp_ns))
-            if base is None:                 # the first measurement: the origin is its start
-                base = (np.eye(3), np.zeros(3))
-            self._insert(int(stamp_ns), compose(base[0], base[1], R, t))
-            self._velocity = (R, t, dt)
-            return True
+            return self._add_motion(int(ref_stamp_ns), int(stamp_ns),
+                                    np.asarray(R, float), np.asarray(t, float))
 
     def add_pose(self, stamp_ns: int, R, t) -> bool:
         """A cumulative pose (odometry, ``X_odom = R X_cam + t``): the motion from the
         previous pose given is measured (`add_motion`); False for the first pose (or
         one not after the previous)."""
         pose = (np.asarray(R, float), np.asarray(t, float))
-        prev = self._odom
-        if prev is not None and int(stamp_ns) <= prev[0]:
+        with self._lock:
+            prev = self._odom
+            if prev is not None and int(stamp_ns) <= prev[0]:
+                return False
+            self._odom = (int(stamp_ns), pose)
+            if prev is None:
+                return False
+            mR, mt = relative(prev[1], pose)
+            return self._add_motion(prev[0], int(stamp_ns), mR, mt)
+
+    def _add_motion(self, ref_stamp_ns: int, stamp_ns: int, R: np.ndarray,
+                    t: np.ndarray) -> bool:
+        dt = stamp_ns - ref_stamp_ns
+        if dt <= 0 or not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
             return False
-        self._odom = (int(stamp_ns), pose)
-        if prev is None:
+        if self._too_fast(R, t, dt):
+            self._restart_at(stamp_ns)
             return False
-        mR, mt = relative(prev[1], pose)
-        return self.add_motion(prev[0], stamp_ns, mR, mt)
+        base = self._poses.get(ref_stamp_ns)
+        if base is None:
+            base = self._estimate(ref_stamp_ns)
+        if base is None:                     # the first measurement: the origin is its start
+            base = (np.eye(3), np.zeros(3))
+        self._insert(stamp_ns, compose(base[0], base[1], R, t))
+        self._velocity = (R, t, dt)
+        return True
 
     def _too_fast(self, R: np.ndarray, t: np.ndarray, dt_ns: int) -> bool:
         dt = dt_ns * 1e-9
