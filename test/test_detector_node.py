@@ -290,3 +290,70 @@ def test_parameter_out_of_range_is_a_clear_error_and_exit_2():
         env=dict(os.environ), capture_output=True, text=True, timeout=60)
     assert res.returncode == 2
     assert 'invalid settings' in res.stderr and 'gpod.threshold_px' in res.stderr
+
+
+def test_the_map_takes_odometry_and_never_waits(ros_context):
+    """With the evidence map on, the detector never waits for /egomotion (a silent
+    publisher of it is there, with a 2 s wait configured): each pair's map motion is
+    predicted from the /egomotion/odometry received by then (here each pair's pose
+    arrives only after the next pair is sent), so the map is placed on every walking
+    pair with a plane instead of being cleared for want of a motion."""
+    import numpy as np
+    from geometry_msgs.msg import TransformStamped
+    from nav_msgs.msg import Odometry
+
+    from asmonc_vision.core.motion import EgomotionEstimator, compose
+    from asmonc_vision.core.rotations import matrix_to_quaternion
+    from asmonc_vision.nodes.conversions import image_msg_to_gray, stereo_camera_from_infos
+
+    frames = load_frames(BAGS / 'walk_obstacles', range(16, 30))   # walking
+    est = EgomotionEstimator()
+    poses, R, t = [], np.eye(3), np.zeros(3)
+    for left, right, li, ri in frames:
+        cam = stereo_camera_from_infos(li, ri)
+        stamp = left.header.stamp.sec * 10 ** 9 + left.header.stamp.nanosec
+        r = est.process(image_msg_to_gray(left), image_msg_to_gray(right), cam, stamp)
+        if r.ok:
+            R, t = compose(R, t, r.motion.R, r.motion.t)
+        poses.append((R, t) if r.ok or not poses else None)
+    assert sum(p is not None for p in poses) >= 12
+    with detector_graph(ros_context, [Parameter('map.enabled', value=True),
+                                      Parameter('egomotion_wait', value=2.0),
+                                      Parameter('publish_debug_image', value=False)]) as g:
+        det, ex, send, got = g
+        probe = Node('odom_probe', context=det.context)
+        silent = probe.create_publisher(TransformStamped, '/egomotion', RESULT_QOS)
+        odom = probe.create_publisher(Odometry, '/egomotion/odometry', RESULT_QOS)
+        ex.add_node(probe)
+        try:
+            assert spin_until(ex, lambda: odom.get_subscription_count() >= 1)
+            assert silent.get_subscription_count() == 0   # nobody waits for /egomotion
+            took = []
+            for i, f in enumerate(frames):
+                t0 = time.monotonic()
+                send(*f)
+                assert spin_until(ex, lambda i=i: len(got['obstacles']) == i + 1, timeout=15)
+                took.append(time.monotonic() - t0)
+                if poses[i] is not None:       # pair i's pose, known once pair i is done
+                    msg = Odometry()
+                    msg.header = f[0].header
+                    q = matrix_to_quaternion(poses[i][0])
+                    o = msg.pose.pose.orientation
+                    o.x, o.y, o.z, o.w = (float(v) for v in q)
+                    p = msg.pose.pose.position
+                    p.x, p.y, p.z = (float(v) for v in poses[i][1])
+                    odom.publish(msg)
+                    n = det.motion_predictor._odom
+                    assert spin_until(ex, lambda n=n: det.motion_predictor._odom is not n,
+                                      timeout=5)
+            assert spin_until(ex, lambda: len(got['plane']) == len(frames))
+        finally:
+            ex.remove_node(probe)
+            probe.destroy_node()
+    assert max(took) < 1.9
+    pred = det.motion_predictor
+    assert pred.predictions >= len(frames) - 3 and pred.measured == 0   # all extrapolated
+    # never cleared while walking: every pair with a ground plane is placed
+    tracking = sum(p.status == GroundPlane.TRACKING for p in got['plane'])
+    assert tracking >= len(frames) - 3
+    assert det.perception.map.placed_pairs == tracking

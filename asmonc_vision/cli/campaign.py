@@ -2,7 +2,8 @@
 
     asmonc campaign [--minutes 20] [--workers 2] [--blind | --tuning]
                     [--classes CLASS ...] [--rigs backpack chest] [--duration 20]
-                    [--methods gpod gpod_ego gpod_map sgbm] [--cache DIR] [--json FILE]
+                    [--methods gpod gpod_ego gpod_map gpod_map_lag sgbm] [--cache DIR]
+                    [--json FILE]
                     [--markdown FILE] [--no-progress]
 
 Picks walks (scene class, seed, rig) from `sim.scenes` until the minutes are covered,
@@ -14,8 +15,11 @@ a rosbag2 bag with the pixels that see each obstacle in both images beside it
 (`truth.json`), and reused when present. On every walk, offline (no ROS), our detector
 (GPOD, default settings: no evidence map, no motion input), the same given each pair's
 motion from the egomotion estimator (``gpod_ego``), our detector with the evidence map
-(``gpod_map``: the map on, with the motion) and the SGBM peer (`core.baseline`, as
-`asmonc eval --method sgbm`)
+(``gpod_map``: the map on, with each pair's motion at once, as a graph that waits for it),
+the map as the detector node runs it (``gpod_map_lag``: the detector with no motion, the
+map's motion predicted by `core.map_motion.MotionPredictor` from the motions of the pairs
+``MAP_MOTION_LAG`` (2) or more before, as the graph has them without waiting) and the SGBM
+peer (`core.baseline`, as `asmonc eval --method sgbm`)
 each run over the stereo pairs in order, the alarm node's logic (`core.alarm`,
 default settings) is replayed over their outputs in bag time (`eval.alarm_replay`), and
 the safety score is taken (`eval.safety`, the definitions of docs/evaluation.md).
@@ -48,7 +52,10 @@ from pathlib import Path
 TUNING_SEEDS = (1000, 2000)
 BLIND_SEEDS = (900000, 901000)
 METHOD_NAMES = {'gpod': 'ours (GPOD)', 'gpod_ego': 'ours (GPOD + motion)',
-                'gpod_map': 'ours (GPOD + map)', 'sgbm': 'peer (SGBM)'}
+                'gpod_map': 'ours (GPOD + map)', 'gpod_map_lag': 'ours (GPOD + map, no wait)',
+                'sgbm': 'peer (SGBM)'}
+#: gpod_map_lag: the motion of a pair reaches the map this many pairs later
+MAP_MOTION_LAG = 2
 
 
 def default_cache() -> Path:
@@ -77,8 +84,9 @@ def add_arguments(p) -> None:
     p.add_argument('--methods', nargs='+', choices=tuple(METHOD_NAMES), default=['gpod', 'sgbm'],
                    help='detectors to run: gpod (no map, no motion), gpod_ego (no map, '
                         'each pair\'s motion from the egomotion estimator), gpod_map (the '
-                        'evidence map, with the motion), sgbm (the peer); default gpod '
-                        'and sgbm')
+                        'evidence map, with each pair\'s motion), gpod_map_lag (the map, its '
+                        'motion predicted from the pairs 2 or more before, as the node '
+                        'graph runs it), sgbm (the peer); default gpod and sgbm')
     p.add_argument('--cache', type=Path, default=None,
                    help='rendered walks are kept here (default ~/.cache/asmonc_vision/campaign)')
     p.add_argument('--json', type=Path, default=None, help='write every number here as JSON')
@@ -186,8 +194,9 @@ def score_walk(w: Walk, cache: Path, methods: list[str], version: str) -> dict:
     scores, detect_s, detect_cpu_s = {}, {}, {}
     for m in methods:
         t0, c0 = time.perf_counter(), time.process_time()
-        runs = (run_method(frames, 'gpod', map_enabled=m == 'gpod_map',
-                           egomotion=m != 'gpod')
+        runs = (run_method(frames, 'gpod', map_enabled=m.startswith('gpod_map'),
+                           egomotion=m != 'gpod',
+                           motion_lag=MAP_MOTION_LAG if m == 'gpod_map_lag' else 0)
                 if m.startswith('gpod') else run_method(frames, m))
         detect_s[m] = time.perf_counter() - t0
         detect_cpu_s[m] = time.process_time() - c0

@@ -8,16 +8,18 @@ By default runs our detector (GPOD, default settings, then the evidence map when
 enabled: `core.perception.Perception`, as the detector node runs them) in this process,
 without ROS, over each bag's stereo pairs in order (with no motion input: its obstacle
 tracks and map are carried only while the rig stands still; `--egomotion` runs the
-egomotion estimator here and feeds its motion as the node graph does; `--map on|off`
-sets the evidence map; or score a graph run with `asmonc run BAG --out DIR` and
-`--outputs DIR`); `--method sgbm` runs the OpenCV StereoSGBM baseline
-(core.baseline) instead, and several methods or `--threshold-px` values give one run
-each. With `--outputs DIR` (one per BAG) nothing is run: the /obstacles and
-/ground_plane recorded by `asmonc run BAG --out DIR` are scored against BAG's truth,
-and its recorded /alarms tell whether each true obstacle on the walking path was warned of
-in time (`eval.evaluation.path_warnings`, the alarm node's default criteria; as the
-summary of `asmonc run`). Both paths are scored by the same code
-(eval.evaluation.SequenceEvaluation):
+egomotion estimator here and feeds its motion as the node graph does when it waits for
+it (``use_egomotion``), `--motion-lag N` with it gives the detector no motion and the
+map its motion predicted from those of the pairs N or more before, as the graph that
+does not wait (`core.map_motion`); `--map on|off` sets the evidence map; or score a
+graph run with `asmonc run BAG --out DIR` and `--outputs DIR`); `--method sgbm` runs the
+OpenCV StereoSGBM baseline (core.baseline) instead, and several methods or
+`--threshold-px` values give one run each. With `--outputs DIR` (one per BAG) nothing is
+run: the /obstacles and /ground_plane recorded by `asmonc run BAG --out DIR` are scored
+against BAG's truth, and its recorded /alarms tell whether each true obstacle on the
+walking path was warned of in time (`eval.evaluation.path_warnings`, the alarm node's
+default criteria; as the summary of `asmonc run`). Both paths are scored by the same
+code (eval.evaluation.SequenceEvaluation):
 
 * recall per frame, per |height| x range bin of the true obstacles (0-5, 5-10, 10-20,
   20-50, >= 50 cm x 1-2, 2-3, 3-4, 4-5, 5-8 m) with counts: a true obstacle is found in a
@@ -71,6 +73,11 @@ def add_arguments(p) -> None:
     p.add_argument('--egomotion', action='store_true',
                    help="feed GPOD each pair's motion from the egomotion estimator run here "
                         '(as the node graph does; its time is not counted), instead of none')
+    p.add_argument('--motion-lag', type=int, default=0,
+                   help='with --egomotion and the map: 0 gives each pair its own motion (the '
+                        'graph waiting for it); N >= 1 gives the map the motion predicted from '
+                        'those of the pairs N or more before and the detector none (the graph '
+                        'not waiting); default 0')
     p.add_argument('--frames', type=int, default=0, help='only the first N pairs per bag (0: all)')
     p.add_argument('--match-radius', type=float, default=0.3,
                    help='a report within this distance (m) on the ground finds a true obstacle')

@@ -3,7 +3,11 @@
 `Perception.process` runs `core.gpod.GpodDetector.process` on a stereo pair, then (with
 ``EvidenceMapConfig.enabled``) enters the pair's matched edge pixels into the evidence
 map (`core.evidence_map`) and reports the map's confirmed regions instead of the
-detector's detections and tracks. The detector node and the offline evaluation
+detector's detections and tracks. The map's camera motion is the one given with the
+pair, or, with a `core.map_motion.MotionPredictor` (``motion_predictor``), the
+predictor's for the pair: from the motions measured before it, so that nobody waits for
+the pair's own (the detector node feeds the predictor the egomotion's odometry as it
+arrives). The detector node and the offline evaluation
 (`asmonc eval`, `asmonc bench`'s runs) both drive the detector through this class, so
 the offline numbers are what the graph publishes.
 """
@@ -21,6 +25,7 @@ from asmonc_vision.core.evidence_map import (DROP, GROUND, NONE, RAISED, Evidenc
                                              EvidenceMapConfig, objects_to_obstacles,
                                              pair_evidence)
 from asmonc_vision.core.gpod import GpodConfig, GpodDetector, GpodResult
+from asmonc_vision.core.map_motion import MotionPredictor
 
 
 class Perception:
@@ -29,14 +34,19 @@ class Perception:
     Attributes:
         detector: the GpodDetector.
         map: the EvidenceMap (None when ``map_config.enabled`` is false).
+        motion_predictor: None, the map takes the motion given to `process`; else the
+            map takes this predictor's motion for each pair (the caller feeds it the
+            measured motions as they come).
     """
 
     def __init__(self, gpod_config: GpodConfig | None = None,
-                 map_config: EvidenceMapConfig | None = None) -> None:
+                 map_config: EvidenceMapConfig | None = None,
+                 motion_predictor: MotionPredictor | None = None) -> None:
         self.gpod_config = gpod_config or GpodConfig()
         self.map_config = map_config or EvidenceMapConfig()
         self.detector = GpodDetector(self.gpod_config)
         self.map = EvidenceMap(self.map_config) if self.map_config.enabled else None
+        self.motion_predictor = motion_predictor
 
     @property
     def config(self) -> GpodConfig:
@@ -44,10 +54,12 @@ class Perception:
         return self.gpod_config
 
     def reset(self) -> None:
-        """Restart the detector and forget the map."""
+        """Restart the detector and forget the map (and the predictor's motions)."""
         self.detector.reset()
         if self.map is not None:
             self.map.reset()
+        if self.motion_predictor is not None:
+            self.motion_predictor.reset()
 
     def process(self, left: np.ndarray, right: np.ndarray, cam: StereoCamera,
                 stamp_ns: int | None = None,
@@ -57,7 +69,9 @@ class Perception:
         (`objects_to_obstacles`), or the detector's own while the map has placed fewer
         than ``min_placed_pairs`` pairs in a row (it needs the camera motion while the
         rig moves: without it the map is cleared and the detector's reports pass), and
-        ``timings_ms['map']`` is the map's time, ms (included in 'total')."""
+        ``timings_ms['map']`` is the map's time, ms (included in 'total'). With a
+        ``motion_predictor`` the map's motion is its prediction for ``stamp_ns`` (the
+        identity while the detector finds the rig still), whatever ``motion`` is."""
         got: list = []
         if callable(motion):
             fn = motion
@@ -73,6 +87,9 @@ class Perception:
             return result
         t0 = time.perf_counter()
         m = got[-1] if got else None
+        if self.motion_predictor is not None:
+            m = (self.motion_predictor.predict(stamp_ns, still=bool(result.still))
+                 if stamp_ns is not None else None)
         stamp_s = (stamp_ns * 1e-9 if stamp_ns is not None
                    else result.frame_index * self.gpod_config.track_frame_period_s)
         plane = result.metric_plane if result.status == 'tracking' else None

@@ -97,7 +97,7 @@ def make_method(method: str, threshold_px: float | None = None, map_enabled: boo
 
 def run_method(frames: list[Frame], method: str = 'gpod', threshold_px: float | None = None,
                progress=None, map_enabled: bool | None = None,
-               egomotion: bool = False) -> list[FrameRun]:
+               egomotion: bool = False, motion_lag: int = 0) -> list[FrameRun]:
     """Run a fresh detector over the frames in order, on one OpenCV thread.
 
     Args:
@@ -109,6 +109,10 @@ def run_method(frames: list[Frame], method: str = 'gpod', threshold_px: float | 
             (`core.motion.EgomotionEstimator`, default settings, run here as the egomotion
             node runs it; its time is not counted), as the node graph gives it; without
             it, no motion (the tracks and the map are carried only while still).
+        motion_lag: with ``egomotion`` and the map, 0 gives each pair its own motion (as
+            a graph that waits for it); N >= 1 gives the detector no motion and the map
+            the prediction of a `core.map_motion.MotionPredictor` fed the motions of the
+            pairs at least N before (as the graph, which does not wait, has them).
     """
     import cv2
 
@@ -120,13 +124,23 @@ def run_method(frames: list[Frame], method: str = 'gpod', threshold_px: float | 
     if egomotion and method == 'gpod':
         from asmonc_vision.core.motion import EgomotionEstimator
         est = EgomotionEstimator()
+    lagged: list = []            # (frame index, reference stamp, stamp, R, t) not yet known
+    if est is not None and motion_lag > 0 and det.map is not None:
+        from asmonc_vision.core.map_motion import MotionPredictor
+        det.motion_predictor = MotionPredictor()
     out = []
     prev_stamp = None
     for i, f in enumerate(frames):
         motion = None
         if est is not None:
             er = est.process(f.left, f.right, f.cam, f.stamp_ns)
-            if er.ok and er.reference_stamp_ns == prev_stamp:
+            if det.motion_predictor is not None:
+                if er.ok and er.reference_stamp_ns is not None:
+                    lagged.append((i, er.reference_stamp_ns, f.stamp_ns, er.motion.R,
+                                   er.motion.t))
+                while lagged and lagged[0][0] <= i - motion_lag:
+                    det.motion_predictor.add_motion(*lagged.pop(0)[1:])
+            elif er.ok and er.reference_stamp_ns == prev_stamp:
                 motion = (er.motion.R, er.motion.t)
             prev_stamp = f.stamp_ns
         c = time.thread_time()

@@ -337,6 +337,9 @@ def _check_arguments(args, err) -> tuple | int:
         if args.threshold_px is not None or args.method != ['gpod']:
             err('--method and --threshold-px do not apply to --outputs (nothing is run)')
             return 2
+    if args.motion_lag < 0:
+        err('--motion-lag must be >= 0')
+        return 2
     if args.frames < 0 or args.match_radius <= 0 or args.max_range <= 0 or args.min_height < 0:
         err('--frames must be >= 0, --match-radius and --max-range > 0, --min-height >= 0')
         return 2
@@ -411,7 +414,8 @@ def _method_runs(args, bag: Path, name: str, frames, thresholds: list, map_enabl
         for thr in thresholds:
             label = f'{name} {method}' + (f' {thr:g}px' if thr is not None else '')
             rs = run_method(frames, method, thr, progress=progress(label),
-                            map_enabled=map_enabled, egomotion=args.egomotion)
+                            map_enabled=map_enabled, egomotion=args.egomotion,
+                            motion_lag=args.motion_lag)
             progress.clear()
             ev = score_runs(frames, rs, **criteria)
             det = make_method(method, thr, map_enabled)
@@ -423,6 +427,7 @@ def _method_runs(args, bag: Path, name: str, frames, thresholds: list, map_enabl
             if method == 'gpod':
                 run['map_config'] = to_dict(det.map_config)
                 run['egomotion'] = bool(args.egomotion)
+                run['motion_lag'] = int(args.motion_lag)
             runs.append(run)
     return runs
 

@@ -21,9 +21,17 @@ callbacks that receive images stay fast. Publishes, per processed pair:
 
 With ``map.enabled`` the obstacles reported are those the evidence map confirms
 (`core.perception.Perception`, `core.evidence_map`): seen from two viewpoints, not
-cleared by ground seen where they stood.
+cleared by ground seen where they stood. The map places each pair by the camera motion
+since the previous pair processed, and never waits for it: it subscribes to
+`/egomotion/odometry` (nav_msgs/Odometry, the egomotion node's chained pose, published
+for every pair it processes) and a `core.map_motion.MotionPredictor` gives each pair
+the motion from the poses received by then (the pair's own when it is in, else
+extrapolated at constant velocity from the newest, the error corrected on the next
+pair). With no odometry (no egomotion node, or none for ``max_extrapolation``) the map
+holds still while the rig stands still and is cleared while it moves, and the
+detector's own reports go out.
 
-With ``use_egomotion`` (off by default) or the evidence map, subscribes to `/egomotion`
+With ``use_egomotion`` (off by default), subscribes to `/egomotion`
 (geometry_msgs/TransformStamped, the visual egomotion node's motion of the left camera from
 the previous pair to this one) as the motion input of the ground plane and the obstacle
 tracks: once a pair's edges are matched the worker waits up to ``egomotion_wait`` for that
@@ -49,7 +57,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 from geometry_msgs.msg import Point, Pose, TransformStamped
-from nav_msgs.msg import MapMetaData, OccupancyGrid
+from nav_msgs.msg import MapMetaData, OccupancyGrid, Odometry
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Image
 from std_msgs.msg import ColorRGBA
@@ -62,6 +70,7 @@ from asmonc_vision.core.config import param
 from asmonc_vision.core.draw import draw_debug
 from asmonc_vision.core.evidence_map import EvidenceMap, EvidenceMapConfig
 from asmonc_vision.core.gpod import GpodConfig, GpodResult
+from asmonc_vision.core.map_motion import MotionPredictor
 from asmonc_vision.core.perception import Perception
 from asmonc_vision.core.rotations import matrix_to_quaternion, quaternion_to_matrix
 from asmonc_vision.nodes.common import (IMAGE_QOS, RESULT_QOS, Diagnostics, declare_config,
@@ -99,12 +108,16 @@ class DetectorNodeConfig(StereoInputConfig):
         'for its motion, which adds the egomotion node\'s time to every pair\'s latency. '
         'Off, the plane is refitted on each pair and the tracks are carried only while the '
         'rig stands still (fewer false reports, asmonc campaign --methods gpod gpod_ego). '
-        'The evidence map (map.enabled) takes the motion whatever this says')
+        'The evidence map (map.enabled) never waits: it takes /egomotion/odometry')
     egomotion_wait: float = param(
         0.1, 'with the motion input, the longest wait, once a pair is matched, for its '
         '/egomotion message (wall time, s); without it the plane is refitted unpredicted '
         'and the tracks are carried only while the rig stands still',
         range=(0.0, 2.0))
+    max_extrapolation: float = param(
+        0.5, 'with the evidence map, the camera pose is extrapolated at most this long '
+        'past the newest /egomotion/odometry; beyond, the map has no motion (s)',
+        range=(0.0, 5.0))
 
 
 class DetectorNode(StereoInputNode):
@@ -115,7 +128,10 @@ class DetectorNode(StereoInputNode):
         self.node_config = declare_config(self, DetectorNodeConfig)
         self.gpod_config = declare_config(self, GpodConfig, prefix='gpod.')
         self.map_config = declare_config(self, EvidenceMapConfig, prefix='map.')
-        self.perception = Perception(self.gpod_config, self.map_config)
+        #: the evidence map's motion, from /egomotion/odometry (None without the map)
+        self.motion_predictor = (MotionPredictor(self.node_config.max_extrapolation)
+                                 if self.map_config.enabled else None)
+        self.perception = Perception(self.gpod_config, self.map_config, self.motion_predictor)
         self.detector = self.perception.detector
         self.pub_map = self.create_publisher(OccupancyGrid, '/obstacle_map', MAP_QOS)
         self.pub_obstacles = self.create_publisher(ObstacleArray, '/obstacles', RESULT_QOS)
@@ -128,11 +144,15 @@ class DetectorNode(StereoInputNode):
         self._motion_cv = threading.Condition()
         self._newest_motion_ns = -1
         self._prev_seq: int | None = None
+        self._prev_stamp_ns: int | None = None
         self.motions_used = 0
-        #: the motion input is taken (the evidence map needs it)
-        self.use_motion = self.node_config.use_egomotion or self.map_config.enabled
+        #: the detector waits for each pair's /egomotion
+        self.use_motion = self.node_config.use_egomotion
         if self.use_motion:
             self.create_subscription(TransformStamped, '/egomotion', self._on_egomotion,
+                                     RESULT_QOS)
+        if self.motion_predictor is not None:
+            self.create_subscription(Odometry, '/egomotion/odometry', self._on_odometry,
                                      RESULT_QOS)
         # The debug image is drawn and published on its own thread, newest frame only:
         # a slow subscriber of that large RELIABLE image (a recorder compressing it) must
@@ -152,6 +172,7 @@ class DetectorNode(StereoInputNode):
     def restart(self) -> None:
         self.perception.reset()
         self._prev_seq = None
+        self._prev_stamp_ns = None
 
     def _debug_work(self) -> None:
         while True:
@@ -201,6 +222,20 @@ class DetectorNode(StereoInputNode):
             self._newest_motion_ns = max(self._newest_motion_ns, stamp)
             self._motion_cv.notify_all()
 
+    def _on_odometry(self, msg: Odometry) -> None:
+        p = msg.pose.pose
+        t = np.array([p.position.x, p.position.y, p.position.z], float)
+        q = p.orientation
+        try:
+            R = quaternion_to_matrix(np.array([q.x, q.y, q.z, q.w], float))
+        except ValueError:
+            R = None
+        if R is None or not np.all(np.isfinite(t)):
+            self.get_logger().warn('/egomotion/odometry with an invalid pose ignored',
+                                   throttle_duration_sec=5.0)
+            return
+        self.motion_predictor.add_pose(stamp_to_ns(msg.header.stamp), R, t)
+
     def _motion_for(self, stamp_ns: int, follows_previous: bool):
         """The pair's /egomotion (R, t), waiting up to ``egomotion_wait`` -- not at all
         when further pairs are already waiting (detection must not fall behind a slow
@@ -227,10 +262,18 @@ class DetectorNode(StereoInputNode):
     def process_pair(self, pair: StereoPair, left: np.ndarray, right: np.ndarray,
                      cam: StereoCamera) -> None:
         follows = self._prev_seq is not None and pair.seq == self._prev_seq + 1
-        self._prev_seq = pair.seq
-        result = self.perception.process(
-            left, right, cam, stamp_ns=pair.stamp_ns,
-            motion=lambda: self._motion_for(pair.stamp_ns, follows))
+        prev_stamp = self._prev_stamp_ns
+        self._prev_seq, self._prev_stamp_ns = pair.seq, pair.stamp_ns
+
+        def motion():
+            m = self._motion_for(pair.stamp_ns, follows)
+            if m is not None and self.motion_predictor is not None and prev_stamp is not None:
+                # the pair's own motion, waited for: the map's prediction is exact
+                self.motion_predictor.add_motion(prev_stamp, pair.stamp_ns, m[0], m[1])
+            return m
+
+        result = self.perception.process(left, right, cam, stamp_ns=pair.stamp_ns,
+                                         motion=motion if self.use_motion else None)
         header = pair.left.header
         self.pub_obstacles.publish(obstacles_to_msg(result, header))
         emap = self.perception.map
@@ -263,6 +306,8 @@ class DetectorNode(StereoInputNode):
                          frames_in=self.frames_in, frames_done=self.frames_done + 1,
                          frames_dropped=self.frames_dropped, frames_bad=self.frames_bad,
                          motions_used=self.motions_used,
+                         map_motions=(self.motion_predictor.predictions
+                                      if self.motion_predictor is not None else 0),
                          image_noise=f'{self.detector.image_noise_sigma:.2f}',
                          edge_threshold=f'{result.edge_threshold:.2f}',
                          misalignment_px=f'{mis:.2f}',
