@@ -2145,8 +2145,20 @@ def test_stillness_and_temporal_kernels_equal_numpy(box_frame, monkeypatch):
     assert not np.array_equal(fast[-3], excess[2])          # averaged with the sums
 
 
+@pytest.fixture(scope='module')
+def bollard_walk():
+    """The camera and frames 78-92 of walk_obstacles seed 3002 (simulator), rendered once
+    for the cases below."""
+    from asmonc_vision.sim import StereoRenderer, make_scenario, simulate_frame
+
+    sc = make_scenario('walk_obstacles', seed=3002)
+    rend = StereoRenderer(sc.rig)
+    return sc.rig.camera(), [simulate_frame(sc, k, rend) for k in range(78, 93)]
+
+
 @pytest.mark.parametrize('missing', [(), (89, 90), (88, 89, 90, 91, 92)])
-def test_an_obstacle_walked_up_to_is_still_reported_once_its_foot_leaves_the_view(missing):
+def test_an_obstacle_walked_up_to_is_still_reported_once_its_foot_leaves_the_view(
+        missing, bollard_walk):
     """The paper's rig sees the ground from about 1.4 m, the alarm stops at 1.2 m: an
     84 cm bollard walked up to (simulator, true camera motion as the tracks' input) must
     go on being reported, coasted, at its true place once its foot has left the bottom
@@ -2154,13 +2166,10 @@ def test_an_obstacle_walked_up_to_is_still_reported_once_its_foot_leaves_the_vie
     (a missed /egomotion) the tracks are carried by the motion before
     (``track_motion_hold_frames``); with five missing, the bollard is held where it was
     last placed once the hold runs out, not forgotten."""
-    from asmonc_vision.sim import StereoRenderer, make_scenario, simulate_frame
-
-    sc = make_scenario('walk_obstacles', seed=3002)
-    rend, cam = StereoRenderer(sc.rig), sc.rig.camera()
+    cam, frames = bollard_walk
     det, prev, near = GpodDetector(), None, []
-    for k in range(78, 93):
-        f = simulate_frame(sc, k, rend)
+    for f in frames:
+        k = f.index
         motion = None
         if prev is not None and k not in missing:       # X_prev = R X_curr + t
             motion = (prev.rotation.T @ f.left_pose.rotation,
@@ -2384,8 +2393,20 @@ def test_the_initial_plane_must_hold_a_part_of_the_features(ground_fraction, fra
     assert status == want
 
 
+@pytest.fixture(scope='module')
+def vigorous_walk():
+    """The camera and every frame of clear_walk seed 8202 with `GaitSettings.extreme`
+    (simulator), rendered once for the cases below."""
+    from asmonc_vision.sim import StereoRenderer, make_scenario, simulate
+    from asmonc_vision.sim.motion import GaitSettings
+
+    sc = make_scenario('clear_walk', seed=8202, gait=GaitSettings.extreme())
+    return sc.rig.camera(), list(simulate(sc, StereoRenderer(sc.rig)))
+
+
 @pytest.mark.parametrize('missing', [(52,), tuple(range(10, 80, 3))])
-def test_a_vigorous_walker_frame_without_motion_does_not_leave_the_plane_off(missing):
+def test_a_vigorous_walker_frame_without_motion_does_not_leave_the_plane_off(
+        missing, vigorous_walk):
     """The paper's extreme walking motion (5 degrees of sway, 10 cm bob; simulator
     clear_walk seed 8202 with `GaitSettings.extreme`) moves the ground by 10 px of
     disparity between frames. In the node graph the /egomotion of one frame (52) was
@@ -2397,15 +2418,10 @@ def test_a_vigorous_walker_frame_without_motion_does_not_leave_the_plane_off(mis
     neither the narrow gate nor the long coast until a refit. Also with every third
     motion missing, the plane is right or lost (a fault the wearer hears), in all but a
     frame or two."""
-    from asmonc_vision.sim import StereoRenderer, make_scenario, simulate_frame
-    from asmonc_vision.sim.motion import GaitSettings
-
-    sc = make_scenario('clear_walk', seed=8202, gait=GaitSettings.extreme())
-    rend, cam = StereoRenderer(sc.rig), sc.rig.camera()
+    cam, frames = vigorous_walk
     det = GpodDetector(GpodConfig())
     prev, off, lost, false = None, [], [], []
-    for k in range(sc.n_frames):
-        f = simulate_frame(sc, k, rend)
+    for k, f in enumerate(frames):
         motion = None
         if prev is not None and k not in missing:
             motion = (prev.rotation.T @ f.left_pose.rotation,
