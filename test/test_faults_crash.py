@@ -12,6 +12,9 @@ from conftest import BAGS
 FAULT, CLEAR = 4, 0
 #: the alarm node's timeout in this test (the wearer's target: FAULT within 0.5 s)
 TIMEOUT = 0.5
+#: seconds `asmonc run` waits for late results once the bag is played and the results
+#: have stopped short of the pairs (the pairs lost at the kill never come)
+SETTLE = 3.0
 
 
 def test_detector_killed_mid_replay_fault_then_recovery(tmp_path):
@@ -21,7 +24,7 @@ def test_detector_killed_mid_replay_fault_then_recovery(tmp_path):
     bag = BAGS / 'static_obstacles'
     res = subprocess.run([sys.executable, '-m', 'asmonc_vision.cli', 'run', str(bag),
                           '--out', str(out), '--no-progress', '--params-file', str(params),
-                          '--inject', 'kill=detector@1.5'],
+                          '--inject', 'kill=detector@1.5', '--settle', str(SETTLE)],
                          env=dict(os.environ), capture_output=True, text=True, timeout=300)
     log = res.stdout + res.stderr
     # a node died: exit status 1, said in the summary, but the run went on

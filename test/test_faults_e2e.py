@@ -18,11 +18,15 @@ from conftest import BAGS
 
 FAULT = 4
 T0 = 1_700_000_000_000_000_000      # the bundled bags' first stamp
+#: seconds `asmonc run` waits for late results once the bag is played and the results
+#: have stopped short of the pairs (those the faults took never come)
+SETTLE = 2.0
 
 
 def run_faults(out, bag, spec, *extra):
     res = subprocess.run([sys.executable, '-m', 'asmonc_vision.cli', 'run', str(bag),
-                          '--out', str(out), '--no-progress', '--inject', spec, *extra],
+                          '--out', str(out), '--no-progress', '--inject', spec,
+                          '--settle', str(SETTLE), *extra],
                          env=dict(os.environ), capture_output=True, text=True, timeout=300)
     summary = json.loads((out / 'summary.json').read_text())
     logs = {p.stem: p.read_text() for p in (out / 'logs').glob('*.log')}
@@ -152,7 +156,7 @@ def test_corrupt_bag_is_replayed_up_to_the_damage(tmp_path):
     bad.write_bytes(bytes(data))
     out = tmp_path / 'out'
     res = subprocess.run([sys.executable, '-m', 'asmonc_vision.cli', 'run', str(bad),
-                          '--out', str(out), '--no-progress'],
+                          '--out', str(out), '--no-progress', '--settle', str(SETTLE)],
                          env=dict(os.environ), capture_output=True, text=True, timeout=300)
     # a zstd chunk that does not decompress once ended `asmonc run` in a Traceback
     assert res.returncode == 1, res.stderr[-3000:]

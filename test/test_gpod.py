@@ -1449,20 +1449,61 @@ def test_continuation_alternatives():
     assert not case(end, True)(11).any()                 # 10 lower matches: too few
 
 
-def test_the_paving_beyond_a_kerb_down_is_no_obstacle():
+#: the kerb-down walks of the three tests below (simulator, step_down): name -> (seed,
+#: rig settings, first frame the test uses)
+KERB_WALKS = {
+    'paving': (8022, dict(width=640, height=480, focal=600.0), 66),
+    'creep': (8043, dict(camera_height=1.4, fps=15.0), 0),
+    'predicted': (8084, dict(baseline=0.2, fps=15.0), 0),
+}
+
+
+def render_kerb_walk(name: str) -> list:
+    """(left, right, left pose, true plane) of each frame of KERB_WALKS[name] the test
+    uses, in order."""
+    from asmonc_vision.sim import RigSettings, StereoRenderer, simulate_frame
+    from asmonc_vision.sim.scenarios import step_down
+
+    seed, rig, first = KERB_WALKS[name]
+    sc = step_down(seed=seed, rig=RigSettings(**rig))
+    rend = StereoRenderer(sc.rig)
+    return [(f.left, f.right, f.left_pose, f.plane)
+            for f in (simulate_frame(sc, k, rend) for k in range(first, sc.n_frames))]
+
+
+@pytest.fixture(scope='module')
+def kerb_walks():
+    """name -> a future of `render_kerb_walk(name)`. The walks are rendered (most of these
+    tests' time) two at a time, each in a process of its own (spawned: this process may
+    hold ROS threads), while the first test detects on its frames."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(max_workers=2,
+                             mp_context=multiprocessing.get_context('spawn')) as pool:
+        yield {name: pool.submit(render_kerb_walk, name) for name in KERB_WALKS}
+
+
+def _kerb_scenario(name: str):
+    from asmonc_vision.sim import RigSettings
+    from asmonc_vision.sim.scenarios import step_down
+    seed, rig, _ = KERB_WALKS[name]
+    return step_down(seed=seed, rig=RigSettings(**rig))
+
+
+def test_the_paving_beyond_a_kerb_down_is_no_obstacle(kerb_walks):
     """Standing 2.45 m before a 15 cm kerb down at 640 x 480 (simulator, step_down seed
     8022): the paving joints beyond the kerb, on the lower ground, were matched one joint
     spacing off in stretches of 10 rows, 43-54 px above the plane, as an obstacle 0.9 m
     away (10 of these 14 frames; a STOP alarm in the node graph). The kerb is reported as
     a drop, and nothing stands between it and the wearer."""
-    from asmonc_vision.sim import RigSettings, StereoRenderer, simulate_frame
-    from asmonc_vision.sim.scenarios import step_down
-
-    sc = step_down(seed=8022, rig=RigSettings(width=640, height=480, focal=600.0))
-    rend, cam = StereoRenderer(sc.rig), sc.rig.camera()
+    sc = _kerb_scenario('paving')
+    cam = sc.rig.camera()
     det, drops, near = GpodDetector(), 0, []
-    for k in range(66, sc.n_frames):                     # standing still
-        r = det.process(*(lambda f: (f.left, f.right))(simulate_frame(sc, k, rend)), cam)
+    frames = kerb_walks['paving'].result()
+    assert len(frames) == sc.n_frames - 66
+    for k, (left, right, _, _) in enumerate(frames, start=66):     # standing still
+        r = det.process(left, right, cam)
         drops += any(o.is_drop and abs(o.range - 2.45) < 0.3 for o in r.detections)
         near += [(k, round(o.range, 2)) for o in r.detections
                  if not o.is_drop and o.range < 2.2]
@@ -1470,7 +1511,7 @@ def test_the_paving_beyond_a_kerb_down_is_no_obstacle():
     assert not near, near
 
 
-def test_the_plane_does_not_creep_onto_the_ground_beyond_a_kerb_down():
+def test_the_plane_does_not_creep_onto_the_ground_beyond_a_kerb_down(kerb_walks):
     """Walking up to a 15 cm kerb down and standing 2.2 m before it, the camera 1.4 m
     high at 15 Hz (simulator, step_down seed 8043): most of the view is the lower ground.
     Standing, each refit was gated around the current plane; the lower ground leaked in
@@ -1479,20 +1520,19 @@ def test_the_plane_does_not_creep_onto_the_ground_beyond_a_kerb_down():
     (a WARNING "obstacle, 2 metres" in the node graph). Gated around the plane the rig
     had when it stopped, the plane stays on the ground the wearer stands on."""
     from asmonc_vision.eval.evaluation import plane_error
-    from asmonc_vision.sim import RigSettings, StereoRenderer, simulate_frame
-    from asmonc_vision.sim.scenarios import step_down
 
-    sc = step_down(seed=8043, rig=RigSettings(camera_height=1.4, fps=15.0))
-    rend, cam = StereoRenderer(sc.rig), sc.rig.camera()
+    sc = _kerb_scenario('creep')
+    cam = sc.rig.camera()
     det, worst, still, up = GpodDetector(), 0.0, 0, []
-    for k in range(sc.n_frames):
-        f = simulate_frame(sc, k, rend)
-        r = det.process(f.left, f.right, cam)
+    frames = kerb_walks['creep'].result()
+    assert len(frames) == sc.n_frames
+    for k, (left, right, _, plane) in enumerate(frames):
+        r = det.process(left, right, cam)
         if k < 96:                                      # walking up to the kerb
             continue
         still += r.still
         assert r.metric_plane is not None, k
-        worst = max(worst, plane_error(r.metric_plane, f.plane)[0])
+        worst = max(worst, plane_error(r.metric_plane, plane)[0])
         up += [(k, round(o.range, 2), round(o.height, 2)) for o in r.detections
                if not o.is_drop and o.height >= 0.05 and o.range < 5.0
                and abs(o.range * math.sin(o.bearing)) <= 0.5]
@@ -1501,7 +1541,7 @@ def test_the_plane_does_not_creep_onto_the_ground_beyond_a_kerb_down():
     assert not up, up
 
 
-def test_the_plane_predicted_through_the_motion_stays_on_the_ground_stood_on():
+def test_the_plane_predicted_through_the_motion_stays_on_the_ground_stood_on(kerb_walks):
     """Stopping 2 m before a 15 cm kerb down, 15 Hz, a 0.2 m baseline (simulator,
     step_down seed 8084): most of the view is the lower ground. The rig moved again for
     two frames, just enough not to be still, and the refits, gated around the current
@@ -1511,25 +1551,24 @@ def test_the_plane_predicted_through_the_motion_stays_on_the_ground_stood_on():
     through it, the refits are gated 5 cm around the prediction and limited to 2 degrees
     and 5 cm from it, and the plane stays on the ground the wearer stands on."""
     from asmonc_vision.eval.evaluation import plane_error
-    from asmonc_vision.sim import RigSettings, StereoRenderer, simulate_frame
-    from asmonc_vision.sim.scenarios import step_down
 
-    sc = step_down(seed=8084, rig=RigSettings(baseline=0.2, fps=15.0))
-    rend, cam = StereoRenderer(sc.rig), sc.rig.camera()
+    sc = _kerb_scenario('predicted')
+    cam = sc.rig.camera()
     det, prev, errors, up, still = GpodDetector(), None, [], [], 0
-    for k in range(sc.n_frames):
-        f = simulate_frame(sc, k, rend)
+    frames = kerb_walks['predicted'].result()
+    assert len(frames) == sc.n_frames
+    for k, (left, right, pose, plane) in enumerate(frames):
         motion = None
         if prev is not None:           # X_prev = R X + t, left optical frames
-            motion = (prev.rotation.T @ f.left_pose.rotation,
-                      prev.rotation.T @ (f.left_pose.centre - prev.centre))
-        prev = f.left_pose
-        r = det.process(f.left, f.right, cam, motion=motion)
+            motion = (prev.rotation.T @ pose.rotation,
+                      prev.rotation.T @ (pose.centre - prev.centre))
+        prev = pose
+        r = det.process(left, right, cam, motion=motion)
         if k < 85:                                      # walking up to the kerb
             continue
         still += r.still
         assert r.metric_plane is not None, k
-        errors.append(plane_error(r.metric_plane, f.plane))
+        errors.append(plane_error(r.metric_plane, plane))
         up += [(k, round(o.range, 2), round(o.height, 2)) for o in r.obstacles
                if not o.is_drop and o.height >= 0.05 and o.range < 5.0
                and abs(o.range * math.sin(o.bearing)) <= 0.5]
@@ -2106,8 +2145,20 @@ def test_stillness_and_temporal_kernels_equal_numpy(box_frame, monkeypatch):
     assert not np.array_equal(fast[-3], excess[2])          # averaged with the sums
 
 
+@pytest.fixture(scope='module')
+def bollard_walk():
+    """The camera and frames 78-92 of walk_obstacles seed 3002 (simulator), rendered once
+    for the cases below."""
+    from asmonc_vision.sim import StereoRenderer, make_scenario, simulate_frame
+
+    sc = make_scenario('walk_obstacles', seed=3002)
+    rend = StereoRenderer(sc.rig)
+    return sc.rig.camera(), [simulate_frame(sc, k, rend) for k in range(78, 93)]
+
+
 @pytest.mark.parametrize('missing', [(), (89, 90), (88, 89, 90, 91, 92)])
-def test_an_obstacle_walked_up_to_is_still_reported_once_its_foot_leaves_the_view(missing):
+def test_an_obstacle_walked_up_to_is_still_reported_once_its_foot_leaves_the_view(
+        missing, bollard_walk):
     """The paper's rig sees the ground from about 1.4 m, the alarm stops at 1.2 m: an
     84 cm bollard walked up to (simulator, true camera motion as the tracks' input) must
     go on being reported, coasted, at its true place once its foot has left the bottom
@@ -2115,13 +2166,10 @@ def test_an_obstacle_walked_up_to_is_still_reported_once_its_foot_leaves_the_vie
     (a missed /egomotion) the tracks are carried by the motion before
     (``track_motion_hold_frames``); with five missing, the bollard is held where it was
     last placed once the hold runs out, not forgotten."""
-    from asmonc_vision.sim import StereoRenderer, make_scenario, simulate_frame
-
-    sc = make_scenario('walk_obstacles', seed=3002)
-    rend, cam = StereoRenderer(sc.rig), sc.rig.camera()
+    cam, frames = bollard_walk
     det, prev, near = GpodDetector(), None, []
-    for k in range(78, 93):
-        f = simulate_frame(sc, k, rend)
+    for f in frames:
+        k = f.index
         motion = None
         if prev is not None and k not in missing:       # X_prev = R X_curr + t
             motion = (prev.rotation.T @ f.left_pose.rotation,
@@ -2345,8 +2393,20 @@ def test_the_initial_plane_must_hold_a_part_of_the_features(ground_fraction, fra
     assert status == want
 
 
+@pytest.fixture(scope='module')
+def vigorous_walk():
+    """The camera and every frame of clear_walk seed 8202 with `GaitSettings.extreme`
+    (simulator), rendered once for the cases below."""
+    from asmonc_vision.sim import StereoRenderer, make_scenario, simulate
+    from asmonc_vision.sim.motion import GaitSettings
+
+    sc = make_scenario('clear_walk', seed=8202, gait=GaitSettings.extreme())
+    return sc.rig.camera(), list(simulate(sc, StereoRenderer(sc.rig)))
+
+
 @pytest.mark.parametrize('missing', [(52,), tuple(range(10, 80, 3))])
-def test_a_vigorous_walker_frame_without_motion_does_not_leave_the_plane_off(missing):
+def test_a_vigorous_walker_frame_without_motion_does_not_leave_the_plane_off(
+        missing, vigorous_walk):
     """The paper's extreme walking motion (5 degrees of sway, 10 cm bob; simulator
     clear_walk seed 8202 with `GaitSettings.extreme`) moves the ground by 10 px of
     disparity between frames. In the node graph the /egomotion of one frame (52) was
@@ -2358,15 +2418,10 @@ def test_a_vigorous_walker_frame_without_motion_does_not_leave_the_plane_off(mis
     neither the narrow gate nor the long coast until a refit. Also with every third
     motion missing, the plane is right or lost (a fault the wearer hears), in all but a
     frame or two."""
-    from asmonc_vision.sim import StereoRenderer, make_scenario, simulate_frame
-    from asmonc_vision.sim.motion import GaitSettings
-
-    sc = make_scenario('clear_walk', seed=8202, gait=GaitSettings.extreme())
-    rend, cam = StereoRenderer(sc.rig), sc.rig.camera()
+    cam, frames = vigorous_walk
     det = GpodDetector(GpodConfig())
     prev, off, lost, false = None, [], [], []
-    for k in range(sc.n_frames):
-        f = simulate_frame(sc, k, rend)
+    for k, f in enumerate(frames):
         motion = None
         if prev is not None and k not in missing:
             motion = (prev.rotation.T @ f.left_pose.rotation,

@@ -6,6 +6,8 @@ pitched 20 degrees down) standing still.
 
 Everything the detector reports on these pairs is false: the ground only bends.
 """
+import functools
+
 import cv2
 import numpy as np
 import pytest
@@ -77,17 +79,23 @@ PROFILES = {
 }
 
 
+@functools.lru_cache(maxsize=None)
+def rendered(profile, frames: int, seed: int) -> tuple:
+    """The first ``frames`` pairs `render` gives for this profile and seed (the same for
+    the detector with and without the surface: rendered once)."""
+    rng = np.random.default_rng(seed)
+    return tuple(tuple(render(profile, rng)) for _ in range(frames))
+
+
 def reports_ahead(profile, surface: bool, frames: int = 4, seed: int = 0,
                   from_m: float = 3.0) -> list[int]:
     """Per tracked frame, the obstacles reported from ``from_m`` ahead (where the ground
     bends; nearer, this renderer's coarse texture gives a few 5-8 cm reports on flat
     ground too, with or without the surface)."""
-    rng = np.random.default_rng(seed)
     det = GpodDetector(GpodConfig(surface_enabled=surface))
     out = []
-    for _ in range(frames):
-        left, right = render(profile, rng)
-        r = det.process(left, right, CAM)
+    for left, right in rendered(profile, frames, seed):
+        r = det.process(left.copy(), right.copy(), CAM)
         if r.status == 'tracking':
             out.append(len([o for o in r.obstacles if o.range >= from_m]))
     return out

@@ -29,6 +29,16 @@ def strict_json(path):
     return json.loads(path.read_text(), parse_constant=refuse)
 
 
+def asmonc_run_refused(capsys, *args) -> str:
+    """`asmonc run` in this process, for arguments it must refuse before starting any
+    node (exit status 2, checked here): what it said on stderr. (The process's own exit
+    status is that of `main`, as the runs above show.)"""
+    from asmonc_vision.cli.main import main
+    capsys.readouterr()
+    assert main(['run', *map(str, args)]) == 2
+    return capsys.readouterr().err
+
+
 def frames(bag, topic):
     return {bagio.header_stamp_ns(m): frame_from_obstacle_array(m)
             for _, _, m in bagio.read_messages(bag, [topic])}
@@ -134,7 +144,8 @@ def test_missing_right_images_are_not_announced_as_a_fault(tmp_path):
     bag = tmp_path / 'lost_right'
     assert _without_right_images(BAGS / 'clear_static', bag, [5, -1]) == 2
     out = tmp_path / 'out'
-    res = asmonc_run(bag, '--out', out, '--no-progress')
+    # the two lost pairs never come: a 2 s wait for late results is enough
+    res = asmonc_run(bag, '--out', out, '--no-progress', '--settle', 2)
     assert res.returncode == 1, res.stdout + res.stderr       # 1: frames were dropped
     assert '28 of 30 processed, 2 dropped' in res.stdout
     summary = strict_json(out / 'summary.json')
@@ -251,19 +262,17 @@ def test_the_gait_node_is_stopped_after_its_last_state_not_before():
     assert not stopper.is_alive() and not gait.stop_calls
 
 
-def test_domain_id_out_of_range_is_a_clear_error():
-    res = asmonc_run(BAGS / 'clear_static', ROS_DOMAIN_ID='500')
-    assert res.returncode == 2
-    assert 'ROS_DOMAIN_ID must be in [0, 232]' in res.stderr and 'got 500' in res.stderr
+def test_domain_id_out_of_range_is_a_clear_error(capsys, monkeypatch):
+    monkeypatch.setenv('ROS_DOMAIN_ID', '500')
+    err = asmonc_run_refused(capsys, BAGS / 'clear_static')
+    assert 'ROS_DOMAIN_ID must be in [0, 232]' in err and 'got 500' in err
 
 
-def test_missing_bag_is_a_clear_error(tmp_path):
-    res = asmonc_run(tmp_path / 'no_such_bag')
-    assert res.returncode == 2
-    assert 'does not exist' in res.stderr
+def test_missing_bag_is_a_clear_error(tmp_path, capsys):
+    assert 'does not exist' in asmonc_run_refused(capsys, tmp_path / 'no_such_bag')
 
 
-def test_truncated_bag_replays_what_can_be_read(tmp_path):
+def test_truncated_bag_replays_what_can_be_read(tmp_path, capsys):
     """A bag cut short (a recording that crashed): the messages before the cut are
     replayed and scored, the cut is reported, and the exit status says the bag ended in
     error. Cut to nothing readable, it is a clear error."""
@@ -283,12 +292,11 @@ def test_truncated_bag_replays_what_can_be_read(tmp_path):
     assert len(frames(out, '/obstacles')) == summary['processed_frames']
     assert summary['ground_truth']                   # the truth before the cut is scored
     (tmp_path / 'none.mcap').write_bytes(data[:200])
-    res = asmonc_run(tmp_path / 'none.mcap')
-    assert res.returncode == 2
-    assert 'none.mcap' in res.stderr and 'cannot be read' in res.stderr
+    err = asmonc_run_refused(capsys, tmp_path / 'none.mcap')
+    assert 'none.mcap' in err and 'cannot be read' in err
 
 
-def test_bag_with_neither_cameras_nor_inclinometer_is_a_clear_error(tmp_path):
+def test_bag_with_neither_cameras_nor_inclinometer_is_a_clear_error(tmp_path, capsys):
     from rosbags.rosbag2 import StoragePlugin, Writer
     store = bagio.typestore()
     Imu = store.types['sensor_msgs/msg/Imu']
@@ -303,9 +311,8 @@ def test_bag_with_neither_cameras_nor_inclinometer_is_a_clear_error(tmp_path):
             linear_acceleration=store.types['geometry_msgs/msg/Vector3'](x=0, y=0, z=0),
             linear_acceleration_covariance=np.zeros(9))
         w.write(c, 1, store.serialize_cdr(msg, 'sensor_msgs/msg/Imu'))
-    res = asmonc_run(tmp_path / 'imu_only')
-    assert res.returncode == 2
-    assert 'no /stereo/left/image_rect messages and no /inclinometer/imu messages' in res.stderr
+    err = asmonc_run_refused(capsys, tmp_path / 'imu_only')
+    assert 'no /stereo/left/image_rect messages and no /inclinometer/imu messages' in err
 
 
 def test_inclinometer_only_bag_runs_the_walk_model_alone(tmp_path):

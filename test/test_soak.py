@@ -134,11 +134,12 @@ def test_the_streamed_wav_equals_the_whole_mix(tmp_path):
 
 
 def test_a_short_soak_of_the_whole_graph(capsys):
-    """Half a minute of the walking bag looped through every node: no process dies,
-    every pair played gets its result, and each node is sampled."""
+    """18 s of the walking bag looped at twice its rate through every node (the replay
+    paced by the detector, as at rate 1): no process dies, every pair played gets its
+    result, and each node is sampled."""
     from asmonc_vision.cli.main import main
-    rc = main(['soak', str(BAGS / 'walk_obstacles'), '--minutes', '0.5', '--warmup', '5',
-               '--period', '5'])
+    rc = main(['soak', str(BAGS / 'walk_obstacles'), '--minutes', '0.3', '--rate', '2',
+               '--warmup', '3', '--period', '4'])
     out = capsys.readouterr().out
     assert rc == 0, out
     for name in ('detector', 'egomotion', 'gait', 'alarm', 'audio', 'player'):

@@ -5,6 +5,7 @@ The monitor's rules are tested on synthetic ground pixels (a paper rig, camera 1
 high pitched 20 degrees down), and the whole detector on a simulated plain wall (no
 texture at all on its faces) that appears in front of a rig standing still.
 """
+import functools
 import math
 
 import numpy as np
@@ -228,9 +229,11 @@ def test_bad_settings_are_refused(kw, match):
         GpodConfig(unseen_max_ratio=0.99)
 
 
+@functools.lru_cache(maxsize=None)
 def _plain_wall_frames(seed: int = 3, n: int = 20):
     """The simulator's wall with no texture on its faces (uniform grey), appearing 2.4 m
-    ahead of the paper's rig standing still at 0.8 s: (camera, frames)."""
+    ahead of the paper's rig standing still at 0.8 s: (camera, frames). Rendered once
+    for the tests below (the detectors only read the frames)."""
     from asmonc_vision.sim import RigSettings, StereoRenderer, simulate_frame
     from asmonc_vision.sim.motion import Leg, Trajectory
     from asmonc_vision.sim.scenarios import Scenario, random_pavement
