@@ -81,6 +81,29 @@ def test_ground_hidden_beyond_three_metres_is_reported_there_after_two_frames():
     assert PLANE.signed_height(r.position)[0] == pytest.approx(r.height, abs=1e-9)
 
 
+def test_a_walls_matched_stripes_are_not_ground_seen_behind_its_foot():
+    """A plain wall's faint stripes are matched here and there, at the wall's disparity:
+    their rays meet the ground plane behind the wall's foot, but they stand far above
+    the plane there and are no ground seen. On walk stop_turn 1012 (backpack rig) they
+    hid a dark plain wall 2.5 m ahead from the monitor until the wearer had stopped."""
+    rng, mon = _learnt(13, frames=1)
+    xy, u, v = _ground_points(rng, 4000)
+    keep = xy[:, 0] < 3.0                           # a plain wall at 3 m hides the rest
+    expected = mon.expected[mon.range_edges[:-1] >= 3.0].sum()
+    wxy, wu, wv = _ground_points(rng, 4000)
+    on = (wxy[:, 0] >= 3.0) & (np.abs(wxy[:, 1]) <= 0.5)
+    n_wall = int(round(0.4 * expected))             # its stripes' pixels: 40 % of those
+    wu, wv = wu[on][:n_wall], wv[on][:n_wall]       # the hidden ground showed
+    assert len(wu) == n_wall
+    uu, vv = np.concatenate([u[keep], wu]), np.concatenate([v[keep], wv])
+    for wall_excess, reported in ((0.0, False), (12.0, True)):
+        # the same pixels on the ground's disparity are ground seen beyond 3 m
+        excess = np.concatenate([np.zeros(keep.sum()), np.full(n_wall, wall_excess)])
+        r = mon.update(CAM, PLANE, uu, vv, excess, 0.8)
+        assert (r is not None) == reported
+    assert 2.85 <= r.range <= 3.0, r
+
+
 def test_ground_as_usual_is_never_reported():
     rng, mon = _learnt(3, frames=1)
     for _ in range(100):

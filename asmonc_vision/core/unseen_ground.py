@@ -10,9 +10,13 @@ into cells of ground ``CELL_DEPTH_M`` deep along the walking direction, each the
 corridor's whole width (tile joints that run along the walk leave narrower strips
 without a single vertical edge for metres). For each cell in view
 the monitor counts the frame's matched edge pixels whose ray meets the ground plane
-inside the cell, at any disparity (ground, obstacle or the lower ground beyond a drop:
-all of them are *seen*), and keeps a running mean of that count over the frames the cell
-was in view and not hidden (``expected``; learnt slowly where the cell itself looks
+inside the cell and whose disparity is at most the obstacle threshold above the plane's
+(ground, or the lower ground beyond a drop: the ground there is *seen*). A pixel standing
+higher is not ground seen at that cell but something in front of it: the faint stripes
+of a plain wall, matched here and there, project onto the ground behind the wall's foot
+and would otherwise count as the ground it hides (a standing thing that is detected
+explains the band it hides, below). The monitor keeps a running mean of that count over
+the frames the cell was in view and not hidden (``expected``; learnt slowly where the cell itself looks
 hidden). The cells are fixed to the wearer (range, lateral), not to the world, so the
 expectation describes "the ground the wearer walks on, at that distance" and carries
 through turns.
@@ -312,7 +316,8 @@ class UnseenGroundMonitor:
             metric: this frame's ground plane (left optical frame).
             u, v: (K,) left-image column and row of the frame's matched edge pixels.
             excess: (K,) their disparity minus the plane's, pixels (NaN: unusable).
-            threshold: the obstacle threshold, pixels: a scalar or (K,) per pixel.
+            threshold: the obstacle threshold, pixels: a scalar or (K,) per pixel; a
+                pixel whose excess is above it is not counted as ground seen.
             explained: (M, 2) ground coordinates (range, lateral; metres) of the feet of
                 the frame's detected obstacles and drop-offs (None: none).
             left: (H, W) uint8 the left image, to place the band's near edge where the
@@ -325,8 +330,11 @@ class UnseenGroundMonitor:
         v = np.asarray(v, float)
         excess = np.asarray(excess, float)
         xy = self.pixel_ground(cam, metric, u, v)
-        fin = np.isfinite(excess)
-        k_all = self._count(xy[fin])
+        thr = np.broadcast_to(np.asarray(threshold, float), excess.shape)
+        with np.errstate(invalid='ignore'):
+            # ground or lower: a pixel standing above the threshold is not ground seen
+            ground = np.isfinite(excess) & (excess <= thr)
+        k_all = self._count(xy[ground])
         view = self.cells_in_view(cam, metric)
         trusted = view & (self.seen_frames >= TRUST_FRAMES)
         n_r = len(view)
