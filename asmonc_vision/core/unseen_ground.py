@@ -79,9 +79,13 @@ TRUST_FRAMES = 5
 #: explains the unseen ground.
 EXPLAINED_M = 0.5
 #: The band's last TAIL_CELLS trusted cells must show at most max_ratio of their expected
-#: edge pixels, plus TAIL_SLACK.
+#: edge pixels, plus SLACK.
 TAIL_CELLS = 2
-TAIL_SLACK = 2.0
+#: Edge pixels a hidden band (and its tail) may show beyond max_ratio of those expected:
+#: stray matches, about one per cell behind a wall's foot, would otherwise fail a band
+#: whose expectation is small (the far ground of a small image shows a few edge pixels
+#: per cell).
+SLACK = 2.0
 #: A band starts to be reported only when the cells in front of it showed at least
 #: FRONT_RATIO of their expected edge pixels, and FRONT_MIN * min_expected were expected.
 FRONT_RATIO = 0.5
@@ -294,14 +298,14 @@ class UnseenGroundMonitor:
         k = np.where(trusted, k_all, 0.0)[::-1].cumsum()[::-1]
         cells = trusted[::-1].cumsum()[::-1]
         starts = np.flatnonzero(trusted & (cells >= MIN_CELLS) & (lam >= self.min_expected)
-                                & (k <= self.max_ratio * lam))
+                                & (k <= self.max_ratio * lam + SLACK))
         if not len(starts):
             return None
         i = int(starts[0])
         # the band's far end must be hidden too: a plain patch of ground ends, a wall
         # hides all behind it
         tail = np.flatnonzero(trusted & (np.arange(n_r) >= i))[-TAIL_CELLS:]
-        if k_all[tail].sum() > self.max_ratio * self.expected[tail].sum() + TAIL_SLACK:
+        if k_all[tail].sum() > self.max_ratio * self.expected[tail].sum() + SLACK:
             return None
         return i
 
