@@ -23,8 +23,10 @@ through turns.
 
 The corridor's ground is *unseen from range R on* when, over the trusted cells in view
 from R out to the corridor's far end (at least ``MIN_CELLS`` of them):
-- at most ``max_ratio`` of the expected edge pixels are seen, with at least
-  ``min_expected`` expected;
+- at most ``max_ratio`` of the expected edge pixels are seen, plus ``SLACK`` (a few
+  stray matches behind a wall's foot), with at least ``min_expected`` expected (the far
+  ground of a 320 x 240 image shows only about 15 edge pixels from 3 m to 5 m: its fine
+  texture is not matched that far);
 - so are the last ``TAIL_CELLS`` (a plain patch of ground ends, a wall hides all behind
   it);
 - and, for a band not already being reported, the cells in front of R showed at least
@@ -49,7 +51,9 @@ seen, moved on to where the ground's fine texture gives way to a plain face
 Limits, which no passive stereo cue avoids: ground that itself has no edges for metres (a
 smooth floor after a textured one) looks the same as a wall with none, and is reported;
 a wall already in view when the monitor starts has no expectation behind it, and is not;
-a plain surface across only part of the corridor is not reported.
+a plain surface across only part of the corridor is not reported. On a small image the
+ground beyond about 3 m shows too few matched edge pixels to expect anything of it: a
+wall is found when its foot is about 2.5-3 m ahead, not at 4-5 m.
 
 Frames: the left optical frame (x right, y down, z forward); ground coordinates as in
 `core.camera.ground_range_bearing` (range along the ground from the point below the left
