@@ -104,6 +104,32 @@ def test_a_walls_matched_stripes_are_not_ground_seen_behind_its_foot():
     assert 2.85 <= r.range <= 3.0, r
 
 
+def test_a_few_stray_matches_do_not_hide_a_wall_whose_band_expects_few():
+    """The far ground of a small image shows few edge pixels (the backpack rig: about 15
+    from 3 m to 5 m); behind a wall's foot a stray match or so per cell still shows.
+    ``max_ratio`` of a small expectation is less than one per cell: the band is found
+    with ``SLACK`` (two) edge pixels more."""
+    rng = np.random.default_rng(14)
+    mon = UnseenGroundMonitor(max_ratio=0.15, min_expected=15.0, frames=1, max_range=5.0,
+                              half_width=0.5)
+    _learn(mon, rng, density=250)
+    band = mon.range_edges[:-1] >= 3.0
+    expected = mon.expected[band].sum()
+    assert 15.0 <= expected <= 40.0, expected
+    n_stray = int(math.floor(0.15 * expected)) + 1  # one more than max_ratio allows
+    assert n_stray <= 0.15 * expected + 2.0     # within SLACK (2) more
+    stray = np.column_stack([np.linspace(3.3, 4.6, n_stray), np.zeros(n_stray)])
+    n_up = PLANE.normal_up
+    fwd = np.array([0.0, 0.0, 1.0]) - n_up[2] * n_up
+    fwd /= np.linalg.norm(fwd)
+    su, sv = CAM.project_left(-PLANE.height * n_up + stray[:, :1] * fwd)
+    xy, u, v = _ground_points(rng, 4000)        # the near ground as usual
+    keep = xy[:, 0] < 3.0
+    uu, vv = np.concatenate([u[keep], su]), np.concatenate([v[keep], sv])
+    r = mon.update(CAM, PLANE, uu, vv, np.zeros(len(uu)), 0.8)
+    assert r is not None and 2.85 <= r.range <= 3.0, r
+
+
 def test_ground_as_usual_is_never_reported():
     rng, mon = _learnt(3, frames=1)
     for _ in range(100):
