@@ -82,6 +82,55 @@ def test_ground_hidden_beyond_three_metres_is_reported_there_after_two_frames():
     assert PLANE.signed_height(r.position)[0] == pytest.approx(r.height, abs=1e-9)
 
 
+def test_a_walls_matched_stripes_are_not_ground_seen_behind_its_foot():
+    """A plain wall's faint stripes are matched here and there, at the wall's disparity:
+    their rays meet the ground plane behind the wall's foot, but they stand far above
+    the plane there and are no ground seen. On walk stop_turn 1012 (backpack rig) they
+    hid a dark plain wall 2.5 m ahead from the monitor until the wearer had stopped."""
+    rng, mon = _learnt(13, frames=1)
+    xy, u, v = _ground_points(rng, 4000)
+    keep = xy[:, 0] < 3.0                           # a plain wall at 3 m hides the rest
+    expected = mon.expected[mon.range_edges[:-1] >= 3.0].sum()
+    wxy, wu, wv = _ground_points(rng, 4000)
+    on = (wxy[:, 0] >= 3.0) & (np.abs(wxy[:, 1]) <= 0.5)
+    n_wall = int(round(0.4 * expected))             # its stripes' pixels: 40 % of those
+    wu, wv = wu[on][:n_wall], wv[on][:n_wall]       # the hidden ground showed
+    assert len(wu) == n_wall
+    uu, vv = np.concatenate([u[keep], wu]), np.concatenate([v[keep], wv])
+    for wall_excess, reported in ((0.0, False), (12.0, True)):
+        # the same pixels on the ground's disparity are ground seen beyond 3 m
+        excess = np.concatenate([np.zeros(keep.sum()), np.full(n_wall, wall_excess)])
+        r = mon.update(CAM, PLANE, uu, vv, excess, 0.8)
+        assert (r is not None) == reported
+    assert 2.85 <= r.range <= 3.0, r
+
+
+def test_a_few_stray_matches_do_not_hide_a_wall_whose_band_expects_few():
+    """The far ground of a small image shows few edge pixels (the backpack rig: about 15
+    from 3 m to 5 m); behind a wall's foot a stray match or so per cell still shows.
+    ``max_ratio`` of a small expectation is less than one per cell: the band is found
+    with ``SLACK`` (two) edge pixels more."""
+    rng = np.random.default_rng(14)
+    mon = UnseenGroundMonitor(max_ratio=0.15, min_expected=15.0, frames=1, max_range=5.0,
+                              half_width=0.5)
+    _learn(mon, rng, density=250)
+    band = mon.range_edges[:-1] >= 3.0
+    expected = mon.expected[band].sum()
+    assert 15.0 <= expected <= 40.0, expected
+    n_stray = int(math.floor(0.15 * expected)) + 1  # one more than max_ratio allows
+    assert n_stray <= 0.15 * expected + 2.0     # within SLACK (2) more
+    stray = np.column_stack([np.linspace(3.3, 4.6, n_stray), np.zeros(n_stray)])
+    n_up = PLANE.normal_up
+    fwd = np.array([0.0, 0.0, 1.0]) - n_up[2] * n_up
+    fwd /= np.linalg.norm(fwd)
+    su, sv = CAM.project_left(-PLANE.height * n_up + stray[:, :1] * fwd)
+    xy, u, v = _ground_points(rng, 4000)        # the near ground as usual
+    keep = xy[:, 0] < 3.0
+    uu, vv = np.concatenate([u[keep], su]), np.concatenate([v[keep], sv])
+    r = mon.update(CAM, PLANE, uu, vv, np.zeros(len(uu)), 0.8)
+    assert r is not None and 2.85 <= r.range <= 3.0, r
+
+
 def test_ground_as_usual_is_never_reported():
     rng, mon = _learnt(3, frames=1)
     for _ in range(100):

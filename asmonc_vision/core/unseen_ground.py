@@ -10,17 +10,23 @@ into cells of ground ``CELL_DEPTH_M`` deep along the walking direction, each the
 corridor's whole width (tile joints that run along the walk leave narrower strips
 without a single vertical edge for metres). For each cell in view
 the monitor counts the frame's matched edge pixels whose ray meets the ground plane
-inside the cell, at any disparity (ground, obstacle or the lower ground beyond a drop:
-all of them are *seen*), and keeps a running mean of that count over the frames the cell
-was in view and not hidden (``expected``; learnt slowly where the cell itself looks
+inside the cell and whose disparity is at most the obstacle threshold above the plane's
+(ground, or the lower ground beyond a drop: the ground there is *seen*). A pixel standing
+higher is not ground seen at that cell but something in front of it: the faint stripes
+of a plain wall, matched here and there, project onto the ground behind the wall's foot
+and would otherwise count as the ground it hides (a standing thing that is detected
+explains the band it hides, below). The monitor keeps a running mean of that count over
+the frames the cell was in view and not hidden (``expected``; learnt slowly where the cell itself looks
 hidden). The cells are fixed to the wearer (range, lateral), not to the world, so the
 expectation describes "the ground the wearer walks on, at that distance" and carries
 through turns.
 
 The corridor's ground is *unseen from range R on* when, over the trusted cells in view
 from R out to the corridor's far end (at least ``MIN_CELLS`` of them):
-- at most ``max_ratio`` of the expected edge pixels are seen, with at least
-  ``min_expected`` expected;
+- at most ``max_ratio`` of the expected edge pixels are seen, plus ``SLACK`` (a few
+  stray matches behind a wall's foot), with at least ``min_expected`` expected (the far
+  ground of a 320 x 240 image shows only about 15 edge pixels from 3 m to 5 m: its fine
+  texture is not matched that far);
 - so are the last ``TAIL_CELLS`` (a plain patch of ground ends, a wall hides all behind
   it);
 - and, for a band not already being reported, the cells in front of R showed at least
@@ -45,7 +51,9 @@ seen, moved on to where the ground's fine texture gives way to a plain face
 Limits, which no passive stereo cue avoids: ground that itself has no edges for metres (a
 smooth floor after a textured one) looks the same as a wall with none, and is reported;
 a wall already in view when the monitor starts has no expectation behind it, and is not;
-a plain surface across only part of the corridor is not reported.
+a plain surface across only part of the corridor is not reported. On a small image the
+ground beyond about 3 m shows too few matched edge pixels to expect anything of it: a
+wall is found when its foot is about 2.5-3 m ahead, not at 4-5 m.
 
 Frames: the left optical frame (x right, y down, z forward); ground coordinates as in
 `core.camera.ground_range_bearing` (range along the ground from the point below the left
@@ -75,9 +83,13 @@ TRUST_FRAMES = 5
 #: explains the unseen ground.
 EXPLAINED_M = 0.5
 #: The band's last TAIL_CELLS trusted cells must show at most max_ratio of their expected
-#: edge pixels, plus TAIL_SLACK.
+#: edge pixels, plus SLACK.
 TAIL_CELLS = 2
-TAIL_SLACK = 2.0
+#: Edge pixels a hidden band (and its tail) may show beyond max_ratio of those expected:
+#: stray matches, about one per cell behind a wall's foot, would otherwise fail a band
+#: whose expectation is small (the far ground of a small image shows a few edge pixels
+#: per cell).
+SLACK = 2.0
 #: A band starts to be reported only when the cells in front of it showed at least
 #: FRONT_RATIO of their expected edge pixels, and FRONT_MIN * min_expected were expected.
 FRONT_RATIO = 0.5
@@ -290,14 +302,14 @@ class UnseenGroundMonitor:
         k = np.where(trusted, k_all, 0.0)[::-1].cumsum()[::-1]
         cells = trusted[::-1].cumsum()[::-1]
         starts = np.flatnonzero(trusted & (cells >= MIN_CELLS) & (lam >= self.min_expected)
-                                & (k <= self.max_ratio * lam))
+                                & (k <= self.max_ratio * lam + SLACK))
         if not len(starts):
             return None
         i = int(starts[0])
         # the band's far end must be hidden too: a plain patch of ground ends, a wall
         # hides all behind it
         tail = np.flatnonzero(trusted & (np.arange(n_r) >= i))[-TAIL_CELLS:]
-        if k_all[tail].sum() > self.max_ratio * self.expected[tail].sum() + TAIL_SLACK:
+        if k_all[tail].sum() > self.max_ratio * self.expected[tail].sum() + SLACK:
             return None
         return i
 
@@ -312,7 +324,8 @@ class UnseenGroundMonitor:
             metric: this frame's ground plane (left optical frame).
             u, v: (K,) left-image column and row of the frame's matched edge pixels.
             excess: (K,) their disparity minus the plane's, pixels (NaN: unusable).
-            threshold: the obstacle threshold, pixels: a scalar or (K,) per pixel.
+            threshold: the obstacle threshold, pixels: a scalar or (K,) per pixel; a
+                pixel whose excess is above it is not counted as ground seen.
             explained: (M, 2) ground coordinates (range, lateral; metres) of the feet of
                 the frame's detected obstacles and drop-offs (None: none).
             left: (H, W) uint8 the left image, to place the band's near edge where the
@@ -325,8 +338,11 @@ class UnseenGroundMonitor:
         v = np.asarray(v, float)
         excess = np.asarray(excess, float)
         xy = self.pixel_ground(cam, metric, u, v)
-        fin = np.isfinite(excess)
-        k_all = self._count(xy[fin])
+        thr = np.broadcast_to(np.asarray(threshold, float), excess.shape)
+        with np.errstate(invalid='ignore'):
+            # ground or lower: a pixel standing above the threshold is not ground seen
+            ground = np.isfinite(excess) & (excess <= thr)
+        k_all = self._count(xy[ground])
         view = self.cells_in_view(cam, metric)
         trusted = view & (self.seen_frames >= TRUST_FRAMES)
         n_r = len(view)

@@ -334,7 +334,7 @@ class GpodConfig(PlausiblePlaneConfig):
         'hidden by something, reported as an obstacle at its near edge; 0 = off',
         range=(0.0, 0.95))
     unseen_min_expected: float = param(
-        30.0, 'Unseen ground: least number of edge pixels the hidden band must have been '
+        15.0, 'Unseen ground: least number of edge pixels the hidden band must have been '
         'expected to show (fewer: too little evidence either way)', range=(1.0, 1.0e6))
     unseen_frames: int = param(
         2, 'Unseen ground: pairs in a row a band must be found hidden before it is reported',
