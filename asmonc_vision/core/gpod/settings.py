@@ -295,6 +295,28 @@ class GpodConfig(PlausiblePlaneConfig):
     min_drop_pixels: int = param(
         3, 'Pixels below the plane by more than the threshold that an edge string needs '
         'to be a drop-off', range=(1, 100000))
+    drop_run_fraction: float = param(
+        0.25, 'As obstacle_run_fraction, for a pixel below the plane: the lower ground '
+        'beyond a drop is a surface parallel to the ground, whose edges (short texture '
+        'edges) lie below the plane by the same depth along their whole length rather than '
+        'sinking row by row, so its pixels need no longer runs for a larger depth; 0 = '
+        'min_matched_run for every drop pixel', range=(0.0, 10.0))
+    drop_region_pixels: float = param(
+        0.0, 'An edge string with fewer than min_drop_pixels drop pixels is still a drop '
+        'string when the drop pixels of all the strings whose feet lie within '
+        'drop_cluster_radius_m of its own (the lower ground it belongs to) count at least '
+        'this many times min_drop_pixels (weighted as min_drop_pixels counts them): the '
+        'lower ground is many short texture edges, none long alone; 0 = each string '
+        'alone', range=(0.0, 100000.0))
+    drop_region_min_strings: int = param(
+        10, 'drop_region_pixels: the region must hold drop pixels of at least this many '
+        'edge strings (the lower ground shows many texture edges; a few strings below the '
+        'plane are mismatches)', range=(1, 100000))
+    drop_region_max_spread: float = param(
+        0.25, 'drop_region_pixels: the drop pixels of the region must lie at one depth '
+        'below the plane (a level lower ground): the median absolute deviation of their '
+        'heights at most this fraction of their median depth (mismatches scatter in '
+        'depth)', range=(0.0, 10.0))
     min_drop_cluster_pixels: int = param(
         15, 'Drop pixels a drop-off needs in all (a drop is a region, not a lone string)',
         range=(1, 1000000))
