@@ -199,8 +199,7 @@ class Detection(PlaneTracking):
         # row, so an excess E needs about E / |b| rows of it (a fraction of them, up to
         # max_required_run, must be matched in one run).
         slope = max(abs(float(cast(np.ndarray, self._abc)[1])), 1e-3)   # (tracking: set)
-        frac = np.where(ex_mean < 0.0, c.drop_run_fraction, c.obstacle_run_fraction)
-        need = np.clip(np.ceil(frac * np.abs(ex_mean) / slope),
+        need = np.clip(np.ceil(c.obstacle_run_fraction * np.abs(ex_mean) / slope),
                        c.min_matched_run, max(c.max_required_run, c.min_matched_run))
         reliable = run >= need
         usable = reliable & in_range

@@ -312,12 +312,6 @@ class GpodConfig(PlausiblePlaneConfig):
     min_drop_pixels: int = param(
         3, 'Pixels below the plane by more than the threshold that an edge string needs '
         'to be a drop-off', range=(1, 100000))
-    drop_run_fraction: float = param(
-        0.0, 'As obstacle_run_fraction, for a pixel below the plane: the lower ground '
-        'beyond a drop is a surface parallel to the ground, whose edges (short texture '
-        'edges) lie below the plane by the same depth along their whole length rather than '
-        'sinking row by row, so its pixels need no longer runs for a larger depth; 0 = '
-        'min_matched_run for every drop pixel', range=(0.0, 10.0))
     drop_region_pixels: float = param(
         3.0, 'An edge string with fewer than min_drop_pixels drop pixels is still a drop '
         'string when the drop pixels of all the strings whose feet lie within '
