@@ -171,7 +171,7 @@ class GpodConfig(PlausiblePlaneConfig):
         'against pitch, so that a chain of them walks the plane onto the ground beyond a '
         'drop')
     hold_min_height_sd_m: float = param(
-        0.01, "'refit', refit_hold_height: a refit is held at the anchor height only when "
+        0.015, "'refit', refit_hold_height: a refit is held at the anchor height only when "
         'its own camera height is this uncertain or more (standard deviation by the fit '
         'covariance, metres): a rig that sees the ground from near its feet fits the '
         'height to millimetres and follows it freely', range=(0.0, 100.0))
