@@ -214,3 +214,22 @@ def test_inliers_along_one_slanted_line_are_refused_with_a_least_spread():
     assert fit is not None and np.allclose(fit.abc, abc, atol=0.05)
     with pytest.raises(ValueError, match='min_spread_px'):
         fit_ground_plane(u2, v2, d2, min_spread_px=-1.0)
+
+
+def test_lsq_plane_at_height_keeps_the_height_and_fits_the_orientation():
+    """A band of noisy ground rows: the free fit trades height against pitch; the fit at
+    the true height recovers the plane, and at a wrong height keeps that height."""
+    from asmonc_vision.core.ground_plane import cyclopean_height, lsq_plane_at_height
+    n = np.array([0.0, np.cos(np.radians(3.0)), np.sin(np.radians(3.0))])
+    true = plane_from_metric(CAM, MetricPlane(normal_up=-n, height=1.3))
+    rng = np.random.default_rng(4)
+    u = rng.uniform(0, 319, 400)
+    v = rng.uniform(200, 239, 400)
+    d = true[0] * u + true[1] * v + true[2] + rng.normal(0.0, 0.3, 400)
+    h_true = cyclopean_height(CAM, true)
+    held = lsq_plane_at_height(CAM, u, v, d, h_true)
+    assert cyclopean_height(CAM, held) == pytest.approx(h_true, abs=1e-9)
+    assert held == pytest.approx(true, abs=0.02 * abs(true[2]))
+    wrong = lsq_plane_at_height(CAM, u, v, d, 1.5)
+    assert cyclopean_height(CAM, wrong) == pytest.approx(1.5, abs=1e-9)
+    assert lsq_plane_at_height(CAM, u[:1], v[:1], d[:1], 1.3) is None

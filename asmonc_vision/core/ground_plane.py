@@ -439,6 +439,68 @@ def _minor_spread(u: np.ndarray, v: np.ndarray) -> float:
     return math.sqrt(max(lam, 0.0) / u.shape[0])
 
 
+def cyclopean_height(cam: StereoCamera, abc: np.ndarray) -> float:
+    """The height of the cyclopean centre above the plane ``abc`` (3,), metres (inf for
+    a plane of zero disparity everywhere)."""
+    a, b, c = (float(x) for x in abc)
+    wz = (c + a * cam.cx + b * cam.cy) / cam.f
+    norm = math.sqrt(a * a + b * b + wz * wz) / cam.baseline
+    return 1.0 / norm if norm > 0.0 else math.inf
+
+
+def lsq_plane_at_height(cam: StereoCamera, u: np.ndarray, v: np.ndarray, d: np.ndarray,
+                        height: float, w: np.ndarray | None = None) -> np.ndarray | None:
+    """Least-squares plane ``d = a*u + b*v + c`` whose cyclopean centre lies ``height``
+    metres above it: only its orientation is fitted.
+
+    The plane is ``d = B * (x . r)`` with ``r = (u - cx, v - cy, f)`` and ``|x| = 1 / height``
+    (x the downward normal over the height); the constrained least squares is
+    ``(A^T W A + lam I) x = A^T W d`` with the multiplier lam that puts x on that sphere,
+    found by bisection in the eigenbasis of ``A^T W A``.
+
+    Args:
+        cam: the rectified stereo camera.
+        u, v, d: (N,) cyclopean columns, rows and disparities, pixels (N >= 2).
+        height: the cyclopean centre's height above the plane, metres (> 0).
+        w: (N,) non-negative weights, or None (all 1).
+    Returns:
+        (3,) abc, or None when degenerate (too few points, or a solution that is not
+        unique).
+    """
+    if u.shape[0] < 2 or not (height > 0.0 and math.isfinite(height)):
+        return None
+    A = cam.baseline * np.stack([u - cam.cx, v - cam.cy, np.full(u.shape[0], cam.f)], axis=1)
+    Aw = A if w is None else A * np.asarray(w, np.float64)[:, None]
+    ata = Aw.T @ A
+    atd = Aw.T @ d
+    lam_i, Q = np.linalg.eigh(ata)
+    g = Q.T @ atd
+    target = 1.0 / (height * height)
+    if not (np.all(np.isfinite(lam_i)) and np.all(np.isfinite(g))) or abs(g[0]) < 1e-12:
+        return None
+
+    def norm2(lam: float) -> float:
+        return float(np.sum((g / (lam_i + lam)) ** 2))
+
+    lo = -lam_i[0] + 1e-12 * max(abs(lam_i[-1]), 1.0)
+    hi = max(abs(lam_i[-1]), 1.0)
+    while norm2(hi) > target:
+        hi *= 4.0
+        if hi > 1e30:
+            return None
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if norm2(mid) > target:
+            lo = mid
+        else:
+            hi = mid
+        if hi - lo <= 1e-12 * max(abs(hi), 1.0):
+            break
+    x = Q @ (g / (lam_i + 0.5 * (lo + hi)))
+    B = cam.baseline
+    return np.array([B * x[0], B * x[1], B * (cam.f * x[2] - cam.cx * x[0] - cam.cy * x[1])])
+
+
 def predict_plane(cam: StereoCamera, abc: np.ndarray, R: np.ndarray, t: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray] | None:
     """The ground plane carried through a camera motion (the prediction of the paper's

@@ -247,7 +247,11 @@ class Detection(PlaneTracking):
                 obst_string &= n_seen + 1e-9 >= min_px
                 seen = drop & ~occluded
                 n_drop = np.bincount(sid[seen], weights=weight[seen], minlength=n_s) + 1e-9
-        drop_string = ~obst_string & (n_drop >= c.min_drop_pixels)
+        drop_string = n_drop >= c.min_drop_pixels
+        if c.drop_region_pixels > 0.0:
+            drop_string |= self._drop_regions(drop & (n_drop[sid] > 1e-6), weight, pts, h,
+                                              metric, n_s, sid)
+        drop_string &= ~obst_string
         obst &= obst_string[sid]
         drop &= drop_string[sid]
         sclass = np.where(obst_string[sid], 1, np.where(drop_string[sid], -1, 0)).astype(np.int8)
@@ -276,6 +280,33 @@ class Detection(PlaneTracking):
                                             cam, metric))
         found.sort(key=lambda o: o.range)
         return features, tuple(found)
+
+    def _drop_regions(self, drop: np.ndarray, weight: np.ndarray, pts: np.ndarray,
+                      h: np.ndarray, metric: MetricPlane, n_s: int, sid: np.ndarray
+                      ) -> np.ndarray:
+        """(n_s,) bool: the strings whose drop pixels (``drop`` (K,) bool) belong to a
+        region of lower ground: their feet clustered at ``drop_cluster_radius_m``, of at
+        least ``drop_region_min_strings`` strings, whose drop pixels weigh (``weight``
+        (K,)) at least ``drop_region_pixels`` times ``min_drop_pixels`` in all and lie
+        at one depth below the plane (``h`` (K,): the median absolute deviation of
+        their heights at most ``drop_region_max_spread`` times their median)."""
+        c = self.config
+        out = np.zeros(n_s, bool)
+        idx = np.flatnonzero(drop)
+        if idx.size == 0:
+            return out
+        g2 = _ground_coords(pts[idx], h[idx], metric)
+        label = cluster_points_2d(g2, sid[idx], c.drop_cluster_radius_m)
+        total = np.bincount(label, weights=weight[idx])
+        for k in np.flatnonzero(total >= c.drop_region_pixels * c.min_drop_pixels):
+            sel = idx[label == k]
+            if np.unique(sid[sel]).size < c.drop_region_min_strings:
+                continue
+            depth = h[sel]
+            med = float(np.median(depth))
+            if float(np.median(np.abs(depth - med))) <= c.drop_region_max_spread * abs(med):
+                out[sid[sel]] = True
+        return out
 
     def _ground_reference(self, u, v, d, cam: StereoCamera, metric: MetricPlane
                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -436,16 +467,8 @@ class Detection(PlaneTracking):
                   cam: StereoCamera, metric: MetricPlane) -> list[GpodObstacle]:
         """Cluster the selected pixels (by string, feet proximity) into obstacles; drop
         clusters of fewer than ``min_pixels`` pixels."""
-        n_up = metric.normal_up
-        p = pts[idx]
         hh = h[idx]
-        feet = p - hh[:, None] * n_up[None, :]
-        fwd = np.array([0.0, 0.0, 1.0]) - n_up[2] * n_up
-        fwd /= np.linalg.norm(fwd)
-        lft = _cross3(n_up, fwd)
-        origin = -metric.height * n_up
-        g = feet - origin[None, :]
-        g2 = np.stack([g @ fwd, g @ lft], axis=1)
+        g2, fwd, lft = _ground_coords(pts[idx], hh, metric, axes=True)
         label = cluster_points_2d(g2, m.string_id[idx], radius)
         out = self._describe(idx, label, sign, min_pixels, hh, g2, m, excess, cam, metric,
                              fwd, lft)
@@ -700,3 +723,16 @@ class Detection(PlaneTracking):
                 string_ids=sid_u[sid_start[k]:sid_start[k + 1]].astype(np.int32)))
         return out
 
+
+def _ground_coords(p: np.ndarray, hh: np.ndarray, metric: MetricPlane, axes: bool = False):
+    """The feet of points ``p`` (K, 3) (heights ``hh`` (K,) above the plane) on the ground:
+    (K, 2) (forward, left) from the point below the camera, metres; with ``axes`` also
+    the forward and left unit vectors (3,)."""
+    n_up = metric.normal_up
+    feet = p - hh[:, None] * n_up[None, :]
+    fwd = np.array([0.0, 0.0, 1.0]) - n_up[2] * n_up
+    fwd /= np.linalg.norm(fwd)
+    lft = _cross3(n_up, fwd)
+    g = feet + metric.height * n_up[None, :]
+    g2 = np.stack([g @ fwd, g @ lft], axis=1)
+    return (g2, fwd, lft) if axes else g2

@@ -4,13 +4,15 @@ and the obstacle thresholds from the calibration's residual spread.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any, cast
 
 import numpy as np
 
 from ..camera import MetricPlane, StereoCamera, plane_disparity
-from ..ground_plane import PlaneFit, fast_median, fit_ground_plane, lsq_plane, predict_plane
+from ..ground_plane import (PlaneFit, cyclopean_height, fast_median, fit_ground_plane,
+                            lsq_plane, lsq_plane_at_height, plane_is_plausible, predict_plane)
 from .runs import _robust_row_slope
 from .state import DetectorState
 from .support import _mad_sigma, _planes_agree, _state_metric, _still_motion
@@ -45,6 +47,58 @@ class PlaneTracking(DetectorState):
             min_features=c.min_plane_features, min_spread_px=c.plane_min_spread_px,
             min_support_fraction=min_support, rng=self._rng,
             **cast(dict[str, Any], c.plausibility()))
+
+    def _refit(self, u, v, d, cam: StereoCamera) -> PlaneFit | None:
+        """A per-frame refit of features (u, v, d): `_fit`, then, with
+        ``refit_hold_height``, `_held` at the anchor height."""
+        fit = self._fit(u, v, d, cam)
+        if fit is None or not self.config.refit_hold_height:
+            return fit
+        if not _height_sd(cam, fit) > self.config.hold_min_height_sd_m:
+            return fit
+        return self._held(fit, u, v, d, cam)
+
+    def _held(self, fit: PlaneFit, u, v, d, cam: StereoCamera) -> PlaneFit | None:
+        """The plane of the refit ``fit`` of features (u, v, d: (N,) pixels) refitted at
+        the anchor height (`_anchor_height`): least squares of its orientation alone on
+        its inliers (weighted as `_fit` weighs them), the inliers re-selected within
+        ``plane_inlier_px`` of it until they settle (at most 3 rounds). The free least
+        squares on the final inliers gives the height this frame adds to the anchor
+        (kept in ``_free_height`` until the refit is taken). None when too few inliers
+        remain or the plane is not a plausible ground."""
+        c = self.config
+        height = self._anchor_height()
+        if not math.isfinite(height):
+            return fit
+        w = np.maximum(d, 0.0) ** 3
+        inl = fit.inliers
+        abc = fit.abc
+        for _ in range(3):
+            held = lsq_plane_at_height(cam, u[inl], v[inl], d[inl], height, w[inl])
+            if held is None:
+                return None
+            abc = held
+            new = np.abs(d - plane_disparity(abc, u, v)) <= c.plane_inlier_px
+            if int(new.sum()) < c.min_plane_features:
+                return None
+            if np.array_equal(new, inl):
+                break
+            inl = new
+        metric = plane_is_plausible(cam, abc, **cast(dict[str, Any], c.plausibility()))
+        if metric is None:
+            return None
+        free = lsq_plane(u[inl], v[inl], d[inl], w[inl])
+        self._free_height = cyclopean_height(cam, free[0]) if free is not None else math.nan
+        return dataclasses.replace(fit, abc=np.asarray(abc, np.float64), inliers=inl,
+                                   num_features=int(inl.sum()), metric=metric)
+
+    def _anchor_height(self) -> float:
+        """The cyclopean camera height the refits are held at (``refit_hold_height``):
+        the median of the calibrated one and the free heights of the latest
+        ``height_anchor_frames`` refits taken, metres (NaN before the calibration)."""
+        if not self._heights:
+            return math.nan
+        return float(np.median(np.asarray(self._heights)))
 
     def _near_calibration(self, fit: PlaneFit) -> bool:
         """Whether an ungated refit is close enough to the calibrated plane to trust."""
@@ -247,6 +301,7 @@ class PlaneTracking(DetectorState):
             (status: 'initialising' | 'tracking' | 'lost', whether the plane was refitted).
         """
         c = self.config
+        self._free_height = math.nan
         if self._calib is None:
             return self._calibrate(u, v, d, s, cam)
         enough = u.shape[0] >= c.min_plane_features
@@ -348,7 +403,7 @@ class PlaneTracking(DetectorState):
             ref = self._still_plane if self._still_plane is not None else current
             height = ref.signed_height(cam.triangulate(u, v, d))
             gate = np.abs(height) <= gate_m
-            fit = self._fit(u[gate], v[gate], d[gate], cam)
+            fit = self._refit(u[gate], v[gate], d[gate], cam)
             if fit is not None and not self._close_to_current(fit, cam, current, tight):
                 fit, rejected = None, True
             if fit is None and anchored and not predicted:
@@ -407,6 +462,8 @@ class PlaneTracking(DetectorState):
         if fit.num_features < c.init_min_inlier_fraction * uu.shape[0]:
             return 'initialising', False
         self._calib = self._last_fit = fit
+        self._heights.clear()
+        self._heights.append(cyclopean_height(cam, fit.abc))
         self._abc, self._cov = fit.abc.copy(), fit.cov.copy()
         self._calibrate_sigma(uu, vv, dd, ss.astype(np.float64))
         self._init_window.clear()
@@ -424,14 +481,14 @@ class PlaneTracking(DetectorState):
         gate = np.abs(d - plane_disparity(self._abc, u, v)) <= gate_px
         if gate.any():      # the coarse fit sees only the nearer half: the ground here
             gate &= d >= fast_median(d[gate])      # (np.median's arithmetic, finite d)
-        coarse = self._fit(u[gate], v[gate], d[gate], cam)
+        coarse = self._refit(u[gate], v[gate], d[gate], cam)
         out = None
         if coarse is not None:
             # (fitted with a camera: it has a metric plane)
             height = cast(MetricPlane, coarse.metric).signed_height(cam.triangulate(u, v, d))
             gate = ((np.abs(d - plane_disparity(coarse.abc, u, v)) <= gate_px)
                     & (np.abs(height) <= gate_m))
-            out = self._fit(u[gate], v[gate], d[gate], cam)
+            out = self._refit(u[gate], v[gate], d[gate], cam)
         if out is not None and not self._close_to_current(out, cam, current, tight):
             return None, True
         return out, False
@@ -449,6 +506,8 @@ class PlaneTracking(DetectorState):
         self._abc = self._abc + gain @ (fit.abc - self._abc)
         self._cov = (np.eye(3) - gain) @ p_pred
         self._last_fit = fit
+        if math.isfinite(self._free_height):
+            self._heights.append(self._free_height)
         self._coast = self._rejected = 0
         self._stale = False
 
@@ -457,7 +516,7 @@ class PlaneTracking(DetectorState):
         stands on, rather than the ground beyond a step) if it is near the calibration,
         else None."""
         near = d >= np.median(d)
-        ungated = self._fit(u[near], v[near], d[near], cam)
+        ungated = self._refit(u[near], v[near], d[near], cam)
         if ungated is not None and self._near_calibration(ungated):
             return ungated
         return None
@@ -513,3 +572,15 @@ class PlaneTracking(DetectorState):
         d_max = min(cam.fb / self.config.min_range_m, float(cam.width - 1))
         return d_min, max(d_max, d_min)
 
+
+def _height_sd(cam: StereoCamera, fit: PlaneFit) -> float:
+    """The standard deviation of the cyclopean camera height above the plane of ``fit``
+    by its covariance, metres (first order)."""
+    M = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0],
+                  [cam.cx / cam.f, cam.cy / cam.f, 1.0 / cam.f]]) / cam.baseline
+    x = M @ fit.abc
+    n = float(np.linalg.norm(x))
+    if not n > 0.0:
+        return math.inf
+    grad = -(x @ M) / n ** 3          # d (1 / |M abc|) / d abc
+    return math.sqrt(max(float(grad @ fit.cov @ grad), 0.0))

@@ -162,6 +162,23 @@ class GpodConfig(PlausiblePlaneConfig):
     refit_max_angle_change_deg: float = param(
         8.0, "'refit': a refit that turns the plane normal by more than this from the "
         'current plane is rejected, degrees', range=(0.01, 90.0))
+    refit_hold_height: bool = param(
+        True, "'refit': each refit keeps the camera height of the anchor (the median of the "
+        'calibrated height and the free heights of the latest height_anchor_frames refits) '
+        "and fits the plane's orientation alone: the wearer carries the rig at a steady "
+        'height while it pitches and rolls with the gait, and a free fit to a narrow band '
+        'of far ground (a chest rig looking level sees the ground from 3 m) trades height '
+        'against pitch, so that a chain of them walks the plane onto the ground beyond a '
+        'drop')
+    hold_min_height_sd_m: float = param(
+        0.015, "'refit', refit_hold_height: a refit is held at the anchor height only when "
+        'its own camera height is this uncertain or more (standard deviation by the fit '
+        'covariance, metres): a rig that sees the ground from near its feet fits the '
+        'height to millimetres and follows it freely', range=(0.0, 100.0))
+    height_anchor_frames: int = param(
+        50, "'refit', refit_hold_height: the free heights (least squares on the held "
+        "refit's inliers) of this many latest refits taken join the calibrated height in "
+        'the anchor', range=(0, 100000))
     recover_height_tolerance: float = param(
         0.3, "'refit': when lost (gated refits failed for longer than max_coast_frames), "
         'an ungated refit is accepted if its camera height is within this fraction of the '
@@ -295,6 +312,22 @@ class GpodConfig(PlausiblePlaneConfig):
     min_drop_pixels: int = param(
         3, 'Pixels below the plane by more than the threshold that an edge string needs '
         'to be a drop-off', range=(1, 100000))
+    drop_region_pixels: float = param(
+        3.0, 'An edge string with fewer than min_drop_pixels drop pixels is still a drop '
+        'string when the drop pixels of all the strings whose feet lie within '
+        'drop_cluster_radius_m of its own (the lower ground it belongs to) count at least '
+        'this many times min_drop_pixels (weighted as min_drop_pixels counts them): the '
+        'lower ground is many short texture edges, none long alone; 0 = each string '
+        'alone', range=(0.0, 100000.0))
+    drop_region_min_strings: int = param(
+        15, 'drop_region_pixels: the region must hold drop pixels of at least this many '
+        'edge strings (the lower ground shows many texture edges; a few strings below the '
+        'plane are mismatches)', range=(1, 100000))
+    drop_region_max_spread: float = param(
+        0.25, 'drop_region_pixels: the drop pixels of the region must lie at one depth '
+        'below the plane (a level lower ground): the median absolute deviation of their '
+        'heights at most this fraction of their median depth (mismatches scatter in '
+        'depth)', range=(0.0, 10.0))
     min_drop_cluster_pixels: int = param(
         15, 'Drop pixels a drop-off needs in all (a drop is a region, not a lone string)',
         range=(1, 1000000))

@@ -3,6 +3,7 @@ calibration and filter, the threshold's sigma, the temporal averages, the tracks
 """
 from __future__ import annotations
 
+import math
 from collections import deque
 from typing import TYPE_CHECKING
 
@@ -48,6 +49,11 @@ class DetectorState:
         #: the plane was carried over a frame without a motion and without a refit: it
         #: is not where the camera's later motions would carry it (until a refit)
         self._stale = False
+        #: the calibrated camera height and the free heights of the latest refits taken
+        #: (cyclopean, metres): the anchor of ``refit_hold_height``
+        self._heights: deque = deque(maxlen=self.config.height_anchor_frames + 1)
+        #: the free height of this frame's refit (NaN: none)
+        self._free_height = math.nan
         #: the plane before this frame's motion (None: no motion this frame)
         self._unmoved: MetricPlane | None = None
         #: residual spread of the initial fit: global, and per edge strength (bin
