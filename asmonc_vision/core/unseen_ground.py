@@ -16,10 +16,10 @@ higher is not ground seen at that cell but something in front of it: the faint s
 of a plain wall, matched here and there, project onto the ground behind the wall's foot
 and would otherwise count as the ground it hides (a standing thing that is detected
 explains the band it hides, below). The monitor keeps a running mean of that count over
-the frames the cell was in view and not hidden (``expected``; learnt slowly where the cell itself looks
-hidden). The cells are fixed to the wearer (range, lateral), not to the world, so the
-expectation describes "the ground the wearer walks on, at that distance" and carries
-through turns.
+the frames the cell was in view and not hidden (``expected``; learnt slowly where the
+cell itself looks hidden). The cells are fixed to the wearer (range, lateral), not to
+the world, so the expectation describes "the ground the wearer walks on, at that
+distance" and carries through turns.
 
 The corridor's ground is *unseen from range R on* when, over the trusted cells in view
 from R out to the corridor's far end (at least ``MIN_CELLS`` of them):

@@ -247,11 +247,8 @@ class Detection(PlaneTracking):
                 obst_string &= n_seen + 1e-9 >= min_px
                 seen = drop & ~occluded
                 n_drop = np.bincount(sid[seen], weights=weight[seen], minlength=n_s) + 1e-9
-        drop_string = n_drop >= c.min_drop_pixels
-        if c.drop_region_pixels > 0.0:
-            drop_string |= self._drop_regions(drop & (n_drop[sid] > 1e-6), weight, pts, h,
-                                              metric, n_s, sid)
-        drop_string &= ~obst_string
+        drop_string = self._drop_strings(drop, n_drop, weight, pts, h, metric, n_s,
+                                         sid) & ~obst_string
         obst &= obst_string[sid]
         drop &= drop_string[sid]
         sclass = np.where(obst_string[sid], 1, np.where(drop_string[sid], -1, 0)).astype(np.int8)
@@ -280,6 +277,19 @@ class Detection(PlaneTracking):
                                             cam, metric))
         found.sort(key=lambda o: o.range)
         return features, tuple(found)
+
+    def _drop_strings(self, drop: np.ndarray, n_drop: np.ndarray, weight: np.ndarray,
+                      pts: np.ndarray, h: np.ndarray, metric: MetricPlane, n_s: int,
+                      sid: np.ndarray) -> np.ndarray:
+        """(n_s,) bool: the drop strings: ``min_drop_pixels`` of drop evidence (``n_drop``
+        (n_s,)), or, with ``drop_region_pixels``, a string in a region of lower ground
+        (`_drop_regions`)."""
+        c = self.config
+        out = n_drop >= c.min_drop_pixels
+        if c.drop_region_pixels > 0.0:
+            out |= self._drop_regions(drop & (n_drop[sid] > 1e-6), weight, pts, h, metric,
+                                      n_s, sid)
+        return out
 
     def _drop_regions(self, drop: np.ndarray, weight: np.ndarray, pts: np.ndarray,
                       h: np.ndarray, metric: MetricPlane, n_s: int, sid: np.ndarray
