@@ -357,3 +357,33 @@ def test_the_map_takes_odometry_and_never_waits(ros_context):
     tracking = sum(p.status == GroundPlane.TRACKING for p in got['plane'])
     assert tracking >= len(frames) - 3
     assert det.perception.map.placed_pairs == tracking
+
+
+def test_a_motion_over_a_pair_the_detector_processed_is_not_taken_as_its_own(graph_ego):
+    """The egomotion node, on a busy CPU, skips pairs: its motion for pair 4 is then from
+    pair 2 (the /egomotion before it). The detector, which processed pair 3, must not take
+    it as pair 3 -> 4; the next motion (4 -> 5) is its own again."""
+    from geometry_msgs.msg import TransformStamped
+
+    det, ex, send, got = graph_ego
+    probe = Node('skipping_ego', context=det.context)
+    pub = probe.create_publisher(TransformStamped, '/egomotion', RESULT_QOS)
+    ex.add_node(probe)
+    assert spin_until(ex, lambda: pub.get_subscription_count() >= 1)
+    frames = load_frames(BAGS / 'static_obstacles', range(8))      # a still rig
+    published = [1, 2, 4, 5, 6, 7]                                  # pair 3 skipped
+    for i, f in enumerate(frames):
+        if i in published:
+            msg = TransformStamped()                                # no motion: identity
+            msg.header = f[0].header
+            msg.child_frame_id = f[0].header.frame_id
+            msg.transform.rotation.w = 1.0
+            pub.publish(msg)
+            assert spin_until(ex, lambda: pub.get_subscription_count() >= 1)
+        send(*f)
+        assert spin_until(ex, lambda i=i: len(got['obstacles']) == i + 1, timeout=15)
+    assert spin_until(ex, lambda: len(got['plane']) == len(frames))
+    tracking = [p.status == GroundPlane.TRACKING for p in got['plane']]
+    assert tracking[4], 'the test needs a plane at pair 4 to tell the motions apart'
+    assert det.motions_used == sum(tracking[i] for i in (1, 2, 5, 6, 7))
+    probe.destroy_node()

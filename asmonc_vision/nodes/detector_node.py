@@ -138,12 +138,13 @@ class DetectorNode(StereoInputNode):
         self.pub_plane = self.create_publisher(GroundPlane, '/ground_plane', RESULT_QOS)
         self.pub_markers = self.create_publisher(MarkerArray, '/obstacles/markers', RESULT_QOS)
         self.pub_debug = self.create_publisher(Image, '/detector/debug_image', IMAGE_QOS)
-        #: /egomotion by stamp (ns) -> (R, t), the newest stamp received, the previous
-        #: processed pair's sequence number, and how many pairs had a motion
+        #: /egomotion by stamp (ns) -> (R, t, the stamp of the /egomotion before it: the
+        #: pair it is from), the newest and the last stamp received, the previous
+        #: processed pair's stamp, and how many pairs had a motion
         self._motions: collections.OrderedDict = collections.OrderedDict()
         self._motion_cv = threading.Condition()
         self._newest_motion_ns = -1
-        self._prev_seq: int | None = None
+        self._last_motion_ns: int | None = None
         self._prev_stamp_ns: int | None = None
         self.motions_used = 0
         #: the detector waits for each pair's /egomotion
@@ -171,8 +172,10 @@ class DetectorNode(StereoInputNode):
 
     def restart(self) -> None:
         self.perception.reset()
-        self._prev_seq = None
         self._prev_stamp_ns = None
+        with self._motion_cv:           # (time went back: the motions' stamps are void)
+            self._motions.clear()
+            self._newest_motion_ns, self._last_motion_ns = -1, None
 
     def _debug_work(self) -> None:
         while True:
@@ -202,21 +205,30 @@ class DetectorNode(StereoInputNode):
             self._debug_thread.join(timeout=2.0)
         return super().destroy_node()
 
-    def _on_egomotion(self, msg: TransformStamped) -> None:
-        q = msg.transform.rotation
-        tr = msg.transform.translation
-        t = np.array([tr.x, tr.y, tr.z], float)
+    def _pose(self, q, p, topic: str):
+        """(R (3, 3), t (3,)) of a quaternion and a translation or position message
+        field, or None (logged, throttled) when either is invalid."""
+        t = np.array([p.x, p.y, p.z], float)
         try:
             R = quaternion_to_matrix(np.array([q.x, q.y, q.z, q.w], float))
         except ValueError:
             R = None
         if R is None or not np.all(np.isfinite(t)):
-            self.get_logger().warn('/egomotion with an invalid rotation or translation ignored',
+            self.get_logger().warn(f'{topic} with an invalid rotation or translation ignored',
                                    throttle_duration_sec=5.0)
+            return None
+        return R, t
+
+    def _on_egomotion(self, msg: TransformStamped) -> None:
+        pose = self._pose(msg.transform.rotation, msg.transform.translation, '/egomotion')
+        if pose is None:
             return
         stamp = stamp_to_ns(msg.header.stamp)
         with self._motion_cv:
-            self._motions[stamp] = (R, t)
+            # the motion is from the pair of the /egomotion before it (the egomotion node's
+            # contract: the pair it estimated before, pairs it dropped lie in between)
+            ref, self._last_motion_ns = self._last_motion_ns, stamp
+            self._motions[stamp] = (*pose, ref)
             while len(self._motions) > 64:
                 self._motions.popitem(last=False)
             self._newest_motion_ns = max(self._newest_motion_ns, stamp)
@@ -224,25 +236,18 @@ class DetectorNode(StereoInputNode):
 
     def _on_odometry(self, msg: Odometry) -> None:
         p = msg.pose.pose
-        t = np.array([p.position.x, p.position.y, p.position.z], float)
-        q = p.orientation
-        try:
-            R = quaternion_to_matrix(np.array([q.x, q.y, q.z, q.w], float))
-        except ValueError:
-            R = None
-        if R is None or not np.all(np.isfinite(t)):
-            self.get_logger().warn('/egomotion/odometry with an invalid pose ignored',
-                                   throttle_duration_sec=5.0)
-            return
-        self.motion_predictor.add_pose(stamp_to_ns(msg.header.stamp), R, t)
+        pose = self._pose(p.orientation, p.position, '/egomotion/odometry')
+        if pose is not None:
+            self.motion_predictor.add_pose(stamp_to_ns(msg.header.stamp), *pose)
 
-    def _motion_for(self, stamp_ns: int, follows_previous: bool):
+    def _motion_for(self, stamp_ns: int, prev_stamp_ns: int | None):
         """The pair's /egomotion (R, t), waiting up to ``egomotion_wait`` -- not at all
         when further pairs are already waiting (detection must not fall behind a slow
-        egomotion node); None when the previous pair was not the one processed before
-        it, nobody publishes /egomotion, a later motion arrived instead (none will come
-        for this pair) or time ran out."""
-        if not (self.use_motion and follows_previous):
+        egomotion node); None when the motion is not from the pair processed before this
+        one (``prev_stamp_ns``: a pair dropped here or by the egomotion node between),
+        nobody publishes /egomotion, a later motion arrived instead (none will come for
+        this pair) or time ran out."""
+        if not self.use_motion or prev_stamp_ns is None:
             return None
         if self.count_publishers('/egomotion') == 0:
             return None
@@ -252,8 +257,10 @@ class DetectorNode(StereoInputNode):
             while True:
                 motion = self._motions.pop(stamp_ns, None)
                 if motion is not None:
+                    if motion[2] != prev_stamp_ns:
+                        return None
                     self.motions_used += 1
-                    return motion
+                    return motion[:2]
                 left = deadline - time.monotonic()
                 if self._newest_motion_ns > stamp_ns or left <= 0:
                     return None
@@ -261,13 +268,12 @@ class DetectorNode(StereoInputNode):
 
     def process_pair(self, pair: StereoPair, left: np.ndarray, right: np.ndarray,
                      cam: StereoCamera) -> None:
-        follows = self._prev_seq is not None and pair.seq == self._prev_seq + 1
         prev_stamp = self._prev_stamp_ns
-        self._prev_seq, self._prev_stamp_ns = pair.seq, pair.stamp_ns
+        self._prev_stamp_ns = pair.stamp_ns
 
         def motion():
-            m = self._motion_for(pair.stamp_ns, follows)
-            if m is not None and self.motion_predictor is not None and prev_stamp is not None:
+            m = self._motion_for(pair.stamp_ns, prev_stamp)
+            if m is not None and self.motion_predictor is not None:
                 # the pair's own motion, waited for: the map's prediction is exact
                 self.motion_predictor.add_motion(prev_stamp, pair.stamp_ns, m[0], m[1])
             return m
