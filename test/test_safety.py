@@ -88,6 +88,22 @@ def test_cue_lead_is_the_range_where_the_cue_began_over_the_walking_speed():
     assert 'cued at least 3 s before contact 1/1' in '\n'.join(format_safety(s.as_dict()))
 
 
+def test_an_obstacle_that_comes_into_the_corridor_late_is_cued_at_entry_or_not():
+    # the box steps into the path at frame 8 (x = 0.8 m: 2.2 m, 2.2 s before contact at
+    # 1 m/s), as a passer-by does: no cue could lead by more than 2.2 s
+    late = TrueObstacle(1, 0.2, rect(3.0, 3.3, -0.1, 0.1), appear_ns=S0 + 8 * DT, kind='box')
+    truth = SafetyTruth([late], walk(25))
+    s = score_safety(truth, [alarm(0, AlarmLevel.CLEAR), alarm(8, AlarmLevel.CAUTION, 1, 2.2)])
+    o = s.path_obstacles[0]
+    assert o['corridor_lead_s'] == pytest.approx(2.2) and o['cue_lead_s'] == pytest.approx(2.2)
+    assert (s.cued_ahead, s.cued_at_entry) == (0, 1)
+    assert 'and 1 that came into the corridor later' in '\n'.join(format_safety(s.as_dict()))
+    # cued three pairs after it came: neither
+    s = score_safety(truth, [alarm(0, AlarmLevel.CLEAR), alarm(11, AlarmLevel.CAUTION, 1, 1.9)])
+    assert (s.cued_ahead, s.cued_at_entry) == (0, 0)
+    assert s.path_obstacles[0]['cue_lead_s'] == pytest.approx(1.9)
+
+
 def test_fault_at_the_first_frame_on_the_path_counts_apart_and_clear_is_never():
     truth = SafetyTruth([BOX], walk(25))
     s = score_safety(truth, [alarm(0, AlarmLevel.CLEAR), alarm(5, AlarmLevel.FAULT),

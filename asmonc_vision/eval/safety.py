@@ -98,6 +98,11 @@ class SafetyCriteria:
                               'higher was in force while it lay in the corridor at least '
                               'this long before contact at the walking speed, seconds',
                               range=(0.0, 60.0))
+    entry_slack_s: float = param(0.2, 'an obstacle that came into the corridor less than '
+                                 'cue_lead_s before contact (the wearer turned towards it) is '
+                                 'cued at entry when the cue led by at least its lead at entry '
+                                 'less this, seconds (about two pairs at walking pace)',
+                                 range=(0.0, 10.0))
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -293,6 +298,7 @@ class SafetyScore:
     never: int = 0
     under_fault: int = 0
     cued_ahead: int = 0
+    cued_at_entry: int = 0
     frames: int = 0
     frames_on_path: int = 0
     frames_on_path_clear: int = 0
@@ -340,6 +346,7 @@ class SafetyScore:
         out = cls(criteria=scores[0].criteria if scores else {})
         for s in scores:
             for k in ('on_path', 'warned', 'late', 'never', 'under_fault', 'cued_ahead',
+                      'cued_at_entry',
                       'frames',
                       'frames_on_path', 'frames_on_path_clear', 'frames_on_path_fault',
                       'duration_s', 'walking_s', 'alarms_false', 'alarms_warning',
@@ -364,6 +371,7 @@ class SafetyScore:
                                'late': self.late, 'never': self.never,
                                'under_fault': self.under_fault,
                                'cued_ahead': self.cued_ahead,
+                               'cued_at_entry': self.cued_at_entry,
                                'obstacles': self.path_obstacles},
             'frames': self.frames, 'duration_s': self.duration_s,
             'walking_s': self.walking_s,
@@ -485,14 +493,18 @@ def _score_warnings(c: SafetyCriteria, truth: SafetyTruth, alarms: Sequence[dict
     speed, _ = walking_speed(truth, c.walking_window_s)
     track: dict[int, dict] = {}
     cued: dict[int, float] = {}                 # obstacle id -> lead of its first cue, s
+    entry: dict[int, float] = {}                # id -> lead at its first pair in the corridor
     for f, level, obs, v in zip(frames, levels, present, speed):
         on = []
         for ob in obs:
             if abs(ob.height) < c.min_height:
                 continue
             r = corridor_range(ob, f, c.corridor_half_width, c.corridor_length)
-            if r is not None and level in WARNING_LEVELS and ob.id not in cued:
-                cued[ob.id] = r / v if v > c.walking_speed else math.inf
+            lead = None if r is None else r / v if v > c.walking_speed else math.inf
+            if lead is not None and ob.id not in entry:
+                entry[ob.id] = lead
+            if lead is not None and level in WARNING_LEVELS and ob.id not in cued:
+                cued[ob.id] = lead
             if r is not None and r <= c.on_path_range:
                 on.append((ob, r))
         if not on:
@@ -518,7 +530,12 @@ def _score_warnings(c: SafetyCriteria, truth: SafetyTruth, alarms: Sequence[dict
         # (None: never cued in the corridor; cued while the wearer stood: no contact time)
         o['cue_lead_s'] = float(lead) if lead is not None and math.isfinite(lead) else None
         o['cued_standing'] = bool(lead == math.inf)
+        # the most any cue in the corridor could lead by: from the pair it came into it
+        most = entry.get(o['id'])
+        o['corridor_lead_s'] = float(most) if most is not None and math.isfinite(most) else None
         out.cued_ahead += int(lead is not None and lead >= c.cue_lead_s)
+        out.cued_at_entry += int(lead is not None and lead < c.cue_lead_s
+                                 and lead >= most - c.entry_slack_s)
         if o['first_level'] in WARNING_LEVELS:
             o['outcome'] = 'warned'
         elif o['first_level'] == AlarmLevel.FAULT:
@@ -627,7 +644,9 @@ def format_safety(s: dict, indent: str = '') -> list[str]:
         f"path {s['frames_on_path']}, CLEAR in force in {s['frames_on_path_clear']}, FAULT in "
         f"{s['frames_on_path_fault']}"
         + (f"; cued at least {s['criteria']['cue_lead_s']:g} s before contact "
-           f"{w['cued_ahead']}/{w['on_path']}" if 'cued_ahead' in w else ''),
+           f"{w['cued_ahead']}/{w['on_path']}" if 'cued_ahead' in w else '')
+        + (f" (and {w['cued_at_entry']} that came into the corridor later, cued as they "
+           f"came)" if w.get('cued_at_entry') else ''),
         f"false alarm events: {fa['events']} in {s['walking_s'] / 60:.2f} min of walking = "
         + (f'{pm:.2f} per minute' if pm is not None else '- per minute')
         + f" ({fa['false_alarm_messages']} of {fa['warning_messages']} CAUTION/WARNING/STOP "
