@@ -5,8 +5,9 @@ import pytest
 
 from asmonc_vision.core.edges import detect_vertical_edges
 from asmonc_vision.core.matching import (Candidates, candidate_matches,
-                                         disparity_gradient_interval, match_edges, pmf_match,
-                                         pmf_support, select_matches, support_links)
+                                         disparity_gradient_interval, match_edges,
+                                         match_rivals, pmf_match, pmf_support, select_matches,
+                                         support_links)
 
 
 def _texture(rng, h, w, blur=1.5, contrast=40.0):
@@ -269,8 +270,16 @@ def test_numba_kernels_equal_the_numpy_path(plane_pair, monkeypatch, shuffle):
         c = Candidates(c.left[o], c.right[o], c.d[o])
     fast_links = support_links(el, er, c, 0.5, 80.0, support_radius=3.0)
     fast = select_matches(c, fast_links, el, er, iterations=3)
-    for name in ('nb_pairs', 'nb_group', 'nb_select'):
+    k = np.flatnonzero(fast[0])
+    first = pmf_support(fast_links)
+    fast_rivals = match_rivals(c, first, k)
+    for name in ('nb_pairs', 'nb_group', 'nb_select', 'nb_rivals'):
         monkeypatch.setattr(mt.kernels, name, None)
+    rivals = match_rivals(c, first, k)
+    assert len(rivals[0]) > 0
+    for a, b in zip(fast_rivals, rivals):
+        assert a.dtype == b.dtype
+        np.testing.assert_array_equal(a, b)
     links = support_links(el, er, c, 0.5, 80.0, support_radius=3.0)
     for f in ('cand', 'start', 'pair_link', 'pair_cand', 'pair_edge', 'pair_right', 'weight'):
         np.testing.assert_array_equal(getattr(fast_links, f), getattr(links, f))

@@ -91,6 +91,7 @@ _LONE_MIN_GAIN_M = 0.05
 #: The directions searched (radians from the ground's x axis towards y) and the steps
 #: along each (metres from the foot).
 _LONE_PHI = np.arange(_LONE_DIRECTIONS) * (2.0 * np.pi / _LONE_DIRECTIONS)
+_LONE_COS, _LONE_SIN = np.cos(_LONE_PHI), np.sin(_LONE_PHI)
 
 #: A whole obstacle placed at one part's nearest point takes that part's height and
 #: confidence when the part is lower than this fraction of the whole's height (another
@@ -297,6 +298,16 @@ def described_by_part(whole: list[GpodObstacle], parts: list[GpodObstacle],
     return out
 
 
+def _row_median(x: np.ndarray) -> np.ndarray:
+    """``np.median(x, axis=-1)`` of a float array with at least one column, the same
+    values (the middle of the sorted row, or the mean of the middle two; NaN for a row
+    with a NaN) without np.median's overhead on small arrays."""
+    s = np.sort(x, axis=-1)
+    n = s.shape[-1]
+    mid = s[..., n // 2] if n % 2 else (s[..., n // 2 - 1] + s[..., n // 2]) / 2.0
+    return np.where(np.isnan(s[..., -1]), np.nan, mid)
+
+
 def _pairs_of(n: int) -> tuple[np.ndarray, np.ndarray]:
     """``np.triu_indices(n, 1)``: (P,) int64 i < j of every pair of 0..n-1, in row-major
     order (cached up to n = 256; read-only)."""
@@ -347,18 +358,18 @@ def lone_face_points(ctx: _FrameContext, xy: np.ndarray, group: np.ndarray, n_gr
         if np.min(np.hypot(f[:, 0] - foot[0], f[:, 1] - foot[1])) > _LONE_SPREAD_M:
             continue        # placed elsewhere already (a face out of the view, a gap)
         # Only a face that runs towards the camera's side can bring the point nearer.
-        phi = _LONE_PHI[np.cos(_LONE_PHI) * foot[0] + np.sin(_LONE_PHI) * foot[1] < 0.0]
+        phi = _LONE_PHI[_LONE_COS * foot[0] + _LONE_SIN * foot[1] < 0.0]
         if phi.size == 0:
             continue
         points, ev, sep, shift = ctx.outline_evidence(foot, h, phi)
-        bar = max(_LONE_BAR * float(np.median(ev.mean(axis=1))), noise_floor)
+        bar = max(_LONE_BAR * float(_row_median(ev.mean(axis=1))), noise_floor)
         gain = np.cumsum(ev - bar, axis=1)
         end = np.argmax(gain, axis=1)
         rows = np.arange(ev.shape[0])
         support = gain[rows, end]
         ok = ((support > 0.0) & ((end + 1) * _LONE_STEP_M >= _LONE_MIN_M)
-              & (np.median(sep, axis=1) >= _LONE_MIN_SEP_PX)
-              & (np.median(sep / np.maximum(shift, 1e-9), axis=1)
+              & (_row_median(sep) >= _LONE_MIN_SEP_PX)
+              & (_row_median(sep / np.maximum(shift, 1e-9))
                  >= _LONE_MIN_SEP_FRACTION))
         # each face's nearest point to the camera (the foot, its end, or between)
         ends = points[rows, end]

@@ -237,8 +237,9 @@ def _group_quantile(group: np.ndarray, x: np.ndarray, q: float, n_groups: int) -
     if x.size == 0:
         return out
     if kn.nb_group_quantile is not None:
-        return kn.nb_group_quantile(np.asarray(group, np.int64), np.asarray(x, np.float64),
-                                  float(q), n_groups)
+        return kn.nb_group_quantile(np.ascontiguousarray(group, np.int64),
+                                    np.ascontiguousarray(x, np.float64),
+                                    float(q), n_groups)
     order = np.lexsort((x, group))
     g, xs = group[order], x[order]
     count = np.bincount(g, minlength=n_groups)

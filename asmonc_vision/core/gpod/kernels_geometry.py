@@ -675,10 +675,10 @@ def warm_up(compiled: bool) -> None:
     """Compile these kernels (called by `kernels.warm_up`); ``compiled`` False: numba is
     missing or failed, and the numpy paths are used."""
     global nb_corner_free, nb_contact, nb_walk_down, nb_extremes, nb_soft_args, nb_arcs, \
-        nb_contact_bounds, nb_owners, nb_outline
+        nb_contact_bounds, nb_owners, nb_outline, nb_face_hides
     if not compiled:
         nb_corner_free = nb_contact = nb_walk_down = nb_extremes = nb_soft_args = None
-        nb_arcs = nb_contact_bounds = nb_owners = nb_outline = None
+        nb_arcs = nb_contact_bounds = nb_owners = nb_outline = nb_face_hides = None
         return
     f2, f1, i1 = np.zeros((1, 2)), np.zeros(1), np.zeros(1, np.int64)
     nb_corner_free = _warmed(nb_corner_free, f2, f2, f2, f2, f1 + 1.0, np.zeros((1, 1, 2)),
@@ -688,6 +688,9 @@ def warm_up(compiled: bool) -> None:
                          np.zeros((1, 1), np.float32), np.zeros((1, 1), np.float32))
     nb_walk_down = _warmed(nb_walk_down, i1, i1 - 1, f1, f1, 2.0, 1)
     nb_arcs = _warmed(nb_arcs, f2, f2, f1)
+    # (also called on its own, by `faces.lone_face_points`)
+    nb_face_hides = _warmed(nb_face_hides, 0.0, 0.0, 0.0, f2, f1, f2, 0.5,
+                            _FREE_SPACE_MARGIN_M, _FACE_HIDDEN_MIN)
     nb_owners = _warmed(nb_owners, f2, f1, np.zeros((2, 2)), np.zeros(2, np.int64), f1 + 1.0,
                         0.5, 1.2, f1, np.zeros(2), f1, np.zeros(2), f2)
     nb_contact_bounds = _warmed(nb_contact_bounds, f1, f1, f1, f1, f2[:, :1], f2[:, :1],

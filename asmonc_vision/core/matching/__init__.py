@@ -30,7 +30,7 @@ After Pollard, Mayhew & Frisby (PMF, 1985), as used by GPOD (Molton et al. 1998,
 
 Disparities are sub-pixel, from the sub-pixel edge positions in both images.
 
-The pair, grouping and selection loops run compiled by numba when it is installed
+The pair, grouping, selection and rival loops run compiled by numba when it is installed
 (:func:`warm_up`), with the numpy paths' tests and order of summation: identical results.
 """
 from asmonc_vision.core.matching.candidates import (candidate_matches, disc_offsets,

@@ -346,6 +346,51 @@ def select_kernel(c_left, c_right, n_l, n_r, l_cand, l_start, pair_cand, weight,
     return accepted, support
 
 
+def rivals_kernel(c_left, c_right, d, support, k, lo_l, hi_l, n_r):
+    """:func:`match_rivals` as loops (for numba), with the same order and arithmetic:
+    per accepted candidate ``k[i]`` (ascending i), the other candidates of its left edge
+    (``lo_l[i]``..``hi_l[i]``, ascending) and then those of its right edge (ascending
+    index, as a stable sort by right edge lists them; ``n_r`` > every right index);
+    returns (owner int32, d float32, support ratio float32)."""
+    m = c_left.shape[0]
+    n = k.shape[0]
+    first = np.zeros(n_r + 1, np.int64)        # candidates per right edge, as offsets
+    for c in range(m):
+        first[c_right[c] + 1] += 1
+    for r in range(n_r):
+        first[r + 1] += first[r]
+    by_r = np.empty(m, np.int64)
+    fill = first[:n_r].copy()
+    for c in range(m):
+        by_r[fill[c_right[c]]] = c
+        fill[c_right[c]] += 1
+    cap = 0
+    for i in range(n):
+        r = c_right[k[i]]
+        cap += (hi_l[i] - lo_l[i]) + (first[r + 1] - first[r])
+    owner = np.empty(cap, np.int32)
+    rd = np.empty(cap, np.float32)
+    ratio = np.empty(cap, np.float32)
+    j = 0
+    for i in range(n):
+        ki = k[i]
+        s = support[ki]
+        den = s if not s < 1e-12 else 1e-12
+        r = c_right[ki]
+        for half in range(2):
+            a = lo_l[i] if half == 0 else first[r]
+            b = hi_l[i] if half == 0 else first[r + 1]
+            for p in range(a, b):
+                c = p if half == 0 else by_r[p]
+                if c == ki:
+                    continue
+                owner[j] = i
+                rd[j] = np.float32(d[c])
+                ratio[j] = np.float32(support[c] / den)
+                j += 1
+    return owner[:j].copy(), rd[:j].copy(), ratio[:j].copy()
+
+
 #: the compiled kernels (None without numba: the numpy paths are used)
 nb_search_left = jit(search_left)
 nb_search_right = jit(search_right)
@@ -356,6 +401,7 @@ nb_link_rows = jit(link_rows_kernel)
 nb_pairs = jit(pairs_kernel)
 nb_group = jit(group_kernel)
 nb_select = jit(select_kernel)
+nb_rivals = jit(rivals_kernel)
 
 
 def warm_up() -> bool:
@@ -363,12 +409,12 @@ def warm_up() -> bool:
     real argument types, so that the first frame does not pay for it; without numba, or
     if compiling fails, the numpy paths are used. Returns whether numba is in use."""
     global nb_pairs, nb_select, nb_group, nb_candidates, nb_cells, nb_siblings, \
-        nb_link_rows
+        nb_link_rows, nb_rivals
     if (nb_pairs is None or nb_select is None or nb_group is None
             or nb_candidates is None or nb_cells is None or nb_siblings is None
-            or nb_link_rows is None):
+            or nb_link_rows is None or nb_rivals is None):
         nb_pairs = nb_select = nb_group = None
-        nb_candidates = nb_cells = nb_siblings = nb_link_rows = None
+        nb_candidates = nb_cells = nb_siblings = nb_link_rows = nb_rivals = None
         return False
     i64, f64 = np.zeros(2, np.int64), np.zeros(2)
     i8, i32, f32 = np.ones(2, np.int8), np.zeros(2, np.int32), np.ones(2, np.float32)
@@ -383,8 +429,9 @@ def warm_up() -> bool:
         nb_cells(i64, 2)
         nb_siblings(i64, f64)
         nb_link_rows(i64, 2, i64, i64, i64)
+        nb_rivals(i64, i64, f64, f64, i64, i64, i64 + 1, 1)
     except Exception:       # pragma: no cover - a broken numba/llvmlite install
         nb_pairs = nb_select = nb_group = None
-        nb_candidates = nb_cells = nb_siblings = nb_link_rows = None
+        nb_candidates = nb_cells = nb_siblings = nb_link_rows = nb_rivals = None
         return False
     return True

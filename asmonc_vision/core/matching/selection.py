@@ -158,8 +158,12 @@ def match_rivals(cand: Candidates, support: np.ndarray, k: np.ndarray
     if n == 0:
         return np.zeros(0, np.int32), np.zeros(0, np.float32), np.zeros(0, np.float32)
     own_l, own_r = cand.left[k], cand.right[k]
-    o_l, c_l = expand_ranges(np.searchsorted(cand.left, own_l, 'left'),
-                             np.searchsorted(cand.left, own_l, 'right'))
+    lo_l = np.searchsorted(cand.left, own_l, 'left')
+    hi_l = np.searchsorted(cand.left, own_l, 'right')
+    if kernels.nb_rivals is not None:
+        return kernels.nb_rivals(cand.left, cand.right, cand.d, support, k, lo_l, hi_l,
+                                 int(cand.right.max()) + 1)
+    o_l, c_l = expand_ranges(lo_l, hi_l)
     by_r = np.argsort(cand.right, kind='stable')
     s_r = cand.right[by_r]
     o_r, p_r = expand_ranges(np.searchsorted(s_r, own_r, 'left'),
