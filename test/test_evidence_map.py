@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 
 from asmonc_vision.core.camera import MetricPlane, StereoCamera
-from asmonc_vision.core.evidence_map import (DROP, GROUND, MAP_ID_BASE, RAISED, EvidenceMap,
-                                             EvidenceMapConfig, PairEvidence,
-                                             objects_to_obstacles, pair_evidence)
+from asmonc_vision.core.evidence_map import (DROP, GROUND, RAISED, EvidenceMap,
+                                             EvidenceMapConfig, PairEvidence, pair_evidence)
+from asmonc_vision.core.map_reports import (CORRIDOR_ID_BASE, MAP_ID_BASE,
+                                            objects_to_obstacles)
 
 CAM = StereoCamera(f=300.0, cx=159.5, cy=119.5, baseline=0.35, width=320, height=240)
 H = 1.25
@@ -345,6 +346,61 @@ def test_a_passer_by_leaves_no_ghost_trail():
     assert not emap.objects
 
 
+def _crossing(emap: EvidenceMap, steps: int, cam=CAM, hide_at=None):
+    """A person (a tall thing 0.4 m wide) crossing the path 3 m ahead at 1.4 m/s over
+    plain ground (no ground matches near it) while the wearer stands still; ``hide_at`` (lateral
+    position) puts a nearer thing (at 1.5 m) there. Returns, per pair, whether a region
+    more than 0.45 m behind the person's near side (a ghost) is reported."""
+    ghosts = []
+    for i in range(steps):
+        py = -1.2 + 0.14 * min(i, 10)
+        parts = [(ground_grid(6.5, 7.5, -4.0, 4.0, step=0.25), GROUND, None)]  # far, sparse
+        if i <= 10:                  # the person's clothes: matched all across
+            body = np.concatenate([box_edges(3.0, py + dy, 1.7, half_width=0.0)
+                                   for dy in np.arange(-0.2, 0.21, 0.05)])
+            parts.append((body, RAISED, None))
+        if hide_at is not None:
+            parts.append((box_edges(1.5, hide_at, 1.0, half_width=0.25), RAISED, None))
+        ev = evidence(parts, 0.0)
+        emap.update(0.1 * i, PLANE, ev, None, True, cam)
+        ghosts.append(any((o.far_xy[:, 1] < py - 0.2 - 0.45).any() and o.far_xy[:, 0].min() > 2.5
+                          for o in emap.objects))
+    return ghosts
+
+
+def test_a_passer_by_over_plain_ground_fades_when_not_seen_again():
+    """With no ground matched where the person walked, only the person not being seen
+    again in plain view clears the cells left behind: within a few pairs (without the
+    rule the trail is kept for seconds)."""
+    ghosts = _crossing(EvidenceMap(EvidenceMapConfig(enabled=True)), 16)
+    kept = _crossing(EvidenceMap(EvidenceMapConfig(enabled=True, miss_logodds=0.0)), 16)
+    assert sum(ghosts) <= 4 < sum(kept)
+    assert not ghosts[-1] and kept[-1]
+
+
+def test_a_thing_out_of_sight_is_not_faded():
+    """A confirmed thing hidden behind a nearer one, or out of the image (no camera
+    given), is kept: only a thing in plain view that is not seen again fades."""
+    emap = EvidenceMap(EvidenceMapConfig(enabled=True))
+    box = box_edges(4.0, 0.0, 0.5)
+    for i in range(4):
+        emap.update(0.1 * i, PLANE, evidence([(box, RAISED, None)], 0.0), None, True, CAM)
+    assert emap.objects
+    front = box_edges(2.0, 0.0, 1.0, half_width=0.3)
+    beyond = ground_grid(5.0, 7.0)
+    for i in range(4, 10):           # hidden by a nearer thing in front of it
+        emap.update(0.1 * i, PLANE, evidence([(front, RAISED, None), (beyond, GROUND, None)],
+                                             0.0, occluders=[(2.0, 0.0, 1.0, 0.3)]),
+                    None, True, CAM)
+    assert any(o.far_xy[:, 0].min() > 3.5 for o in emap.objects)
+    emap2 = EvidenceMap(EvidenceMapConfig(enabled=True))
+    for i in range(4):
+        emap2.update(0.1 * i, PLANE, evidence([(box, RAISED, None)], 0.0), None, True, CAM)
+    for i in range(4, 10):           # in plain view (ground seen beyond), not seen again
+        emap2.update(0.1 * i, PLANE, evidence([(beyond, GROUND, None)], 0.0), None, True, CAM)
+    assert not any(o.far_xy[:, 0].min() > 0.5 for o in emap2.objects)
+
+
 # ------------------------------------------------------------------ drops, ids, output
 def test_a_drop_is_confirmed_as_a_drop():
     emap = EvidenceMap(EvidenceMapConfig(enabled=True))
@@ -407,6 +463,38 @@ def test_objects_as_obstacles_confirm_detector_reports():
     assert x <= u[0] <= x + w and y <= v[0] <= y + h
 
 
+def test_a_thing_beside_the_path_that_reaches_into_it_is_reported_there():
+    """A kerb running along the path whose nearest point (its corner) is just beside the
+    walking corridor: the detector's report of the corner is confirmed, and the kerb's
+    part in the corridor farther on is reported too (the alarm sees one point of each
+    report)."""
+    from asmonc_vision.core.gpod import GpodObstacle
+
+    emap = EvidenceMap(EvidenceMapConfig(enabled=True))
+    # the kerb's side face along the path: from (2.0, 0.55) to (3.5, 0.40) (angled in)
+    s = np.linspace(0.0, 1.0, 16)
+    kerb = np.concatenate([box_edges(2.0 + 1.5 * a, 0.55 - 0.15 * a, 0.1, 0.0)[:1]
+                           for a in s])
+    for i in range(4):
+        emap.update(0.1 * i, PLANE, evidence([(kerb, RAISED, None)], 0.0), None, True, CAM)
+    assert emap.objects
+    foot = to_optical(np.array([[2.0, 0.55, 0.0]]), 0.0)[0]
+    corner = GpodObstacle(position=foot + 0.1 * PLANE.normal_up, height=0.1,
+                          range=float(np.hypot(2.0, 0.55)), bearing=math.atan2(0.55, 2.0),
+                          width=0.2, disparity_excess=1.0, confidence=0.5,
+                          roi=(100, 100, 20, 20), num_edge_pixels=30,
+                          string_ids=np.zeros(0, np.int32), track_id=7)
+    out = objects_to_obstacles(emap.objects, CAM, PLANE, [corner], 0.3, 0.5)
+    assert [o.track_id for o in out][0] == 7
+    (part,) = [o for o in out if o.track_id != 7]
+    assert part.track_id >= CORRIDOR_ID_BASE
+    lateral = part.range * math.sin(part.bearing)
+    assert lateral <= 0.5 and part.range == pytest.approx(np.hypot(2.5, 0.5), abs=0.15)
+    # off: only the corner
+    assert [o.track_id for o in objects_to_obstacles(emap.objects, CAM, PLANE, [corner],
+                                                     0.3, 0.0)] == [7]
+
+
 def test_occupancy_and_placement_in_the_camera():
     emap = EvidenceMap(EvidenceMapConfig(enabled=True))
     assert emap.grid_in_camera() is None
@@ -440,7 +528,7 @@ def test_perception_with_the_map_off_is_the_detector():
     from conftest import BAGS
 
     frames = load_frames(BAGS / 'static_obstacles', 24)[20:24]
-    p = Perception()
+    p = Perception(map_config=EvidenceMapConfig(enabled=False))
     d = GpodDetector()
     for f in load_frames(BAGS / 'static_obstacles', 24):
         a = p.process(f.left, f.right, f.cam, stamp_ns=f.stamp_ns)

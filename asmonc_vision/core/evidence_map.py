@@ -37,7 +37,9 @@ Each pair, `EvidenceMap.update`:
    log-odds ``L_r`` (once per pair: the pixels of one pair share their errors), ground
    evidence with no raised evidence there subtracts ``free_logodds`` from ``L_r`` and the
    drop log-odds ``L_d`` (a thing said to be there is cleared by the ground seen where it
-   stood); log-odds stay within [``min_logodds``, ``max_logodds``]. The top of a raised
+   stood); a confirmed cell in plain view with no evidence of the pair near it loses
+   ``miss_logodds`` (`_unseen`: a passer-by who walked on is not seen again); log-odds
+   stay within [``min_logodds``, ``max_logodds``]. The top of a raised
    cell is a scalar Kalman filter per cell (batched):
 
        predict:  x = F x,          F = 1 (a thing stays as tall as it is)
@@ -56,7 +58,8 @@ Each pair, `EvidenceMap.update`:
    regions of them (8-connected, gaps of ``join_cells`` bridged) are obstacles
    (drop regions: drop-offs) with the nearest point to the wearer, the top height, the
    width across the line of sight, a confidence (the largest P of its cells) and an id
-   kept from the region of the previous pair it overlaps most.
+   kept from the region of the previous pair it overlaps most (published as the
+   detector's reports by `core.map_reports.objects_to_obstacles`).
 
 A cleared cell (``L_r ≤ 0`` and ``L_d ≤ 0``) forgets its height and its views, so a
 passer-by's cells, cleared by the ground seen behind them, leave no trail.
@@ -69,8 +72,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from asmonc_vision.core.camera import (MetricPlane, StereoCamera, ground_axes,
-                                       ground_range_bearing, plane_disparity, plane_from_metric)
+from asmonc_vision.core.camera import MetricPlane, StereoCamera, ground_axes
 from asmonc_vision.core.config import check_fields, param
 
 
@@ -79,7 +81,7 @@ class EvidenceMapConfig:
     """Settings of the evidence map (`EvidenceMap`)."""
 
     enabled: bool = param(
-        False, 'report obstacles and drop-offs from the evidence map (a thing confirmed '
+        True, 'report obstacles and drop-offs from the evidence map (a thing confirmed '
         'from two viewpoints, cleared by ground seen where it stood) instead of each '
         "pair's detections and their tracks")
     cell_m: float = param(0.1, 'side of a map cell, m', range=(0.02, 0.5))
@@ -99,6 +101,17 @@ class EvidenceMapConfig:
     still_hit_factor: float = param(
         1.0, 'raised or drop evidence of a pair taken while the rig stands still counts '
         'this much (its frames repeat the same matches and their errors)', range=(0.0, 1.0))
+    miss_logodds: float = param(
+        0.6, 'log-odds taken from a confirmed cell in plain view (not hidden by a nearer '
+        'thing) with none of the evidence of a pair near it (0: off)',
+        range=(0.0, 10.0))
+    miss_guard_cells: int = param(
+        2, 'a confirmed cell with evidence of a pair within this many cells of it is not '
+        'missed (the matched points of a thing scatter along the line of sight)',
+        range=(0, 10))
+    miss_margin_px: float = param(
+        5.0, 'a cell is in plain view when the foot of its evidence point lies this far '
+        'inside both images, px', range=(0.0, 100.0))
     min_ground_pixels: int = param(2, 'ground-matched edge pixels in a cell that clear '
                                    'it', range=(1, 1000))
     clear_guard_cells: int = param(
@@ -146,6 +159,11 @@ class EvidenceMapConfig:
     near_tolerance_m: float = param(
         0.15, "a region's nearest point is at its nearest range, at the median bearing of "
         'its cells within this of that range, m', range=(0.0, 2.0))
+    corridor_half_width_m: float = param(
+        0.5, "a region with cells ahead within this of the walking direction none of "
+        "whose reports lies there is reported there too, at its nearest cell there (the "
+        "alarm's walking corridor: a thing beside the path that reaches into it farther "
+        "on), m (0: off)", range=(0.0, 5.0))
     attach_m: float = param(
         0.5, "a detector report whose foot lies within this of a confirmed cell of its kind "
         "is confirmed and reported as the detector placed it (from the whole silhouette); "
@@ -379,6 +397,8 @@ class EvidenceMap:
         self._pair_count = None
         if ev is not None and ev.xy.shape[0]:
             self._enter(stamp_s, ev, still)
+            if cam is not None:
+                self._unseen(ev, cam)
         self.objects = self._regions(stamp_s, cam)
         return self.objects
 
@@ -560,6 +580,73 @@ class EvidenceMap:
         right = np.count_nonzero(through & (lateral <= 0), axis=1)
         return cells[(np.minimum(left, right) >= c.ray_min_pixels) & (left + right > n_r[cells])]
 
+    def _label(self, mask: np.ndarray) -> list[np.ndarray]:
+        """Flat cell indices of each region of ``mask`` (8-connected, gaps of
+        ``join_cells`` bridged)."""
+        m8: np.ndarray = mask.astype(np.uint8)
+        if self.config.join_cells > 0:
+            k = 2 * self.config.join_cells + 1
+            m8 = cv2.dilate(m8, np.ones((k, k), np.uint8))
+        _, lab = cv2.connectedComponents(m8, connectivity=8)
+        flat = np.where(mask, lab, 0).reshape(-1)
+        cells = np.flatnonzero(flat)
+        if not cells.size:
+            return []
+        cells = cells[np.argsort(flat[cells], kind='stable')]
+        labels = flat[cells]
+        starts = np.flatnonzero(np.concatenate(([True], labels[1:] != labels[:-1])))
+        return np.split(cells, starts[1:])
+
+    def _unseen(self, ev: PairEvidence, cam: StereoCamera) -> None:
+        """Confirmed cells in plain view that this pair saw nothing at are fading.
+
+        A confirmed cell in plain view, with none of this pair's raised or drop evidence
+        within ``miss_guard_cells`` of it, loses ``miss_logodds``: a thing that stays
+        where it is is seen again; a passer-by who walked on, or a mismatch, is not. In
+        plain view: the foot of its evidence point is in both images
+        (``miss_margin_px`` inside their borders), the pair matched ground or a thing
+        at its bearing beyond it (the sight line passed it), and no raised evidence
+        nearer at its bearing (nothing in front hides it)."""
+        c = self.config
+        if c.miss_logodds <= 0 or self._pair_count is None:
+            return
+        assert self._plane is not None
+        conf_r, conf_d = self.confirmed(False).reshape(-1), self.confirmed(True).reshape(-1)
+        k = 2 * c.miss_guard_cells + 1
+        got = cv2.dilate((self._pair_count > 0).astype(np.uint8).reshape(self.n, self.n),
+                         np.ones((k, k), np.uint8)).reshape(-1) > 0
+        cells = np.flatnonzero((conf_r | conf_d) & ~got)
+        if not cells.size:
+            return
+        Rcg, o = ground_frame(self._plane)
+        g = self.to_ground(self.pt_xy.reshape(-1, 2)[cells].astype(np.float64))
+        feet = g @ Rcg[:, :2].T + o[None, :]
+        z = np.maximum(feet[:, 2], 1e-3)
+        u = cam.f * feet[:, 0] / z + cam.cx
+        v = cam.f * feet[:, 1] / z + cam.cy
+        m = c.miss_margin_px
+        view = ((feet[:, 2] > 0.1) & (u - cam.f * cam.baseline / z >= m)
+                & (u <= cam.width - 1 - m) & (v >= m) & (v <= cam.height - 1 - m))
+        # in plain view: this pair saw something (ground or a thing) at the cell's
+        # bearing beyond it, and no raised evidence nearer (1 degree bearing bins, each
+        # widened by one bin either side)
+        r, b = np.hypot(g[:, 0], g[:, 1]), _bearing_bin(g)
+        seen = (ev.kind == GROUND) | (ev.kind == RAISED)
+        er, eb = np.hypot(ev.xy[seen, 0], ev.xy[seen, 1]), _bearing_bin(ev.xy[seen])
+        far = np.full(_BINS + 2, -np.inf)
+        np.maximum.at(far, eb + 1, er)
+        near = np.full(_BINS + 2, np.inf)
+        raised = ev.kind[seen] == RAISED
+        np.minimum.at(near, eb[raised] + 1, er[raised])
+        far = np.maximum(np.maximum(far[:-2], far[1:-1]), far[2:])
+        near = np.minimum(np.minimum(near[:-2], near[1:-1]), near[2:])
+        view &= (far[b] >= r + c.cell_m) & (near[b] >= r - c.cell_m)
+        cells = cells[view]
+        self.L_r.reshape(-1)[cells[conf_r[cells]]] -= c.miss_logodds
+        self.L_d.reshape(-1)[cells[conf_d[cells]]] -= c.miss_logodds
+        np.clip(self.L_r, c.min_logodds, c.max_logodds, out=self.L_r)
+        np.clip(self.L_d, c.min_logodds, c.max_logodds, out=self.L_d)
+
     def _forget(self, cells: np.ndarray) -> None:
         if not cells.size:
             return
@@ -628,23 +715,8 @@ class EvidenceMap:
         for drop, mask in masks:
             if not mask.any():
                 continue
-            m8: np.ndarray = mask.astype(np.uint8)
-            if c.join_cells > 0:
-                k = 2 * c.join_cells + 1
-                m8 = cv2.dilate(m8, np.ones((k, k), np.uint8))
-            _, lab = cv2.connectedComponents(m8, connectivity=8)
-            lab = np.where(mask, lab, 0)
-            flat = lab.reshape(-1)
-            cells = np.flatnonzero(flat)
-            if not cells.size:
-                continue
-            order = np.argsort(flat[cells], kind='stable')
-            cells = cells[order]
-            labels = flat[cells]
-            starts = np.flatnonzero(np.concatenate(([True], labels[1:] != labels[:-1])))
             L = (self.L_d if drop else self.L_r).reshape(-1)
-            for s, e in zip(starts, np.append(starts[1:], cells.size)):
-                cs = cells[s:e]
+            for cs in self._label(mask):
                 if cs.size < c.min_region_cells:
                     continue
                 g = self.to_ground(self.pt_xy.reshape(-1, 2)[cs].astype(np.float64))
@@ -712,6 +784,16 @@ class EvidenceMap:
         return R, Rcg @ corner_g + o
 
 
+#: bearings from -90 to 90 degrees in 1 degree bins (`EvidenceMap._unseen`)
+_BINS = 180
+
+
+def _bearing_bin(xy: np.ndarray) -> np.ndarray:
+    """(N,) int: the 1 degree bearing bin (0 .. _BINS - 1) of ground points (N, 2)."""
+    b = np.degrees(np.arctan2(xy[:, 1], xy[:, 0])) + 90.0
+    return np.clip(b.astype(np.int64), 0, _BINS - 1)
+
+
 def _shift(a: np.ndarray, dy: int, dx: int, fill) -> None:
     """Shift array ``a`` (first two axes [y, x]) in place so that new[i, j] = old[i + dy,
     j + dx] (the grid's origin moved by (dy, dx) cells), filling the
@@ -725,78 +807,3 @@ def _shift(a: np.ndarray, dy: int, dx: int, fill) -> None:
     if abs(dy) < n0 and abs(dx) < n1:
         out[yd, xd] = a[ys, xs]
     a[...] = out
-
-
-#: ids of the reports placed by the map itself are region ids offset by this (the
-#: detector's track ids of the reports it confirms stay below it)
-MAP_ID_BASE = 1_000_000
-
-
-def objects_to_obstacles(objects, cam: StereoCamera, plane: MetricPlane,
-                         detections=(), attach_m: float = 0.0) -> list:
-    """The map's objects as `core.gpod.GpodObstacle` (the detector's output form), in
-    the current left optical frame.
-
-    A detector report (``detections``, GpodObstacle: the pair's detections and tracks)
-    whose foot lies within ``attach_m`` of a cell of an object of its kind is confirmed:
-    it is reported as the detector placed it (its nearest point from the whole
-    silhouette; the map sees only matched edges), with the object's confidence and its
-    own track id (the object's id + ``MAP_ID_BASE`` when it has none). An object that
-    confirms no report is reported as the map places it, id its region id +
-    ``MAP_ID_BASE``: ``position`` the top above the nearest point (for a drop, the lowest
-    point), range and bearing along the ground, the image region of the region's feet
-    and tops (clipped to the image), disparity excess at the top. Reports on no
-    confirmed cell are not reported."""
-    import dataclasses
-
-    from asmonc_vision.core.gpod import GpodObstacle
-
-    Rcg, o = ground_frame(plane)
-    n = np.asarray(plane.normal_up, float)
-    abc = plane_from_metric(cam, plane)
-    dets = list(detections)
-    det_xy = np.array([((d.position - d.height * n) - o) @ Rcg[:, :2] for d in dets]
-                      ).reshape(-1, 2)
-    det_drop = np.array([d.is_drop for d in dets], bool)
-    taken = np.zeros(len(dets), bool)
-    out = []
-    for ob in objects:
-        if attach_m > 0 and len(dets):
-            dist = np.min(np.linalg.norm(det_xy[:, None, :] - ob.far_xy[None, :, :], axis=2),
-                          axis=1)
-            cand = np.flatnonzero((dist <= attach_m) & (det_drop == ob.is_drop))
-            if cand.size:
-                for k in cand[~taken[cand]].tolist():
-                    taken[k] = True
-                    tid = dets[k].track_id or (int(ob.object_id) + MAP_ID_BASE)
-                    out.append(dataclasses.replace(dets[k], track_id=int(tid),
-                                                   confidence=float(ob.confidence)))
-                continue
-        foot = Rcg @ np.array([ob.nearest_xy[0], ob.nearest_xy[1], 0.0]) + o
-        top = foot + ob.height * n
-        rng_, brg = ground_range_bearing(plane, foot[None, :])
-        g = ob.far_xy
-        feet = (Rcg @ np.column_stack([g, np.zeros(len(g))]).T).T + o
-        allp = np.vstack([feet, feet + max(ob.height, 0.0) * n[None, :], top[None, :]])
-        allp = allp[allp[:, 2] > 0.1]
-        roi = (0, 0, 0, 0)
-        excess = 0.0
-        if allp.shape[0]:
-            uu, vv = cam.project_left(allp)
-            x0 = int(np.clip(np.floor(uu.min()), 0, cam.width - 1))
-            x1 = int(np.clip(np.ceil(uu.max()), 0, cam.width - 1))
-            y0 = int(np.clip(np.floor(vv.min()), 0, cam.height - 1))
-            y1 = int(np.clip(np.ceil(vv.max()), 0, cam.height - 1))
-            roi = (x0, y0, max(x1 - x0, 1), max(y1 - y0, 1))
-        if top[2] > 0.1:
-            u, v, d = cam.project(top[None, :])
-            excess = float(d[0] - plane_disparity(abc, u, v)[0])
-        out.append(GpodObstacle(
-            position=top, height=float(ob.height), range=float(rng_[0]),
-            bearing=float(brg[0]), width=float(ob.width), disparity_excess=excess,
-            confidence=float(ob.confidence), roi=roi,
-            num_edge_pixels=int(ob.fresh_pixels),
-            string_ids=np.zeros(0, np.int32), track_id=int(ob.object_id) + MAP_ID_BASE,
-            age_s=float(ob.age_s)))
-    out.sort(key=lambda d: d.range)
-    return out

@@ -22,10 +22,10 @@ import numpy as np
 
 from asmonc_vision.core.camera import StereoCamera
 from asmonc_vision.core.evidence_map import (DROP, GROUND, NONE, RAISED, EvidenceMap,
-                                             EvidenceMapConfig, objects_to_obstacles,
-                                             pair_evidence)
+                                             EvidenceMapConfig, pair_evidence)
 from asmonc_vision.core.gpod import GpodConfig, GpodDetector, GpodResult
 from asmonc_vision.core.map_motion import MotionPredictor
+from asmonc_vision.core.map_reports import objects_to_obstacles
 
 
 class Perception:
@@ -100,8 +100,9 @@ class Perception:
             # no motion while walking): the detector's reports go out as they are
             obstacles = result.obstacles
         else:
-            obstacles = (tuple(objects_to_obstacles(objects, cam, plane, result.obstacles,
-                                                    self.map_config.attach_m))
+            obstacles = (tuple(objects_to_obstacles(
+                objects, cam, plane, result.obstacles, self.map_config.attach_m,
+                self.map_config.corridor_half_width_m))
                          if plane is not None else ())
             # the detector's unknown ahead (height NaN, `core.unseen_ground`) is no
             # evidence for the map, and goes out as it is

@@ -1,0 +1,120 @@
+"""The evidence map's confirmed objects as the detector's reports (`/obstacles`).
+
+`objects_to_obstacles` turns the map's objects (`core.evidence_map.MapObject`, in the
+current pair's ground frame) and the pair's detector reports into the reports published:
+the detector's reports the map confirms, the map's own placements of the regions that
+confirm none, and a region's part in the walking corridor when none of its reports is
+there (docs/map.md, *Objects*).
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from asmonc_vision.core.camera import (MetricPlane, StereoCamera, ground_range_bearing,
+                                       plane_disparity, plane_from_metric)
+from asmonc_vision.core.evidence_map import MapObject, ground_frame
+
+#: ids of the reports placed by the map itself are region ids offset by this (the
+#: detector's track ids of the reports it confirms stay below it)
+MAP_ID_BASE = 1_000_000
+#: ... and those of a region's part in the walking corridor by this
+CORRIDOR_ID_BASE = 2_000_000
+
+
+def objects_to_obstacles(objects, cam: StereoCamera, plane: MetricPlane,
+                         detections=(), attach_m: float = 0.0,
+                         corridor_half_width: float = 0.0) -> list:
+    """The map's objects as `core.gpod.GpodObstacle` (the detector's output form), in
+    the current left optical frame.
+
+    A detector report (``detections``, GpodObstacle: the pair's detections and tracks)
+    whose foot lies within ``attach_m`` of a cell of an object of its kind is confirmed:
+    it is reported as the detector placed it (its nearest point from the whole
+    silhouette; the map sees only matched edges), with the object's confidence and its
+    own track id (the object's id + ``MAP_ID_BASE`` when it has none). An object that
+    confirms no report is reported as the map places it, id its region id +
+    ``MAP_ID_BASE``: ``position`` the top above the nearest point (for a drop, the lowest
+    point), range and bearing along the ground, the image region of the region's feet
+    and tops (clipped to the image), disparity excess at the top. Reports on no
+    confirmed cell are not reported.
+
+    The part in the walking corridor (``corridor_half_width`` > 0: cells ahead within
+    it of the walking direction): an object with cells there none of whose reports
+    lies in the corridor (a kerb or a wall beside the path whose nearest point is just
+    beside it, while the thing reaches into the path farther on) is reported there too,
+    at its nearest cell in the corridor, id its region id + ``CORRIDOR_ID_BASE``: the
+    alarm sees one point of each report."""
+    Rcg, o = ground_frame(plane)
+    n = np.asarray(plane.normal_up, float)
+    dets = list(detections)
+    det_xy = np.array([((d.position - d.height * n) - o) @ Rcg[:, :2] for d in dets]
+                      ).reshape(-1, 2)
+    det_drop = np.array([d.is_drop for d in dets], bool)
+    taken = np.zeros(len(dets), bool)
+    out = []
+    for ob in objects:
+        mine = []
+        cand: np.ndarray = np.zeros(0, np.int64)
+        if attach_m > 0 and len(dets):
+            dist = np.min(np.linalg.norm(det_xy[:, None, :] - ob.far_xy[None, :, :], axis=2),
+                          axis=1)
+            cand = np.flatnonzero((dist <= attach_m) & (det_drop == ob.is_drop))
+        if cand.size:
+            for k in cand[~taken[cand]].tolist():
+                taken[k] = True
+                tid = dets[k].track_id or (int(ob.object_id) + MAP_ID_BASE)
+                mine.append(dataclasses.replace(dets[k], track_id=int(tid),
+                                                confidence=float(ob.confidence)))
+            reported = det_xy[cand]
+        else:
+            mine.append(_map_report(ob, ob.nearest_xy, int(ob.object_id) + MAP_ID_BASE,
+                                    cam, plane))
+            reported = ob.nearest_xy[None, :]
+        if corridor_half_width > 0:
+            g = ob.far_xy
+            inside = (g[:, 0] > 0) & (np.abs(g[:, 1]) <= corridor_half_width)
+            if inside.any() and not (np.abs(reported[:, 1]) <= corridor_half_width).any():
+                gi = g[inside]
+                near = gi[int(np.argmin(np.hypot(gi[:, 0], gi[:, 1])))]
+                mine.append(_map_report(ob, near, int(ob.object_id) + CORRIDOR_ID_BASE,
+                                        cam, plane))
+        out.extend(mine)
+    out.sort(key=lambda d: d.range)
+    return out
+
+
+def _map_report(ob: MapObject, near_xy: np.ndarray, track_id: int, cam: StereoCamera,
+                plane: MetricPlane):
+    """A GpodObstacle of a map object placed by the map at ``near_xy`` (G, m)."""
+    from asmonc_vision.core.gpod import GpodObstacle
+
+    Rcg, o = ground_frame(plane)
+    n = np.asarray(plane.normal_up, float)
+    foot = Rcg @ np.array([near_xy[0], near_xy[1], 0.0]) + o
+    top = foot + ob.height * n
+    rng_, brg = ground_range_bearing(plane, foot[None, :])
+    g = ob.far_xy
+    feet = (Rcg @ np.column_stack([g, np.zeros(len(g))]).T).T + o
+    allp = np.vstack([feet, feet + max(ob.height, 0.0) * n[None, :], top[None, :]])
+    allp = allp[allp[:, 2] > 0.1]
+    roi = (0, 0, 0, 0)
+    excess = 0.0
+    if allp.shape[0]:
+        uu, vv = cam.project_left(allp)
+        x0 = int(np.clip(np.floor(uu.min()), 0, cam.width - 1))
+        x1 = int(np.clip(np.ceil(uu.max()), 0, cam.width - 1))
+        y0 = int(np.clip(np.floor(vv.min()), 0, cam.height - 1))
+        y1 = int(np.clip(np.ceil(vv.max()), 0, cam.height - 1))
+        roi = (x0, y0, max(x1 - x0, 1), max(y1 - y0, 1))
+    if top[2] > 0.1:
+        u, v, d = cam.project(top[None, :])
+        excess = float(d[0] - plane_disparity(plane_from_metric(cam, plane), u, v)[0])
+    return GpodObstacle(
+        position=top, height=float(ob.height), range=float(rng_[0]),
+        bearing=float(brg[0]), width=float(ob.width), disparity_excess=excess,
+        confidence=float(ob.confidence), roi=roi,
+        num_edge_pixels=int(ob.fresh_pixels),
+        string_ids=np.zeros(0, np.int32), track_id=track_id,
+        age_s=float(ob.age_s))
