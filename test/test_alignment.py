@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from asmonc_vision.core.alignment import (AlignmentConfig, VerticalAlignment,
+                                          corner_displacement_steps,
                                           corner_displacements, fit_misalignment,
                                           matched_brightness)
 from asmonc_vision.core.gpod import GpodConfig, GpodDetector
@@ -158,3 +159,57 @@ def test_a_bumped_rig_is_followed():
         for _ in range(n):
             al.update(left, right, 150.0, 79.5, 59.5)
         assert al.sides_px()[0] == pytest.approx([dv_true, dv_true], abs=0.1)
+
+
+def _textured_pairs(n: int, dv_true: float, seed: int = 7):
+    """n synthetic pairs: a blurred random texture (its grain changes each pair) and its
+    copy 4 px over and dv_true px down (160x120)."""
+    import cv2
+    rng = np.random.default_rng(seed)
+    base = rng.uniform(0, 255, (120, 160))
+    pairs = []
+    for _ in range(n):
+        left = cv2.GaussianBlur(base + rng.normal(0, 20, base.shape), (0, 0), 1.5)
+        left = np.clip(left, 0, 255).astype(np.uint8)
+        m = np.float32([[1, 0, -4], [0, 1, dv_true]])
+        pairs.append((left, cv2.warpAffine(left, m, (160, 120), flags=cv2.INTER_LINEAR,
+                                           borderMode=cv2.BORDER_REFLECT)))
+    return pairs
+
+
+def test_a_spread_measurement_is_the_same_a_few_pairs_later():
+    """Once settled, a measurement done in steps over the following pairs leaves the filter
+    exactly where measuring it all at once does (its corners' result is the same bit for
+    bit however the second pass is chunked); it only arrives later, and every due pair
+    is still measured."""
+    pairs = _textured_pairs(40, 0.6)
+    left, right = pairs[0]
+    whole = corner_displacements(left, right, 60)
+    yields = []
+    for chunk in (1, 7, 60):
+        steps = corner_displacement_steps(left, right, 60, 5.0, 0.25, chunk)
+        n = 0
+        while True:
+            try:
+                next(steps)
+                n += 1
+            except StopIteration as done:
+                pts, disp = done.value
+                break
+        yields.append(n)
+        assert np.array_equal(pts, whole[0]) and np.array_equal(disp, whole[1])
+    assert yields[0] > yields[1] > yields[2] == 2 and len(whole[0]) >= 20
+    at_once = VerticalAlignment(AlignmentConfig(spread=False, every_frames=8))
+    spread = VerticalAlignment(AlignmentConfig(spread=True, every_frames=8,
+                                               chunk_corners=60))
+    running = compared = 0
+    for left, right in pairs:
+        at_once.update(left, right, 150.0, 79.5, 59.5)
+        spread.update(left, right, 150.0, 79.5, 59.5)
+        if spread._job is not None:
+            running += 1
+            continue
+        compared += 1
+        assert np.array_equal(spread.x, at_once.x) and np.array_equal(spread.P, at_once.P)
+        assert spread.measurements == at_once.measurements
+    assert running >= 8 and compared >= 20 and at_once.measurements >= 8

@@ -27,6 +27,13 @@ well-rectified rigs the largest measured was 0.13 px), the right image is resamp
 so that its rows match the left's again (bilinear; below that, the pair is left
 untouched, so a well-rectified rig sees no change at all).
 
+A measurement costs about 5 ms at 320x240 (two thirds of it the corners' second
+Lucas-Kanade pass). Once the misalignment is known it is measured in one pair of
+``every_frames``, and that measurement is done in steps of 1-2 ms over the
+pairs that follow (`corner_displacement_steps`); the filter takes it in as of the pair it
+measures, so the estimate is the same, a few pairs later, and no pair pays for a whole
+measurement. Until then (the first pairs, a restart) every pair is measured at once.
+
 Lucas-Kanade assumes that a point is as bright in both images. Two cameras differ in
 gain and black level (the simulator's right camera: 1.05 and +4 grey levels; two
 cameras with their own auto-exposure: a third or more); on the raw pair that bias
@@ -39,6 +46,7 @@ of the left image lies on row v + dv of the right image.
 """
 from __future__ import annotations
 
+from collections.abc import Generator
 from dataclasses import dataclass
 
 import cv2
@@ -89,6 +97,14 @@ class AlignmentConfig:
                             'square root of a frame', range=(0.0, 10.0))
     match_error_px: float = param(0.25, 'Largest forward-backward error of a corner match, '
                                   'pixels', range=(0.01, 10.0))
+    spread: bool = param(True, 'Once the misalignment is known, spread each measurement '
+                         'over the pairs after the one it measures (steps of 1-2 '
+                         'ms at 320x240: the corners, the first pass, then the '
+                         'second pass chunk_corners at a time) instead of doing it all in '
+                         'one pair, when every_frames leaves the room; the filter takes it '
+                         'in as of the pair it measures')
+    chunk_corners: int = param(50, 'Corners followed in one step of a spread '
+                               'measurement\'s second pass', range=(1, 5000))
     scene_bias_px: float = param(0.1, 'Error of the measurement that frames do not '
                                  'average away, pixels: the scene\'s structure biases it, '
                                  'the same in every frame of a still view (at most 0.13 px on '
@@ -191,7 +207,7 @@ def corner_displacements(left: np.ndarray, right: np.ndarray, max_corners: int =
     their horizontal displacement, and then every corner is followed from that plane's
     prediction over 3 levels (the ground's large near disparities and its repetitive
     texture defeat a search from zero). A corner keeps the second pass's displacement,
-    or the first's where only that one held.
+    or the first's where only that one held. (All of `corner_displacement_steps` at once.)
 
     Args:
         left, right: (H, W) uint8 grey images of one (rectified) pair.
@@ -203,35 +219,67 @@ def corner_displacements(left: np.ndarray, right: np.ndarray, max_corners: int =
         (du, dv)), pixels; only matches found both ways, with a non-negative disparity
         (du <= 0.5).
     """
+    steps = corner_displacement_steps(left, right, max_corners, max_px, match_error_px,
+                                      chunk=max_corners)
+    while True:
+        try:
+            next(steps)
+        except StopIteration as done:
+            return done.value
+
+
+def corner_displacement_steps(left: np.ndarray, right: np.ndarray, max_corners: int,
+                              max_px: float, match_error_px: float, chunk: int
+                              ) -> Generator[None, None, tuple[np.ndarray, np.ndarray]]:
+    """`corner_displacements` in steps of 1-2 ms at 320x240: it yields after
+    the corners, after the first pass, and after each ``chunk`` corners of the second
+    pass, and returns its result. Lucas-Kanade follows every point on its own, so the
+    result is the same bit for bit however the points are chunked. The images are
+    copied: the caller may reuse its arrays between steps."""
     empty = (np.zeros((0, 2)), np.zeros((0, 2)))
-    right = matched_brightness(left, right)
+    left = left.copy()
+    right = matched_brightness(left, right.copy())
     p = cv2.goodFeaturesToTrack(left, max_corners, 0.01, 5, blockSize=5)
     if p is None or len(p) == 0:
         return empty
+    yield
     pts = p.reshape(-1, 2).astype(np.float64)
     first = np.arange(0, len(p), 3)
     disp = np.zeros((len(p), 2))
     ok = np.zeros(len(p), bool)
     disp[first], ok[first] = _lk_both_ways(left, right, p[first], None, 4, match_error_px,
                                            max_px)
-    if ok.sum() >= 6:
-        a = np.column_stack([pts[ok], np.ones(int(ok.sum()))])
-        du = disp[ok, 0]
-        keep = np.ones(du.shape[0], bool)
-        for _ in range(5):            # least squares trimmed to 3 robust sigmas
-            coef = np.linalg.lstsq(a[keep], du[keep], rcond=None)[0]
-            r = du - a @ coef
-            s = max(1.4826 * float(np.median(np.abs(r[keep]))), 0.3)
-            keep = np.abs(r) <= 3.0 * s
-            if keep.sum() < 3:
-                break
-        else:
-            pred = np.column_stack([pts, np.ones(len(pts))]) @ coef
-            guess = np.column_stack([pts[:, 0] + pred, pts[:, 1]]).astype(np.float32)
-            d2, ok2 = _lk_both_ways(left, right, p, guess.reshape(-1, 1, 2), 2,
-                                    match_error_px, max_px)
-            disp[ok2], ok = d2[ok2], ok | ok2
+    coef = _ground_disparity_plane(pts[ok], disp[ok, 0])
+    if coef is None:
+        return pts[ok], disp[ok]
+    pred = np.column_stack([pts, np.ones(len(pts))]) @ coef
+    guess = np.column_stack([pts[:, 0] + pred, pts[:, 1]]).astype(np.float32)
+    guess = guess.reshape(-1, 1, 2)
+    for i in range(0, len(p), chunk):
+        yield
+        d2, ok2 = _lk_both_ways(left, right, p[i:i + chunk], guess[i:i + chunk], 2,
+                                match_error_px, max_px)
+        sel = np.flatnonzero(ok2) + i
+        disp[sel], ok[i:i + chunk] = d2[ok2], ok[i:i + chunk] | ok2
     return pts[ok], disp[ok]
+
+
+def _ground_disparity_plane(pts: np.ndarray, du: np.ndarray) -> np.ndarray | None:
+    """The plane du = a u + b v + c fitted to the first pass's matches (least squares
+    trimmed to 3 robust sigmas): (3,) float64 (a, b, c), or None with fewer than 6
+    matches or when the trimming keeps fewer than 3."""
+    if du.shape[0] < 6:
+        return None
+    a = np.column_stack([pts, np.ones(du.shape[0])])
+    keep = np.ones(du.shape[0], bool)
+    for _ in range(5):
+        coef = np.linalg.lstsq(a[keep], du[keep], rcond=None)[0]
+        r = du - a @ coef
+        s = max(1.4826 * float(np.median(np.abs(r[keep]))), 0.3)
+        keep = np.abs(r) <= 3.0 * s
+        if keep.sum() < 3:
+            return None
+    return coef
 
 
 def fit_misalignment(points: np.ndarray, dv: np.ndarray, f: float, cx: float
@@ -299,6 +347,11 @@ class VerticalAlignment:
         self._map_x = np.zeros(2)
         self._shape: tuple[int, int] | None = None
         self._cam: tuple[float, float, float] | None = None
+        #: a spread measurement under way (`update`): its steps, the filter's P as of
+        #: the pair it measures, and the frames predicted since
+        self._job: Generator[None, None, tuple[np.ndarray, np.ndarray]] | None = None
+        self._job_P: np.ndarray | None = None
+        self._job_frames = 0
 
     # ----------------------------------------------------------------- estimate
     def _sides_x(self) -> np.ndarray:
@@ -345,12 +398,18 @@ class VerticalAlignment:
                ) -> AlignmentMeasurement | None:
         """Predict one frame on, and measure this pair when it is due.
 
+        Once the misalignment is known (`settled`) and ``spread`` is set, a due pair's
+        measurement is done in steps, one a call, the first in this one; the call that
+        finishes it takes it in as it would have been in the pair it measures (the
+        update on that pair's prediction, then the frames' predictions since), so the
+        estimate is the same, those few pairs later.
+
         Args:
             left, right: (H, W) uint8 rectified grey images (the raw right image).
             f, cx, cy: the rectified camera, pixels.
         Returns:
-            The pair's measurement when one was made and used, else None (not due, too
-            few matches, or gated out as an outlier).
+            The pair's measurement when one was finished and used, else None (not due,
+            not finished, too few matches, or gated out as an outlier).
         """
         c = self.config
         shape = (int(left.shape[0]), int(left.shape[1]))
@@ -361,11 +420,49 @@ class VerticalAlignment:
         # predict: x = F x (F = I), P = F P F' + Q
         self.P = self.P + (c.drift_px ** 2) * np.eye(2)
         self._since += 1
+        if self._job is not None:
+            return self._step()
         if self.settled() and self._since < c.every_frames:
             return None
         self._since = 0
-        pts, disp = corner_displacements(left, right, c.max_corners, c.max_px,
-                                         c.match_error_px)
+        steps = corner_displacement_steps(left, right, c.max_corners, c.max_px,
+                                          c.match_error_px, c.chunk_corners)
+        if c.spread and self._settled and c.every_frames > self._spread_frames():
+            self._job, self._job_P, self._job_frames = steps, self.P, 0
+            return self._step()
+        while True:
+            try:
+                next(steps)
+            except StopIteration as done:
+                return self._measured(*done.value)
+
+    def _spread_frames(self) -> int:
+        """Pairs after the measured one that a spread measurement takes to finish: one
+        for the first pass, one a chunk of the second (its corners in the first)."""
+        return 1 + -(-self.config.max_corners // self.config.chunk_corners)
+
+    def _step(self) -> AlignmentMeasurement | None:
+        """One step of the spread measurement; when it finishes, its update as of the
+        pair it measures and the predictions of the frames since (`update`)."""
+        assert self._job is not None and self._job_P is not None
+        try:
+            next(self._job)
+        except StopIteration as done:
+            self._job = None
+            self.P, frames = self._job_P, self._job_frames
+            m = self._measured(*done.value)
+            for _ in range(frames):
+                self.P = self.P + (self.config.drift_px ** 2) * np.eye(2)
+            return m
+        self._job_frames += 1
+        return None
+
+    def _measured(self, pts: np.ndarray, disp: np.ndarray) -> AlignmentMeasurement | None:
+        """Fit one pair's corner matches and take the fit into the filter (gated; a
+        restart after ``_RESTART_AFTER`` outliers in a row): the measurement when used."""
+        c = self.config
+        assert self._cam is not None                                   # set by update()
+        f, cx, _ = self._cam
         if pts.shape[0] < c.min_matches:
             return None
         m = fit_misalignment(pts + disp, disp[:, 1], f, cx)
