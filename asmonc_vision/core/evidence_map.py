@@ -610,7 +610,6 @@ class EvidenceMap:
         c = self.config
         if c.miss_logodds <= 0 or self._pair_count is None:
             return
-        assert self._plane is not None
         conf_r, conf_d = self.confirmed(False).reshape(-1), self.confirmed(True).reshape(-1)
         k = 2 * c.miss_guard_cells + 1
         got = cv2.dilate((self._pair_count > 0).astype(np.uint8).reshape(self.n, self.n),
@@ -618,9 +617,7 @@ class EvidenceMap:
         cells = np.flatnonzero((conf_r | conf_d) & ~got)
         if not cells.size:
             return
-        Rcg, o = ground_frame(self._plane)
-        g = self.to_ground(self.pt_xy.reshape(-1, 2)[cells].astype(np.float64))
-        feet = g @ Rcg[:, :2].T + o[None, :]
+        g, feet, _ = self._cell_feet(cells)
         z = np.maximum(feet[:, 2], 1e-3)
         u = cam.f * feet[:, 0] / z + cam.cx
         v = cam.f * feet[:, 1] / z + cam.cy
@@ -647,6 +644,15 @@ class EvidenceMap:
         np.clip(self.L_r, c.min_logodds, c.max_logodds, out=self.L_r)
         np.clip(self.L_d, c.min_logodds, c.max_logodds, out=self.L_d)
 
+    def _cell_feet(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The evidence points of ``cells`` (flat indices): (M, 2) on the ground (wearer
+        frame, x ahead, y left, m), (M, 3) in the current left optical frame (their feet
+        on the plane, m), and (3,) the plane's up normal in that frame."""
+        assert self._plane is not None                 # after an update
+        Rcg, o = ground_frame(self._plane)
+        g = self.to_ground(self.pt_xy.reshape(-1, 2)[cells].astype(np.float64))
+        return g, g @ Rcg[:, :2].T + o[None, :], Rcg[:, 2]
+
     def _forget(self, cells: np.ndarray) -> None:
         if not cells.size:
             return
@@ -670,11 +676,8 @@ class EvidenceMap:
         """((k,) bool, (k,) bool): cells (flat indices) whose evidence point, at the
         ground or at its height, projects into the left image of the current pair; and
         those out of it below the image (in front of the wearer, walked up to)."""
-        assert self._plane is not None                 # in_view follows an update
-        Rcg, o = ground_frame(self._plane)
-        g = self.to_ground(self.pt_xy.reshape(-1, 2)[cells].astype(np.float64))
-        feet = g @ Rcg[:, :2].T + o[None, :]
-        tops = feet + self.h_x.reshape(-1)[cells, None] * Rcg[:, 2][None, :]
+        g, feet, up = self._cell_feet(cells)
+        tops = feet + self.h_x.reshape(-1)[cells, None] * up[None, :]
         vis = np.zeros(cells.size, bool)
         below = np.zeros(cells.size, bool)
         for p in (feet, tops):
