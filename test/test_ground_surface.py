@@ -10,7 +10,7 @@ import pytest
 
 from asmonc_vision.core.camera import MetricPlane, StereoCamera, ground_axes
 from asmonc_vision.core.ground_surface import (GroundSurface, GroundSurfaceConfig,
-                                               fit_ground_surface)
+                                               depth_noise, fit_ground_surface)
 
 CAM = StereoCamera(f=300.0, cx=159.5, cy=119.5, baseline=0.35, width=320, height=240)
 PITCH = np.radians(20.0)
@@ -198,3 +198,102 @@ def test_a_plane_that_is_off_is_not_bent_for():
     rng = np.random.default_rng(6)
     surf = fit_ground_surface(ground_points(lambda s: 0.0 * s - 0.03, rng), PLANE)
     assert surf.checks[0].refused_by == 'rule_anchor' and not surf.bends
+
+
+# --- the noise at range, sparse far ground, the ground beyond the known -------------
+
+#: the chest rig binned 2 x 2 (the detector's coarse pass): a short baseline, whose
+#: ground features at 8-10 m are several cm apart in height from disparity noise alone
+SHORT = StereoCamera(f=260.0, cx=159.5, cy=119.5, baseline=0.12, width=320, height=240)
+
+
+def test_depth_noise_is_the_depth_change_per_disparity():
+    """depth_noise is |dz/dd| sigma: the change of the triangulated depth per pixel of
+    disparity, times sigma; it grows with the square of the depth."""
+    rng = np.random.default_rng(1)
+    pts = ground_points(slope_from(3.0, 4.0), rng, n=200, sigma_d=0.0)
+    u, v, d = CAM.project(pts)
+    sd = depth_noise(CAM, d, 0.25)
+    dz = (CAM.triangulate(u, v, d + 1e-4) - CAM.triangulate(u, v, d - 1e-4))[:, 2] / 2e-4
+    assert np.allclose(sd, np.abs(dz) * 0.25, rtol=1e-3)
+    assert np.allclose(sd, 0.25 * pts[:, 2] ** 2 / CAM.fb)
+
+
+def _short_rig_points(profile, rng, sigma_d=0.25, n=6000):
+    """Ground points seen by SHORT with disparity noise sigma_d px, and their pixels."""
+    origin, fwd, left = ground_axes(PLANE)
+    s = rng.uniform(1.5, 10.0, n)
+    lat = rng.uniform(-2.0, 2.0, n)
+    p = origin + s[:, None] * fwd + lat[:, None] * left + profile(s)[:, None] * PLANE.normal_up
+    u, v, d = SHORT.project(p)
+    ok = (u >= 0) & (u < SHORT.width) & (v >= 0) & (v < SHORT.height) & (d > 0)
+    u, v, d = u[ok], v[ok], d[ok] + rng.normal(0.0, sigma_d, ok.sum())
+    return SHORT.triangulate(u, v, d), depth_noise(SHORT, d, sigma_d)
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_far_ground_of_a_short_baseline_is_known_through_its_noise(seed):
+    """A 4 degree rise from 4 m seen on a short baseline: its far segments spread by
+    the disparity noise beyond rule_spread's 5 cm; told the features' height noise, the
+    surface takes them and follows the rise to 9.5 m within 8 cm."""
+    prof = slope_from(4.0, 4.0)
+    pts, sd = _short_rig_points(prof, np.random.default_rng(seed))
+    blind = fit_ground_surface(pts, PLANE)
+    told = fit_ground_surface(pts, PLANE, depth_sd=sd)
+    assert blind.known_until_m < 9.5
+    assert told.known_until_m >= 9.5, told.checks
+    s = np.linspace(2.0, 9.5, 16)
+    assert np.max(np.abs(told.profile(s) - prof(s))) < 0.08
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_a_kerb_on_a_short_baseline_is_still_a_step(seed):
+    """The depth noise widens rule_spread only: a 10 cm kerb up at 3.5 m is not bent
+    into on the short baseline either (rule_step; a step down there is the limit of
+    docs/ground.md)."""
+    rise = 0.10
+    pts, sd = _short_rig_points(step_at(3.5, rise), np.random.default_rng(10 + seed))
+    surf = fit_ground_surface(pts, PLANE, depth_sd=sd)
+    assert np.max(np.abs(surf.profile(np.linspace(0, 10, 101)))) < 0.03
+    beyond = surf.coordinates(pts)[0] > 3.7
+    assert np.median(surf.height_above(pts[beyond])) == pytest.approx(rise, abs=0.03)
+
+
+def _sparse_ground(profile, rng, per_m=12):
+    """Dense ground to 4 m, then ``per_m`` features per metre (the far ground of a
+    pavement with little texture)."""
+    near = ground_points(profile, rng, s_max=4.0)
+    origin, fwd, left = ground_axes(PLANE)
+    s = rng.uniform(4.0, 9.0, int(5 * per_m))
+    lat = rng.uniform(-2.0, 2.0, s.size)
+    p = origin + s[:, None] * fwd + lat[:, None] * left + profile(s)[:, None] * PLANE.normal_up
+    return np.vstack([near, _through_camera(p, rng, 0.15)])
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_sparse_far_ground_is_fitted_by_longer_segments(seed):
+    """Beyond 4 m only 12 features per metre: 1 m segments lack rule_support's 30; the
+    segments lengthen (up to max_segment_m) and follow a 5 degree fall from 4 m within
+    8 cm (the plane alone is 35 cm off at 8 m)."""
+    prof = slope_from(4.0, -5.0)
+    pts = _sparse_ground(prof, np.random.default_rng(seed))
+    short = fit_ground_surface(pts, PLANE, GroundSurfaceConfig(max_segment_m=1.0))
+    surf = fit_ground_surface(pts, PLANE)
+    assert short.known_until_m <= 5.0
+    assert surf.known_until_m >= 8.0, surf.checks
+    s = np.linspace(2.0, 8.0, 13)
+    assert np.max(np.abs(surf.profile(s) - prof(s))) < 0.08
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_a_slope_goes_on_beyond_the_known_ground(seed):
+    """A 5 degree rise from 3 m seen only to 7 m: beyond the known ground the surface
+    goes on at the grade of its last two segments, not level (the rise at 9.5 m is then
+    still ground)."""
+    prof = slope_from(3.0, 5.0)
+    pts = ground_points(prof, np.random.default_rng(seed), s_max=7.0)
+    surf = fit_ground_surface(pts, PLANE)
+    assert surf.known_until_m <= 7.0
+    assert surf.tail_grade == pytest.approx(np.tan(np.radians(5.0)), abs=0.03)
+    s = np.array([8.0, 9.0, 9.5])
+    assert np.max(np.abs(surf.profile(s) - prof(s))) < 0.10

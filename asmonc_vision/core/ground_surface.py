@@ -15,8 +15,11 @@ road-profile idea of v-disparity methods, Labayrade et al. 2002, and of Wedel et
 
 The knot heights are fitted from near to far, one segment at a time, to the features
 near the profile's continuation (a robust line from the previous knot, Tukey-weighted
-IRLS with a prior towards the straight continuation, ``smoothness_m``). A segment is
-taken only if it is ground, not an obstacle or a step:
+IRLS with a prior towards the straight continuation, ``smoothness_m`` per
+``knot_spacing_m``). A segment is ``knot_spacing_m`` long, or longer, up to
+``max_segment_m``, where that is too short for ``rule_support`` (the features per metre
+of ground fall with the square of the distance). A segment is taken only if it is
+ground, not an obstacle or a step:
 
 * ``rule_support``: at least ``min_features`` features, a quarter of them in each
   half of the segment, spread across at least ``min_width_m`` of the path (a box or a
@@ -25,9 +28,12 @@ taken only if it is ground, not an obstacle or a step:
   segment (a ramp or a slope's start, not a wall);
 * ``rule_step``: no step of more than ``max_step_m`` inside the segment: the features
   are fitted by a line plus a step at each of 9 places along the segment, and the best
-  of these, if it cuts the line's residual sum by a quarter, must have a step of at most
-  ``max_step_m`` (a kerb of 10 cm is a line plus a step; a slope is a line);
-* ``rule_spread``: the residuals' robust spread is at most ``max_spread_m``.
+  of these, if it cuts the line's residual sum by a quarter or is significant against
+  the features' scatter, must have a step of at most ``max_step_m`` (a kerb of 10 cm is
+  a line plus a step; a slope is a line);
+* ``rule_spread``: the residuals' robust spread is at most ``max_spread_m`` beyond what
+  the features' disparity noise explains (``depth_sd``: a feature moves along its ray,
+  several cm across the ground at 9 m on a short baseline).
 
 Before any segment, ``rule_anchor``: the features of the last ``knot_spacing_m`` before
 the first knot (when there are ``min_features`` of them) must lie on the plane (median
@@ -35,11 +41,12 @@ height within ``anchor_max_m``); if not, the plane itself is off and no profile 
 (it would bend to make up for the plane, not for the ground).
 
 The first segment that fails ends the known surface: beyond ``known_until_m`` the ground
-is *unknown* (the profile is held level at its last knot for the obstacle test, and the
-caller is told how far it knows the ground). Points are judged against the surface by
-their height above it (`GroundSurface.height_above`), or in disparity by the surface's
-disparity at their pixel (`GroundSurface.disparity`: the ray's first intersection with
-the profile, solved exactly per segment).
+is *unknown* (for the obstacle test the surface goes on at ``tail_grade``, the grade the
+last two segments agree on, and the caller is told how far it knows the ground).
+Points are judged against the surface by their height above it
+(`GroundSurface.height_above`), or in disparity by the surface's disparity at their
+pixel (`GroundSurface.disparity`: the ray's first intersection with the profile, solved
+exactly per segment).
 
 Frames: the left optical frame (REP 103: x right, y down, z forward, metres); pixels
 are cyclopean (u, v) with disparity d (docs/CONVENTIONS.md). No ROS here.
@@ -72,7 +79,12 @@ class GroundSurfaceConfig:
         10.0, 'The profile is fitted out to this distance along the ground, metres',
         range=(0.5, 100.0))
     knot_spacing_m: float = param(
-        1.0, 'Distance between the knots of the profile, metres', range=(0.1, 20.0))
+        1.0, 'Least distance between the knots of the profile, metres', range=(0.1, 20.0))
+    max_segment_m: float = param(
+        3.0, 'Longest segment of the profile, metres: a segment with too few features '
+        'for rule_support over knot_spacing_m is lengthened, by half a knot spacing at a '
+        'time, up to this (the features per metre of ground fall with the square of the '
+        'distance)', range=(0.1, 50.0))
     half_width_m: float = param(
         2.0, 'Features within this distance of the walking line take part, metres',
         range=(0.1, 50.0))
@@ -112,6 +124,9 @@ class GroundSurfaceConfig:
         if self.near_m >= self.far_m:
             raise ValueError(f'GroundSurfaceConfig.near_m = {self.near_m} must be less than '
                              f'far_m = {self.far_m}')
+        if self.max_segment_m < self.knot_spacing_m:
+            raise ValueError(f'GroundSurfaceConfig.max_segment_m = {self.max_segment_m} must '
+                             f'be at least knot_spacing_m = {self.knot_spacing_m}')
 
 
 @dataclass(frozen=True)
@@ -141,6 +156,9 @@ class GroundSurface:
             along the ground; knots_s[-1] when all segments were taken, knots_s[0] (the
             first knot: near_m, or where the ground is first seen) when none.
         checks: one SegmentCheck per segment tried, near to far.
+        tail_grade: the grade (rise per metre) of the surface beyond the last known knot:
+            that of the last known segment (the ground is taken to go on as it was seen
+            to go; 0 when no segment was taken or the profile is the plane itself).
     """
 
     plane: MetricPlane
@@ -148,6 +166,7 @@ class GroundSurface:
     knots_z: np.ndarray
     known_until_m: float
     checks: tuple[SegmentCheck, ...] = ()
+    tail_grade: float = 0.0
 
     @classmethod
     def flat(cls, plane: MetricPlane, near_m: float = 0.0) -> 'GroundSurface':
@@ -157,14 +176,17 @@ class GroundSurface:
     @property
     def bends(self) -> bool:
         """Whether the profile leaves the plane anywhere."""
-        return bool(np.any(self.knots_z != 0.0))
+        return bool(np.any(self.knots_z != 0.0)) or self.tail_grade != 0.0
 
     def profile(self, s: np.ndarray) -> np.ndarray:
         """(N,) surface height above the plane (m) at distances s (N,) along the ground
-        (m): 0 before the first knot, level after the last known knot."""
+        (m): 0 before the first knot, at ``tail_grade`` after the last known knot."""
         s = np.asarray(s, float)
         ks, kz = self._known_knots()
-        return np.interp(s, ks, kz, left=0.0, right=kz[-1])
+        out = np.interp(s, ks, kz, left=0.0, right=kz[-1])
+        if self.tail_grade != 0.0:
+            out = out + self.tail_grade * np.maximum(s - ks[-1], 0.0)
+        return out
 
     def _known_knots(self) -> tuple[np.ndarray, np.ndarray]:
         keep = self.knots_s <= self.known_until_m + 1e-9
@@ -202,7 +224,7 @@ class GroundSurface:
         for k in range(ks.size - 1):
             pieces.append((ks[k], ks[k + 1], kz[k],
                            (kz[k + 1] - kz[k]) / (ks[k + 1] - ks[k])))
-        pieces.append((ks[-1], np.inf, kz[-1], 0.0))
+        pieces.append((ks[-1], np.inf, kz[-1], self.tail_grade))
         best = np.full(u.shape, np.inf)
         with np.errstate(divide='ignore', invalid='ignore'):
             for s_a, s_b, z_a, g in pieces:
@@ -215,6 +237,12 @@ class GroundSurface:
         out = cam.fb / best
         out[~np.isfinite(best)] = np.nan
         return out
+
+
+#: `_best_step`: a step whose t statistic is at least this is one, whatever share of
+#: the residual sum it explains (the best of 9 splits of pure noise: below 4 but for
+#: about 1 segment in 2 000).
+_STEP_T = 4.0
 
 
 def _tukey(res: np.ndarray, c: float) -> np.ndarray:
@@ -251,8 +279,11 @@ def _best_step(t: np.ndarray, h: np.ndarray, length: float, splits: int = 9) -> 
     line: for each split t* at 1/(splits+1) .. splits/(splits+1) of the segment,
     least squares of h = c + g t + delta [t > t*] over the features (t: (N,) m from the
     segment's start, h: (N,) m); the |delta| of the split whose residual sum is least
-    if it is at most 3/4 of the line's alone, else 0 (a slope has no step). NaN with
-    fewer than 3 features on either side of every split.
+    if it is at most 3/4 of the line's alone, or if the step is significant against the
+    features' own scatter (its t statistic, sqrt((rss_line - rss) / (rss / (N - 3))),
+    at least ``_STEP_T``: a kerb among noisy far features cuts the residual sum by less
+    than a quarter, yet by many times the noise), else 0 (a slope has no step). NaN
+    with fewer than 3 features on either side of every split.
 
     Every split is solved at once from the sums of the normal equations (A^T A) x =
     A^T h, A = [1, t, [t > t*]]; the residual sum is h^T h - x^T A^T h (a few
@@ -288,11 +319,48 @@ def _best_step(t: np.ndarray, h: np.ndarray, length: float, splits: int = 9) -> 
     rss = np.where(valid, shh - np.sum(coef * ath, axis=1), np.inf)
     k = int(np.argmin(rss))
     best_rss = max(float(rss[k]), 0.0)
-    return abs(float(coef[k, 2])) if best_rss <= 0.75 * rss_line else 0.0
+    significant = rss_line - best_rss >= _STEP_T ** 2 * best_rss / max(n - 3.0, 1.0)
+    return abs(float(coef[k, 2])) if best_rss <= 0.75 * rss_line or significant else 0.0
+
+
+def depth_noise(cam: StereoCamera, d, sigma_px) -> np.ndarray:
+    """(N,) standard deviation (m) of the depth of points triangulated with disparity d
+    (N,) px whose disparity has the standard deviation ``sigma_px`` (scalar or (N,)) px:
+    ``z^2 sigma / (f B) = f B sigma / d^2`` (a few mm near the wearer, tens of cm at 9 m
+    on a short baseline). A point moves along its ray by this; its height above a
+    ground of grade g by the ray's change of height less g times its change of
+    distance ahead (`fit_ground_surface`)."""
+    d = np.maximum(np.asarray(d, float), 1e-6)
+    return cam.fb * np.asarray(sigma_px, float) / (d * d)
+
+
+def _first_knot(s: np.ndarray, h: np.ndarray, c: GroundSurfaceConfig) -> float:
+    """Where the profile starts: near_m, or where the ground is first seen if that is
+    farther (a car's cameras see the road from 5 m): the 5th percentile of the
+    distances of the features on the plane."""
+    on_plane = np.abs(h) <= c.gate_m
+    if np.count_nonzero(on_plane) >= c.min_features:
+        return max(c.near_m, float(np.percentile(s[on_plane], 5)))
+    return c.near_m
+
+
+def _segment_lengths(s_a: float, c: GroundSurfaceConfig) -> list[float]:
+    """The lengths a segment from s_a is tried at, shortest first: knot_spacing_m, then
+    half a spacing longer at a time up to max_segment_m, none past far_m."""
+    room = c.far_m - s_a
+    out: list[float] = []
+    n = int(math.floor((c.max_segment_m - c.knot_spacing_m) / (0.5 * c.knot_spacing_m)
+                       + 1e-9))
+    for j in range(n + 1):
+        length = min(c.knot_spacing_m * (1.0 + 0.5 * j), room)
+        if not out or length > out[-1] + 1e-9:
+            out.append(length)
+    return out
 
 
 def fit_ground_surface(points: np.ndarray, plane: MetricPlane,
-                       config: GroundSurfaceConfig | None = None) -> GroundSurface:
+                       config: GroundSurfaceConfig | None = None,
+                       depth_sd: np.ndarray | None = None) -> GroundSurface:
     """Fit the surface ahead to matched features.
 
     Args:
@@ -301,78 +369,123 @@ def fit_ground_surface(points: np.ndarray, plane: MetricPlane,
             rules).
         plane: the near ground plane (left optical frame).
         config: the settings (defaults if None).
+        depth_sd: (N,) the standard deviation of each point's depth from its disparity
+            noise, metres (`depth_noise`), or None (none): a segment's residual spread
+            is judged beyond what this noise explains (``rule_spread``).
     Returns:
         The GroundSurface; with no feature support ahead, the plane alone with
         ``known_until_m = near_m`` (a return value, never an exception).
     """
     c = config if config is not None else GroundSurfaceConfig()
     surface = GroundSurface.flat(plane, c.near_m)
-    s, lat, h = surface.coordinates(points)
+    pts = np.asarray(points, float).reshape(-1, 3)
+    s, lat, h = surface.coordinates(pts)
+    # how far each point's (s, h) moves for one standard deviation of its depth: along
+    # its ray, (ds/dz, dh/dz) times depth_sd
+    e_s, e_h = np.zeros(s.shape), np.zeros(s.shape)
+    if depth_sd is not None and s.size:
+        _, fwd, _ = ground_axes(plane)
+        sz = np.broadcast_to(np.asarray(depth_sd, float), s.shape)
+        z = np.where(np.abs(pts[:, 2]) > 1e-9, pts[:, 2], 1e-9)
+        e_s, e_h = sz * (pts @ fwd) / z, sz * (pts @ plane.normal_up) / z
     use = np.abs(lat) <= c.half_width_m
-    s, lat, h = s[use], lat[use], h[use]
-    # The profile starts at near_m, or where the ground is first seen if that is
-    # farther (a car's cameras see the road from 5 m): the 5th percentile of the
-    # distances of the features on the plane.
-    on_plane = np.abs(h) <= c.gate_m
-    first = c.near_m
-    if np.count_nonzero(on_plane) >= c.min_features:
-        first = max(c.near_m, float(np.percentile(s[on_plane], 5)))
+    feats = (s[use], lat[use], h[use], e_s[use], e_h[use])
+    s, lat, h = feats[:3]
+    first = _first_knot(s, h, c)
     if first >= c.far_m - 0.5 * c.knot_spacing_m:
         return GroundSurface.flat(plane, first)
-    n_seg = max(int(math.ceil((c.far_m - first) / c.knot_spacing_m - 1e-9)), 1)
-    knots_s = first + c.knot_spacing_m * np.arange(n_seg + 1)
-    knots_s[-1] = min(knots_s[-1], c.far_m)
-    knots_z = np.zeros(n_seg + 1)
-    grade = 0.0                       # the previous segment's rise per metre
-    known = first
-    checks: list[SegmentCheck] = []
     # rule_anchor: the profile starts on the plane, so the ground just before its first
     # knot must lie on the plane; if it does not, the plane is off (a frame of a
     # vigorous walk) and a profile would bend to make up for it, not for the ground.
-    anchor = (s >= first - c.knot_spacing_m) & (s < first) & on_plane
+    anchor = (s >= first - c.knot_spacing_m) & (s < first) & (np.abs(h) <= c.gate_m)
     if np.count_nonzero(anchor) >= c.min_features:
         offset = float(np.median(h[anchor]))
         if abs(offset) > c.anchor_max_m:
-            checks.append(SegmentCheck('rule_anchor', int(np.count_nonzero(anchor)),
-                                       math.nan, math.nan, offset, math.nan))
-            return GroundSurface(plane, knots_s, knots_z, known, tuple(checks))
-    for k in range(n_seg):
-        s_a, s_b = knots_s[k], knots_s[k + 1]
-        length = s_b - s_a
-        z_a = knots_z[k]
+            knots_s = _nominal_knots(first, first, c)
+            return GroundSurface(plane, knots_s, np.zeros(knots_s.size), first,
+                                 (SegmentCheck('rule_anchor',
+                                               int(np.count_nonzero(anchor)), math.nan,
+                                               math.nan, offset, math.nan),))
+    ks, kz = [first], [0.0]
+    grade = before = 0.0              # the grades of the last two segments (the plane: 0)
+    checks: list[SegmentCheck] = []
+    while ks[-1] < c.far_m - 1e-6:
+        s_a, z_a = ks[-1], kz[-1]
+        check, length, z_b = _segment(feats, s_a, z_a, grade, c)
+        checks.append(check)
+        if check.refused_by:
+            break
+        ks.append(s_a + length)
+        kz.append(z_b)
+        before, grade = grade, (z_b - z_a) / length
+    known = ks[-1]
+    rest = _nominal_knots(known, ks[-1], c)[1:]
+    knots_s = np.concatenate([np.array(ks), rest])
+    knots_z = np.concatenate([np.array(kz), np.zeros(rest.size)])
+    # Beyond the known ground the surface goes on at the grade the last two segments
+    # agree on (the smaller of theirs if they rise or fall alike, else level): a slope
+    # seen over two segments goes on; one segment bent towards a kerb does not carry.
+    tail = float(min(grade, before, key=abs)) if grade * before > 0.0 else 0.0
+    if np.max(np.abs(knots_z)) <= c.min_bend_m:
+        knots_z[:] = 0.0                 # flat within the noise: the plane itself
+        tail = 0.0
+    return GroundSurface(plane, knots_s, knots_z, float(known), tuple(checks), tail)
+
+
+def _nominal_knots(first: float, last: float, c: GroundSurfaceConfig) -> np.ndarray:
+    """The knots from ``last`` on at knot_spacing_m out to far_m (the last one at far_m),
+    ``first`` <= ``last`` (for the record of a surface refused there)."""
+    n = max(int(math.ceil((c.far_m - last) / c.knot_spacing_m - 1e-9)), 0)
+    out = last + c.knot_spacing_m * np.arange(n + 1)
+    if n:
+        out[-1] = min(out[-1], c.far_m)
+    return out
+
+
+def _segment(feats: tuple, s_a: float, z_a: float, grade: float, c: GroundSurfaceConfig
+             ) -> tuple[SegmentCheck, float, float]:
+    """One segment of the profile from (s_a, z_a) after a segment of ``grade``, fitted to
+    the features ``feats`` = (s, lat, h, e_s, e_h) (N,) m each (e_s, e_h: how far a
+    feature's s and h move for one standard deviation of its depth): (its check, its
+    length, its far knot's height). Its length is the shortest of `_segment_lengths`
+    that has the support of ``rule_support``."""
+    s, lat, h, e_s, e_h = feats
+    for length in _segment_lengths(s_a, c):
         z_line = z_a + grade * (s - s_a)            # the straight continuation
         gate = c.gate_m + length * c.max_grade_change
-        inseg = (s >= s_a) & (s < s_b) & (np.abs(h - z_line) <= gate)
+        inseg = (s >= s_a) & (s < s_a + length) & (np.abs(h - z_line) <= gate)
         n_in = int(inseg.sum())
         ss, ll, hh = s[inseg], lat[inseg], h[inseg]
         width = float(np.subtract(*np.percentile(ll, [90, 10]))) if n_in else 0.0
-        refused = ''
-        z_b, step, spread, change = z_a + grade * length, math.nan, math.nan, math.nan
         halves = (int(np.count_nonzero(ss < s_a + 0.5 * length)),
                   int(np.count_nonzero(ss >= s_a + 0.5 * length)))
-        if n_in < c.min_features or width < c.min_width_m or min(halves) < c.min_features // 4:
-            refused = 'rule_support'
-        else:
-            z_b = _fit_segment(ss, hh, s_a, z_a, length, z_a + grade * length,
-                               c.smoothness_m, scale=max(c.gate_m, 1e-3))
-            new_grade = (z_b - z_a) / length
-            change = abs(new_grade - grade)
-            res = hh - (z_a + (z_b - z_a) * (ss - s_a) / length)
-            on = np.abs(res) <= c.gate_m
-            step = _best_step(ss[on] - s_a, hh[on], length)
-            spread = _mad(res[on])
-            for name, bad in (('rule_grade', change > c.max_grade_change),
-                              ('rule_step', not step <= c.max_step_m),
-                              ('rule_spread', not spread <= c.max_spread_m)):
-                if bad:
-                    refused = name
-                    break
-        checks.append(SegmentCheck(refused, n_in, width, change, step, spread))
-        if refused:
+        supported = (n_in >= c.min_features and width >= c.min_width_m
+                     and min(halves) >= c.min_features // 4)
+        if supported:
             break
-        knots_z[k + 1] = z_b
-        grade = (z_b - z_a) / length
-        known = float(s_b)
-    if np.max(np.abs(knots_z)) <= c.min_bend_m:
-        knots_z[:] = 0.0                 # flat within the noise: the plane itself
-    return GroundSurface(plane, knots_s, knots_z, known, tuple(checks))
+    z_b = z_a + grade * length
+    if not supported:
+        return SegmentCheck('rule_support', n_in, width, math.nan, math.nan, math.nan), \
+            length, z_b
+    # a longer segment may bend as much per metre as a short one: the prior's
+    # standard deviation grows with its length
+    z_b = _fit_segment(ss, hh, s_a, z_a, length, z_b,
+                       c.smoothness_m * length / c.knot_spacing_m, scale=max(c.gate_m, 1e-3))
+    new_grade = (z_b - z_a) / length
+    change = abs(new_grade - grade)
+    res = hh - (z_a + (z_b - z_a) * (ss - s_a) / length)
+    # a feature's noise about the segment: its depth's, along its ray, across the line
+    dd = np.abs(e_h[inseg] - new_grade * e_s[inseg])
+    on = np.abs(res) <= np.maximum(c.gate_m, 2.5 * dd)
+    step = _best_step(ss[on] - s_a, hh[on], length)
+    spread = _mad(res[on])
+    # the spread of a segment is the ground's own unevenness and the disparity noise
+    noise = float(np.median(dd[on])) if on.any() else 0.0
+    refused = ''
+    for name, bad in (('rule_grade', change > c.max_grade_change),
+                      ('rule_step', not step <= c.max_step_m),
+                      ('rule_spread', not spread <= math.hypot(c.max_spread_m, noise))):
+        if bad:
+            refused = name
+            break
+    return SegmentCheck(refused, n_in, width, change, step, spread), length, z_b

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..camera import MetricPlane, StereoCamera, plane_disparity
 from ..edges import EdgeMap, gradient_noise_gain
-from ..ground_surface import fit_ground_surface
+from ..ground_surface import depth_noise, fit_ground_surface
 from ..matching import Candidates, Matches
 from . import kernels as kn
 from .faces import (
@@ -186,13 +186,13 @@ class Detection(PlaneTracking):
         plane's disparity range d_min .. d_max; ``still``: the rig stood still): (the
         features with their obstacle / drop classes, the detections nearest first)."""
         c = self.config
-        pd, pts, h = self._ground_reference(u, v, d, cam, metric)
+        thr, thr_global = self.pixel_thresholds(_noise_key(m), v)
+        pd, pts, h = self._ground_reference(u, v, d, cam, metric, thr / c.threshold_k)
         excess = d - pd
         feet = pts - h[:, None] * metric.normal_up[None, :]
         ground_range = np.linalg.norm(feet + metric.height * metric.normal_up[None, :], axis=1)
         prev, run, smooth, nxt = self._runs(m, el, excess)
         in_range = ground_range <= c.max_range_m
-        thr, thr_global = self.pixel_thresholds(_noise_key(m), v)
         ex_mean = self._temporal_excess(m, smooth, still, el.shape, thr)
         # Figural continuity: a run of min_matched_run pixels at least, and longer for a
         # larger excess -- an edge standing on the ground rises by |b| px of excess per
@@ -318,12 +318,13 @@ class Detection(PlaneTracking):
                 out[sid[sel]] = True
         return out
 
-    def _ground_reference(self, u, v, d, cam: StereoCamera, metric: MetricPlane
-                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _ground_reference(self, u, v, d, cam: StereoCamera, metric: MetricPlane,
+                          sigma_px: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The ground the features are judged against: (its disparity at each feature,
         the features' 3-D points, their heights above it). The plane, or with
         ``surface_enabled`` the ground surface ahead where it bends (kept in
-        ``self._surface``)."""
+        ``self._surface``), fitted knowing each feature's disparity noise ``sigma_px``
+        (K,) px (the obstacle threshold over ``threshold_k``) as a depth noise."""
         c = self.config
         pd = plane_disparity(self._abc, u, v)
         pts = cam.triangulate(u, v, d)
@@ -332,7 +333,8 @@ class Detection(PlaneTracking):
         if c.surface_enabled:
             # The reference of the obstacle test: the plane continued by the profile
             # ahead where features support it (core/ground_surface.py).
-            surf = fit_ground_surface(pts, metric, surface_config(c))
+            surf = fit_ground_surface(pts, metric, surface_config(c),
+                                      depth_noise(cam, d, sigma_px))
             self._surface = surf
             if surf.bends:
                 pd_surf = surf.disparity(cam, u, v)
