@@ -259,32 +259,6 @@ def test_a_kerb_on_a_short_baseline_is_still_a_step(seed):
     assert np.median(surf.height_above(pts[beyond])) == pytest.approx(rise, abs=0.03)
 
 
-def _sparse_ground(profile, rng, per_m=12):
-    """Dense ground to 4 m, then ``per_m`` features per metre (the far ground of a
-    pavement with little texture)."""
-    near = ground_points(profile, rng, s_max=4.0)
-    origin, fwd, left = ground_axes(PLANE)
-    s = rng.uniform(4.0, 9.0, int(5 * per_m))
-    lat = rng.uniform(-2.0, 2.0, s.size)
-    p = origin + s[:, None] * fwd + lat[:, None] * left + profile(s)[:, None] * PLANE.normal_up
-    return np.vstack([near, _through_camera(p, rng, 0.15)])
-
-
-@pytest.mark.parametrize('seed', [0, 1, 2])
-def test_sparse_far_ground_is_fitted_by_longer_segments(seed):
-    """Beyond 4 m only 12 features per metre: 1 m segments lack rule_support's 30; the
-    segments lengthen (up to max_segment_m) and follow a 5 degree fall from 4 m within
-    8 cm (the plane alone is 35 cm off at 8 m)."""
-    prof = slope_from(4.0, -5.0)
-    pts = _sparse_ground(prof, np.random.default_rng(seed))
-    short = fit_ground_surface(pts, PLANE, GroundSurfaceConfig(max_segment_m=1.0))
-    surf = fit_ground_surface(pts, PLANE)
-    assert short.known_until_m <= 5.0
-    assert surf.known_until_m >= 8.0, surf.checks
-    s = np.linspace(2.0, 8.0, 13)
-    assert np.max(np.abs(surf.profile(s) - prof(s))) < 0.08
-
-
 @pytest.mark.parametrize('seed', [0, 1, 2])
 def test_a_slope_goes_on_beyond_the_known_ground(seed):
     """A 5 degree rise from 3 m seen only to 7 m: beyond the known ground the surface

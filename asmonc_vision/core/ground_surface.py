@@ -15,11 +15,8 @@ road-profile idea of v-disparity methods, Labayrade et al. 2002, and of Wedel et
 
 The knot heights are fitted from near to far, one segment at a time, to the features
 near the profile's continuation (a robust line from the previous knot, Tukey-weighted
-IRLS with a prior towards the straight continuation, ``smoothness_m`` per
-``knot_spacing_m``). A segment is ``knot_spacing_m`` long, or longer, up to
-``max_segment_m``, where that is too short for ``rule_support`` (the features per metre
-of ground fall with the square of the distance). A segment is taken only if it is
-ground, not an obstacle or a step:
+IRLS with a prior towards the straight continuation, ``smoothness_m``). A segment is
+taken only if it is ground, not an obstacle or a step:
 
 * ``rule_support``: at least ``min_features`` features, a quarter of them in each
   half of the segment, spread across at least ``min_width_m`` of the path (a box or a
@@ -79,12 +76,7 @@ class GroundSurfaceConfig:
         10.0, 'The profile is fitted out to this distance along the ground, metres',
         range=(0.5, 100.0))
     knot_spacing_m: float = param(
-        1.0, 'Least distance between the knots of the profile, metres', range=(0.1, 20.0))
-    max_segment_m: float = param(
-        3.0, 'Longest segment of the profile, metres: a segment with too few features '
-        'for rule_support over knot_spacing_m is lengthened, by half a knot spacing at a '
-        'time, up to this (the features per metre of ground fall with the square of the '
-        'distance)', range=(0.1, 50.0))
+        1.0, 'Distance between the knots of the profile, metres', range=(0.1, 20.0))
     half_width_m: float = param(
         2.0, 'Features within this distance of the walking line take part, metres',
         range=(0.1, 50.0))
@@ -124,9 +116,6 @@ class GroundSurfaceConfig:
         if self.near_m >= self.far_m:
             raise ValueError(f'GroundSurfaceConfig.near_m = {self.near_m} must be less than '
                              f'far_m = {self.far_m}')
-        if self.max_segment_m < self.knot_spacing_m:
-            raise ValueError(f'GroundSurfaceConfig.max_segment_m = {self.max_segment_m} must '
-                             f'be at least knot_spacing_m = {self.knot_spacing_m}')
 
 
 @dataclass(frozen=True)
@@ -344,20 +333,6 @@ def _first_knot(s: np.ndarray, h: np.ndarray, c: GroundSurfaceConfig) -> float:
     return c.near_m
 
 
-def _segment_lengths(s_a: float, c: GroundSurfaceConfig) -> list[float]:
-    """The lengths a segment from s_a is tried at, shortest first: knot_spacing_m, then
-    half a spacing longer at a time up to max_segment_m, none past far_m."""
-    room = c.far_m - s_a
-    out: list[float] = []
-    n = int(math.floor((c.max_segment_m - c.knot_spacing_m) / (0.5 * c.knot_spacing_m)
-                       + 1e-9))
-    for j in range(n + 1):
-        length = min(c.knot_spacing_m * (1.0 + 0.5 * j), room)
-        if not out or length > out[-1] + 1e-9:
-            out.append(length)
-    return out
-
-
 def fit_ground_surface(points: np.ndarray, plane: MetricPlane,
                        config: GroundSurfaceConfig | None = None,
                        depth_sd: np.ndarray | None = None) -> GroundSurface:
@@ -447,30 +422,23 @@ def _segment(feats: tuple, s_a: float, z_a: float, grade: float, c: GroundSurfac
     """One segment of the profile from (s_a, z_a) after a segment of ``grade``, fitted to
     the features ``feats`` = (s, lat, h, e_s, e_h) (N,) m each (e_s, e_h: how far a
     feature's s and h move for one standard deviation of its depth): (its check, its
-    length, its far knot's height). Its length is the shortest of `_segment_lengths`
-    that has the support of ``rule_support``."""
+    length (knot_spacing_m, less at far_m), its far knot's height)."""
     s, lat, h, e_s, e_h = feats
-    for length in _segment_lengths(s_a, c):
-        z_line = z_a + grade * (s - s_a)            # the straight continuation
-        gate = c.gate_m + length * c.max_grade_change
-        inseg = (s >= s_a) & (s < s_a + length) & (np.abs(h - z_line) <= gate)
-        n_in = int(inseg.sum())
-        ss, ll, hh = s[inseg], lat[inseg], h[inseg]
-        width = float(np.subtract(*np.percentile(ll, [90, 10]))) if n_in else 0.0
-        halves = (int(np.count_nonzero(ss < s_a + 0.5 * length)),
-                  int(np.count_nonzero(ss >= s_a + 0.5 * length)))
-        supported = (n_in >= c.min_features and width >= c.min_width_m
-                     and min(halves) >= c.min_features // 4)
-        if supported:
-            break
+    length = min(c.knot_spacing_m, c.far_m - s_a)
+    z_line = z_a + grade * (s - s_a)            # the straight continuation
+    gate = c.gate_m + length * c.max_grade_change
+    inseg = (s >= s_a) & (s < s_a + length) & (np.abs(h - z_line) <= gate)
+    n_in = int(inseg.sum())
+    ss, ll, hh = s[inseg], lat[inseg], h[inseg]
+    width = float(np.subtract(*np.percentile(ll, [90, 10]))) if n_in else 0.0
+    halves = (int(np.count_nonzero(ss < s_a + 0.5 * length)),
+              int(np.count_nonzero(ss >= s_a + 0.5 * length)))
     z_b = z_a + grade * length
-    if not supported:
+    if n_in < c.min_features or width < c.min_width_m or min(halves) < c.min_features // 4:
         return SegmentCheck('rule_support', n_in, width, math.nan, math.nan, math.nan), \
             length, z_b
-    # a longer segment may bend as much per metre as a short one: the prior's
-    # standard deviation grows with its length
-    z_b = _fit_segment(ss, hh, s_a, z_a, length, z_b,
-                       c.smoothness_m * length / c.knot_spacing_m, scale=max(c.gate_m, 1e-3))
+    z_b = _fit_segment(ss, hh, s_a, z_a, length, z_b, c.smoothness_m,
+                       scale=max(c.gate_m, 1e-3))
     new_grade = (z_b - z_a) / length
     change = abs(new_grade - grade)
     res = hh - (z_a + (z_b - z_a) * (ss - s_a) / length)
