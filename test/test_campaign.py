@@ -58,17 +58,18 @@ def test_one_walk_end_to_end_and_cached(tmp_path, capsys):
     from asmonc_vision.cli.main import main
     assert main(argv) == 0
     out = capsys.readouterr().out
-    assert 'TUNING seeds 1000-1999: 1 walks' in out and 'ours (GPOD)' in out
+    assert 'TUNING seeds 1000-1999: 1 walks' in out and 'ours (GPOD + map, no wait)' in out
     assert 'peer (SGBM)' in out and f'class {SCENE_CLASSES[0]}' in out
     doc = json.loads(js.read_text())
     (walk,) = doc['walks']
     assert walk['seed'] == 1000 and walk['frames'] == 15 and walk['render_s'] > 0
-    for m in ('gpod', 'sgbm'):
+    assert set(walk['safety']) == {'gpod_map_lag', 'sgbm'}   # the system and its peer
+    for m in ('gpod_map_lag', 'sgbm'):
         s = walk['safety'][m]
         assert s['frames'] == 15 and s['false_reports']['frames_scored'] == 15
     md = (tmp_path / 'c.md').read_text().splitlines()
     assert md[0] == '**TUNING seeds 1000-1999: 1 walks of 1.5 s**'
-    assert md[2].startswith('|  | walks | min | ours (GPOD) warned |') and md[3] == '|---' * 9 + '|'
+    assert md[2].startswith('|  | walks | min | ours (GPOD + map, no wait) warned |') and md[3] == '|---' * 9 + '|'
     assert md[4].startswith(f'| class {SCENE_CLASSES[0]} | 1 | 0.0 | ')
     assert md[-1].startswith('| **all** | 1 |') and md[-1].count('|') == 10
     entries = list((tmp_path / 'cache').iterdir())

@@ -13,7 +13,7 @@ into a cache outside the repository (default ~/.cache/asmonc_vision/campaign/<ke
 key a hash of the scene class, seed, rig, duration and the simulator's source code) as
 a rosbag2 bag with the pixels that see each obstacle in both images beside it
 (`truth.json`), and reused when present. On every walk, offline (no ROS), our detector
-(GPOD, default settings: no evidence map, no motion input), the same given each pair's
+(``gpod``: GPOD alone, the evidence map off and no motion input), the same given each pair's
 motion from the egomotion estimator (``gpod_ego``), our detector with the evidence map
 (``gpod_map``: the map on, with each pair's motion at once, as a graph that waits for it),
 the map as the detector node runs it (``gpod_map_lag``: the detector with no motion, the
@@ -81,12 +81,13 @@ def add_arguments(p) -> None:
     p.add_argument('--rigs', nargs='+', choices=RIGS, default=list(RIGS),
                    help='rigs (default all)')
     p.add_argument('--duration', type=float, default=20.0, help='seconds per walk (default 20)')
-    p.add_argument('--methods', nargs='+', choices=tuple(METHOD_NAMES), default=['gpod', 'sgbm'],
+    p.add_argument('--methods', nargs='+', choices=tuple(METHOD_NAMES), default=['gpod_map_lag', 'sgbm'],
                    help='detectors to run: gpod (no map, no motion), gpod_ego (no map, '
                         'each pair\'s motion from the egomotion estimator), gpod_map (the '
                         'evidence map, with each pair\'s motion), gpod_map_lag (the map, its '
                         'motion predicted from the pairs 2 or more before, as the node '
-                        'graph runs it), sgbm (the peer); default gpod and sgbm')
+                        'graph runs it: the system), sgbm (the peer); default gpod_map_lag '
+                        'and sgbm')
     p.add_argument('--cache', type=Path, default=None,
                    help='rendered walks are kept here (default ~/.cache/asmonc_vision/campaign)')
     p.add_argument('--json', type=Path, default=None, help='write every number here as JSON')
