@@ -72,6 +72,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from asmonc_vision.core import map_kernels
 from asmonc_vision.core.camera import MetricPlane, StereoCamera, ground_axes
 from asmonc_vision.core.config import check_fields, param
 
@@ -312,6 +313,7 @@ class EvidenceMap:
         c = self.config
         self.n = int(math.ceil(2 * c.radius_m / c.cell_m))
         self._next_id = 1
+        map_kernels.warm_up()
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -550,7 +552,8 @@ class EvidenceMap:
                 sh_[seen] = np.minimum(sh_[seen] + 1, 30000)
             tv[seen] |= (moved >= c.min_baseline_m) | (sh_[seen] >= c.still_min_frames)
 
-    def _rays(self, ground_xy: np.ndarray, n_r: np.ndarray) -> np.ndarray:
+    def _rays(self, ground_xy: np.ndarray, n_r: np.ndarray, use_kernel: bool = True
+              ) -> np.ndarray:
         """Flat indices of raised cells seen through by this pair's ground matches.
 
         The sight line from the camera (``H`` = the plane's camera height above the
@@ -580,6 +583,13 @@ class EvidenceMap:
         gh = ground_xy / np.maximum(R, 1e-6)[:, None]                   # sight line directions
         p = self.to_ground(self.pt_xy.reshape(-1, 2)[cells].astype(np.float64))   # (m, 2)
         top = hx[cells] - np.maximum(c.ray_margin_m, 2.0 * np.sqrt(hP[cells]))
+        if map_kernels.nb_rays is not None and use_kernel and gh.dtype == np.float64:
+            # the same counts, compiled (`map_kernels.rays_kernel`)
+            left, right = map_kernels.nb_rays(p, top.astype(np.float64), gh, R,
+                                              float(self._plane.height),
+                                              float(c.ray_lateral_m), float(c.ray_stop_m))
+            return cells[(np.minimum(left, right) >= c.ray_min_pixels)
+                         & (left + right > n_r[cells])]
         # (m, n): each evidence point against each sight line
         along = p[:, 0:1] * gh[None, :, 0] + p[:, 1:2] * gh[None, :, 1]
         lateral = gh[None, :, 0] * p[:, 1:2] - gh[None, :, 1] * p[:, 0:1]
