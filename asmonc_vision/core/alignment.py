@@ -167,14 +167,18 @@ def matched_brightness(left: np.ndarray, right: np.ndarray) -> np.ndarray:
         left, right: (H, W) uint8 grey images of one pair (both see nearly the same scene,
             so their statistics would agree but for the cameras' responses).
     Returns:
-        (H, W) uint8 right image, gain * right + offset, rounded and clipped to 0..255;
-        the right image itself when either image is uniform.
+        (H, W) uint8 right image, gain * right + offset, rounded and clipped to 0..255
+        (each grey level's value computed once, in a 256-entry table); the right image
+        itself when either image is uniform.
     """
     go = brightness_gain_offset(left, right)
     if go is None:
         return right
     gain, offset = go
-    return np.clip(np.rint(right * gain + offset), 0, 255).astype(np.uint8)
+    if right.dtype != np.uint8:
+        return np.clip(np.rint(right * gain + offset), 0, 255).astype(np.uint8)
+    table = np.clip(np.rint(np.arange(256, dtype=np.uint8) * gain + offset), 0, 255)
+    return cv2.LUT(right, table.astype(np.uint8))
 
 
 def brightness_gain_offset(left: np.ndarray, right: np.ndarray) -> tuple[float, float] | None:
