@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from asmonc_vision.core.alignment import (AlignmentConfig, VerticalAlignment,
-                                          corner_displacement_steps,
+                                          brightness_gain_offset, corner_displacement_steps,
                                           corner_displacements, fit_misalignment,
                                           matched_brightness)
 from asmonc_vision.core.gpod import GpodConfig, GpodDetector
@@ -82,6 +82,19 @@ def test_matched_brightness_undoes_a_gain_and_an_offset():
     assert np.abs(back - left).mean() < 1.0
     flat = np.full((60, 80), 90, np.uint8)
     assert matched_brightness(left, flat) is flat          # nothing to scale
+
+
+def test_matched_brightness_is_the_gain_and_offset_rounded_and_clipped():
+    """The table of grey levels gives every pixel gain * right + offset rounded and
+    clipped, as computed pixel by pixel (float64)."""
+    rng = np.random.default_rng(7)
+    left = rng.integers(0, 256, (48, 64)).astype(np.uint8)
+    for gain, offset in ((1.4, -20.0), (0.55, 30.0), (2.5, 3.0)):
+        right = np.clip(np.rint((left - offset) / gain), 0, 255).astype(np.uint8)
+        go = brightness_gain_offset(left, right)
+        assert go is not None
+        want = np.clip(np.rint(right * go[0] + go[1]), 0, 255).astype(np.uint8)
+        np.testing.assert_array_equal(matched_brightness(left, right), want)
 
 
 @pytest.mark.parametrize('gain,offset', [(1.05, 4.0), (1.5, -25.0), (0.7, 15.0)])

@@ -321,6 +321,33 @@ def test_ground_seen_where_a_thing_stood_clears_it():
     assert not emap.two_views.any()
 
 
+def test_the_compiled_sight_line_test_gives_numpys_cells():
+    """`map_kernels.rays_kernel` (the compiled `EvidenceMap._rays`) clears the same cells
+    as its numpy path: raised cells of all heights and spreads, sight lines on both sides,
+    through them, short of them and beyond them."""
+    from asmonc_vision.core import map_kernels
+    if map_kernels.nb_rays is None:
+        pytest.skip('numba is not available')
+    rng = np.random.default_rng(3)
+    emap = EvidenceMap(EvidenceMapConfig(enabled=True))
+    box = box_edges(3.0, 0.0, 0.3)
+    emap.update(0.0, PLANE, evidence([(box, RAISED, None)], 0.0), None, True)
+    n = emap.n
+    cells = rng.choice(n * n, 300, replace=False)
+    emap.L_r.reshape(-1)[cells] = rng.uniform(-1.0, 3.0, cells.size).astype(np.float32)
+    emap.h_x.reshape(-1)[cells] = rng.uniform(0.0, 1.5, cells.size).astype(np.float32)
+    emap.h_P.reshape(-1)[cells] = rng.uniform(0.0, 0.05, cells.size).astype(np.float32)
+    xy = emap.to_world(np.column_stack([rng.uniform(0.5, 6.0, cells.size),
+                                        rng.uniform(-1.0, 1.0, cells.size)]))
+    emap.pt_xy.reshape(-1, 2)[cells] = xy.astype(np.float32)
+    ground = np.column_stack([rng.uniform(0.3, 8.0, 800), rng.uniform(-2.0, 2.0, 800)])
+    n_r = rng.integers(0, 3, n * n)
+    got = emap._rays(ground, n_r)
+    want = emap._rays(ground, n_r, use_kernel=False)
+    assert want.size > 0
+    np.testing.assert_array_equal(got, want)
+
+
 def test_a_passer_by_leaves_no_ghost_trail():
     """A person (a tall thing 0.4 m wide) crossing the path 3 m ahead at 1.4 m/s while
     the wearer stands still: the ground seen where the person was clears those cells

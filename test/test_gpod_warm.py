@@ -38,6 +38,21 @@ def test_no_kernel_is_first_compiled_on_a_frame():
     assert not late, f'compiled on a frame: {late}'
 
 
+def test_no_map_kernel_is_first_compiled_on_a_frame():
+    """The evidence map's kernels (``core.map_kernels``) too are compiled when the map is
+    made (the detector with its map, as the node runs it)."""
+    pytest.importorskip('numba')
+    from asmonc_vision.core.perception import Perception
+    frames = load_frames(BAGS / 'static_obstacles', 25)
+    per = Perception()
+    assert per.map is not None
+    before = {k: len(v.signatures) for k, v in _dispatchers().items()}
+    for f in frames:
+        per.process(f.left, f.right, f.cam, stamp_ns=f.stamp_ns)
+    late = sorted(k for k, v in _dispatchers().items() if len(v.signatures) > before.get(k, 0))
+    assert not late, f'compiled on a frame: {late}'
+
+
 def test_row_median_is_numpys():
     """`faces._row_median` (the lone-face rule's medians) gives np.median's values, NaN
     rows and even and odd lengths included."""

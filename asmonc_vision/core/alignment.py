@@ -167,14 +167,18 @@ def matched_brightness(left: np.ndarray, right: np.ndarray) -> np.ndarray:
         left, right: (H, W) uint8 grey images of one pair (both see nearly the same scene,
             so their statistics would agree but for the cameras' responses).
     Returns:
-        (H, W) uint8 right image, gain * right + offset, rounded and clipped to 0..255;
-        the right image itself when either image is uniform.
+        (H, W) uint8 right image, gain * right + offset, rounded and clipped to 0..255
+        (each grey level's value computed once, in a 256-entry table); the right image
+        itself when either image is uniform.
     """
     go = brightness_gain_offset(left, right)
     if go is None:
         return right
     gain, offset = go
-    return np.clip(np.rint(right * gain + offset), 0, 255).astype(np.uint8)
+    if right.dtype != np.uint8:
+        return np.clip(np.rint(right * gain + offset), 0, 255).astype(np.uint8)
+    table = np.clip(np.rint(np.arange(256, dtype=np.uint8) * gain + offset), 0, 255)
+    return cv2.LUT(right, table.astype(np.uint8))
 
 
 def brightness_gain_offset(left: np.ndarray, right: np.ndarray) -> tuple[float, float] | None:
@@ -229,19 +233,22 @@ def corner_displacements(left: np.ndarray, right: np.ndarray, max_corners: int =
 
 
 def corner_displacement_steps(left: np.ndarray, right: np.ndarray, max_corners: int,
-                              max_px: float, match_error_px: float, chunk: int
+                              max_px: float, match_error_px: float, chunk: int,
+                              min_corners: int = 1
                               ) -> Generator[None, None, tuple[np.ndarray, np.ndarray]]:
     """`corner_displacements` in steps of 1-2 ms at 320x240: it yields after
     the corners, after the first pass, and after each ``chunk`` corners of the second
     pass, and returns its result. Lucas-Kanade follows every point on its own, so the
     result is the same bit for bit however the points are chunked. The images are
-    copied: the caller may reuse its arrays between steps."""
+    copied: the caller may reuse its arrays between steps. With fewer than
+    ``min_corners`` corners it returns no matches at once (a caller that needs that many
+    matches has no use for fewer)."""
     empty = (np.zeros((0, 2)), np.zeros((0, 2)))
     left = left.copy()
-    right = matched_brightness(left, right.copy())
     p = cv2.goodFeaturesToTrack(left, max_corners, 0.01, 5, blockSize=5)
-    if p is None or len(p) == 0:
+    if p is None or len(p) < max(min_corners, 1):
         return empty
+    right = matched_brightness(left, right.copy())
     yield
     pts = p.reshape(-1, 2).astype(np.float64)
     first = np.arange(0, len(p), 3)
@@ -425,11 +432,15 @@ class VerticalAlignment:
         if self.settled() and self._since < c.every_frames:
             return None
         self._since = 0
-        steps = corner_displacement_steps(left, right, c.max_corners, c.max_px,
-                                          c.match_error_px, c.chunk_corners)
         if c.spread and self._settled and c.every_frames > self._spread_frames():
+            steps = corner_displacement_steps(left, right, c.max_corners, c.max_px,
+                                              c.match_error_px, c.chunk_corners)
             self._job, self._job_P, self._job_frames = steps, self.P, 0
             return self._step()
+        # at once: a pair with fewer corners than min_matches is not followed (it could
+        # give no more matches than corners)
+        steps = corner_displacement_steps(left, right, c.max_corners, c.max_px,
+                                          c.match_error_px, c.chunk_corners, c.min_matches)
         while True:
             try:
                 next(steps)

@@ -72,6 +72,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from asmonc_vision.core import map_kernels
 from asmonc_vision.core.camera import MetricPlane, StereoCamera, ground_axes
 from asmonc_vision.core.config import check_fields, param
 
@@ -312,6 +313,7 @@ class EvidenceMap:
         c = self.config
         self.n = int(math.ceil(2 * c.radius_m / c.cell_m))
         self._next_id = 1
+        map_kernels.warm_up()
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -458,6 +460,12 @@ class EvidenceMap:
         return ij[:, 1] * self.n + ij[:, 0], inside
 
     def _enter(self, stamp_s: float, ev: PairEvidence, still: bool) -> None:
+        """Enter one pair's evidence into the cells (module docstring, step 4).
+
+        The cells' arithmetic touches only the cells this pair has evidence in (the
+        indices of the kinds' cells, sorted): the log-odds of every other cell are
+        within [min_logodds, max_logodds] already (the decay towards 0 keeps them so).
+        """
         c = self.config
         n2 = self.n * self.n
         w = self.to_world(ev.xy)
@@ -465,36 +473,40 @@ class EvidenceMap:
         flat, w, kind = flat[inside], w[inside], ev.kind[inside]
         h, sh = ev.height[inside], ev.sigma_h[inside]
         hit = c.hit_logodds * (c.still_hit_factor if still else 1.0)
-        n_r = np.bincount(flat[kind == RAISED], minlength=n2)
-        n_d = np.bincount(flat[kind == DROP], minlength=n2)
-        n_g = np.bincount(flat[kind == GROUND], minlength=n2)
+        f_r, f_d, f_g = flat[kind == RAISED], flat[kind == DROP], flat[kind == GROUND]
+        n_r = np.bincount(f_r, minlength=n2)
+        n_d = np.bincount(f_d, minlength=n2)
+        n_g = np.bincount(f_g, minlength=n2)
         self._pair_count = n_r + n_d
         Lr, Ld = self.L_r.reshape(-1), self.L_d.reshape(-1)
         # a cell seen through by this pair's sight lines takes none of its raised evidence
         seen_through = self._rays(ev.xy[ev.kind == GROUND], n_r)
         n_r[seen_through] = 0
-        raised = np.flatnonzero(n_r)
-        dropc = np.flatnonzero(n_d & (n_r == 0))
-        free: np.ndarray = (n_g >= c.min_ground_pixels) & (n_g > n_r + n_d)
+        u_r, u_d, u_g = np.unique(f_r), np.unique(f_d), np.unique(f_g)
+        raised = u_r[n_r[u_r] != 0]
+        dropc = u_d[(n_d[u_d] & (n_r[u_d] == 0)) != 0]
+        # (ground in a cell with no more raised and drop pixels: in u_g)
+        free_g = (n_g[u_g] >= c.min_ground_pixels) & (n_g[u_g] > n_r[u_g] + n_d[u_g])
         if c.clear_guard_cells > 0:
             # ground seen beside a thing seen in this pair (its foot, the ground in front
             # of its face in the same cell) does not clear it
             k = 2 * c.clear_guard_cells + 1
             near = cv2.dilate(((n_r + n_d) > 0).astype(np.uint8).reshape(self.n, self.n),
                               np.ones((k, k), np.uint8))
-            free &= near.reshape(-1) == 0
-        free = np.flatnonzero(free)
+            free_g &= near.reshape(-1)[u_g] == 0
+        free = u_g[free_g]
         # a thing seen now is not held back by the ground seen there before (a thing
         # that appears, a passer-by stepping in): L = max(L, 0) + hit
         Lr[raised] = np.maximum(Lr[raised], 0.0) + hit
         Ld[dropc] = np.maximum(Ld[dropc], 0.0) + hit
         Lr[free] -= c.free_logodds
         Ld[free] -= c.free_logodds
-        np.clip(Lr, c.min_logodds, c.max_logodds, out=Lr)
-        np.clip(Ld, c.min_logodds, c.max_logodds, out=Ld)
+        for L, cells in ((Lr, np.concatenate((raised, free))),
+                         (Ld, np.concatenate((dropc, free)))):
+            L[cells] = np.clip(L[cells], c.min_logodds, c.max_logodds)
         if seen_through.size:
             Lr[seen_through] -= c.ray_logodds
-            np.clip(Lr, c.min_logodds, c.max_logodds, out=Lr)
+            Lr[seen_through] = np.clip(Lr[seen_through], c.min_logodds, c.max_logodds)
             free = np.union1d(free, seen_through)
         # cells whose evidence is gone forget their height and views
         gone = free[(Lr[free] <= 0) & (Ld[free] <= 0)]
@@ -540,7 +552,8 @@ class EvidenceMap:
                 sh_[seen] = np.minimum(sh_[seen] + 1, 30000)
             tv[seen] |= (moved >= c.min_baseline_m) | (sh_[seen] >= c.still_min_frames)
 
-    def _rays(self, ground_xy: np.ndarray, n_r: np.ndarray) -> np.ndarray:
+    def _rays(self, ground_xy: np.ndarray, n_r: np.ndarray, use_kernel: bool = True
+              ) -> np.ndarray:
         """Flat indices of raised cells seen through by this pair's ground matches.
 
         The sight line from the camera (``H`` = the plane's camera height above the
@@ -570,6 +583,13 @@ class EvidenceMap:
         gh = ground_xy / np.maximum(R, 1e-6)[:, None]                   # sight line directions
         p = self.to_ground(self.pt_xy.reshape(-1, 2)[cells].astype(np.float64))   # (m, 2)
         top = hx[cells] - np.maximum(c.ray_margin_m, 2.0 * np.sqrt(hP[cells]))
+        if map_kernels.nb_rays is not None and use_kernel and gh.dtype == np.float64:
+            # the same counts, compiled (`map_kernels.rays_kernel`)
+            left, right = map_kernels.nb_rays(p, top.astype(np.float64), gh, R,
+                                              float(self._plane.height),
+                                              float(c.ray_lateral_m), float(c.ray_stop_m))
+            return cells[(np.minimum(left, right) >= c.ray_min_pixels)
+                         & (left + right > n_r[cells])]
         # (m, n): each evidence point against each sight line
         along = p[:, 0:1] * gh[None, :, 0] + p[:, 1:2] * gh[None, :, 1]
         lateral = gh[None, :, 0] * p[:, 1:2] - gh[None, :, 1] * p[:, 0:1]
