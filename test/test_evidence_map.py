@@ -445,6 +445,25 @@ def test_a_drop_is_confirmed_as_a_drop():
     assert drops[0].nearest_xy[0] == pytest.approx(4.0 - 0.6, abs=0.08)
 
 
+@pytest.mark.parametrize('pixels, taken', [(1, False), (2, True), (3, True), (4, True)])
+def test_a_cell_takes_drop_evidence_from_min_drop_pixels(pixels, taken):
+    """A cell takes a pair's drop evidence when it holds at least min_drop_pixels (2)
+    drop pixels of that pair and no raised one, whatever their number beyond that (odd
+    or even)."""
+    emap = EvidenceMap(EvidenceMapConfig(enabled=True))
+    xy = np.tile([[3.02, 0.02]], (pixels, 1))
+    ev = PairEvidence(xy=xy, height=np.full(pixels, -0.15), sigma_h=np.full(pixels, 0.02),
+                      kind=np.full(pixels, DROP, np.int8))
+    emap.update(0.0, PLANE, ev, None, True)
+    assert (emap.L_d.max() > 0.0) == taken
+    raised = PairEvidence(xy=np.vstack([xy, [[3.02, 0.02]]]),
+                          height=np.append(ev.height, 0.2), sigma_h=np.full(pixels + 1, 0.02),
+                          kind=np.append(ev.kind, np.int8(RAISED)))
+    emap2 = EvidenceMap(EvidenceMapConfig(enabled=True))
+    emap2.update(0.0, PLANE, raised, None, True)
+    assert emap2.L_d.max() <= 0.0            # a raised pixel in the cell: no drop there
+
+
 def test_ids_are_stable_and_distinct():
     emap = EvidenceMap(EvidenceMapConfig(enabled=True))
     a, b = box_edges(4.0, -1.0, 0.3), box_edges(5.0, 1.0, 0.3)

@@ -115,6 +115,10 @@ class EvidenceMapConfig:
         'inside both images, px', range=(0.0, 100.0))
     min_ground_pixels: int = param(2, 'ground-matched edge pixels in a cell that clear '
                                    'it', range=(1, 1000))
+    min_drop_pixels: int = param(
+        2, 'drop pixels of one pair in a cell (and no raised pixel there) that make it drop '
+        'evidence: a lone pixel below the ground is as often a mismatch on a repeated '
+        'pattern (a grate, a slope beyond the known ground) as a drop', range=(1, 1000))
     clear_guard_cells: int = param(
         1, 'ground seen within this many cells of raised or drop evidence of the same pair '
         'does not clear (an obstacle is seen with the ground at its foot)', range=(0, 10))
@@ -484,7 +488,7 @@ class EvidenceMap:
         n_r[seen_through] = 0
         u_r, u_d, u_g = np.unique(f_r), np.unique(f_d), np.unique(f_g)
         raised = u_r[n_r[u_r] != 0]
-        dropc = u_d[(n_d[u_d] & (n_r[u_d] == 0)) != 0]
+        dropc = u_d[(n_d[u_d] >= c.min_drop_pixels) & (n_r[u_d] == 0)]
         # (ground in a cell with no more raised and drop pixels: in u_g)
         free_g = (n_g[u_g] >= c.min_ground_pixels) & (n_g[u_g] > n_r[u_g] + n_d[u_g])
         if c.clear_guard_cells > 0:
