@@ -117,8 +117,8 @@ class EvidenceMapConfig:
                                    'it', range=(1, 1000))
     min_drop_pixels: int = param(
         2, 'drop pixels of one pair in a cell (and no raised pixel there) that make it drop '
-        'evidence: a lone pixel below the ground is as often a mismatch on a repeated '
-        'pattern (a grate, a slope beyond the known ground) as a drop', range=(1, 1000))
+        'evidence: a lone pixel below the ground is as often a mismatch (on a marking, on '
+        'the far ground of a slope beyond the known surface) as a drop', range=(1, 1000))
     clear_guard_cells: int = param(
         1, 'ground seen within this many cells of raised or drop evidence of the same pair '
         'does not clear (an obstacle is seen with the ground at its foot)', range=(0, 10))
