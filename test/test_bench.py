@@ -63,3 +63,30 @@ def test_loaders_and_the_old_timing_api():
     assert f.left.shape == (120, 160) and f.cam.f == 150.0
     assert len(f.truth) >= 4 and np.all(f.truth.range > 1.0)
     assert abs(f.truth_plane.height - 1.25) < 0.1
+
+
+def test_run_method_gives_gpod_the_inclinometer_up_direction(monkeypatch):
+    """Each pair gets the up direction of the latest inclinometer sample at or before it
+    (none before the first sample), as the detector node takes /inclinometer/imu."""
+    from asmonc_vision.core.perception import Perception
+    from asmonc_vision.core.rotations import gravity_up_optical
+    from asmonc_vision.eval.bench import run_method
+    from asmonc_vision.io.frames import load_frames
+
+    frames = load_frames(BAGS / 'clear_static', limit=3)
+    assert frames[0].inclinometer is None
+    for f in frames[1:]:
+        assert 0 < f.stamp_ns - f.inclinometer[0] < 0.2e9
+    seen = []
+    original = Perception.process
+
+    def process(self, *args, up=None, **kwargs):
+        seen.append(up)
+        return original(self, *args, up=up, **kwargs)
+
+    monkeypatch.setattr(Perception, 'process', process)
+    run_method(frames, 'gpod')
+    assert seen[0] is None
+    for f, up in zip(frames[1:], seen[1:]):
+        assert np.allclose(up, gravity_up_optical(f.inclinometer[1]))
+        assert up[1] < -0.9                       # the rig looks ahead, about level

@@ -387,3 +387,43 @@ def test_a_motion_over_a_pair_the_detector_processed_is_not_taken_as_its_own(gra
     assert tracking[4], 'the test needs a plane at pair 4 to tell the motions apart'
     assert det.motions_used == sum(tracking[i] for i in (1, 2, 5, 6, 7))
     probe.destroy_node()
+
+
+def test_the_inclinometer_gives_each_pair_its_up_direction(graph):
+    """The latest /inclinometer/imu orientation is the up direction of a pair stamped
+    within gravity_prior_max_age_s of it; an older sample gives none."""
+    import math
+
+    import numpy as np
+    from sensor_msgs.msg import Imu
+
+    from asmonc_vision.core.rotations import rpy_to_quaternion
+
+    det, ex, send, got = graph
+    frames = load_frames(BAGS / 'clear_static', range(0, 2))
+    probe = Node('imu_probe', context=det.context)
+    pub = probe.create_publisher(Imu, '/inclinometer/imu', RESULT_QOS)
+    ex.add_node(probe)
+    try:
+        assert spin_until(ex, lambda: pub.get_subscription_count() >= 1)
+        pitch = math.radians(10.0)
+        for i, (f, age_s) in enumerate(zip(frames, (0.05, 1.0))):
+            msg = Imu()
+            stamp_ns = (f[0].header.stamp.sec * 10 ** 9 + f[0].header.stamp.nanosec
+                        - int(age_s * 1e9))
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 10 ** 9)
+            o = msg.orientation
+            o.x, o.y, o.z, o.w = (float(v) for v in rpy_to_quaternion([0.0, pitch, 0.0]))
+            pub.publish(msg)
+            assert spin_until(ex, lambda s=stamp_ns: det._imu is not None
+                              and det._imu[0] == s)
+            send(*f)
+            assert spin_until(ex, lambda i=i: len(got['obstacles']) == i + 1, timeout=15)
+            up = det.detector._up
+            if age_s < det.gpod_config.gravity_prior_max_age_s:
+                assert np.allclose(up, [0.0, -math.cos(pitch), -math.sin(pitch)])
+            else:
+                assert up is None
+    finally:
+        ex.remove_node(probe)
+        probe.destroy_node()

@@ -142,12 +142,55 @@ def _plausible_mask(cam: StereoCamera, a: np.ndarray, b: np.ndarray, c: np.ndarr
             & (height >= min_height_m - slack) & (height <= max_height_m + slack))
 
 
+@dataclass(frozen=True)
+class _Prior:
+    """`fit_ground_plane`'s soft prior on the plane's orientation: a plane whose upward
+    normal is the angle t from ``up`` costs ``cost * (t / scale)^2`` more (in the fit's
+    weighted squared disparity residuals, px^2)."""
+
+    up: np.ndarray          # (3,) unit vector, left optical frame
+    scale: float            # radians
+    cost: float             # px^2 (weighted)
+
+    def angles(self, cam: StereoCamera, a: np.ndarray, b: np.ndarray, c: np.ndarray
+               ) -> np.ndarray:
+        """The angles (radians) of the upward normals of the planes (a, b, c) (each
+        (k,)) from ``up``."""
+        wz = (c + a * cam.cx + b * cam.cy) / cam.f
+        norm = np.sqrt(a * a + b * b + wz * wz)
+        # the upward normal is -(a, b, wz) / norm (see `_plausible_mask`)
+        dot = -(a * float(self.up[0]) + b * float(self.up[1]) + wz * float(self.up[2]))
+        with np.errstate(divide='ignore', invalid='ignore'):
+            return np.arccos(np.clip(dot / norm, -1.0, 1.0))
+
+    def penalty(self, cam: StereoCamera, a: np.ndarray, b: np.ndarray, c: np.ndarray
+                ) -> np.ndarray:
+        """The (k,) costs of the planes (a, b, c) (each (k,)), px^2."""
+        return self.cost * (self.angles(cam, a, b, c) / self.scale) ** 2
+
+    def rows(self, cam: StereoCamera, abc: np.ndarray) -> np.ndarray | None:
+        """(2, 3) R with ``|R abc|^2 ~ (t / scale)^2`` near ``abc`` (t the angle of its
+        normal from ``up``, first order), or None for a degenerate plane: the plane's
+        ``x = M abc = n_down / h`` projected on two axes across ``up``, over ``|x|``."""
+        m = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0],
+                      [cam.cx / cam.f, cam.cy / cam.f, 1.0 / cam.f]])
+        norm = float(np.linalg.norm(m @ abc))
+        if not (math.isfinite(norm) and norm > 0.0):
+            return None
+        helper = np.eye(3)[int(np.argmin(np.abs(self.up)))]
+        e1 = np.cross(self.up, helper)
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(self.up, e1)
+        return np.stack([e1, e2]) @ m / (norm * self.scale)
+
+
 def _ransac_best(u: np.ndarray, v: np.ndarray, d: np.ndarray, threshold: float,
                  iterations: int, rng: np.random.Generator, cam: StereoCamera | None = None,
                  bounds: tuple[float, float, float] = (0.1, 10.0, 75.0),
                  weights: np.ndarray | None = None, confidence: float = 0.99,
                  batch: int = 16, max_score_points: int = 1000,
-                 min_support_fraction: float = 0.0) -> np.ndarray | None:
+                 min_support_fraction: float = 0.0,
+                 prior: _Prior | None = None) -> np.ndarray | None:
     """Best minimal-sample plane by MSAC score (truncated squared residual, optionally
     weighted per point by ``weights``).
 
@@ -159,6 +202,9 @@ def _ransac_best(u: np.ndarray, v: np.ndarray, d: np.ndarray, threshold: float,
     ``threshold`` of fewer than ``min_support_fraction`` of the (scored) points is not a
     candidate: weighted by a power of the disparity, a few dozen wrong matches at large
     disparity (a long baseline searched from 1 m) outweigh thousands on the ground.
+    With ``cam`` and ``prior``, each hypothesis's score adds its cost
+    (`_Prior.penalty`, the prior's cost per point weight times the points' total
+    weight).
 
     Returns:
         (3,) abc of the best hypothesis, or None if no usable sample was drawn.
@@ -168,6 +214,7 @@ def _ransac_best(u: np.ndarray, v: np.ndarray, d: np.ndarray, threshold: float,
     us, vs, ds = (u, v, d) if sel is None else (u[sel], v[sel], d[sel])
     ws = None if weights is None else (weights if sel is None else weights[sel])
     t2 = threshold * threshold
+    w_total = float(us.shape[0] if ws is None else ws.sum())
     best, best_score, needed, drawn = None, np.inf, float(iterations), 0
     while drawn < min(needed, iterations):
         k = int(min(batch, iterations - drawn))
@@ -200,6 +247,8 @@ def _ransac_best(u: np.ndarray, v: np.ndarray, d: np.ndarray, threshold: float,
         np.multiply(sq, sq, out=sq)
         trunc = np.minimum(sq, t2)
         score = trunc.sum(axis=1) if ws is None else trunc @ ws
+        if prior is not None and cam is not None:
+            score += prior.penalty(cam, a, b, c) * w_total
         if min_support_fraction > 0.0:
             score[np.mean(sq <= t2, axis=1) < min_support_fraction] = np.inf
         j = int(np.argmin(score))
@@ -256,7 +305,8 @@ def fit_ground_plane(u, v, d, *, cam: StereoCamera | None = None, method: str = 
                      min_features: int = 10, min_height_m: float = 0.1,
                      max_height_m: float = 10.0, max_tilt_deg: float = 75.0,
                      min_spread_px: float = 0.0, min_support_fraction: float = 0.0,
-                     rng=None) -> PlaneFit | None:
+                     up_prior: np.ndarray | None = None, prior_scale_deg: float = 0.0,
+                     prior_cost: float = 0.0, rng=None) -> PlaneFit | None:
     """Robust least-squares ground plane ``d = a*u + b*v + c`` from matched features.
 
     ``'ransac'``: the best of at most ``iterations`` random minimal triples (MSAC score
@@ -286,15 +336,22 @@ def fit_ground_plane(u, v, d, *, cam: StereoCamera | None = None, method: str = 
         min_height_m, max_height_m, max_tilt_deg: plausibility bounds (with ``cam``).
         min_spread_px: least spread of the inliers across their main direction in the
             image (the standard deviation of (u, v) along the minor principal axis),
-            pixels (>= 0; 0: any). Inliers along one line -- the only grout joint of
-            smooth slabs -- leave the plane free to turn about that line: fitted to
-            them it is off by pixels everywhere else, with residuals as small as a
-            good fit's.
+            pixels (>= 0; 0: any). Inliers along one line (the only grout joint of
+            smooth slabs) leave the plane free to turn about it.
         min_support_fraction: 'ransac': least fraction of the features (unweighted)
             within ``inlier_threshold_px`` of a hypothesis for it to be scored, in
             [0, 1] (0: any). With ``weights`` growing with the disparity, the
             best-scored plane can otherwise be a chance consensus of a few wrong matches
             at large disparity.
+        up_prior: (3,) the world's up direction in the left optical frame (gravity, from
+            an inclinometer), or None: with ``cam``, 'ransac' and ``prior_scale_deg``,
+            ``prior_cost`` > 0, a plane whose upward normal is the angle t from it costs
+            as much as ``prior_cost * (t / prior_scale_deg)^2`` of the features (by
+            weight) lying ``inlier_threshold_px`` off it, in the RANSAC score and (two
+            pseudo-observations) the final least squares: features that leave the tilt
+            free (a narrow band of ground rows, obstacles' vertical edges) cannot tilt it.
+        prior_scale_deg, prior_cost: that prior's angle scale (degrees) and cost (a
+            fraction of the features); 0: no prior.
         rng: int seed or numpy Generator (RANSAC sampling).
     Returns:
         The PlaneFit, or None when the fit fails (too few points, degenerate, or not a
@@ -302,12 +359,7 @@ def fit_ground_plane(u, v, d, *, cam: StereoCamera | None = None, method: str = 
     Raises:
         ValueError: unknown method or bad argument values (never for the data).
     """
-    if method not in METHODS:
-        raise ValueError(f'method must be one of {METHODS}, got {method!r}')
-    if not inlier_threshold_px > 0:
-        raise ValueError(f'inlier_threshold_px must be > 0, got {inlier_threshold_px}')
-    if not min_spread_px >= 0:
-        raise ValueError(f'min_spread_px must be >= 0, got {min_spread_px}')
+    _check_arguments(method, inlier_threshold_px, min_spread_px)
     min_features = max(int(min_features), 3)
     data = _finite_data(u, v, d, weights, min_features)
     if data is None:
@@ -315,10 +367,12 @@ def fit_ground_plane(u, v, d, *, cam: StereoCamera | None = None, method: str = 
     uf, vf, df, wf, finite = data
     n = finite.shape[0]
     thr = float(inlier_threshold_px)
+    prior = _prior(cam, up_prior, prior_scale_deg, prior_cost * thr * thr)
     if method == 'ransac':
         found = _fit_ransac(uf, vf, df, wf, thr, iterations, refine_iterations, min_features,
                             np.random.default_rng(rng), cam,
-                            (min_height_m, max_height_m, max_tilt_deg), min_support_fraction)
+                            (min_height_m, max_height_m, max_tilt_deg), min_support_fraction,
+                            prior)
     else:
         found = _fit_trimmed(uf, vf, df, thr, refine_iterations, trim_fraction, min_features)
     if found is None:
@@ -343,6 +397,28 @@ def fit_ground_plane(u, v, d, *, cam: StereoCamera | None = None, method: str = 
     return PlaneFit(abc=np.asarray(abc, np.float64), cov=np.asarray(cov, np.float64),
                     num_features=int(inl.sum()), residual_rms=float(rms), inliers=mask,
                     metric=metric, residual_sigma=sigma)
+
+
+def _check_arguments(method: str, inlier_threshold_px: float, min_spread_px: float) -> None:
+    """ValueError for `fit_ground_plane`'s bad argument values."""
+    if method not in METHODS:
+        raise ValueError(f'method must be one of {METHODS}, got {method!r}')
+    if not inlier_threshold_px > 0:
+        raise ValueError(f'inlier_threshold_px must be > 0, got {inlier_threshold_px}')
+    if not min_spread_px >= 0:
+        raise ValueError(f'min_spread_px must be >= 0, got {min_spread_px}')
+
+
+def _prior(cam: StereoCamera | None, up, scale_deg: float, cost: float) -> _Prior | None:
+    """`fit_ground_plane`'s orientation prior (``cost``: px^2 per unit weight), or None
+    when it has none (no camera, no or a degenerate up vector, a zero scale or cost)."""
+    if cam is None or up is None or not (scale_deg > 0.0 and cost > 0.0):
+        return None
+    up = np.asarray(up, np.float64).reshape(3)
+    norm = float(np.linalg.norm(up))
+    if not (math.isfinite(norm) and norm > 1e-9):
+        return None
+    return _Prior(up=up / norm, scale=math.radians(scale_deg), cost=float(cost))
 
 
 def _finite_data(u, v, d, weights, min_features: int):
@@ -372,11 +448,13 @@ def _finite_data(u, v, d, weights, min_features: int):
 
 
 def _fit_ransac(uf, vf, df, wf, thr: float, iterations: int, refine_iterations: int,
-                min_features: int, gen, cam, bounds: tuple, min_support_fraction: float):
-    """`fit_ground_plane`'s 'ransac' method: (inliers, lsq_plane fit) or None."""
+                min_features: int, gen, cam, bounds: tuple, min_support_fraction: float,
+                prior: _Prior | None = None):
+    """`fit_ground_plane`'s 'ransac' method: (inliers, lsq_plane fit) or None (with
+    ``prior``: `_lsq_prior` in place of `lsq_plane`)."""
     abc = _ransac_best(uf, vf, df, thr, max(int(iterations), 1), gen, cam=cam,
                        bounds=bounds, weights=wf,
-                       min_support_fraction=float(min_support_fraction))
+                       min_support_fraction=float(min_support_fraction), prior=prior)
     if abc is None:
         return None
     inl = np.abs(df - (abc[0] * uf + abc[1] * vf + abc[2])) <= thr
@@ -386,6 +464,10 @@ def _fit_ransac(uf, vf, df, wf, thr: float, iterations: int, refine_iterations: 
         if sel.size < min_features:
             return None
         fit = lsq_plane(uf[sel], vf[sel], df[sel], None if wf is None else wf[sel])
+        if fit is not None and prior is not None:
+            w_total = float(uf.shape[0] if wf is None else wf.sum())
+            fit = _lsq_prior(cam, uf[sel], vf[sel], df[sel], None if wf is None else wf[sel],
+                             prior, w_total, abc)
         if fit is None:
             return None
         abc = fit[0]
@@ -394,6 +476,35 @@ def _fit_ransac(uf, vf, df, wf, thr: float, iterations: int, refine_iterations: 
             break           # ``fit`` is the least squares on ``inl``
         inl = new
     return inl, fit
+
+
+def _lsq_prior(cam: StereoCamera, u: np.ndarray, v: np.ndarray, d: np.ndarray,
+               w: np.ndarray | None, prior: _Prior, w_total: float, abc0: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """`lsq_plane` of the features (u, v, d) (N,) with weights ``w`` (None: 1) plus the
+    orientation prior's two pseudo-observations (`_Prior.rows`, linearised at ``abc0``)
+    weighted by its cost times ``w_total`` (the total weight of all the features): the
+    least squares of ``sum w r^2 + cost * w_total * (t / scale)^2``. Same returns."""
+    rows = prior.rows(cam, abc0)
+    if rows is None:
+        return None
+    n = u.shape[0]
+    ww = np.ones(n) if w is None else np.asarray(w, np.float64)
+    mean_w = float(ww.mean())
+    if not (np.isfinite(mean_w) and mean_w > 0):
+        return None
+    ww = ww / mean_w
+    a_mat = np.stack([u, v, np.ones(n)], axis=1)
+    ata = (a_mat * ww[:, None]).T @ a_mat + (prior.cost * w_total / mean_w) * (rows.T @ rows)
+    try:
+        ata_inv = np.linalg.inv(ata)
+    except np.linalg.LinAlgError:
+        return None
+    abc = ata_inv @ ((a_mat * ww[:, None]).T @ d)
+    res = d - a_mat @ abc
+    rms = float(np.sqrt(res @ res / n))
+    sigma2 = float((ww * res) @ res) / max(n - 3, 1)
+    return abc, sigma2 * ata_inv, rms
 
 
 def _fit_trimmed(uf, vf, df, thr: float, refine_iterations: int, trim_fraction: float,

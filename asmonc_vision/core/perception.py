@@ -63,7 +63,8 @@ class Perception:
 
     def process(self, left: np.ndarray, right: np.ndarray, cam: StereoCamera,
                 stamp_ns: int | None = None,
-                motion: tuple | Callable[[], tuple | None] | None = None) -> GpodResult:
+                motion: tuple | Callable[[], tuple | None] | None = None,
+                up: np.ndarray | None = None) -> GpodResult:
         """One stereo pair: arguments and result as `GpodDetector.process`; with the map
         enabled, the result's ``obstacles`` are those the map confirms
         (`objects_to_obstacles`), or the detector's own while the map has placed fewer
@@ -82,7 +83,8 @@ class Perception:
                 return m
         else:
             got.append(motion)
-        result = self.detector.process(left, right, cam, stamp_ns=stamp_ns, motion=motion)
+        result = self.detector.process(left, right, cam, stamp_ns=stamp_ns, motion=motion,
+                                       up=up)
         if self.map is None:
             return result
         t0 = time.perf_counter()

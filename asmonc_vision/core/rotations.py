@@ -127,3 +127,46 @@ def rotvec_to_matrix(v) -> np.ndarray:
     a = np.where(small, 1.0, np.sin(th) / np.where(small, 1.0, th))
     b = np.where(small, 0.5, (1 - np.cos(th)) / np.where(small, 1.0, th * th))
     return np.eye(3) + a * k + b * (k @ k)
+
+
+def gravity_up_optical(q) -> np.ndarray:
+    """The world's up direction (against gravity) in the left optical frame, from the
+    inclinometer's orientation.
+
+    Args:
+        q: (4,) quaternion (x, y, z, w), any norm > 0: the rotation taking
+            ``inclinometer_link`` vectors to world vectors (world z up), as
+            `/inclinometer/imu` carries it (the mount rotation already applied by the
+            compass node).
+    Returns:
+        (3,) unit vector in the left optical frame (x right, y down, z forward): for a
+        level rig (0, -1, 0); for cameras pitched down by p (nose down),
+        (0, -cos p, -sin p) (up leans back, against the optical axis).
+    Raises:
+        ValueError: a quaternion of (near) zero norm or not finite.
+    """
+    r = quaternion_to_matrix(np.asarray(q, float).reshape(4))
+    up_body = r[2, :]                       # R^T (0, 0, 1): world up in the body frame
+    return R_BODY_OPTICAL.T @ up_body
+
+
+def up_for_pair(sample: tuple[int, np.ndarray] | None, stamp_ns: int, max_age_s: float
+                ) -> np.ndarray | None:
+    """The world's up direction in the left optical frame for a stereo pair, from an
+    inclinometer sample (`gravity_up_optical`).
+
+    Args:
+        sample: (stamp_ns, (4,) quaternion x, y, z, w) of the inclinometer's orientation
+            (world -> inclinometer_link), or None.
+        stamp_ns: the pair's stamp.
+        max_age_s: the sample counts only if stamped at most this long from the pair, s.
+    Returns:
+        (3,) unit vector, or None (no sample, too far in time, or a degenerate
+        quaternion).
+    """
+    if sample is None or abs(int(sample[0]) - int(stamp_ns)) > max_age_s * 1e9:
+        return None
+    try:
+        return gravity_up_optical(sample[1])
+    except ValueError:
+        return None

@@ -113,13 +113,20 @@ def run_method(frames: list[Frame], method: str = 'gpod', threshold_px: float | 
             a graph that waits for it); N >= 1 gives the detector no motion and the map
             the prediction of a `core.map_motion.MotionPredictor` fed the motions of the
             pairs at least N before (as the graph, which does not wait, has them).
+
+    GPOD is given each pair's up direction from the frame's inclinometer sample
+    (`io.frames.Frame.inclinometer`, `core.rotations.up_for_pair` within the detector's
+    ``gravity_prior_max_age_s``), as the node takes it from `/inclinometer/imu`; none
+    for frames without one.
     """
     import cv2
 
+    from asmonc_vision.core.rotations import up_for_pair
     from asmonc_vision.eval.evaluation import frame_from_detections
 
     cv2.setNumThreads(1)
     det = make_method(method, threshold_px, map_enabled)
+    max_age_s = det.gpod_config.gravity_prior_max_age_s if method == 'gpod' else 0.0
     est = None
     if egomotion and method == 'gpod':
         from asmonc_vision.core.motion import EgomotionEstimator
@@ -146,7 +153,9 @@ def run_method(frames: list[Frame], method: str = 'gpod', threshold_px: float | 
         c = time.thread_time()
         t = time.perf_counter()
         if method == 'gpod':
-            res = det.process(f.left, f.right, f.cam, stamp_ns=f.stamp_ns, motion=motion)
+            up = up_for_pair(f.inclinometer, f.stamp_ns, max_age_s)
+            res = det.process(f.left, f.right, f.cam, stamp_ns=f.stamp_ns, motion=motion,
+                              up=up)
         else:
             res = det.process(f.left, f.right, f.cam)
         ms = (time.perf_counter() - t) * 1e3

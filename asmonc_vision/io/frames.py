@@ -7,6 +7,7 @@
 """
 from __future__ import annotations
 
+import bisect
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -29,6 +30,9 @@ class Frame:
         pose: the true pose (R (3, 3), t (3,)) of the left optical frame in the world,
             from /ground_truth/camera_pose, or None.
         frame_id: the left image's frame id.
+        inclinometer: (stamp_ns, (4,) quaternion x, y, z, w) of the latest
+            `/inclinometer/imu` orientation stamped at or before the pair (world ->
+            inclinometer_link), or None (no inclinometer in the bag, or none yet).
     """
 
     stamp_ns: int
@@ -39,6 +43,7 @@ class Frame:
     truth_plane: object = None
     pose: tuple | None = None
     frame_id: str = ''
+    inclinometer: tuple[int, np.ndarray] | None = None
 
 
 def pose_from_msg(msg) -> tuple[np.ndarray, np.ndarray]:
@@ -85,11 +90,18 @@ def load_frames(bag: Path, limit: int = 0, images: bool = True) -> list[Frame]:
                                          'gt_obstacles', 'gt_ground_plane', 'gt_camera_pose')}
     need = ['left_info', 'right_info'] + (['left_image', 'right_image'] if images else [])
     need_topics = {T[k] for k in need}
+    imu_topic = bagio.TOPICS['imu'][0]
     topics = [T[k] for k in need] + [T['gt_obstacles'], T['gt_ground_plane'],
-                                     T['gt_camera_pose']]
+                                     T['gt_camera_pose'], imu_topic]
     by_stamp: dict[int, dict] = {}
+    imu: list[tuple[int, np.ndarray]] = []
     complete = 0
     for topic, _, m in bagio.read_messages(bag, topics):
+        if topic == imu_topic:
+            sample = _imu_sample(m)
+            if sample is not None:
+                imu.append(sample)
+            continue
         s = by_stamp.setdefault(bagio.header_stamp_ns(m), {})
         s[topic] = m
         if topic in need_topics and need_topics <= s.keys():
@@ -97,6 +109,7 @@ def load_frames(bag: Path, limit: int = 0, images: bool = True) -> list[Frame]:
             # messages come in time order: a pair beyond the limit means all are in
             if limit and complete > limit:
                 break
+    imu.sort(key=lambda sample: sample[0])
     frames: list[Frame] = []
     for stamp in sorted(by_stamp):
         s = by_stamp[stamp]
@@ -115,10 +128,32 @@ def load_frames(bag: Path, limit: int = 0, images: bool = True) -> list[Frame]:
                   if T['gt_ground_plane'] in s else None)
         pose = pose_from_msg(s[T['gt_camera_pose']]) if T['gt_camera_pose'] in s else None
         frame_id = s[T['left_image']].header.frame_id if images else ''
-        frames.append(Frame(stamp, left, right, cam, truth, tplane, pose, frame_id))
+        frames.append(Frame(stamp, left, right, cam, truth, tplane, pose, frame_id,
+                            _latest_at(imu, stamp)))
         if limit and len(frames) >= limit:
             break
     return frames
+
+
+def _imu_sample(msg) -> tuple[int, np.ndarray] | None:
+    """(stamp_ns, (4,) quaternion x, y, z, w) of an Imu message with an orientation,
+    else None."""
+    cov = np.asarray(msg.orientation_covariance, float)
+    if cov.size and cov[0] == -1.0:
+        return None
+    o = msg.orientation
+    q = np.array([o.x, o.y, o.z, o.w], float)
+    if not (np.all(np.isfinite(q)) and np.linalg.norm(q) > 1e-9):
+        return None
+    return bagio.header_stamp_ns(msg), q
+
+
+def _latest_at(samples: list[tuple[int, np.ndarray]], stamp_ns: int
+               ) -> tuple[int, np.ndarray] | None:
+    """The sample of ``samples`` (sorted by stamp) with the latest stamp at or before
+    ``stamp_ns``, or None."""
+    i = bisect.bisect_right(samples, stamp_ns, key=lambda sample: sample[0])
+    return samples[i - 1] if i > 0 else None
 
 
 def load_pairs(bag: Path, limit: int = 0):

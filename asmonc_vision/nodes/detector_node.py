@@ -19,6 +19,11 @@ callbacks that receive images stay fast. Publishes, per processed pair:
   axes there), cell value P(raised) in percent, -1 where it holds no evidence
 * `/diagnostics`
 
+Subscribes to `/inclinometer/imu` (sensor_msgs/Imu, SENSOR_QOS) and keeps the latest
+orientation: a pair stamped within ``gpod.gravity_prior_max_age_s`` of it gets the world's
+up direction (`core.rotations.up_for_pair`) as the prior on the ground plane's orientation
+(``gpod.gravity_prior_*``); without an inclinometer the plane comes from the images alone.
+
 With ``map.enabled`` the obstacles reported are those the evidence map confirms
 (`core.perception.Perception`, `core.evidence_map`): seen from two viewpoints, not
 cleared by ground seen where they stood. The map places each pair by the camera motion
@@ -59,7 +64,7 @@ import numpy as np
 from geometry_msgs.msg import Point, Pose, TransformStamped
 from nav_msgs.msg import MapMetaData, OccupancyGrid, Odometry
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import Image
+from sensor_msgs.msg import Image, Imu
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -72,9 +77,10 @@ from asmonc_vision.core.evidence_map import EvidenceMap, EvidenceMapConfig
 from asmonc_vision.core.gpod import GpodConfig, GpodResult
 from asmonc_vision.core.map_motion import MotionPredictor
 from asmonc_vision.core.perception import Perception
-from asmonc_vision.core.rotations import matrix_to_quaternion, quaternion_to_matrix
-from asmonc_vision.nodes.common import (IMAGE_QOS, RESULT_QOS, Diagnostics, declare_config,
-                                        run_node)
+from asmonc_vision.core.rotations import (matrix_to_quaternion, quaternion_to_matrix,
+                                          up_for_pair)
+from asmonc_vision.nodes.common import (IMAGE_QOS, RESULT_QOS, SENSOR_QOS, Diagnostics,
+                                        declare_config, run_node)
 from asmonc_vision.nodes.conversions import array_to_image_msg, stamp_to_ns
 from asmonc_vision.nodes.stereo_input import StereoInputConfig, StereoInputNode, StereoPair
 
@@ -155,6 +161,9 @@ class DetectorNode(StereoInputNode):
         if self.motion_predictor is not None:
             self.create_subscription(Odometry, '/egomotion/odometry', self._on_odometry,
                                      RESULT_QOS)
+        #: the latest /inclinometer/imu orientation: (stamp ns, (4,) quaternion x, y, z, w)
+        self._imu: tuple[int, np.ndarray] | None = None
+        self.create_subscription(Imu, '/inclinometer/imu', self._on_imu, SENSOR_QOS)
         # The debug image is drawn and published on its own thread, newest frame only:
         # a slow subscriber of that large RELIABLE image (a recorder compressing it) must
         # never hold back the next /obstacles (at 640x480 it once held the worker for
@@ -173,6 +182,7 @@ class DetectorNode(StereoInputNode):
     def restart(self) -> None:
         self.perception.reset()
         self._prev_stamp_ns = None
+        self._imu = None
         with self._motion_cv:           # (time went back: the motions' stamps are void)
             self._motions.clear()
             self._newest_motion_ns, self._last_motion_ns = -1, None
@@ -234,6 +244,15 @@ class DetectorNode(StereoInputNode):
             self._newest_motion_ns = max(self._newest_motion_ns, stamp)
             self._motion_cv.notify_all()
 
+    def _on_imu(self, msg: Imu) -> None:
+        """Keep the latest inclinometer orientation (one without: ignored)."""
+        if msg.orientation_covariance[0] == -1.0:
+            return
+        o = msg.orientation
+        q = np.array([o.x, o.y, o.z, o.w], float)
+        if np.all(np.isfinite(q)) and np.linalg.norm(q) > 1e-9:
+            self._imu = (stamp_to_ns(msg.header.stamp), q)   # (one reference: atomic)
+
     def _on_odometry(self, msg: Odometry) -> None:
         p = msg.pose.pose
         pose = self._pose(p.orientation, p.position, '/egomotion/odometry')
@@ -278,8 +297,10 @@ class DetectorNode(StereoInputNode):
                 self.motion_predictor.add_motion(prev_stamp, pair.stamp_ns, m[0], m[1])
             return m
 
+        # the up direction: the latest inclinometer sample, if near the pair's time
+        up = up_for_pair(self._imu, pair.stamp_ns, self.gpod_config.gravity_prior_max_age_s)
         result = self.perception.process(left, right, cam, stamp_ns=pair.stamp_ns,
-                                         motion=motion if self.use_motion else None)
+                                         motion=motion if self.use_motion else None, up=up)
         header = pair.left.header
         self.pub_obstacles.publish(obstacles_to_msg(result, header))
         emap = self.perception.map

@@ -64,7 +64,8 @@ class GpodDetector(Tracking):
     # ------------------------------------------------------------------ main
     def process(self, left: np.ndarray, right: np.ndarray, cam: StereoCamera,
                 stamp_ns: int | None = None,
-                motion: tuple | Callable[[], tuple | None] | None = None) -> GpodResult:
+                motion: tuple | Callable[[], tuple | None] | None = None,
+                up: np.ndarray | None = None) -> GpodResult:
         """Detect obstacles in one rectified stereo pair.
 
         Args:
@@ -80,6 +81,10 @@ class GpodDetector(Tracking):
                 stay in place), unknown otherwise (the tracks end). A callable returning
                 one of these is called after the detection, before the tracks are updated
                 (so a node can wait for the motion while the detector works).
+            up: (3,) the world's up direction in the left optical frame at the pair's
+                time (`core.rotations.up_for_pair`: the inclinometer's), or None
+                (unknown): the prior of ``gravity_prior_deg`` on the ground's
+                orientation.
         Returns:
             The GpodResult (status 'initialising', 'tracking' or 'lost').
         Raises:
@@ -87,6 +92,7 @@ class GpodDetector(Tracking):
         """
         t_start = time.perf_counter()
         self._begin(left, right, cam)
+        self._up = None if up is None else np.asarray(up, np.float64).reshape(3)
         c = self.config
         corrected = self.alignment.applied
         right = self.alignment.process(left, right, cam.f, cam.cx, cam.cy)
@@ -292,6 +298,7 @@ class GpodDetector(Tracking):
             self._coarse = GpodDetector(dataclasses.replace(c, coarse_min_width=0))
         lb, rb, cam_b = bin_pair(left, right, cam)
         self._coarse._begin(lb, rb, cam_b)
+        self._coarse._up = self._up
         p = self._coarse._frame_pass(lb, rb, cam_b, motion)
         if metric is None or not p.detections:
             return detections

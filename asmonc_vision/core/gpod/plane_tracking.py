@@ -34,10 +34,14 @@ class PlaneTracking(DetectorState):
         """The plane fitted on the calibration frames, or None while initialising."""
         return self._calib
 
-    def _fit(self, u, v, d, cam: StereoCamera, min_support: float = 0.0) -> PlaneFit | None:
+    def _fit(self, u, v, d, cam: StereoCamera, min_support: float = 0.0,
+             prior: bool = True) -> PlaneFit | None:
         """Robust, plausibility-checked plane fit of features (u, v, d) with the settings
-        (``min_support``: least fraction of the features on a RANSAC hypothesis)."""
+        (``min_support``: least fraction of the features on a RANSAC hypothesis;
+        ``prior``: the pair's up direction, when known, is a soft prior on the plane's
+        orientation, ``gravity_prior_deg`` and ``gravity_prior_cost``)."""
         c = self.config
+        up = self._up if prior else None
         # Weighted by disparity cubed: of two competing surfaces (the ground here and the
         # ground beyond a step), the nearer one is the one the wearer stands on; far
         # features, least flat and least well measured, count little.
@@ -45,13 +49,17 @@ class PlaneTracking(DetectorState):
             u, v, d, cam=cam, method=c.plane_method, inlier_threshold_px=c.plane_inlier_px,
             iterations=c.ransac_iterations, weights=np.maximum(d, 0.0) ** 3,
             min_features=c.min_plane_features, min_spread_px=c.plane_min_spread_px,
-            min_support_fraction=min_support, rng=self._rng,
+            min_support_fraction=min_support, up_prior=up,
+            prior_scale_deg=c.gravity_prior_deg, prior_cost=c.gravity_prior_cost,
+            rng=self._rng,
             **cast(dict[str, Any], c.plausibility()))
 
-    def _refit(self, u, v, d, cam: StereoCamera) -> PlaneFit | None:
-        """A per-frame refit of features (u, v, d): `_fit`, then, with
-        ``refit_hold_height``, `_held` at the anchor height."""
-        fit = self._fit(u, v, d, cam)
+    def _refit(self, u, v, d, cam: StereoCamera, prior: bool = False) -> PlaneFit | None:
+        """A per-frame refit of features (u, v, d): `_fit` (``prior``: as its; off for
+        the refits, which must follow the ground's slope, and for the recovery: measured,
+        it paid only in the calibration), then, with ``refit_hold_height``, `_held` at
+        the anchor height."""
+        fit = self._fit(u, v, d, cam, prior=prior)
         if fit is None or not self.config.refit_hold_height:
             return fit
         if not _height_sd(cam, fit) > self.config.hold_min_height_sd_m:

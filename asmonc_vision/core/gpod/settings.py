@@ -187,6 +187,22 @@ class GpodConfig(PlausiblePlaneConfig):
     recover_max_angle_deg: float = param(
         25.0, "'refit': ... and its normal within this angle of the calibrated normal, "
         'degrees', range=(0.0, 90.0))
+    gravity_prior_deg: float = param(
+        3.0, "The angle scale of the prior that the inclinometer's up direction "
+        "(`process`'s ``up``) puts on the ground's orientation in the calibration's plane "
+        'fit: a plane whose upward normal is this far from it costs as much as '
+        'gravity_prior_cost of the features off it (RANSAC score and final least '
+        'squares), degrees; 0 = no prior', range=(0.0, 90.0))
+    gravity_prior_cost: float = param(
+        0.0, 'The cost of a plane gravity_prior_deg from the up direction, a fraction of '
+        "the features (by weight): features that leave the ground's tilt free (a plain "
+        'floor, obstacle edges filling the view) cannot tilt the plane, well-spread '
+        'ground features on a slope outweigh it; 0 = no prior (off: on the tuning walks '
+        '0.02 removed one false alarm of GPOD alone but raised the false reports of the '
+        'graph with the map, docs/ground.md)', range=(0.0, 100.0))
+    gravity_prior_max_age_s: float = param(
+        0.25, "An inclinometer sample is a pair's up direction only if stamped at most "
+        "this long from the pair's stamp, s", range=(0.0, 10.0))
     # with the camera's motion known (`process`'s motion: /egomotion in the node graph)
     # the plane is predicted through it (the paper's dynamic recalibration)
     motion_process_noise_px: float = param(

@@ -33,6 +33,8 @@ class DetectorState:
         """Forget the ground plane and the calibration frames (status 'initialising')."""
         self._cam: StereoCamera | None = None
         self._rng = np.random.default_rng(self.config.seed)
+        #: the world's up direction in the left optical frame for the pair (None: unknown)
+        self._up: np.ndarray | None = None
         self._init_window: deque = deque(maxlen=self.config.init_frames)
         self._frame = 0
         self._calib: PlaneFit | None = None
