@@ -81,7 +81,8 @@ def add_arguments(p) -> None:
     p.add_argument('--rigs', nargs='+', choices=RIGS, default=list(RIGS),
                    help='rigs (default all)')
     p.add_argument('--duration', type=float, default=20.0, help='seconds per walk (default 20)')
-    p.add_argument('--methods', nargs='+', choices=tuple(METHOD_NAMES), default=['gpod_map_lag', 'sgbm'],
+    p.add_argument('--methods', nargs='+', choices=tuple(METHOD_NAMES),
+                   default=['gpod_map_lag', 'sgbm'],
                    help='detectors to run: gpod (no map, no motion), gpod_ego (no map, '
                         'each pair\'s motion from the egomotion estimator), gpod_map (the '
                         'evidence map, with each pair\'s motion), gpod_map_lag (the map, its '
