@@ -54,12 +54,11 @@ class PlaneTracking(DetectorState):
             rng=self._rng,
             **cast(dict[str, Any], c.plausibility()))
 
-    def _refit(self, u, v, d, cam: StereoCamera, prior: bool = False) -> PlaneFit | None:
-        """A per-frame refit of features (u, v, d): `_fit` (``prior``: as its; off for
-        the refits, which must follow the ground's slope, and for the recovery: measured,
-        it paid only in the calibration), then, with ``refit_hold_height``, `_held` at
-        the anchor height."""
-        fit = self._fit(u, v, d, cam, prior=prior)
+    def _refit(self, u, v, d, cam: StereoCamera) -> PlaneFit | None:
+        """A per-frame refit of features (u, v, d): `_fit` without the gravity prior (the
+        refits must follow the ground's slope; measured, the prior paid only in the
+        calibration), then, with ``refit_hold_height``, `_held` at the anchor height."""
+        fit = self._fit(u, v, d, cam, prior=False)
         if fit is None or not self.config.refit_hold_height:
             return fit
         if not _height_sd(cam, fit) > self.config.hold_min_height_sd_m:
