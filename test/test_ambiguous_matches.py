@@ -120,3 +120,37 @@ def test_a_rival_on_the_ground_takes_the_evidence_away(ratio):
     plain = dataclasses.replace(_matches([15.5], []), rival_match=None, rival_d=None,
                                 rival_ratio=None)
     assert not det._ambiguous_drops(plain, pd[:1], thr[:1]).any()
+
+
+@pytest.mark.parametrize('n_min', [2, 0])
+def test_a_periodic_match_is_no_evidence(n_min):
+    det = GpodDetector(GpodConfig(periodic_min_rivals=n_min))
+    pd = np.full(5, 10.0)                 # the ground's disparity at every match
+    thr = np.full(5, 0.8)
+    m = _matches([13.4, 13.4, 13.4, 13.4, 13.4],
+                 [(0, 10.2, 0.9), (0, 16.8, 1.1),       # a period either side: periodic
+                  (1, 10.1, 1.0),                       # one ground rival (a kerb face)
+                  (2, 16.8, 0.9), (2, 20.2, 0.95),      # two strong, none on the ground
+                  (3, 10.0, 0.9), (3, 16.8, 0.5),       # the second too weak
+                  (4, 6.6, 0.85), (4, 9.5, 0.8)])       # a period below and the ground
+    periodic = det._periodic_matches(m, pd, thr)
+    if n_min == 0:                        # off
+        assert not periodic.any()
+        return
+    np.testing.assert_array_equal(periodic, [True, False, False, False, True])
+    plain = dataclasses.replace(_matches([15.5], []), rival_match=None, rival_d=None,
+                                rival_ratio=None)
+    assert not det._periodic_matches(plain, pd[:1], thr[:1]).any()
+
+
+def test_bars_matched_a_period_off_are_periodic_and_texture_is_not():
+    period, shift = 9.0, 12.3
+    det = GpodDetector()
+    m = pmf_match(*_pair(period, shift), 1.0, 40.0)[0]
+    pd = np.full(len(m), shift)           # the true disparity plays the ground's
+    periodic = det._periodic_matches(m, pd, np.full(len(m), 0.8))
+    off = np.abs(m.d - shift) > 1.0       # matched a period (or more) off
+    assert off.sum() > 20 and periodic[off].mean() > 0.8
+    m0 = pmf_match(*_pair(0.0, shift), 1.0, 40.0)[0]
+    p0 = det._periodic_matches(m0, np.full(len(m0), shift), np.full(len(m0), 0.8))
+    assert p0.mean() < 0.1

@@ -204,7 +204,9 @@ class Detection(PlaneTracking):
         reliable = run >= need
         usable = reliable & in_range
         amb_drop = self._ambiguous_drops(m, pd, thr)
-        obst = (ex_mean > thr) & (h <= c.max_obstacle_height_m) & usable
+        # a periodic pattern matched a period off is no evidence either way
+        periodic = self._periodic_matches(m, pd, thr)
+        obst = (ex_mean > thr) & (h <= c.max_obstacle_height_m) & usable & ~periodic
         below = (ex_mean < -thr) & (h >= -c.max_drop_depth_m)
         if obst.any():
             self._rejected_runs(el, m, cand, prev, run, reliable & in_range, h, excess, pd,
@@ -213,7 +215,7 @@ class Detection(PlaneTracking):
         if c.detect_drops:
             # Below the plane where the plane itself is within the detection range.
             pd_far = cam.fb / c.max_range_m
-            drop = below & (pd >= pd_far) & (pd <= d_max) & usable & ~amb_drop
+            drop = below & (pd >= pd_far) & (pd <= d_max) & usable & ~amb_drop & ~periodic
         sid = m.string_id
         n_s = max(el.num_strings, int(sid.max()) + 1 if sid.size else 0)
         weight = self._evidence_weight(m.strength)
@@ -460,6 +462,31 @@ class Detection(PlaneTracking):
             nearer = rd[sel] > m.d[j[sel]]
             no_drop[j[sel[nearer]]] = True
         return no_drop
+
+    def _periodic_matches(self, m: Matches, pd: np.ndarray, thr: np.ndarray) -> np.ndarray:
+        """(K,) bool: the matches of a periodic pattern: at least ``periodic_min_rivals``
+        rivals (`match_rivals`) with ``ambiguous_match_ratio`` of the match's first-round
+        support or more, one of them on the ground (within the pixel's threshold ``thr``
+        (K,) of the ground disparity ``pd`` (K,)). The bars of a grate support candidates
+        a period apart alike, and the one a period nearer stands above the ground by the
+        period over the baseline times the height of the ray (a 3.5 cm period: 10 cm on
+        the paper's rig) wherever the walker is: a world-fixed false obstacle that the map
+        would confirm. A kerb's face has at most one strong rival on the ground (the
+        ground around it supports the ground's disparity), an obstacle's texture few."""
+        k = len(m)
+        out = np.zeros(k, bool)
+        r = self.config.ambiguous_match_ratio
+        n_min = self.config.periodic_min_rivals
+        if (n_min <= 0 or r <= 0 or m.rival_match is None or m.rival_d is None
+                or m.rival_ratio is None or k == 0):
+            return out
+        strong = m.rival_ratio >= r
+        j = m.rival_match[strong]
+        n_strong = np.bincount(j, minlength=k)
+        on_ground = np.abs(m.rival_d[strong].astype(np.float64) - pd[j]) <= thr[j]
+        ground = np.zeros(k, bool)
+        ground[j[on_ground]] = True
+        return (n_strong >= n_min) & ground
 
     def _ambiguous_strings(self, m: Matches, excess: np.ndarray, obst: np.ndarray,
                            cand: Candidates, el: EdgeMap, er: EdgeMap, threshold: float,

@@ -95,6 +95,14 @@ class GpodConfig(PlausiblePlaneConfig):
         'periodic pattern, such as the bars of a grate, the candidates a period apart are '
         'supported alike). Obstacle evidence is not judged so (a kerb face has ground '
         'rivals as strong); 0 = off', range=(0.0, 10.0))
+    periodic_min_rivals: int = param(
+        2, 'A matched edge pixel is no evidence of an obstacle or a drop-off when at '
+        'least this many other candidate matches of its left or right edge had '
+        'ambiguous_match_ratio of its first-round PMF support or more, one of them on the '
+        'ground (within the threshold): a periodic pattern, such as the bars of a grate, '
+        'supports candidates a period apart alike, and one period off stands about 9 % '
+        'of the camera height above the ground on the paper\'s rig (a kerb face has at '
+        'most one strong rival on the ground); 0 = off', range=(0, 100))
     min_range_m: float = param(
         1.0, 'Nearest depth searched by the matcher, metres along the optical axis '
         '(largest disparity f*B/min_range)', range=(0.05, 100.0))
