@@ -89,8 +89,8 @@ class GroundSurfaceConfig:
         'segment, with this standard deviation, metres (small = stiff)',
         range=(0.001, 10.0))
     max_grade_change: float = param(
-        0.25, 'Largest change of the grade (rise per metre) from one segment to the next '
-        '(0.25: about 14 degrees, a dip from a 7 degree fall into a 7 degree rise)', range=(0.0, 2.0))
+        0.12, 'Largest change of the grade (rise per metre) from one segment to the next '
+        '(0.12: about 7 degrees)', range=(0.0, 2.0))
     max_step_m: float = param(
         0.04, 'Largest step inside a segment (the best line-plus-step fit of its '
         'features, when it cuts the residuals of the line alone by a quarter), metres: a step (a '

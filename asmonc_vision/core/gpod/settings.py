@@ -489,7 +489,7 @@ class GpodConfig(PlausiblePlaneConfig):
         1.0, 'surface: distance between the knots of the profile, metres',
         range=(0.1, 20.0))
     surface_max_grade_change: float = param(
-        0.25, 'surface: largest change of the grade (rise per metre) from one segment to '
+        0.12, 'surface: largest change of the grade (rise per metre) from one segment to '
         'the next', range=(0.0, 2.0))
     surface_max_step_m: float = param(
         0.04, "surface: largest difference of the median residuals of a segment's near "
