@@ -29,11 +29,7 @@ taken only if it is ground, not an obstacle or a step:
   are fitted by a line plus a step at each of 9 places along the segment, and the best
   of these, if it cuts the line's residual sum by a quarter or is significant against
   the features' scatter, must have a step of at most ``max_step_m`` (a kerb of 10 cm is
-  a line plus a step; a slope is a line); nor at its start: the features' own line must
-  start where the surface is, within 7 cm (a knot lags a sharp bend by up to about 5 cm)
-  or its own uncertainty (t < 4) (a
-  kerb or a drop just at a knot has all its far side in the next segment, a line that
-  starts 10 cm up or down; a slope's starts on the surface);
+  a line plus a step; a slope is a line);
 * ``rule_spread``: the residuals' robust spread is at most ``max_spread_m`` beyond what
   the features' disparity noise explains (``depth_sd``: a feature moves along its ray,
   several cm across the ground at 9 m on a short baseline).
@@ -244,10 +240,6 @@ class GroundSurface:
 #: the residual sum it explains (the best of 9 splits of pure noise: below 4 but for
 #: about 1 segment in 2 000).
 _STEP_T = 4.0
-#: `_boundary_step`: a step at a segment's start counts from this height (m): the
-#: surface's knot lags a sharp bend by up to about 5 cm (its stiff prior), which is no
-#: step; a 10 cm kerb or drop at a knot is.
-_KNOT_STEP_M = 0.07
 
 
 def _tukey(res: np.ndarray, c: float) -> np.ndarray:
@@ -326,28 +318,6 @@ def _best_step(t: np.ndarray, h: np.ndarray, length: float, splits: int = 9) -> 
     best_rss = max(float(rss[k]), 0.0)
     significant = rss_line - best_rss >= _STEP_T ** 2 * best_rss / max(n - 3.0, 1.0)
     return abs(float(coef[k, 2])) if best_rss <= 0.75 * rss_line or significant else 0.0
-
-
-def _boundary_step(t: np.ndarray, h: np.ndarray, z_a: float) -> float:
-    """The step (m) at a segment's start: how far the features' own line (least squares
-    of h = c + g t over t (N,) m from the start, h (N,) m) starts from the surface's
-    height there, ``|c - z_a|``, if significant against the features' scatter (t
-    statistic at least ``_STEP_T``), else 0; NaN with fewer than 6 features. A kerb or a
-    drop just at a knot has all its far side in the next segment: no step inside it,
-    only a line that does not start where the surface is (a slope's does)."""
-    if t.size < 6:
-        return math.nan
-    tm = float(t.mean())
-    sxx = float(np.sum((t - tm) ** 2))
-    if sxx <= 1e-12:
-        return math.nan
-    g = float(np.sum((t - tm) * (h - h.mean()))) / sxx
-    c0 = float(h.mean()) - g * tm
-    res = h - (c0 + g * t)
-    sd = math.sqrt(float(res @ res) / max(t.size - 2, 1))
-    se = sd * math.sqrt(1.0 / t.size + tm * tm / sxx)
-    delta = abs(c0 - z_a)
-    return delta if delta >= _STEP_T * max(se, 1e-9) else 0.0
 
 
 def depth_noise(cam: StereoCamera, d, sigma_px) -> np.ndarray:
@@ -484,11 +454,7 @@ def _segment(feats: tuple, s_a: float, z_a: float, grade: float, c: GroundSurfac
     # a feature's noise about the segment: its depth's, along its ray, across the line
     dd = np.abs(e_h[inseg] - new_grade * e_s[inseg])
     on = np.abs(res) <= np.maximum(c.gate_m, 2.5 * dd)
-    # a step inside the segment, or at its start (NaN: too few features to tell)
     step = _best_step(ss[on] - s_a, hh[on], length)
-    at_start = _boundary_step(ss[on] - s_a, hh[on], z_a)
-    if not math.isnan(at_start) and at_start >= _KNOT_STEP_M:
-        step = max(step, at_start)
     spread = _mad(res[on])
     # the spread of a segment is the ground's own unevenness and the disparity noise
     noise = float(np.median(dd[on])) if on.any() else 0.0
