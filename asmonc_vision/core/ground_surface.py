@@ -21,10 +21,8 @@ taken only if it is ground, not an obstacle or a step:
 * ``rule_support``: at least ``min_features`` features, a quarter of them in each
   half of the segment, spread across at least ``min_width_m`` of the path (a box or a
   post is narrow; the ground is wide);
-* ``rule_grade``: the grade falls by at most ``max_grade_fall`` or rises by at most
-  ``max_grade_rise`` from the previous segment (a ramp or a slope's start, not a wall).
-  Ground that bends up is seen whole, and a kerb up in it is a step (``rule_step``);
-  ground that bends down may hide a drop beyond its edge, so a fall is held to less;
+* ``rule_grade``: the grade changes by at most ``max_grade_change`` from the previous
+  segment (a ramp or a slope's start, not a wall);
 * ``rule_step``: no step of more than ``max_step_m`` inside the segment: the features
   are fitted by a line plus a step at each of 9 places along the segment, and the best
   of these, if it cuts the line's residual sum by a quarter or is significant against
@@ -85,19 +83,14 @@ class GroundSurfaceConfig:
     gate_m: float = param(
         0.15, "Features within this height of the profile's straight continuation take "
         'part in a segment\'s fit, metres (plus a segment\'s length times '
-        'max_grade_rise above it, max_grade_fall below it)', range=(0.01, 5.0))
+        'max_grade_change)', range=(0.01, 5.0))
     smoothness_m: float = param(
         0.05, "Prior on a knot's height: its straight continuation from the previous "
         'segment, with this standard deviation, metres (small = stiff)',
         range=(0.001, 10.0))
-    max_grade_fall: float = param(
-        0.12, 'Largest fall of the grade (rise per metre) from one segment to the next, '
-        'the ground bending down (0.12: about 7 degrees; a drop may hide beyond such an '
-        'edge)', range=(0.0, 2.0))
-    max_grade_rise: float = param(
-        0.25, 'Largest rise of the grade (rise per metre) from one segment to the next, '
-        'the ground bending up (0.25: about 14 degrees, a dip from a 7 degree fall into a '
-        '7 degree rise; a kerb up is a step, rule_step)', range=(0.0, 2.0))
+    max_grade_change: float = param(
+        0.12, 'Largest change of the grade (rise per metre) from one segment to the next '
+        '(0.12: about 7 degrees)', range=(0.0, 2.0))
     max_step_m: float = param(
         0.04, 'Largest step inside a segment (the best line-plus-step fit of its '
         'features, when it cuts the residuals of the line alone by a quarter), metres: a step (a '
@@ -128,8 +121,7 @@ class GroundSurfaceConfig:
 @dataclass(frozen=True)
 class SegmentCheck:
     """Why a segment was taken or not: the rule that refused it ('' = taken) and its
-    numbers (features, width m, grade change (rise per metre, > 0 where the ground bends
-    up), step m, spread m; for 'rule_anchor' the
+    numbers (features, width m, grade change, step m, spread m; for 'rule_anchor' the
     near ground's median height above the plane as step_m)."""
 
     refused_by: str
@@ -434,9 +426,8 @@ def _segment(feats: tuple, s_a: float, z_a: float, grade: float, c: GroundSurfac
     s, lat, h, e_s, e_h = feats
     length = min(c.knot_spacing_m, c.far_m - s_a)
     z_line = z_a + grade * (s - s_a)            # the straight continuation
-    above = h - z_line
-    inseg = ((s >= s_a) & (s < s_a + length) & (above <= c.gate_m + length * c.max_grade_rise)
-             & (above >= -(c.gate_m + length * c.max_grade_fall)))
+    gate = c.gate_m + length * c.max_grade_change
+    inseg = (s >= s_a) & (s < s_a + length) & (np.abs(h - z_line) <= gate)
     n_in = int(inseg.sum())
     ss, ll, hh = s[inseg], lat[inseg], h[inseg]
     width = float(np.subtract(*np.percentile(ll, [90, 10]))) if n_in else 0.0
@@ -449,7 +440,7 @@ def _segment(feats: tuple, s_a: float, z_a: float, grade: float, c: GroundSurfac
     z_b = _fit_segment(ss, hh, s_a, z_a, length, z_b, c.smoothness_m,
                        scale=max(c.gate_m, 1e-3))
     new_grade = (z_b - z_a) / length
-    change = new_grade - grade              # > 0: the ground bends up
+    change = abs(new_grade - grade)
     res = hh - (z_a + (z_b - z_a) * (ss - s_a) / length)
     # a feature's noise about the segment: its depth's, along its ray, across the line
     dd = np.abs(e_h[inseg] - new_grade * e_s[inseg])
@@ -459,7 +450,7 @@ def _segment(feats: tuple, s_a: float, z_a: float, grade: float, c: GroundSurfac
     # the spread of a segment is the ground's own unevenness and the disparity noise
     noise = float(np.median(dd[on])) if on.any() else 0.0
     refused = ''
-    for name, bad in (('rule_grade', not -c.max_grade_fall <= change <= c.max_grade_rise),
+    for name, bad in (('rule_grade', change > c.max_grade_change),
                       ('rule_step', not step <= c.max_step_m),
                       ('rule_spread', not spread <= math.hypot(c.max_spread_m, noise))):
         if bad:
