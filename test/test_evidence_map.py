@@ -399,10 +399,25 @@ def test_a_passer_by_over_plain_ground_fades_when_not_seen_again():
     """With no ground matched where the person walked, only the person not being seen
     again in plain view clears the cells left behind: within a few pairs (without the
     rule the trail is kept for seconds)."""
-    ghosts = _crossing(EvidenceMap(EvidenceMapConfig(enabled=True)), 16)
-    kept = _crossing(EvidenceMap(EvidenceMapConfig(enabled=True, miss_logodds=0.0)), 16)
+    ghosts = _crossing(EvidenceMap(EvidenceMapConfig(enabled=True, unseen_report_s=0.0)), 16)
+    kept = _crossing(EvidenceMap(EvidenceMapConfig(enabled=True, miss_logodds=0.0,
+                                                   unseen_report_s=0.0)), 16)
     assert sum(ghosts) <= 4 < sum(kept)
     assert not ghosts[-1] and kept[-1]
+
+
+def test_where_a_passer_by_was_is_not_reported_once_unseen():
+    """The cells a passer-by left stay in the map while they fade, but once their last
+    evidence is older than unseen_report_s and the pair, in plain view there, saw
+    nothing, they are not reported: the wearer is warned of where the person is, not
+    where they were (here with no fading at all, miss_logodds 0)."""
+    emap = EvidenceMap(EvidenceMapConfig(enabled=True, miss_logodds=0.0))
+    ghosts = _crossing(emap, 16)
+    assert not any(ghosts)
+    assert emap.confirmed().sum() > 0        # still in the map: only not reported
+    kept = _crossing(EvidenceMap(EvidenceMapConfig(enabled=True, miss_logodds=0.0,
+                                                   unseen_report_s=0.0)), 16)
+    assert sum(kept) > 4
 
 
 def test_a_thing_out_of_sight_is_not_faded():
@@ -413,7 +428,9 @@ def test_a_thing_out_of_sight_is_not_faded():
     for i in range(4):
         emap.update(0.1 * i, PLANE, evidence([(box, RAISED, None)], 0.0), None, True, CAM)
     assert emap.objects
-    front = box_edges(2.0, 0.0, 1.0, half_width=0.3)
+    # a nearer thing with a textured face (matched all across) in front of it
+    front = np.concatenate([box_edges(2.0, dy, 1.0, half_width=0.0)
+                            for dy in np.arange(-0.3, 0.31, 0.05)])
     beyond = ground_grid(5.0, 7.0)
     for i in range(4, 10):           # hidden by a nearer thing in front of it
         emap.update(0.1 * i, PLANE, evidence([(front, RAISED, None), (beyond, GROUND, None)],
@@ -443,6 +460,29 @@ def test_a_drop_is_confirmed_as_a_drop():
     assert len(drops) == 1 and not [o for o in objs[-1] if not o.is_drop]
     assert drops[0].height == pytest.approx(-0.15, abs=0.03)
     assert drops[0].nearest_xy[0] == pytest.approx(4.0 - 0.6, abs=0.08)
+
+
+def test_a_drop_seen_intermittently_is_reported_from_memory():
+    """A drop's lower side is hidden by its edge on most pairs; pairs that see nothing
+    there (ground matched only nearer) do not stop it being reported, however old its
+    last evidence (unseen_report_s leaves drops alone); a raised thing in the same
+    place is not reported once unseen for longer than unseen_report_s."""
+    lower = ground_grid(4.0, 5.0, -0.8, 0.8, step=0.1)
+    lower[:, 2] = -0.15
+    ground = ground_grid(1.5, 3.95, step=0.1)
+    box = box_edges(4.0, 0.0, 0.3, half_width=0.3)
+    reported = {}
+    for kind in (DROP, RAISED):
+        emap = EvidenceMap(EvidenceMapConfig(enabled=True, miss_logodds=0.0))
+        thing = lower if kind == DROP else box
+        for i in range(4):
+            emap.update(0.1 * i, PLANE, evidence([(thing, kind, None), (ground, GROUND, None)],
+                                                 0.0), None, True, CAM)
+        for i in range(4, 12):      # 0.8 s with only the nearer ground seen
+            emap.update(0.1 * i, PLANE, evidence([(ground, GROUND, None)], 0.0), None, True,
+                        CAM)
+        reported[kind] = [o for o in emap.objects if o.is_drop == (kind == DROP)]
+    assert reported[DROP] and not reported[RAISED]
 
 
 @pytest.mark.parametrize('pixels, taken', [(1, False), (2, True), (3, True), (4, True)])

@@ -176,6 +176,13 @@ class EvidenceMapConfig:
         "map's placement only)", range=(0.0, 5.0))
     min_region_cells: int = param(1, 'least confirmed cells in a reported region',
                                   range=(1, 10000))
+    unseen_report_s: float = param(
+        0.35, 'a confirmed raised cell in the image, hidden by nothing nearer, that the '
+        'pair saw nothing at is not reported once its last evidence is older than this, '
+        's: a passer-by\'s cells behind them fade from the map over several pairs, but '
+        'the wearer is not warned of where they were; a thing hidden or out of the image, '
+        'and a drop (its lower side is hidden by its edge), are still reported from '
+        'memory; 0 = no limit', range=(0.0, 60.0))
     motion_gap_frames: int = param(
         2, 'pairs in a row the rig may move with no motion known (the previous pose held) '
         'before the map is cleared', range=(0, 100))
@@ -342,6 +349,8 @@ class EvidenceMap:
         #: pairs entered since the last reset (the map's evidence is continuous over them)
         self.placed_pairs = 0
         self._pair_count: np.ndarray | None = None
+        #: (n * n,) bool: the confirmed cells in plain view this pair saw nothing at
+        self._missed = np.zeros(n * n, bool)
         self.objects: tuple[MapObject, ...] = ()
 
     @property
@@ -401,6 +410,7 @@ class EvidenceMap:
             # height predict: x = x, P = P + q² dt
             self.h_P += np.float32(c.height_process_noise ** 2 * dt)
         self._pair_count = None
+        self._missed[:] = False
         if ev is not None and ev.xy.shape[0]:
             self._enter(stamp_s, ev, still)
             if cam is not None:
@@ -632,7 +642,7 @@ class EvidenceMap:
         at its bearing beyond it (the sight line passed it), and no raised evidence
         nearer at its bearing (nothing in front hides it)."""
         c = self.config
-        if c.miss_logodds <= 0 or self._pair_count is None:
+        if (c.miss_logodds <= 0 and c.unseen_report_s <= 0) or self._pair_count is None:
             return
         conf_r, conf_d = self.confirmed(False).reshape(-1), self.confirmed(True).reshape(-1)
         k = 2 * c.miss_guard_cells + 1
@@ -661,8 +671,11 @@ class EvidenceMap:
         np.minimum.at(near, eb[raised] + 1, er[raised])
         far = np.maximum(np.maximum(far[:-2], far[1:-1]), far[2:])
         near = np.minimum(np.minimum(near[:-2], near[1:-1]), near[2:])
-        view &= (far[b] >= r + c.cell_m) & (near[b] >= r - c.cell_m)
-        cells = cells[view]
+        unhidden = view & (near[b] >= r - c.cell_m)
+        # not reported once stale (unseen_report_s): in the image and not hidden (a
+        # passer-by's cells behind them; the ground beyond need not have been matched)
+        self._missed[cells[unhidden]] = True
+        cells = cells[unhidden & (far[b] >= r + c.cell_m)]
         self.L_r.reshape(-1)[cells[conf_r[cells]]] -= c.miss_logodds
         self.L_d.reshape(-1)[cells[conf_d[cells]]] -= c.miss_logodds
         np.clip(self.L_r, c.min_logodds, c.max_logodds, out=self.L_r)
@@ -737,6 +750,12 @@ class EvidenceMap:
             vis = np.zeros(mask.size, bool)
             below = np.zeros(mask.size, bool)
             vis[cells], below[cells] = self.in_view(cells, cam)
+            if c.unseen_report_s > 0 and not drop:
+                # in plain view, a raised thing is seen again or is gone (a passer-by
+                # walked on); a drop's evidence is intermittent (its lower ground is
+                # hidden by its edge), so a drop is reported from memory
+                vis &= ~(self._missed
+                         & (stamp_s - self.last_hit_s.reshape(-1) > c.unseen_report_s))
             masks.extend([(drop, mask & vis.reshape(mask.shape)),
                           (drop, mask & below.reshape(mask.shape))])
         for drop, mask in masks:
