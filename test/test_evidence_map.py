@@ -462,6 +462,30 @@ def test_a_drop_is_confirmed_as_a_drop():
     assert drops[0].nearest_xy[0] == pytest.approx(4.0 - 0.6, abs=0.08)
 
 
+@pytest.mark.parametrize('weighs', [True, False])
+def test_ground_seen_for_long_outweighs_three_pairs_below_it(weighs):
+    """Ground a few metres ahead seen for 7 pairs of a walk, then below the plane in 3
+    (the far ground of a bend, or a plane off for a few pairs): with drop_weighs_ground
+    the ground seen before outweighs them and no drop is reported; without, the three
+    pairs alone confirm a drop. Lower ground seen only below the plane is a drop either way."""
+    patch = ground_grid(4.0, 4.6, -0.6, 0.6, step=0.1)
+    low = patch.copy()
+    low[:, 2] = -0.15
+    ground = ground_grid(1.5, 3.95, step=0.1)
+    xs = np.arange(0.0, 1.4, 0.15)
+
+    def scene(x):
+        seen_low = x > 1.0
+        return [(low if seen_low else patch, DROP if seen_low else GROUND, None),
+                (ground, GROUND, None)]
+    emap = EvidenceMap(EvidenceMapConfig(enabled=True, drop_weighs_ground=weighs))
+    objs = walk(emap, scene, xs)
+    assert bool([o for o in objs[-1] if o.is_drop]) == (not weighs)
+    fresh = EvidenceMap(EvidenceMapConfig(enabled=True, drop_weighs_ground=weighs))
+    objs = walk(fresh, lambda x: [(low, DROP, None), (ground, GROUND, None)], xs)
+    assert [o for o in objs[-1] if o.is_drop]
+
+
 def test_a_drop_seen_intermittently_is_reported_from_memory():
     """A drop's lower side is hidden by its edge on most pairs; pairs that see nothing
     there (ground matched only nearer) do not stop it being reported, however old its

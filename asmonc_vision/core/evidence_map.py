@@ -96,6 +96,12 @@ class EvidenceMapConfig:
                               range=(0.1, 10.0))
     hit_logodds: float = param(0.85, 'log-odds added to a cell with raised (or drop) '
                                'evidence in a pair', range=(0.01, 10.0))
+    drop_weighs_ground: bool = param(
+        True, 'drop evidence in a cell adds to what the ground seen there before said '
+        '(L_d = L_d + hit): lower ground is terrain, it does not step in as a passer-by '
+        'does, so a cell seen as ground for many pairs and below it in one or two (the '
+        'far ground of a bend beyond the known surface, a plane off for a pair) is not '
+        'a drop; off: as raised evidence, L_d = max(L_d, 0) + hit')
     free_logodds: float = param(1.2, 'log-odds taken from a cell where ground is seen and '
                                 'no raised evidence (the clearing is faster than the '
                                 'filling)', range=(0.0, 10.0))
@@ -510,9 +516,10 @@ class EvidenceMap:
             free_g &= near.reshape(-1)[u_g] == 0
         free = u_g[free_g]
         # a thing seen now is not held back by the ground seen there before (a thing
-        # that appears, a passer-by stepping in): L = max(L, 0) + hit
+        # that appears, a passer-by stepping in): L = max(L, 0) + hit; lower ground
+        # does not appear (drop_weighs_ground): L = L + hit
         Lr[raised] = np.maximum(Lr[raised], 0.0) + hit
-        Ld[dropc] = np.maximum(Ld[dropc], 0.0) + hit
+        Ld[dropc] = (Ld[dropc] if c.drop_weighs_ground else np.maximum(Ld[dropc], 0.0)) + hit
         Lr[free] -= c.free_logodds
         Ld[free] -= c.free_logodds
         for L, cells in ((Lr, np.concatenate((raised, free))),
