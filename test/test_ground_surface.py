@@ -271,3 +271,37 @@ def test_a_slope_goes_on_beyond_the_known_ground(seed):
     assert surf.tail_grade == pytest.approx(np.tan(np.radians(5.0)), abs=0.03)
     s = np.array([8.0, 9.0, 9.5])
     assert np.max(np.abs(surf.profile(s) - prof(s))) < 0.10
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_a_dip_is_ground_and_a_sharp_brow_is_not(seed):
+    """Ground that bends up by 0.2 (a 6 degree fall into a 6 degree rise, at 4 m) is seen
+    whole: ground. Ground that bends down as much may hide a drop beyond its brow: the
+    surface stops there (unknown beyond), it does not follow the fall."""
+    rng = np.random.default_rng(seed)
+    dip = lambda s: 0.2 * np.maximum(np.asarray(s) - 4.0, 0.0)     # noqa: E731
+    surf = fit_ground_surface(ground_points(dip, rng), PLANE)
+    assert surf.known_until_m >= 7.0, surf.checks
+    s = np.linspace(2.0, surf.known_until_m, 11)
+    assert np.max(np.abs(surf.profile(s) - dip(s))) < 0.05
+    brow = lambda s: -0.2 * np.maximum(np.asarray(s) - 4.0, 0.0)   # noqa: E731
+    surf = fit_ground_surface(ground_points(brow, rng), PLANE)
+    assert surf.known_until_m <= 5.0, surf.checks
+    assert any(c.refused_by == 'rule_grade' and c.grade_change < -0.12 for c in surf.checks)
+    # with the old symmetric limit of 0.12 the dip was refused too
+    old = GroundSurfaceConfig(max_grade_rise=0.12)
+    assert fit_ground_surface(ground_points(dip, rng), PLANE, old).known_until_m <= 5.0
+
+
+@pytest.mark.parametrize('seed', [0, 3])
+@pytest.mark.parametrize('rise', [0.10, 0.15, -0.10])
+def test_a_step_at_a_knot_is_a_step(seed, rise):
+    """A kerb up (or a drop) just at a knot has its far side all in the next segment: no
+    step inside that segment, only a line that does not start where the surface is. It
+    is a step there (not a slope that bends up by 0.1-0.15 within max_grade_rise)."""
+    rng = np.random.default_rng(seed)
+    for at in (3.0, 3.02, 4.0, 5.0, 5.02, 6.0):
+        surf = fit_ground_surface(ground_points(step_at(at, rise), rng), PLANE)
+        beyond = surf.known_until_m > at + 0.5
+        assert not (beyond and abs(surf.profile(np.array([at + 0.5]))[0] - rise)
+                    < abs(rise) / 2), (at, surf.checks)

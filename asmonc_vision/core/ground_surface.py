@@ -21,13 +21,19 @@ taken only if it is ground, not an obstacle or a step:
 * ``rule_support``: at least ``min_features`` features, a quarter of them in each
   half of the segment, spread across at least ``min_width_m`` of the path (a box or a
   post is narrow; the ground is wide);
-* ``rule_grade``: the grade changes by at most ``max_grade_change`` from the previous
-  segment (a ramp or a slope's start, not a wall);
+* ``rule_grade``: the grade falls by at most ``max_grade_fall`` or rises by at most
+  ``max_grade_rise`` from the previous segment (a ramp or a slope's start, not a wall).
+  Ground that bends up is seen whole, and a kerb up in it is a step (``rule_step``);
+  ground that bends down may hide a drop beyond its edge, so a fall is held to less;
 * ``rule_step``: no step of more than ``max_step_m`` inside the segment: the features
   are fitted by a line plus a step at each of 9 places along the segment, and the best
   of these, if it cuts the line's residual sum by a quarter or is significant against
   the features' scatter, must have a step of at most ``max_step_m`` (a kerb of 10 cm is
-  a line plus a step; a slope is a line);
+  a line plus a step; a slope is a line); nor at its start: the features' own line must
+  start where the surface is, within 7 cm (a knot lags a sharp bend by up to about 5 cm)
+  or its own uncertainty (t < 4) (a
+  kerb or a drop just at a knot has all its far side in the next segment, a line that
+  starts 10 cm up or down; a slope's starts on the surface);
 * ``rule_spread``: the residuals' robust spread is at most ``max_spread_m`` beyond what
   the features' disparity noise explains (``depth_sd``: a feature moves along its ray,
   several cm across the ground at 9 m on a short baseline).
@@ -83,14 +89,19 @@ class GroundSurfaceConfig:
     gate_m: float = param(
         0.15, "Features within this height of the profile's straight continuation take "
         'part in a segment\'s fit, metres (plus a segment\'s length times '
-        'max_grade_change)', range=(0.01, 5.0))
+        'max_grade_rise above it, max_grade_fall below it)', range=(0.01, 5.0))
     smoothness_m: float = param(
         0.05, "Prior on a knot's height: its straight continuation from the previous "
         'segment, with this standard deviation, metres (small = stiff)',
         range=(0.001, 10.0))
-    max_grade_change: float = param(
-        0.12, 'Largest change of the grade (rise per metre) from one segment to the next '
-        '(0.12: about 7 degrees)', range=(0.0, 2.0))
+    max_grade_fall: float = param(
+        0.12, 'Largest fall of the grade (rise per metre) from one segment to the next, '
+        'the ground bending down (0.12: about 7 degrees; a drop may hide beyond such an '
+        'edge)', range=(0.0, 2.0))
+    max_grade_rise: float = param(
+        0.25, 'Largest rise of the grade (rise per metre) from one segment to the next, '
+        'the ground bending up (0.25: about 14 degrees, a dip from a 7 degree fall into a '
+        '7 degree rise; a kerb up is a step, rule_step)', range=(0.0, 2.0))
     max_step_m: float = param(
         0.04, 'Largest step inside a segment (the best line-plus-step fit of its '
         'features, when it cuts the residuals of the line alone by a quarter), metres: a step (a '
@@ -121,7 +132,8 @@ class GroundSurfaceConfig:
 @dataclass(frozen=True)
 class SegmentCheck:
     """Why a segment was taken or not: the rule that refused it ('' = taken) and its
-    numbers (features, width m, grade change, step m, spread m; for 'rule_anchor' the
+    numbers (features, width m, grade change (rise per metre, > 0 where the ground bends
+    up), step m, spread m; for 'rule_anchor' the
     near ground's median height above the plane as step_m)."""
 
     refused_by: str
@@ -232,6 +244,10 @@ class GroundSurface:
 #: the residual sum it explains (the best of 9 splits of pure noise: below 4 but for
 #: about 1 segment in 2 000).
 _STEP_T = 4.0
+#: `_boundary_step`: a step at a segment's start counts from this height (m): the
+#: surface's knot lags a sharp bend by up to about 5 cm (its stiff prior), which is no
+#: step; a 10 cm kerb or drop at a knot is.
+_KNOT_STEP_M = 0.07
 
 
 def _tukey(res: np.ndarray, c: float) -> np.ndarray:
@@ -310,6 +326,28 @@ def _best_step(t: np.ndarray, h: np.ndarray, length: float, splits: int = 9) -> 
     best_rss = max(float(rss[k]), 0.0)
     significant = rss_line - best_rss >= _STEP_T ** 2 * best_rss / max(n - 3.0, 1.0)
     return abs(float(coef[k, 2])) if best_rss <= 0.75 * rss_line or significant else 0.0
+
+
+def _boundary_step(t: np.ndarray, h: np.ndarray, z_a: float) -> float:
+    """The step (m) at a segment's start: how far the features' own line (least squares
+    of h = c + g t over t (N,) m from the start, h (N,) m) starts from the surface's
+    height there, ``|c - z_a|``, if significant against the features' scatter (t
+    statistic at least ``_STEP_T``), else 0; NaN with fewer than 6 features. A kerb or a
+    drop just at a knot has all its far side in the next segment: no step inside it,
+    only a line that does not start where the surface is (a slope's does)."""
+    if t.size < 6:
+        return math.nan
+    tm = float(t.mean())
+    sxx = float(np.sum((t - tm) ** 2))
+    if sxx <= 1e-12:
+        return math.nan
+    g = float(np.sum((t - tm) * (h - h.mean()))) / sxx
+    c0 = float(h.mean()) - g * tm
+    res = h - (c0 + g * t)
+    sd = math.sqrt(float(res @ res) / max(t.size - 2, 1))
+    se = sd * math.sqrt(1.0 / t.size + tm * tm / sxx)
+    delta = abs(c0 - z_a)
+    return delta if delta >= _STEP_T * max(se, 1e-9) else 0.0
 
 
 def depth_noise(cam: StereoCamera, d, sigma_px) -> np.ndarray:
@@ -426,8 +464,9 @@ def _segment(feats: tuple, s_a: float, z_a: float, grade: float, c: GroundSurfac
     s, lat, h, e_s, e_h = feats
     length = min(c.knot_spacing_m, c.far_m - s_a)
     z_line = z_a + grade * (s - s_a)            # the straight continuation
-    gate = c.gate_m + length * c.max_grade_change
-    inseg = (s >= s_a) & (s < s_a + length) & (np.abs(h - z_line) <= gate)
+    above = h - z_line
+    inseg = ((s >= s_a) & (s < s_a + length) & (above <= c.gate_m + length * c.max_grade_rise)
+             & (above >= -(c.gate_m + length * c.max_grade_fall)))
     n_in = int(inseg.sum())
     ss, ll, hh = s[inseg], lat[inseg], h[inseg]
     width = float(np.subtract(*np.percentile(ll, [90, 10]))) if n_in else 0.0
@@ -440,17 +479,21 @@ def _segment(feats: tuple, s_a: float, z_a: float, grade: float, c: GroundSurfac
     z_b = _fit_segment(ss, hh, s_a, z_a, length, z_b, c.smoothness_m,
                        scale=max(c.gate_m, 1e-3))
     new_grade = (z_b - z_a) / length
-    change = abs(new_grade - grade)
+    change = new_grade - grade              # > 0: the ground bends up
     res = hh - (z_a + (z_b - z_a) * (ss - s_a) / length)
     # a feature's noise about the segment: its depth's, along its ray, across the line
     dd = np.abs(e_h[inseg] - new_grade * e_s[inseg])
     on = np.abs(res) <= np.maximum(c.gate_m, 2.5 * dd)
+    # a step inside the segment, or at its start (NaN: too few features to tell)
     step = _best_step(ss[on] - s_a, hh[on], length)
+    at_start = _boundary_step(ss[on] - s_a, hh[on], z_a)
+    if not math.isnan(at_start) and at_start >= _KNOT_STEP_M:
+        step = max(step, at_start)
     spread = _mad(res[on])
     # the spread of a segment is the ground's own unevenness and the disparity noise
     noise = float(np.median(dd[on])) if on.any() else 0.0
     refused = ''
-    for name, bad in (('rule_grade', change > c.max_grade_change),
+    for name, bad in (('rule_grade', not -c.max_grade_fall <= change <= c.max_grade_rise),
                       ('rule_step', not step <= c.max_step_m),
                       ('rule_spread', not spread <= math.hypot(c.max_spread_m, noise))):
         if bad:

@@ -488,9 +488,13 @@ class GpodConfig(PlausiblePlaneConfig):
     surface_knot_spacing_m: float = param(
         1.0, 'surface: distance between the knots of the profile, metres',
         range=(0.1, 20.0))
-    surface_max_grade_change: float = param(
-        0.12, 'surface: largest change of the grade (rise per metre) from one segment to '
-        'the next', range=(0.0, 2.0))
+    surface_max_grade_fall: float = param(
+        0.12, 'surface: largest fall of the grade (rise per metre) from one segment to '
+        'the next, the ground bending down (a drop may hide beyond such an edge)',
+        range=(0.0, 2.0))
+    surface_max_grade_rise: float = param(
+        0.25, 'surface: largest rise of the grade (rise per metre) from one segment to '
+        'the next, the ground bending up (a dip; a kerb up is a step)', range=(0.0, 2.0))
     surface_max_step_m: float = param(
         0.04, "surface: largest difference of the median residuals of a segment's near "
         'and far halves, metres (a step inside a segment is not a slope)',
@@ -542,7 +546,8 @@ def surface_config(c: 'GpodConfig') -> GroundSurfaceConfig:
     """The ground surface settings of a GpodConfig (its ``surface_*`` fields)."""
     return GroundSurfaceConfig(enabled=c.surface_enabled, near_m=c.surface_near_m,
                                far_m=c.surface_far_m, knot_spacing_m=c.surface_knot_spacing_m,
-                               max_grade_change=c.surface_max_grade_change,
+                               max_grade_fall=c.surface_max_grade_fall,
+                               max_grade_rise=c.surface_max_grade_rise,
                                max_step_m=c.surface_max_step_m,
                                min_width_m=c.surface_min_width_m)
 
