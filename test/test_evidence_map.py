@@ -486,6 +486,28 @@ def test_ground_seen_for_long_outweighs_three_pairs_below_it(weighs):
     assert [o for o in objs[-1] if o.is_drop]
 
 
+@pytest.mark.parametrize('sigma, clears', [(0.01, True), (0.1, False)])
+def test_only_ground_measured_finely_takes_from_drop_evidence(sigma, clears):
+    """Ground seen in a cell takes free_logodds from its raised evidence whatever its
+    noise, but from its drop evidence only when its height is known to
+    drop_clear_max_sigma_m (3.3 cm: a 10 cm drop at 3 sigma): far ground measured
+    coarsely cannot tell the lower ground beyond a drop from the ground before it."""
+    emap = EvidenceMap(EvidenceMapConfig(enabled=True))
+    xy = np.tile([[3.02, 0.02]], (3, 1))
+    drop = PairEvidence(xy=xy, height=np.full(3, -0.15), sigma_h=np.full(3, 0.02),
+                        kind=np.full(3, DROP, np.int8))
+    emap.update(0.0, PLANE, drop, None, True)
+    cell = int(np.argmax(emap.L_d))
+    before = float(emap.L_d.flat[cell])
+    ground = PairEvidence(xy=xy, height=np.zeros(3), sigma_h=np.full(3, sigma),
+                          kind=np.full(3, GROUND, np.int8))
+    emap.update(0.0, PLANE, ground, None, True)
+    after = float(emap.L_d.flat[cell])
+    assert before > 0.5
+    assert (after < before - 1.0) == clears
+    assert (after == pytest.approx(before)) == (not clears)
+
+
 def test_a_drop_seen_intermittently_is_reported_from_memory():
     """A drop's lower side is hidden by its edge on most pairs; pairs that see nothing
     there (ground matched only nearer) do not stop it being reported, however old its

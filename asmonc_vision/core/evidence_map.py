@@ -102,6 +102,11 @@ class EvidenceMapConfig:
         'does, so a cell seen as ground for many pairs and below it in one or two (the '
         'far ground of a bend beyond the known surface, a plane off for a pair) is not '
         'a drop; off: as raised evidence, L_d = max(L_d, 0) + hit')
+    drop_clear_max_sigma_m: float = param(
+        0.033, 'ground seen in a cell takes log-odds from its drop evidence only from '
+        'ground pixels whose height is known to this standard deviation or better, m '
+        '(0.033: a 10 cm drop at 3 sigma): far ground, measured coarsely, cannot tell the '
+        'lower ground beyond a drop from the ground before it; 0 = any', range=(0.0, 10.0))
     free_logodds: float = param(1.2, 'log-odds taken from a cell where ground is seen and '
                                 'no raised evidence (the clearing is faster than the '
                                 'filling)', range=(0.0, 10.0))
@@ -515,15 +520,22 @@ class EvidenceMap:
                               np.ones((k, k), np.uint8))
             free_g &= near.reshape(-1)[u_g] == 0
         free = u_g[free_g]
+        # ground that can rule a drop out: pixels of height known to drop_clear_max_sigma_m
+        free_d = free
+        if c.drop_clear_max_sigma_m > 0:
+            sure = kind == GROUND
+            sure[sure] = sh[sure] <= c.drop_clear_max_sigma_m
+            n_sure = np.bincount(flat[sure], minlength=n2)
+            free_d = free[n_sure[free] >= c.min_ground_pixels]
         # a thing seen now is not held back by the ground seen there before (a thing
         # that appears, a passer-by stepping in): L = max(L, 0) + hit; lower ground
         # does not appear (drop_weighs_ground): L = L + hit
         Lr[raised] = np.maximum(Lr[raised], 0.0) + hit
         Ld[dropc] = (Ld[dropc] if c.drop_weighs_ground else np.maximum(Ld[dropc], 0.0)) + hit
         Lr[free] -= c.free_logodds
-        Ld[free] -= c.free_logodds
+        Ld[free_d] -= c.free_logodds
         for L, cells in ((Lr, np.concatenate((raised, free))),
-                         (Ld, np.concatenate((dropc, free)))):
+                         (Ld, np.concatenate((dropc, free_d)))):
             L[cells] = np.clip(L[cells], c.min_logodds, c.max_logodds)
         if seen_through.size:
             Lr[seen_through] -= c.ray_logodds
