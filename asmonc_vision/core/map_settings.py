@@ -1,0 +1,145 @@
+"""Settings of the evidence map (`core.evidence_map.EvidenceMap`): one frozen dataclass,
+validated on construction; `docs/map.md` says what each does and why, `docs/parameters.md`
+lists them with their ranges. No ROS here.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from asmonc_vision.core.config import check_fields, param
+
+
+@dataclass(frozen=True)
+class EvidenceMapConfig:
+    """Settings of the evidence map (`EvidenceMap`)."""
+
+    enabled: bool = param(
+        True, 'report obstacles and drop-offs from the evidence map (a thing confirmed '
+        'from two viewpoints, cleared by ground seen where it stood) instead of each '
+        "pair's detections and their tracks")
+    cell_m: float = param(0.1, 'side of a map cell, m', range=(0.02, 0.5))
+    radius_m: float = param(
+        9.0, 'half side of the square map around the wearer, m (evidence farther away is '
+        'not kept)', range=(1.0, 50.0))
+    max_range_m: float = param(8.0, 'evidence farther than this along the ground is not '
+                               'entered, m', range=(0.5, 50.0))
+    recentre_m: float = param(1.0, 'the grid is re-centred on the wearer (by whole cells) '
+                              'once the wearer is this far from its centre, m',
+                              range=(0.1, 10.0))
+    hit_logodds: float = param(0.85, 'log-odds added to a cell with raised (or drop) '
+                               'evidence in a pair', range=(0.01, 10.0))
+    drop_weighs_ground: bool = param(
+        True, 'drop evidence in a cell adds to what the ground seen there before said '
+        '(L_d = L_d + hit): lower ground is terrain, it does not step in as a passer-by '
+        'does, so a cell seen as ground for many pairs and below it in one or two (the '
+        'far ground of a bend beyond the known surface, a plane off for a pair) is not '
+        'a drop; off: as raised evidence, L_d = max(L_d, 0) + hit')
+    drop_clear_max_sigma_m: float = param(
+        0.033, 'ground seen in a cell takes log-odds from its drop evidence only from '
+        'ground pixels whose height is known to this standard deviation or better, m '
+        '(0.033: a 10 cm drop at 3 sigma): far ground, measured coarsely, cannot tell the '
+        'lower ground beyond a drop from the ground before it; 0 = any', range=(0.0, 10.0))
+    free_logodds: float = param(1.2, 'log-odds taken from a cell where ground is seen and '
+                                'no raised evidence (the clearing is faster than the '
+                                'filling)', range=(0.0, 10.0))
+    still_hit_factor: float = param(
+        1.0, 'raised or drop evidence of a pair taken while the rig stands still counts '
+        'this much (its frames repeat the same matches and their errors)', range=(0.0, 1.0))
+    miss_logodds: float = param(
+        0.6, 'log-odds taken from a confirmed cell in plain view (not hidden by a nearer '
+        'thing) with none of the evidence of a pair near it (0: off)',
+        range=(0.0, 10.0))
+    miss_guard_cells: int = param(
+        2, 'a confirmed cell with evidence of a pair within this many cells of it is not '
+        'missed (the matched points of a thing scatter along the line of sight)',
+        range=(0, 10))
+    miss_margin_px: float = param(
+        5.0, 'a cell is in plain view when the foot of its evidence point lies this far '
+        'inside both images, px', range=(0.0, 100.0))
+    min_ground_pixels: int = param(2, 'ground-matched edge pixels in a cell that clear '
+                                   'it', range=(1, 1000))
+    min_drop_pixels: int = param(
+        2, 'drop pixels of one pair in a cell (and no raised pixel there) that make it drop '
+        'evidence: a lone pixel below the ground is as often a mismatch (on a marking, on '
+        'the far ground of a slope beyond the known surface) as a drop', range=(1, 1000))
+    clear_guard_cells: int = param(
+        1, 'ground seen within this many cells of raised or drop evidence of the same pair '
+        'does not clear (an obstacle is seen with the ground at its foot)', range=(0, 10))
+    ray_logodds: float = param(
+        1.2, 'log-odds taken from a raised cell seen through: ground seen behind it along '
+        'sight lines passing lower than its top (0: off)', range=(0.0, 10.0))
+    ray_min_pixels: int = param(3, 'sight lines through a raised cell below its top, on '
+                                'each side of its evidence point, that clear it in a pair',
+                                range=(1, 10000))
+    ray_lateral_m: float = param(0.03, 'a sight line passes through a raised cell when '
+                                 'it passes this near its evidence point, m',
+                                 range=(0.001, 1.0))
+    ray_margin_m: float = param(0.05, 'a sight line must pass this far below a cell top '
+                                '(at least 2 standard deviations of it) to count, m',
+                                range=(0.0, 2.0))
+    ray_stop_m: float = param(0.2, 'sight lines are followed up to this short of their '
+                              'ground point, m', range=(0.0, 2.0))
+    ray_max_points: int = param(600, 'ground matches of a pair whose sight lines are '
+                                'followed (evenly picked when there are more)',
+                                range=(1, 100000))
+    min_logodds: float = param(-2.0, 'least log-odds of a cell', range=(-20.0, 0.0))
+    max_logodds: float = param(3.5, 'largest log-odds of a cell', range=(0.0, 20.0))
+    report_logodds: float = param(1.5, 'a cell is reported (with two views) from this '
+                                  'log-odds on', range=(0.0, 20.0))
+    decay_s: float = param(4.0, 'time constant of the decay of the log-odds towards the '
+                           'prior, s (cells out of view are remembered about this long)',
+                           range=(0.1, 600.0))
+    min_baseline_m: float = param(
+        0.3, 'a cell seen raised or dropped again from this far from where its evidence '
+        'began has two views, m (a mismatch of a repetitive pattern moves in the world '
+        'by a fraction of this)', range=(0.0, 10.0))
+    still_min_frames: int = param(
+        2, 'pairs with evidence at a cell while the rig stands still that count as two '
+        'views (no parallax while still)', range=(1, 1000))
+    stationary_step_m: float = param(
+        0.03, 'a pair whose camera moved less than this along the ground since the '
+        'previous one (turning on the spot) counts as still for still_min_frames, m',
+        range=(0.0, 1.0))
+    height_process_noise: float = param(
+        0.05, 'process noise q of a cell height, m/sqrt(s)', range=(0.0, 10.0))
+    join_cells: int = param(2, 'confirmed cells this many cells apart belong to one '
+                            'region (0: touching cells only)', range=(0, 20))
+    near_tolerance_m: float = param(
+        0.15, "a region's nearest point is at its nearest range, at the median bearing of "
+        'its cells within this of that range, m', range=(0.0, 2.0))
+    corridor_half_width_m: float = param(
+        0.5, "a region with cells ahead within this of the walking direction none of "
+        "whose reports lies there is reported there too, at its nearest cell there (the "
+        "alarm's walking corridor: a thing beside the path that reaches into it farther "
+        "on), m (0: off)", range=(0.0, 5.0))
+    attach_m: float = param(
+        0.5, "a detector report whose foot lies within this of a confirmed cell of its kind "
+        "is confirmed and reported as the detector placed it (from the whole silhouette); "
+        "a region that confirms none is reported at its own nearest point, m (0: the "
+        "map's placement only)", range=(0.0, 5.0))
+    min_region_cells: int = param(1, 'least confirmed cells in a reported region',
+                                  range=(1, 10000))
+    unseen_report_s: float = param(
+        0.35, 'a confirmed raised cell in the image, hidden by nothing nearer, that the '
+        'pair saw nothing at is not reported once its last evidence is older than this, '
+        's: a passer-by\'s cells behind them fade from the map over several pairs, but '
+        'the wearer is not warned of where they were; a thing hidden or out of the image, '
+        'and a drop (its lower side is hidden by its edge), are still reported from '
+        'memory; 0 = no limit', range=(0.0, 60.0))
+    motion_gap_frames: int = param(
+        2, 'pairs in a row the rig may move with no motion known (the previous pose held) '
+        'before the map is cleared', range=(0, 100))
+    min_placed_pairs: int = param(
+        5, "until the map has placed this many pairs in a row (after a start, or after it "
+        "was cleared for want of a motion) the detector's reports are published unfiltered",
+        range=(0, 1000))
+    default_sigma_px: float = param(0.4, 'σ_d of a match when the detector gives '
+                                    'neither a per-pixel threshold nor a sigma, px',
+                                    range=(0.01, 10.0))
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+        if self.min_logodds >= self.report_logodds or self.report_logodds > self.max_logodds:
+            raise ValueError('EvidenceMapConfig: min_logodds < report_logodds <= max_logodds '
+                             f'is required, got {self.min_logodds}, {self.report_logodds}, '
+                             f'{self.max_logodds}')
