@@ -23,10 +23,10 @@ from asmonc_vision.sim.scenes import make_scene
 #: (scene class, seed, duration s) -> measured (warned, on the path, false alarm events,
 #: false reports per frame)
 WALKS = {
-    ('step_down', 1004, 5.0): (1, 1, 0, 0.06),
-    ('kerb_up', 1004, 5.0): (1, 1, 0, 0.12),
-    ('slope_ahead', 1002, 5.0): (0, 0, 0, 0.04),
-    ('grate', 1003, 5.0): (0, 0, 0, 0.04),
+    ('step_down', 1004, 5.0): (1, 1, 0, 0.04),
+    ('kerb_up', 1004, 5.0): (1, 1, 0, 0.08),
+    ('slope_ahead', 1002, 5.0): (0, 0, 0, 0.06),
+    ('grate', 1003, 5.0): (0, 0, 0, 0.02),
 }
 
 
