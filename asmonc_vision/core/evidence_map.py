@@ -34,10 +34,13 @@ Each pair, `EvidenceMap.update`:
    the cell below it, one counted as a drop is *drop* evidence, a reliably matched
    pixel on the plane is *ground* evidence (free space) at its cell.
 4. updates the cells: raised evidence in a cell adds ``hit_logodds`` to its raised
-   log-odds ``L_r`` (once per pair: the pixels of one pair share their errors), ground
-   evidence with no raised evidence there subtracts ``free_logodds`` from ``L_r`` and the
-   drop log-odds ``L_d`` (a thing said to be there is cleared by the ground seen where it
-   stood); a confirmed cell in plain view with no evidence of the pair near it loses
+   log-odds ``L_r`` (once per pair: the pixels of one pair share their errors; from
+   ``max(L_r, 0)``: a thing may step in), drop evidence likewise to the drop log-odds
+   ``L_d`` (from ``L_d`` itself with ``drop_weighs_ground``: lower ground does not step
+   in), ground evidence with no raised evidence there subtracts ``free_logodds`` from
+   ``L_r`` and, where its height is known to ``drop_clear_max_sigma_m``, from ``L_d`` (a
+   thing said to be there is cleared by the ground seen where it stood); a confirmed
+   cell in plain view with no evidence of the pair near it loses
    ``miss_logodds`` (`_unseen`: a passer-by who walked on is not seen again); log-odds
    stay within [``min_logodds``, ``max_logodds``]. The top of a raised
    cell is a scalar Kalman filter per cell (batched):
@@ -54,7 +57,9 @@ Each pair, `EvidenceMap.update`:
    it has *two views* once it is seen raised (or dropped) again from at least
    ``min_baseline_m`` away, or while the rig stands still in ``still_min_frames``
    pairs (a still rig has no parallax; its frames are separate looks only in time).
-6. reports: cells with ``L ≥ report_logodds`` and two views are *confirmed*; connected
+6. reports: cells with ``L ≥ report_logodds`` and two views are *confirmed* (a raised
+   one in plain view that the pair saw nothing at, not reported once its last evidence
+   is older than ``unseen_report_s``); connected
    regions of them (8-connected, gaps of ``join_cells`` bridged) are obstacles
    (drop regions: drop-offs) with the nearest point to the wearer, the top height, the
    width across the line of sight, a confidence (the largest P of its cells) and an id
