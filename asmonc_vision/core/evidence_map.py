@@ -392,8 +392,7 @@ class EvidenceMap:
         # ground that can rule a drop out: pixels of height known to drop_clear_max_sigma_m
         free_d = free
         if c.drop_clear_max_sigma_m > 0:
-            sure = kind == GROUND
-            sure[sure] = sh[sure] <= c.drop_clear_max_sigma_m
+            sure = (kind == GROUND) & (sh <= c.drop_clear_max_sigma_m)
             n_sure = np.bincount(flat[sure], minlength=n2)
             free_d = free[n_sure[free] >= c.min_ground_pixels]
         # a thing seen now is not held back by the ground seen there before (a thing

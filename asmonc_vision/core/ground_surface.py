@@ -332,15 +332,15 @@ def _boundary_step(t: np.ndarray, h: np.ndarray, z_a: float) -> float:
     """The step (m) at a segment's start: how far the features' own line (least squares
     of h = c + g t over t (N,) m from the start, h (N,) m) starts from the surface's
     height there, ``|c - z_a|``, if significant against the features' scatter (t
-    statistic at least ``_STEP_T``), else 0; NaN with fewer than 6 features. A kerb or a
+    statistic at least ``_STEP_T``), else 0 (also with fewer than 6 features). A kerb or a
     drop just at a knot has all its far side in the next segment: no step inside it,
     only a line that does not start where the surface is (a slope's does)."""
     if t.size < 6:
-        return math.nan
+        return 0.0
     tm = float(t.mean())
     sxx = float(np.sum((t - tm) ** 2))
     if sxx <= 1e-12:
-        return math.nan
+        return 0.0
     g = float(np.sum((t - tm) * (h - h.mean()))) / sxx
     c0 = float(h.mean()) - g * tm
     res = h - (c0 + g * t)
@@ -484,10 +484,10 @@ def _segment(feats: tuple, s_a: float, z_a: float, grade: float, c: GroundSurfac
     # a feature's noise about the segment: its depth's, along its ray, across the line
     dd = np.abs(e_h[inseg] - new_grade * e_s[inseg])
     on = np.abs(res) <= np.maximum(c.gate_m, 2.5 * dd)
-    # a step inside the segment, or at its start (NaN: too few features to tell)
+    # a step inside the segment, or at its start
     step = _best_step(ss[on] - s_a, hh[on], length)
     at_start = _boundary_step(ss[on] - s_a, hh[on], z_a)
-    if not math.isnan(at_start) and at_start >= _KNOT_STEP_M:
+    if at_start >= _KNOT_STEP_M:
         step = max(step, at_start)
     spread = _mad(res[on])
     # the spread of a segment is the ground's own unevenness and the disparity noise
