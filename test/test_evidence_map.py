@@ -422,7 +422,9 @@ def test_where_a_passer_by_was_is_not_reported_once_unseen():
 
 def test_a_thing_out_of_sight_is_not_faded():
     """A confirmed thing hidden behind a nearer one, or out of the image (no camera
-    given), is kept: only a thing in plain view that is not seen again fades."""
+    given), is kept in the map: only a thing in plain view that is not seen again fades.
+    While hidden and unseen for longer than unseen_report_s it is not reported (the
+    nearer thing is); seen again, it is reported at once."""
     emap = EvidenceMap(EvidenceMapConfig(enabled=True))
     box = box_edges(4.0, 0.0, 0.5)
     for i in range(4):
@@ -436,6 +438,10 @@ def test_a_thing_out_of_sight_is_not_faded():
         emap.update(0.1 * i, PLANE, evidence([(front, RAISED, None), (beyond, GROUND, None)],
                                              0.0, occluders=[(2.0, 0.0, 1.0, 0.3)]),
                     None, True, CAM)
+    kept = emap.pt_xy.reshape(-1, 2)[np.flatnonzero(emap.confirmed())]
+    assert (kept[:, 0] > 3.5).any()
+    assert not any(o.far_xy[:, 0].min() > 3.5 for o in emap.objects)
+    emap.update(1.0, PLANE, evidence([(box, RAISED, None)], 0.0), None, True, CAM)
     assert any(o.far_xy[:, 0].min() > 3.5 for o in emap.objects)
     emap2 = EvidenceMap(EvidenceMapConfig(enabled=True))
     for i in range(4):
@@ -443,6 +449,46 @@ def test_a_thing_out_of_sight_is_not_faded():
     for i in range(4, 10):           # in plain view (ground seen beyond), not seen again
         emap2.update(0.1 * i, PLANE, evidence([(beyond, GROUND, None)], 0.0), None, True, CAM)
     assert not any(o.far_xy[:, 0].min() > 0.5 for o in emap2.objects)
+
+
+def _walk_past(emap: EvidenceMap, moved_in: bool):
+    """The wearer stands 2 s, then walks 2.25 m on. A thing 0.6 m wide and 0.4 m tall at
+    3 m: with ``moved_in`` a passer-by who steps in where the ground was seen (ground all
+    round for 1 s first) and walks off unseen over plain ground; else a box that stands
+    there from the first pair (its ground never seen) and is seen while in the image.
+    Returns the objects reported
+    within 1.2 m ahead once the spot is below the view (the last pair)."""
+    far_sparse = ground_grid(6.5, 7.5, -4.0, 4.0, step=0.25)
+    body = np.concatenate([box_edges(3.0, dy, 0.4, half_width=0.0)
+                           for dy in np.arange(-0.3, 0.31, 0.05)])
+    x = 0.0
+    for i in range(35):
+        if i < 20:
+            there = i >= 10 if moved_in else True
+            parts = [(ground_grid(1.5, 6.0, step=0.05,
+                                  holes=[(2.8, 3.6, -0.5, 0.5)] if there else []),
+                      GROUND, None)]
+            if there:
+                parts.append((body, RAISED, None))
+            motion = None
+        else:                       # walks on 0.15 m a pair: the box is seen while in
+            x += 0.15               # the image, nothing where the passer-by was
+            parts = [(far_sparse, GROUND, None)] + ([] if moved_in else [(body, RAISED, None)])
+            motion = step_motion(0.15)
+        emap.update(0.1 * i, PLANE, evidence(parts, x), motion, i < 20, CAM)
+    return [o for o in emap.objects if not o.is_drop and o.nearest_xy[0] < 1.2]
+
+
+def test_a_thing_that_moved_in_is_not_remembered_out_of_view():
+    """Raised evidence that begins where the ground was seen finely just before is a
+    thing that moved in (moved_in_s): once out of the image (below it, walked up to) and
+    not seen for unseen_report_s, it is not reported; a box the wearer walks up to
+    (its ground never seen) is reported from memory there; with moved_in_s = 0 the
+    passer-by is too (here with no fading at all, miss_logodds 0)."""
+    cfg = dict(enabled=True, miss_logodds=0.0)
+    assert not _walk_past(EvidenceMap(EvidenceMapConfig(**cfg)), moved_in=True)
+    assert _walk_past(EvidenceMap(EvidenceMapConfig(**cfg)), moved_in=False)
+    assert _walk_past(EvidenceMap(EvidenceMapConfig(**cfg, moved_in_s=0.0)), moved_in=True)
 
 
 # ------------------------------------------------------------------ drops, ids, output

@@ -57,9 +57,12 @@ Each pair, `EvidenceMap.update`:
    it has *two views* once it is seen raised (or dropped) again from at least
    ``min_baseline_m`` away, or while the rig stands still in ``still_min_frames``
    pairs (a still rig has no parallax; its frames are separate looks only in time).
-6. reports: cells with ``L ≥ report_logodds`` and two views are *confirmed* (a raised
-   one in plain view that the pair saw nothing at, not reported once its last evidence
-   is older than ``unseen_report_s``); connected
+6. reports: cells with ``L ≥ report_logodds`` and two views are *confirmed*. A raised
+   one in the image (in plain view or hidden behind a nearer thing) that the pair saw
+   nothing at is not reported once its last evidence is older than ``unseen_report_s``;
+   nor, as old and wherever it is (out of the image too), one whose raised evidence
+   began where the ground was seen at most ``moved_in_s`` before (a thing that moved
+   in, a passer-by, may have moved on; a thing walked up to covers its ground). Connected
    regions of them (8-connected, gaps of ``join_cells`` bridged) are obstacles
    (drop regions: drop-offs) with the nearest point to the wearer, the top height, the
    width across the line of sight, a confidence (the largest P of its cells) and an id
@@ -220,6 +223,8 @@ class EvidenceMap:
         self.still_hits = np.zeros((n, n), np.int16)
         self.two_views = np.zeros((n, n), bool)
         self.last_hit_s = np.full((n, n), -np.inf)
+        self.free_s = np.full((n, n), -np.inf)        # ground last seen there, finely
+        self.moved_in = np.zeros((n, n), bool)        # raised where ground was just seen
         self.ids = np.zeros((n, n), np.int32)          # region id of the previous pair
         self.pose = np.zeros(3)                        # G in W: x, y, yaw
         self.origin = np.array([-self.config.radius_m, -self.config.radius_m])
@@ -249,7 +254,8 @@ class EvidenceMap:
         self.origin = self.origin + k * c.cell_m
         fills = ((self.L_r, 0), (self.L_d, 0), (self.h_x, 0), (self.h_P, np.inf),
                  (self.pt_xy, 0), (self.first_xy, np.nan), (self.still_hits, 0),
-                 (self.two_views, False), (self.last_hit_s, -np.inf), (self.ids, 0))
+                 (self.two_views, False), (self.last_hit_s, -np.inf), (self.ids, 0),
+                 (self.free_s, -np.inf), (self.moved_in, False))
         for a, fill in fills:
             _shift(a, int(k[1]), int(k[0]), fill)
 
@@ -395,6 +401,14 @@ class EvidenceMap:
             sure = (kind == GROUND) & (sh <= c.drop_clear_max_sigma_m)
             n_sure = np.bincount(flat[sure], minlength=n2)
             free_d = free[n_sure[free] >= c.min_ground_pixels]
+        if c.moved_in_s > 0:
+            # raised evidence begins where ground was seen finely just before: a thing
+            # that moved in (a passer-by), not one the wearer walks up to
+            mi = self.moved_in.reshape(-1)
+            fs = self.free_s.reshape(-1)
+            begins = raised[Lr[raised] <= 0]
+            mi[begins] = stamp_s - fs[begins] <= c.moved_in_s
+            fs[free_d] = stamp_s
         # a thing seen now is not held back by the ground seen there before (a thing
         # that appears, a passer-by stepping in): L = max(L, 0) + hit; lower ground
         # does not appear (drop_weighs_ground): L = L + hit
@@ -559,9 +573,10 @@ class EvidenceMap:
         far = np.maximum(np.maximum(far[:-2], far[1:-1]), far[2:])
         near = np.minimum(np.minimum(near[:-2], near[1:-1]), near[2:])
         unhidden = view & (near[b] >= r - c.cell_m)
-        # not reported once stale (unseen_report_s): in the image and not hidden (a
-        # passer-by's cells behind them; the ground beyond need not have been matched)
-        self._missed[cells[unhidden]] = True
+        # not reported once stale (unseen_report_s): in the image, hidden or not (a
+        # passer-by's cells behind them; the ground beyond need not have been matched;
+        # what hides a thing is nearer and reported itself)
+        self._missed[cells[view]] = True
         cells = cells[unhidden & (far[b] >= r + c.cell_m)]
         self.L_r.reshape(-1)[cells[conf_r[cells]]] -= c.miss_logodds
         self.L_d.reshape(-1)[cells[conf_d[cells]]] -= c.miss_logodds
@@ -584,6 +599,7 @@ class EvidenceMap:
         self.first_xy.reshape(-1, 2)[cells] = np.nan
         self.still_hits.reshape(-1)[cells] = 0
         self.two_views.reshape(-1)[cells] = False
+        self.moved_in.reshape(-1)[cells] = False
 
     # ------------------------------------------------------------------ objects
     def confirmed(self, drop: bool = False) -> np.ndarray:
@@ -641,8 +657,13 @@ class EvidenceMap:
                 # in plain view, a raised thing is seen again or is gone (a passer-by
                 # walked on); a drop's evidence is intermittent (its lower ground is
                 # hidden by its edge), so a drop is reported from memory
-                vis &= ~(self._missed
-                         & (stamp_s - self.last_hit_s.reshape(-1) > c.unseen_report_s))
+                stale = stamp_s - self.last_hit_s.reshape(-1) > c.unseen_report_s
+                vis &= ~(self._missed & stale)
+                # a thing that moved in is not remembered where it is no longer seen
+                # (hidden, or out of the image): it may have moved on
+                gone = self.moved_in.reshape(-1) & stale
+                vis &= ~gone
+                below &= ~gone
             masks.extend([(drop, mask & vis.reshape(mask.shape)),
                           (drop, mask & below.reshape(mask.shape))])
         for drop, mask in masks:

@@ -120,12 +120,19 @@ class EvidenceMapConfig:
     min_region_cells: int = param(1, 'least confirmed cells in a reported region',
                                   range=(1, 10000))
     unseen_report_s: float = param(
-        0.35, 'a confirmed raised cell in the image, hidden by nothing nearer, that the '
-        'pair saw nothing at is not reported once its last evidence is older than this, '
-        's: a passer-by\'s cells behind them fade from the map over several pairs, but '
-        'the wearer is not warned of where they were; a thing hidden or out of the image, '
-        'and a drop (its lower side is hidden by its edge), are still reported from '
-        'memory; 0 = no limit', range=(0.0, 60.0))
+        0.35, 'a confirmed raised cell in the image (in plain view or hidden behind a '
+        'nearer thing, which is reported itself) that the pair saw nothing at is not '
+        'reported once its last evidence is older than this, s: a passer-by\'s cells '
+        'behind them fade from the map over several pairs, but the wearer is not warned '
+        'of where they were; a thing out of the image (walked up to), and a drop (its '
+        'lower side is hidden by its edge), are still reported from memory; 0 = no limit',
+        range=(0.0, 60.0))
+    moved_in_s: float = param(
+        3.0, 'a raised cell whose ground was seen (to drop_clear_max_sigma_m) at most this '
+        'long before its raised evidence began holds a thing that moved in (a passer-by): '
+        'it is reported only while its evidence is younger than unseen_report_s, in view '
+        'or not (a thing the wearer walks up to covers its ground and is remembered); '
+        '0 = off', range=(0.0, 60.0))
     motion_gap_frames: int = param(
         2, 'pairs in a row the rig may move with no motion known (the previous pose held) '
         'before the map is cleared', range=(0, 100))
