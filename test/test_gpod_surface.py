@@ -129,3 +129,33 @@ if __name__ == '__main__':
         row = [np.mean(sum((reports_ahead(prof, surf, seed=s) for s in (0, 1, 2)), []))
                for surf in (False, True)]
         print(f'{name:22s} plane alone {row[0]:5.2f}   with the surface {row[1]:5.2f}')
+
+
+
+def _along(s, lat, h):
+    """Points (N, 3) in the left optical frame of the rig above: ground coordinates s
+    (forward), lat (left), height h above the plane, m."""
+    from asmonc_vision.core.camera import MetricPlane, ground_axes
+    plane = MetricPlane(normal_up=np.array([0.0, -np.cos(PITCH), -np.sin(PITCH)]), height=H)
+    o, fwd, left = ground_axes(plane)
+    return (o + s[:, None] * fwd + lat[:, None] * left + h[:, None] * plane.normal_up,
+            plane)
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_ground_falling_beyond_a_brow_is_no_drop_but_a_level_lower_ground_is(seed):
+    """`_falling_ground`: drop pixels along a joint running ahead beyond a brow (their
+    depth grows by 0.19 a metre from 3.3 to 5.5 m, 2 cm of noise) are ground falling
+    away; those of the level lower ground beyond a 12 cm drop (the same joint, the same
+    noise) stay a drop."""
+    rng = np.random.default_rng(seed)
+    s = np.sort(rng.uniform(3.3, 5.5, 30))
+    lat = 0.5 + 0.02 * rng.normal(size=30)
+    sid = np.repeat([0, 1], 15)
+    drop = np.ones(30, bool)
+    for h, falling in ((-0.19 * (s - 3.0), True), (np.full(30, -0.12), False)):
+        h = h + rng.normal(0.0, 0.02, 30)
+        pts, plane = _along(s, lat, h)
+        got = GpodDetector()._falling_ground(drop, pts, h, plane, 2, sid)
+        assert got.tolist() == [falling, falling]
+

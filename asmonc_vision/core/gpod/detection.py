@@ -251,6 +251,9 @@ class Detection(PlaneTracking):
                 n_drop = np.bincount(sid[seen], weights=weight[seen], minlength=n_s) + 1e-9
         drop_string = self._drop_strings(drop, n_drop, weight, pts, h, metric, n_s,
                                          sid) & ~obst_string
+        if c.drop_fall_min_grade > 0 and drop_string.any():
+            drop_string &= ~self._falling_ground(drop & drop_string[sid], pts, h, metric,
+                                                 n_s, sid)
         obst &= obst_string[sid]
         drop &= drop_string[sid]
         sclass = np.where(obst_string[sid], 1, np.where(drop_string[sid], -1, 0)).astype(np.int8)
@@ -291,6 +294,32 @@ class Detection(PlaneTracking):
         if c.drop_region_pixels > 0.0:
             out |= self._drop_regions(drop & (n_drop[sid] > 1e-6), weight, pts, h, metric,
                                       n_s, sid)
+        return out
+
+    def _falling_ground(self, drop: np.ndarray, pts: np.ndarray, h: np.ndarray,
+                        metric: MetricPlane, n_s: int, sid: np.ndarray) -> np.ndarray:
+        """(n_s,) bool: the drop strings that are ground falling away beyond a brow: in a
+        cluster of drop pixels (``drop`` (K,) bool; feet clustered at
+        ``drop_cluster_radius_m``) of at least 8 pixels spread over 0.8 m or more along
+        the walking direction whose depths ``h`` (K,) (m above the ground reference) fit
+        a line falling at ``drop_fall_min_grade`` or more. Beyond a brow the ground
+        goes on falling, so the farther its points the deeper; the lower ground beyond a
+        drop is level, its depth the same near and far."""
+        c = self.config
+        out = np.zeros(n_s, bool)
+        idx = np.flatnonzero(drop)
+        if idx.size < 8:
+            return out
+        g2 = _ground_coords(pts[idx], h[idx], metric)
+        label = cluster_points_2d(g2, sid[idx], c.drop_cluster_radius_m)
+        for k in range(int(label.max()) + 1):
+            sel = label == k
+            s_k, h_k = g2[sel, 0], h[idx][sel]
+            if sel.sum() < 8 or float(s_k.max() - s_k.min()) < 0.8:
+                continue
+            grade = float(np.polyfit(s_k, h_k, 1)[0])
+            if grade <= -c.drop_fall_min_grade:
+                out[sid[idx][sel]] = True
         return out
 
     def _drop_regions(self, drop: np.ndarray, weight: np.ndarray, pts: np.ndarray,
