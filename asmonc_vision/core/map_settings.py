@@ -117,6 +117,11 @@ class EvidenceMapConfig:
         "is confirmed and reported as the detector placed it (from the whole silhouette); "
         "a region that confirms none is reported at its own nearest point, m (0: the "
         "map's placement only)", range=(0.0, 5.0))
+    pass_height_m: float = param(
+        1.0, "a detector report at least this tall is published whether the map confirms "
+        "it or not: a person walking towards the wearer is in new cells every pair and "
+        "is seldom confirmed, while a mismatch (a grate, a marking) is low, m (0: none "
+        "pass)", range=(0.0, 10.0))
     min_region_cells: int = param(1, 'least confirmed cells in a reported region',
                                   range=(1, 10000))
     unseen_report_s: float = param(

@@ -107,8 +107,13 @@ class Perception:
                 self.map_config.corridor_half_width_m))
                          if plane is not None else ())
             # the detector's unknown ahead (height NaN, `core.unseen_ground`) is no
-            # evidence for the map, and goes out as it is
-            obstacles += tuple(o for o in result.obstacles if np.isnan(o.height))
+            # evidence for the map, and goes out as it is; so does a tall report
+            # (pass_height_m) the map did not confirm
+            tall = self.map_config.pass_height_m
+            taken = [o.position for o in obstacles]
+            obstacles += tuple(o for o in result.obstacles if np.isnan(o.height) or (
+                0 < tall <= o.height
+                and not any(np.array_equal(o.position, p) for p in taken)))
         ms = (time.perf_counter() - t0) * 1e3
         timings = dict(result.timings_ms)
         timings['map'] = ms
