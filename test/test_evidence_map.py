@@ -732,6 +732,41 @@ def test_perception_with_the_map_reports_confirmed_obstacles():
     assert all(o.confidence > 0.5 for o in res.obstacles)
 
 
+
+@pytest.mark.parametrize('pass_height', [1.0, 0.0])
+def test_a_tall_report_passes_the_map_unconfirmed(pass_height):
+    """A detector report at least pass_height_m tall where the map holds nothing (a
+    person walking towards the wearer: new cells every pair) is published; a low one
+    there is not (a mismatch); with pass_height_m 0 neither is."""
+    import dataclasses
+    from asmonc_vision.io.frames import load_frames
+    from asmonc_vision.core.perception import Perception
+    from conftest import BAGS
+
+    p = Perception(map_config=EvidenceMapConfig(enabled=True, pass_height_m=pass_height))
+    real = p.detector.process
+
+    def with_two_more(*a, **k):
+        r = real(*a, **k)
+        if not r.obstacles:
+            return r
+        ob = r.obstacles[0]
+        aside = ob.position + np.array([2.5, 0.0, 0.0])       # 2.5 m to its right
+        more = (dataclasses.replace(ob, position=aside, height=1.6, track_id=901),
+                dataclasses.replace(ob, position=aside + np.array([0.0, 0.0, 1.0]),
+                                    height=0.3, track_id=902))
+        return dataclasses.replace(r, obstacles=r.obstacles + more)
+
+    p.detector.process = with_two_more
+    for f in load_frames(BAGS / 'static_obstacles', 26):
+        res = p.process(f.left, f.right, f.cam, stamp_ns=f.stamp_ns)
+    assert p.map.placed_pairs >= p.map_config.min_placed_pairs
+    ids = {o.track_id for o in res.obstacles}
+    assert (901 in ids) == (pass_height > 0)
+    assert 902 not in ids
+    assert len(ids - {901}) >= 3                 # the boxes, confirmed by the map
+
+
 # ------------------------------------------------------------------ the node
 def test_detector_node_publishes_the_map(ros_context):
     from nav_msgs.msg import OccupancyGrid
