@@ -147,13 +147,15 @@ def test_ground_falling_beyond_a_brow_is_no_drop_but_a_level_lower_ground_is(see
     """`_falling_ground`: drop pixels along a joint running ahead beyond a brow (their
     depth grows by 0.19 a metre from 3.3 to 5.5 m, 2 cm of noise) are ground falling
     away; those of the level lower ground beyond a 12 cm drop (the same joint, the same
-    noise) stay a drop."""
+    noise) stay a drop, and so do those of ground falling as steeply from 15 cm below
+    (a drop onto a slope down)."""
     rng = np.random.default_rng(seed)
     s = np.sort(rng.uniform(3.3, 5.5, 30))
     lat = 0.5 + 0.02 * rng.normal(size=30)
     sid = np.repeat([0, 1], 15)
     drop = np.ones(30, bool)
-    for h, falling in ((-0.19 * (s - 3.0), True), (np.full(30, -0.12), False)):
+    for h, falling in ((-0.19 * (s - 3.0), True), (np.full(30, -0.12), False),
+                       (-0.15 - 0.19 * (s - 3.3), False)):
         h = h + rng.normal(0.0, 0.02, 30)
         pts, plane = _along(s, lat, h)
         got = GpodDetector()._falling_ground(drop, pts, h, plane, 2, sid)

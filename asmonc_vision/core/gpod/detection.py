@@ -302,9 +302,11 @@ class Detection(PlaneTracking):
         cluster of drop pixels (``drop`` (K,) bool; feet clustered at
         ``drop_cluster_radius_m``) of at least 8 pixels spread over 0.8 m or more along
         the walking direction whose depths ``h`` (K,) (m above the ground reference) fit
-        a line falling at ``drop_fall_min_grade`` or more. Beyond a brow the ground
-        goes on falling, so the farther its points the deeper; the lower ground beyond a
-        drop is level, its depth the same near and far."""
+        a line falling at ``drop_fall_min_grade`` or more from less than
+        ``_FALL_MAX_START_M`` below the ground at its near end. Beyond a brow the ground
+        goes on falling from where the ground is, so the farther its points the deeper;
+        the lower ground beyond a drop is level, its depth the same near and far, and
+        starts a drop's depth down."""
         c = self.config
         out = np.zeros(n_s, bool)
         idx = np.flatnonzero(drop)
@@ -317,8 +319,11 @@ class Detection(PlaneTracking):
             s_k, h_k = g2[sel, 0], h[idx][sel]
             if sel.sum() < 8 or float(s_k.max() - s_k.min()) < 0.8:
                 continue
-            grade = float(np.polyfit(s_k, h_k, 1)[0])
-            if grade <= -c.drop_fall_min_grade:
+            grade, at0 = (float(x) for x in np.polyfit(s_k, h_k, 1))
+            # ... starting where the ground is: less than a drop that matters
+            # (_FALL_MAX_START_M) below it at its near end
+            near = grade * float(s_k.min()) + at0
+            if grade <= -c.drop_fall_min_grade and near > -_FALL_MAX_START_M:
                 out[sid[idx][sel]] = True
         return out
 
@@ -790,6 +795,12 @@ class Detection(PlaneTracking):
                 confidence=float(conf[k]), roi=roi, num_edge_pixels=int(count[k]),
                 string_ids=sid_u[sid_start[k]:sid_start[k + 1]].astype(np.int32)))
         return out
+
+
+#: `_falling_ground`: ground falling away beyond a brow starts where the ground is; a
+#: cluster whose line lies this far below the ground at its near end is a drop whatever
+#: its grade (the least drop the wearer must be told of, m)
+_FALL_MAX_START_M = 0.10
 
 
 def _ground_coords(p: np.ndarray, hh: np.ndarray, metric: MetricPlane, axes: bool = False):
