@@ -364,9 +364,10 @@ class GpodConfig(PlausiblePlaneConfig):
     drop_fall_min_grade: float = param(
         0.08, 'A cluster of drop strings (drop_cluster_radius_m) whose drop pixels, spread '
         'over at least 0.8 m along the walking direction, lie deeper the farther they are '
-        'at this grade or more (a line fitted to their depths) is ground bending away '
-        'beyond a brow, not a drop: the lower ground beyond a drop is level, its depth the '
-        'same near and far; 0 = off', range=(0.0, 10.0))
+        'at this grade or more (a line fitted to their depths), from less than 10 cm below '
+        'the ground at its near end, is ground bending away beyond a brow, not a drop: the '
+        'lower ground beyond a drop is level, its depth the same near and far, and starts '
+        'a drop\'s depth down; 0 = off', range=(0.0, 10.0))
     max_obstacle_height_m: float = param(
         2.5, 'Pixels higher than this above the plane are ignored (overhead, no hazard), '
         'metres', range=(0.05, 100.0))
