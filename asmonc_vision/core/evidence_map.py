@@ -402,13 +402,7 @@ class EvidenceMap:
             n_sure = np.bincount(flat[sure], minlength=n2)
             free_d = free[n_sure[free] >= c.min_ground_pixels]
         if c.moved_in_s > 0:
-            # raised evidence begins where ground was seen finely just before: a thing
-            # that moved in (a passer-by), not one the wearer walks up to
-            mi = self.moved_in.reshape(-1)
-            fs = self.free_s.reshape(-1)
-            begins = raised[Lr[raised] <= 0]
-            mi[begins] = stamp_s - fs[begins] <= c.moved_in_s
-            fs[free_d] = stamp_s
+            self._moved_in(stamp_s, raised[Lr[raised] <= 0], free_d)
         # a thing seen now is not held back by the ground seen there before (a thing
         # that appears, a passer-by stepping in): L = max(L, 0) + hit; lower ground
         # does not appear (drop_weighs_ground): L = L + hit
@@ -454,18 +448,33 @@ class EvidenceMap:
             pts[cell, 0] = (1 - a) * pts[cell, 0] + a * mx
             pts[cell, 1] = (1 - a) * pts[cell, 1] + a * my
             self.last_hit_s.reshape(-1)[cell] = stamp_s
-        # viewpoints: where the evidence began, seen again from min_baseline_m away
-        seen = np.concatenate((raised, dropc))
-        if seen.size:
-            fx = self.first_xy.reshape(-1, 2)
-            began = ~np.isfinite(fx[seen, 0])
-            fx[seen[began]] = self.pose[:2]
-            moved = np.hypot(fx[seen, 0] - self.pose[0], fx[seen, 1] - self.pose[1])
-            tv = self.two_views.reshape(-1)
-            sh_ = self.still_hits.reshape(-1)
-            if still:
-                sh_[seen] = np.minimum(sh_[seen] + 1, 30000)
-            tv[seen] |= (moved >= c.min_baseline_m) | (sh_[seen] >= c.still_min_frames)
+        self._views(np.concatenate((raised, dropc)), still)
+
+    def _moved_in(self, stamp_s: float, begins: np.ndarray, free: np.ndarray) -> None:
+        """Raised evidence begins in cells ``begins`` (flat indices) where ground was seen
+        finely at most ``moved_in_s`` before: a thing that moved in (a passer-by), not
+        one the wearer walks up to (it covers its ground). ``free``: the cells whose
+        ground this pair saw finely."""
+        fs = self.free_s.reshape(-1)
+        self.moved_in.reshape(-1)[begins] = stamp_s - fs[begins] <= self.config.moved_in_s
+        fs[free] = stamp_s
+
+    def _views(self, seen: np.ndarray, still: bool) -> None:
+        """Viewpoints of the cells ``seen`` (flat indices) raised or dropped in this pair:
+        where their evidence began, and two views once seen again from min_baseline_m
+        away (or in still_min_frames pairs of a still rig)."""
+        if not seen.size:
+            return
+        c = self.config
+        fx = self.first_xy.reshape(-1, 2)
+        began = ~np.isfinite(fx[seen, 0])
+        fx[seen[began]] = self.pose[:2]
+        moved = np.hypot(fx[seen, 0] - self.pose[0], fx[seen, 1] - self.pose[1])
+        tv = self.two_views.reshape(-1)
+        sh_ = self.still_hits.reshape(-1)
+        if still:
+            sh_[seen] = np.minimum(sh_[seen] + 1, 30000)
+        tv[seen] |= (moved >= c.min_baseline_m) | (sh_[seen] >= c.still_min_frames)
 
     def _rays(self, ground_xy: np.ndarray, n_r: np.ndarray, use_kernel: bool = True
               ) -> np.ndarray:

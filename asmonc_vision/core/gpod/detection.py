@@ -249,11 +249,8 @@ class Detection(PlaneTracking):
                 obst_string &= n_seen + 1e-9 >= min_px
                 seen = drop & ~occluded
                 n_drop = np.bincount(sid[seen], weights=weight[seen], minlength=n_s) + 1e-9
-        drop_string = self._drop_strings(drop, n_drop, weight, pts, h, metric, n_s,
-                                         sid) & ~obst_string
-        if c.drop_fall_min_grade > 0 and drop_string.any():
-            drop_string &= ~self._falling_ground(drop & drop_string[sid], pts, h, metric,
-                                                 n_s, sid)
+        drop_string = self._drop_strings(drop, n_drop, weight, pts, h, metric, n_s, sid,
+                                         obst_string)
         obst &= obst_string[sid]
         drop &= drop_string[sid]
         sclass = np.where(obst_string[sid], 1, np.where(drop_string[sid], -1, 0)).astype(np.int8)
@@ -285,15 +282,19 @@ class Detection(PlaneTracking):
 
     def _drop_strings(self, drop: np.ndarray, n_drop: np.ndarray, weight: np.ndarray,
                       pts: np.ndarray, h: np.ndarray, metric: MetricPlane, n_s: int,
-                      sid: np.ndarray) -> np.ndarray:
+                      sid: np.ndarray, obst_string: np.ndarray) -> np.ndarray:
         """(n_s,) bool: the drop strings: ``min_drop_pixels`` of drop evidence (``n_drop``
         (n_s,)), or, with ``drop_region_pixels``, a string in a region of lower ground
-        (`_drop_regions`)."""
+        (`_drop_regions`); not an obstacle string (``obst_string`` (n_s,)), nor, with
+        ``drop_fall_min_grade``, ground falling away beyond a brow (`_falling_ground`)."""
         c = self.config
         out = n_drop >= c.min_drop_pixels
         if c.drop_region_pixels > 0.0:
             out |= self._drop_regions(drop & (n_drop[sid] > 1e-6), weight, pts, h, metric,
                                       n_s, sid)
+        out &= ~obst_string
+        if c.drop_fall_min_grade > 0 and out.any():
+            out &= ~self._falling_ground(drop & out[sid], pts, h, metric, n_s, sid)
         return out
 
     def _falling_ground(self, drop: np.ndarray, pts: np.ndarray, h: np.ndarray,
