@@ -143,12 +143,13 @@ def _along(s, lat, h):
 
 
 @pytest.mark.parametrize('seed', [0, 1, 2])
-def test_ground_falling_beyond_a_brow_is_no_drop_but_a_level_lower_ground_is(seed):
-    """`_falling_ground`: drop pixels along a joint running ahead beyond a brow (their
+def test_ground_bending_away_is_no_drop_nor_obstacle_but_a_step_is(seed):
+    """`_bending_ground`: drop pixels along a joint running ahead beyond a brow (their
     depth grows by 0.19 a metre from 3.3 to 5.5 m, 2 cm of noise) are ground falling
     away; those of the level lower ground beyond a 12 cm drop (the same joint, the same
     noise) stay a drop, and so do those of ground falling as steeply from 15 cm below
-    (a drop onto a slope down)."""
+    (a drop onto a slope down); the same heights mirrored above the ground (ground rising
+    beyond a dip; a 12 cm kerb's top; a rise from 15 cm up) likewise."""
     rng = np.random.default_rng(seed)
     s = np.sort(rng.uniform(3.3, 5.5, 30))
     lat = 0.5 + 0.02 * rng.normal(size=30)
@@ -158,6 +159,10 @@ def test_ground_falling_beyond_a_brow_is_no_drop_but_a_level_lower_ground_is(see
                        (-0.15 - 0.19 * (s - 3.3), False)):
         h = h + rng.normal(0.0, 0.02, 30)
         pts, plane = _along(s, lat, h)
-        got = GpodDetector()._falling_ground(drop, pts, h, plane, 2, sid)
+        got = GpodDetector()._bending_ground(drop, pts, h, plane, 2, sid, 1.0, -1.0)
+        assert got.tolist() == [falling, falling]
+        # mirrored: ground rising beyond a dip is ground, a kerb's level top is not
+        pts, plane = _along(s, lat, -h)
+        got = GpodDetector()._bending_ground(drop, pts, -h, plane, 2, sid, 0.7, 1.0)
         assert got.tolist() == [falling, falling]
 

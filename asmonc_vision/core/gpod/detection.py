@@ -224,15 +224,8 @@ class Detection(PlaneTracking):
             self._piece_rule(m, ex_mean, thr, usable, weight, min_px, n_s, obst)
         n_obst = np.bincount(sid[obst], weights=weight[obst], minlength=n_s) + 1e-9
         n_drop = np.bincount(sid[drop], weights=weight[drop], minlength=n_s) + 1e-9
-        obst_string = n_obst >= min_px
-        if obst_string.any():
-            # Obstacles stand on the ground: a string whose matched pixels all float
-            # higher than max_floating_height_m above it is a mismatch (a distant pole
-            # matched to the wrong edge), not an obstacle.
-            low = np.full(n_s, np.inf)
-            ok = reliable & in_range
-            np.minimum.at(low, sid[ok], h[ok])
-            obst_string &= low <= c.max_floating_height_m
+        obst_string = self._obstacle_strings(n_obst >= min_px, obst, reliable & in_range,
+                                             pts, h, metric, n_s, sid)
         if c.ambiguity_fraction > 0 and obst_string.any():
             obst_string &= ~self._ambiguous_strings(m, excess, obst, cand, el, er, thr_global,
                                                     n_s)
@@ -286,45 +279,63 @@ class Detection(PlaneTracking):
         """(n_s,) bool: the drop strings: ``min_drop_pixels`` of drop evidence (``n_drop``
         (n_s,)), or, with ``drop_region_pixels``, a string in a region of lower ground
         (`_drop_regions`); not an obstacle string (``obst_string`` (n_s,)), nor, with
-        ``drop_fall_min_grade``, ground falling away beyond a brow (`_falling_ground`)."""
+        ``ground_bend_min_grade``, ground falling away beyond a brow (`_bending_ground`)."""
         c = self.config
         out = n_drop >= c.min_drop_pixels
         if c.drop_region_pixels > 0.0:
             out |= self._drop_regions(drop & (n_drop[sid] > 1e-6), weight, pts, h, metric,
                                       n_s, sid)
         out &= ~obst_string
-        if c.drop_fall_min_grade > 0 and out.any():
-            out &= ~self._falling_ground(drop & out[sid], pts, h, metric, n_s, sid)
+        if c.ground_bend_min_grade > 0 and out.any():
+            out &= ~self._bending_ground(drop & out[sid], pts, h, metric, n_s, sid,
+                                         c.drop_cluster_radius_m, -1.0)
         return out
 
-    def _falling_ground(self, drop: np.ndarray, pts: np.ndarray, h: np.ndarray,
-                        metric: MetricPlane, n_s: int, sid: np.ndarray) -> np.ndarray:
-        """(n_s,) bool: the drop strings that are ground falling away beyond a brow: in a
-        cluster of drop pixels (``drop`` (K,) bool; feet clustered at
-        ``drop_cluster_radius_m``) of at least 8 pixels spread over 0.8 m or more along
-        the walking direction whose depths ``h`` (K,) (m above the ground reference) fit
-        a line falling at ``drop_fall_min_grade`` or more from less than
-        ``_FALL_MAX_START_M`` below the ground at its near end. Beyond a brow the ground
-        goes on falling from where the ground is, so the farther its points the deeper;
-        the lower ground beyond a drop is level, its depth the same near and far, and
-        starts a drop's depth down."""
+    def _obstacle_strings(self, strings: np.ndarray, obst: np.ndarray, ok: np.ndarray,
+                          pts: np.ndarray, h: np.ndarray, metric: MetricPlane, n_s: int,
+                          sid: np.ndarray) -> np.ndarray:
+        """(n_s,) bool: of the candidate obstacle strings ``strings`` (n_s,), those that
+        stand on the ground: a string whose reliably matched pixels (``ok`` (K,)) all
+        float higher than max_floating_height_m above it is a mismatch (a distant pole
+        matched to the wrong edge); strings whose obstacle pixels (``obst`` (K,)) are
+        ground rising beyond a dip (`_bending_ground`) are none."""
+        c = self.config
+        if strings.any():
+            low = np.full(n_s, np.inf)
+            np.minimum.at(low, sid[ok], h[ok])
+            strings = strings & (low <= c.max_floating_height_m)
+        if c.ground_bend_min_grade > 0 and strings.any():
+            strings = strings & ~self._bending_ground(obst & strings[sid], pts, h, metric,
+                                                      n_s, sid, c.cluster_radius_m, 1.0)
+        return strings
+
+    def _bending_ground(self, px: np.ndarray, pts: np.ndarray, h: np.ndarray,
+                        metric: MetricPlane, n_s: int, sid: np.ndarray, radius: float,
+                        sign: float) -> np.ndarray:
+        """(n_s,) bool: the strings that are ground bending away from the ground
+        reference: in a cluster of their pixels (``px`` (K,) bool; feet clustered at
+        ``radius`` m) of at least 8 pixels spread over 0.8 m or more along the walking
+        direction whose heights ``h`` (K,) (m above the ground reference; ``sign`` -1:
+        drop pixels, below it) fit a line leaving it at ``ground_bend_min_grade`` or
+        more from less than ``_BEND_MAX_START_M`` off it at its near end. Beyond a
+        brow the ground goes on falling, beyond a dip rising, from where the ground is:
+        the farther its points the farther off; the lower ground beyond a drop and the
+        top of a kerb are level, as far off near as far, and start a step away."""
         c = self.config
         out = np.zeros(n_s, bool)
-        idx = np.flatnonzero(drop)
+        idx = np.flatnonzero(px)
         if idx.size < 8:
             return out
         g2 = _ground_coords(pts[idx], h[idx], metric)
-        label = cluster_points_2d(g2, sid[idx], c.drop_cluster_radius_m)
+        label = cluster_points_2d(g2, sid[idx], radius)
         for k in range(int(label.max()) + 1):
             sel = label == k
-            s_k, h_k = g2[sel, 0], h[idx][sel]
+            s_k, h_k = g2[sel, 0], sign * h[idx][sel]
             if sel.sum() < 8 or float(s_k.max() - s_k.min()) < 0.8:
                 continue
             grade, at0 = (float(x) for x in np.polyfit(s_k, h_k, 1))
-            # ... starting where the ground is: less than a drop that matters
-            # (_FALL_MAX_START_M) below it at its near end
             near = grade * float(s_k.min()) + at0
-            if grade <= -c.drop_fall_min_grade and near > -_FALL_MAX_START_M:
+            if grade >= c.ground_bend_min_grade and near < _BEND_MAX_START_M:
                 out[sid[idx][sel]] = True
         return out
 
@@ -798,10 +809,10 @@ class Detection(PlaneTracking):
         return out
 
 
-#: `_falling_ground`: ground falling away beyond a brow starts where the ground is; a
-#: cluster whose line lies this far below the ground at its near end is a drop whatever
-#: its grade (the least drop the wearer must be told of, m)
-_FALL_MAX_START_M = 0.10
+#: `_bending_ground`: ground bending away beyond a brow or a dip starts where the ground
+#: is; a cluster whose line lies this far off the ground at its near end is a drop or an
+#: obstacle whatever its grade (the least step the wearer must be told of, m)
+_BEND_MAX_START_M = 0.10
 
 
 def _ground_coords(p: np.ndarray, hh: np.ndarray, metric: MetricPlane, axes: bool = False):
