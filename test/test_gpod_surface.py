@@ -92,7 +92,11 @@ def reports_ahead(profile, surface: bool, frames: int = 4, seed: int = 0,
     """Per tracked frame, the obstacles reported from ``from_m`` ahead (where the ground
     bends; nearer, this renderer's coarse texture gives a few 5-8 cm reports on flat
     ground too, with or without the surface)."""
-    det = GpodDetector(GpodConfig(surface_enabled=surface))
+    # the plane alone: no surface, and no ground_bend_min_grade either (which takes a
+    # steady bend's reports on its own)
+    det = GpodDetector(GpodConfig(surface_enabled=surface,
+                                  ground_bend_min_grade=GpodConfig().ground_bend_min_grade
+                                  if surface else 0.0))
     out = []
     for left, right in rendered(profile, frames, seed):
         r = det.process(left.copy(), right.copy(), CAM)
@@ -165,4 +169,32 @@ def test_ground_bending_away_is_no_drop_nor_obstacle_but_a_step_is(seed):
         pts, plane = _along(s, lat, -h)
         got = GpodDetector()._bending_ground(drop, pts, -h, plane, 2, sid, 0.7, 1.0)
         assert got.tolist() == [falling, falling]
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_short_or_gentle_bend_is_ground_but_a_short_look_at_lower_ground_is_a_drop(seed):
+    """`_bending_ground` on what a walker sees of a bend in a few frames: a joint
+    beyond a brow seen over 0.6 m (falling 0.16 a metre from 2 cm below the ground), and
+    the level top of a kerb ramp seen from the ramp over 3 m (falling at the ramp's
+    grade, 0.06 a metre), are ground; the level lower ground of a 12 cm drop seen over
+    0.6 m stays a drop; with ground_bend_min_span_m above the 0.6 m the short look is
+    not judged at all."""
+    rng = np.random.default_rng(seed)
+    sid = np.repeat([0, 1], 12)
+    drop = np.ones(24, bool)
+    short = np.sort(rng.uniform(2.4, 3.0, 24))
+    long_ = np.sort(rng.uniform(3.0, 6.0, 24))
+    lat = 0.1 + 0.02 * rng.normal(size=24)
+    noise = rng.normal(0.0, 0.01, 24)
+    for s, h, bend in ((short, -0.02 - 0.16 * (short - 2.4), True),
+                       (long_, -0.03 - 0.06 * (long_ - 3.0), True),
+                       (short, np.full(24, -0.12), False)):
+        pts, plane = _along(s, lat, h + noise)
+        got = GpodDetector()._bending_ground(drop, pts, h + noise, plane, 2, sid, 1.0, -1.0)
+        assert got.tolist() == [bend, bend]
+    pts, plane = _along(short, lat, -0.02 - 0.16 * (short - 2.4) + noise)
+    det = GpodDetector(GpodConfig(ground_bend_min_span_m=0.8))
+    got = det._bending_ground(drop, pts, -0.02 - 0.16 * (short - 2.4) + noise, plane, 2, sid,
+                              1.0, -1.0)
+    assert got.tolist() == [False, False]
 

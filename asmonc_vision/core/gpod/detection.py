@@ -314,13 +314,14 @@ class Detection(PlaneTracking):
                         sign: float) -> np.ndarray:
         """(n_s,) bool: the strings that are ground bending away from the ground
         reference: in a cluster of their pixels (``px`` (K,) bool; feet clustered at
-        ``radius`` m) of at least 8 pixels spread over 0.8 m or more along the walking
-        direction whose heights ``h`` (K,) (m above the ground reference; ``sign`` -1:
-        drop pixels, below it) fit a line leaving it at ``ground_bend_min_grade`` or
-        more from less than ``_BEND_MAX_START_M`` off it at its near end. Beyond a
-        brow the ground goes on falling, beyond a dip rising, from where the ground is:
-        the farther its points the farther off; the lower ground beyond a drop and the
-        top of a kerb are level, as far off near as far, and start a step away."""
+        ``radius`` m) of at least 8 pixels spread over ``ground_bend_min_span_m`` or
+        more along the walking direction whose heights ``h`` (K,) (m above the ground
+        reference; ``sign`` -1: drop pixels, below it) fit a line leaving it at
+        ``ground_bend_min_grade`` or more from less than ``_BEND_MAX_START_M`` off it at
+        its near end. Beyond a brow the ground goes on falling, beyond a dip rising,
+        from where the ground is: the farther its points the farther off; the lower
+        ground beyond a drop and the top of a kerb are level, as far off near as far,
+        and start a step away."""
         c = self.config
         out = np.zeros(n_s, bool)
         idx = np.flatnonzero(px)
@@ -331,7 +332,7 @@ class Detection(PlaneTracking):
         for k in range(int(label.max()) + 1):
             sel = label == k
             s_k, h_k = g2[sel, 0], sign * h[idx][sel]
-            if sel.sum() < 8 or float(s_k.max() - s_k.min()) < 0.8:
+            if sel.sum() < 8 or float(s_k.max() - s_k.min()) < c.ground_bend_min_span_m:
                 continue
             grade, at0 = (float(x) for x in np.polyfit(s_k, h_k, 1))
             near = grade * float(s_k.min()) + at0

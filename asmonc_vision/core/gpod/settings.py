@@ -362,13 +362,18 @@ class GpodConfig(PlausiblePlaneConfig):
         1.5, 'Pixels more than this far below the plane are ignored (mismatches), metres',
         range=(0.01, 100.0))
     ground_bend_min_grade: float = param(
-        0.08, 'A cluster of drop strings (drop_cluster_radius_m), or of obstacle strings '
-        '(cluster_radius_m), whose pixels, spread over at least 0.8 m along the walking '
-        'direction, lie farther below (above) the ground the farther they are, at this '
-        'grade or more (a line fitted to their heights), from less than 10 cm off the '
-        'ground at its near end, is ground bending away beyond a brow (a dip), not a drop '
-        '(an obstacle): the lower ground beyond a drop and the top of a kerb are level, '
-        'as far off near as far, and start a step away; 0 = off', range=(0.0, 10.0))
+        0.05, 'A cluster of drop strings (drop_cluster_radius_m), or of obstacle strings '
+        '(cluster_radius_m), whose pixels, spread over at least ground_bend_min_span_m '
+        'along the walking direction, lie farther below (above) the ground the farther '
+        'they are, at this grade or more (a line fitted to their heights), from less than '
+        '10 cm off the ground at its near end, is ground bending away beyond a brow (a '
+        'dip), not a drop (an obstacle): the lower ground beyond a drop and the top of a '
+        'kerb are level, as far off near as far, and start a step away (0.05: 1 in 20, '
+        'the least grade of a ramp; the top of a kerb ramp seen from the ramp falls away '
+        'at its grade); 0 = off', range=(0.0, 10.0))
+    ground_bend_min_span_m: float = param(
+        0.5, 'ground_bend_min_grade: the least spread of a cluster\'s pixels along the '
+        'walking direction for its line to be judged, metres', range=(0.05, 10.0))
     max_obstacle_height_m: float = param(
         2.5, 'Pixels higher than this above the plane are ignored (overhead, no hazard), '
         'metres', range=(0.05, 100.0))
