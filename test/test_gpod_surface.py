@@ -186,15 +186,15 @@ def test_short_or_gentle_bend_is_ground_but_a_short_look_at_lower_ground_is_a_dr
     long_ = np.sort(rng.uniform(3.0, 6.0, 24))
     lat = 0.1 + 0.02 * rng.normal(size=24)
     noise = rng.normal(0.0, 0.01, 24)
-    for s, h, bend in ((short, -0.02 - 0.16 * (short - 2.4), True),
-                       (long_, -0.03 - 0.06 * (long_ - 3.0), True),
-                       (short, np.full(24, -0.12), False)):
-        pts, plane = _along(s, lat, h + noise)
-        got = GpodDetector()._bending_ground(drop, pts, h + noise, plane, 2, sid, 1.0, -1.0)
+    brow = -0.02 - 0.16 * (short - 2.4) + noise
+    for s, h, bend in ((short, brow, True),
+                       (long_, -0.03 - 0.06 * (long_ - 3.0) + noise, True),
+                       (short, -0.12 + noise, False)):
+        pts, plane = _along(s, lat, h)
+        got = GpodDetector()._bending_ground(drop, pts, h, plane, 2, sid, 1.0, -1.0)
         assert got.tolist() == [bend, bend]
-    pts, plane = _along(short, lat, -0.02 - 0.16 * (short - 2.4) + noise)
+    pts, plane = _along(short, lat, brow)
     det = GpodDetector(GpodConfig(ground_bend_min_span_m=0.8))
-    got = det._bending_ground(drop, pts, -0.02 - 0.16 * (short - 2.4) + noise, plane, 2, sid,
-                              1.0, -1.0)
-    assert got.tolist() == [False, False]
+    assert det._bending_ground(drop, pts, brow, plane, 2, sid, 1.0, -1.0).tolist() == [
+        False, False]
 
