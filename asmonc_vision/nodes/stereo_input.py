@@ -54,8 +54,10 @@ class StereoInputConfig:
         1.0, 'an image with no partner this long (s of stamp time) is dropped with a warning',
         range=(0.05, 10.0))
     info_wait: float = param(
-        3.0, 'how long a pair waits for the first camera_info before it is skipped, s (once '
-        'this wait has run out, later pairs are skipped at once until a camera_info comes)',
+        8.0, 'how long a pair waits for the first camera_info before it is skipped, s (once '
+        'this wait has run out, later pairs are skipped at once until a camera_info comes; '
+        'a camera_info sent before this node saw its publisher comes again at the '
+        "publisher's next DDS heartbeat, every 3 s in Fast DDS)",
         range=(0.0, 10.0))
     input_timeout: float = param(
         2.0, 'no image pair for this long (s) is reported in /diagnostics', range=(0.1, 60.0))
@@ -278,12 +280,14 @@ class StereoInputNode(Node):
                 self.diag.update(Diagnostics.ERROR, f'internal error: {exc}')
 
     def _camera_for(self, pair: StereoPair) -> StereoCamera | None:
-        # The infos travel on their own topics and may arrive after the first images (on
-        # a loaded machine their subscription once matched 1-2 s after the images'): the
-        # first pair waits up to `info_wait` for them, the pairs behind it queue. Once
+        # The infos travel on their own topics and may arrive after the first images (one
+        # sent before this node saw its publisher comes again only at the publisher's next
+        # DDS heartbeat, 3 s later in Fast DDS): the first pair waits up to `info_wait`
+        # for them, the pairs behind it queue. Once
         # that wait has run out, pairs are skipped at once (no pair-per-`info_wait` crawl
         # that would overflow the queue) until a camera_info arrives.
-        deadline = time.monotonic() + self._settings.info_wait
+        began = time.monotonic()
+        deadline = began + self._settings.info_wait
         matched = self._infos_for(pair.stamp_ns)   # those stamped like it may be in by now
         pair.left_info = matched[0] or pair.left_info
         pair.right_info = matched[1] or pair.right_info
@@ -303,6 +307,10 @@ class StereoInputNode(Node):
                     throttle_duration_sec=2.0)
                 return None
             time.sleep(0.01)
+        waited = time.monotonic() - began
+        if waited > 0.1:
+            self.get_logger().info(f'the camera_info for the pair at {pair.stamp_ns / 1e9:.3f} s '
+                                   f'came {waited:.2f} s after it')
         key = (tuple(pair.left_info.p), tuple(pair.right_info.p),
                pair.left_info.width, pair.left_info.height)
         if key != self._camera_key:
