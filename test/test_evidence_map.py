@@ -451,6 +451,39 @@ def test_a_thing_out_of_sight_is_not_faded():
     assert not any(o.far_xy[:, 0].min() > 0.5 for o in emap2.objects)
 
 
+def _near_passer_by(emap: EvidenceMap) -> list[bool]:
+    """A person (clothes matched all across, 0.5 m wide) stands 1.25 m ahead for 1 s
+    while the wearer stands still, then is gone; plain ground but for a sparse patch far
+    beyond. The person's foot is below the image all along (the ground shows from 1.4 m
+    on), their body up to the camera's height in it. Returns, per pair once the
+    person has gone, whether anything is reported within 1.6 m ahead."""
+    far_sparse = ground_grid(6.5, 7.5, -4.0, 4.0, step=0.25)
+    body = np.concatenate([box_edges(1.25, dy, 1.7, half_width=0.0)
+                           for dy in np.arange(-0.25, 0.26, 0.05)])
+    out = []
+    for i in range(20):
+        parts = [(far_sparse, GROUND, None)] + ([(body, RAISED, None)] if i < 10 else [])
+        emap.update(0.1 * i, PLANE, evidence(parts, 0.0), None, True, CAM)
+        if i == 9:
+            assert any(o.nearest_xy[0] < 1.6 for o in emap.objects)   # the person, there
+        if i >= 10:
+            out.append(any(o.nearest_xy[0] < 1.6 for o in emap.objects))
+    return out
+
+
+def test_a_passer_by_near_the_wearer_seen_above_the_foot_is_not_remembered(monkeypatch):
+    """A thing near the wearer shows its upper part, not its foot: once the person has
+    gone, their body's place in the image (the point at _SEEN_SHARE of its height) is
+    in plain view with nothing seen there, so the cells fade and are not reported
+    after unseen_report_s. Judged by the foot alone (the share 0), they are reported
+    for as long as the wearer stands there."""
+    import asmonc_vision.core.evidence_map as em
+    gone = _near_passer_by(EvidenceMap(EvidenceMapConfig(enabled=True)))
+    assert sum(gone) <= 4 and not any(gone[4:])
+    monkeypatch.setattr(em, '_SEEN_SHARE', 0.0)
+    assert all(_near_passer_by(EvidenceMap(EvidenceMapConfig(enabled=True))))
+
+
 def _walk_past(emap: EvidenceMap, moved_in: bool):
     """The wearer stands 2 s, then walks 2.25 m on. A thing 0.6 m wide and 0.4 m tall at
     3 m: with ``moved_in`` a passer-by who steps in where the ground was seen (ground all

@@ -548,7 +548,9 @@ class EvidenceMap:
         within ``miss_guard_cells`` of it, loses ``miss_logodds``: a thing that stays
         where it is is seen again; a passer-by who walked on, or a mismatch, is not. In
         plain view: the foot of its evidence point is in both images
-        (``miss_margin_px`` inside their borders), the pair matched ground or a thing
+        (``miss_margin_px`` inside their borders), or for a raised cell the point at
+        ``_SEEN_SHARE`` of its height (a level chest camera sees the upper part of a tall
+        thing near the wearer, not its foot), the pair matched ground or a thing
         at its bearing beyond it (the sight line passed it), and no raised evidence
         nearer at its bearing (nothing in front hides it)."""
         c = self.config
@@ -561,13 +563,15 @@ class EvidenceMap:
         cells = np.flatnonzero((conf_r | conf_d) & ~got)
         if not cells.size:
             return
-        g, feet, _ = self._cell_feet(cells)
-        z = np.maximum(feet[:, 2], 1e-3)
-        u = cam.f * feet[:, 0] / z + cam.cx
-        v = cam.f * feet[:, 1] / z + cam.cy
-        m = c.miss_margin_px
-        view = ((feet[:, 2] > 0.1) & (u - cam.f * cam.baseline / z >= m)
-                & (u <= cam.width - 1 - m) & (v >= m) & (v <= cam.height - 1 - m))
+        g, feet, up = self._cell_feet(cells)
+        view = self._in_both_images(feet, cam)
+        # a raised thing near a level camera shows its upper part, not its foot: the
+        # point at _SEEN_SHARE of its height in view is in plain view too
+        raised_cell = conf_r[cells]
+        if raised_cell.any():
+            high = feet + (_SEEN_SHARE * np.maximum(self.h_x.reshape(-1)[cells], 0.0))[:, None] \
+                * up[None, :]
+            view |= raised_cell & self._in_both_images(high, cam)
         # in plain view: this pair saw something (ground or a thing) at the cell's
         # bearing beyond it, and no raised evidence nearer (1 degree bearing bins, each
         # widened by one bin either side)
@@ -591,6 +595,16 @@ class EvidenceMap:
         self.L_d.reshape(-1)[cells[conf_d[cells]]] -= c.miss_logodds
         np.clip(self.L_r, c.min_logodds, c.max_logodds, out=self.L_r)
         np.clip(self.L_d, c.min_logodds, c.max_logodds, out=self.L_d)
+
+    def _in_both_images(self, p: np.ndarray, cam: StereoCamera) -> np.ndarray:
+        """(M,) bool: points ``p`` (M, 3) of the left optical frame (m) that project
+        ``miss_margin_px`` or more inside both images."""
+        m = self.config.miss_margin_px
+        z = np.maximum(p[:, 2], 1e-3)
+        u = cam.f * p[:, 0] / z + cam.cx
+        v = cam.f * p[:, 1] / z + cam.cy
+        return ((p[:, 2] > 0.1) & (u - cam.f * cam.baseline / z >= m)
+                & (u <= cam.width - 1 - m) & (v >= m) & (v <= cam.height - 1 - m))
 
     def _cell_feet(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The evidence points of ``cells`` (flat indices): (M, 2) on the ground (wearer
@@ -749,6 +763,10 @@ class EvidenceMap:
 
 #: bearings from -90 to 90 degrees in 1 degree bins (`EvidenceMap._unseen`)
 _BINS = 180
+#: `EvidenceMap._unseen`: a raised cell is in plain view when the point at this share of
+#: its height is (the part of a tall thing a level camera sees near the wearer, below
+#: its top, whose edge may be level and unmatched)
+_SEEN_SHARE = 0.75
 
 
 def _bearing_bin(xy: np.ndarray) -> np.ndarray:

@@ -54,8 +54,9 @@ class EvidenceMapConfig:
         'missed (the matched points of a thing scatter along the line of sight)',
         range=(0, 10))
     miss_margin_px: float = param(
-        5.0, 'a cell is in plain view when the foot of its evidence point lies this far '
-        'inside both images, px', range=(0.0, 100.0))
+        5.0, 'a cell is in plain view when the foot of its evidence point (a raised cell: '
+        'or the point at 3/4 of its height) lies this far inside both images, px',
+        range=(0.0, 100.0))
     min_ground_pixels: int = param(2, 'ground-matched edge pixels in a cell that clear '
                                    'it', range=(1, 1000))
     min_drop_pixels: int = param(
