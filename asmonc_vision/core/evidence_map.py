@@ -569,9 +569,9 @@ class EvidenceMap:
         # point at _SEEN_SHARE of its height in view is in plain view too
         raised_cell = conf_r[cells]
         if raised_cell.any():
-            high = feet + (_SEEN_SHARE * np.maximum(self.h_x.reshape(-1)[cells], 0.0))[:, None] \
-                * up[None, :]
-            view |= raised_cell & self._in_both_images(high, cam)
+            seen_at = _SEEN_SHARE * np.maximum(self.h_x.reshape(-1)[cells], 0.0)   # (M,) m
+            view |= raised_cell & self._in_both_images(feet + seen_at[:, None] * up[None, :],
+                                                       cam)
         # in plain view: this pair saw something (ground or a thing) at the cell's
         # bearing beyond it, and no raised evidence nearer (1 degree bearing bins, each
         # widened by one bin either side)

@@ -283,9 +283,9 @@ class StereoInputNode(Node):
         # The infos travel on their own topics and may arrive after the first images (one
         # sent before this node saw its publisher comes again only at the publisher's next
         # DDS heartbeat, 3 s later in Fast DDS): the first pair waits up to `info_wait`
-        # for them, the pairs behind it queue. Once
-        # that wait has run out, pairs are skipped at once (no pair-per-`info_wait` crawl
-        # that would overflow the queue) until a camera_info arrives.
+        # for them, the pairs behind it queue. Once that wait has run out, pairs are
+        # skipped at once (no pair-per-`info_wait` crawl that would overflow the queue)
+        # until a camera_info arrives.
         began = time.monotonic()
         deadline = began + self._settings.info_wait
         matched = self._infos_for(pair.stamp_ns)   # those stamped like it may be in by now
