@@ -263,6 +263,30 @@ def test_a_repeat_without_a_target_gives_the_newest_range_seen():
     assert logic._last_target is None
 
 
+def test_a_repeat_does_not_name_a_target_glimpsed_long_ago():
+    """WARNING announced about a passer-by (id 1); another report (id 2, nearer) comes
+    too soon after to be announced, then none while the ground comes and goes (the level
+    held): the repeat 2 s on says the announcement again, not the glimpse 1.6 s old,
+    which has moved on. A target seen within hold_time is the repeat's."""
+    logic = started(hold_time=1.0, timeout=3.0, repeat_period=2.0)
+    assert logic.update(0.1, [ob(2.3, id=1)]).obstacle_id == 1
+    assert logic.update(0.5, [ob(1.85, -8.0, id=2)]) is None      # within hold_time
+    for k in range(15):                                       # the ground LOST at times
+        logic.ground_status(0.6 + 0.1 * k, GroundStatus.LOST if k % 5 == 0
+                            else GroundStatus.TRACKING)
+        assert logic.update(0.6 + 0.1 * k, []) is None
+    d = logic.update(2.1, [])
+    assert d is not None and d.repeat and d.level == L.WARNING
+    assert d.obstacle_id == 1 and d.range == pytest.approx(2.3)
+    # seen within hold_time of the repeat: the repeat gives it
+    logic = started(hold_time=1.5, timeout=3.0, repeat_period=2.0)
+    logic.update(0.1, [ob(2.3, id=1)])
+    logic.ground_status(0.2, GroundStatus.LOST)
+    assert logic.update(1.5, [ob(1.85, -8.0, id=2)]) is None     # within hold_time
+    d = logic.update(2.15, [])
+    assert d is not None and d.repeat and d.obstacle_id == 2
+
+
 # --- faults --------------------------------------------------------------------------------
 
 def test_timeout_gives_fault_and_data_recovers():

@@ -23,7 +23,9 @@ number of plain-speech announcements for a blind pedestrian:
   ``repeat_period`` seconds while the level is not CLEAR. A repeat describes the target
   as last seen: the current one, or, when a frame shows none (the ground LOST as the
   wearer walks up to a wall, or a held level), the last one seen since the level was
-  announced -- never an older range than the newest measured.
+  announced if it is the one announced (never an older range than the newest measured)
+  or was seen within ``hold_time``; else it repeats the announcement (another target
+  seen once since, longer ago, is no news: a passer-by glimpsed nearer has moved on).
 * **Faults**: no obstacle list for longer than ``timeout`` seconds (measured on the
   caller's clock, the time messages *arrive*), or the ground plane LOST for longer than
   ``timeout``, or INITIALISING for longer than ``startup_grace``, gives FAULT, repeated
@@ -406,8 +408,9 @@ class AlarmLogic:
         self._below_since: float | None = None
         self._current = Decision(AlarmLevel.FAULT, TEXT_STARTING, t=float(t0))
         self._last_announce_t = float(t0)
-        #: the newest target seen while the current (obstacle) level holds
+        #: the newest target seen while the current (obstacle) level holds, and when
         self._last_target: ObstacleInfo | None = None
+        self._last_target_t = -math.inf
         self._speed: float | None = None       # m/s, smoothed, from walk_motion
         self._heading = 0.0                    # rad from the camera's axis, positive left
         self._speed_t: float | None = None
@@ -605,7 +608,7 @@ class AlarmLogic:
             tgt, level = self.select(t, obstacles)
             self._set_contact(t, tgt, level)
             if tgt is not None:
-                self._last_target = tgt
+                self._remember(t, tgt)
             self._below_since = None
             if level == AlarmLevel.CLEAR and self._ground == GroundStatus.LOST:
                 return None
@@ -616,7 +619,7 @@ class AlarmLogic:
         tgt, level = self.select(t, obstacles, cur.level)
         self._set_contact(t, tgt, level)
         if tgt is not None:
-            self._last_target = tgt
+            self._remember(t, tgt)
         if level > cur.level:
             self._below_since = None
             return self._announce(self._decide(t, level, tgt))
@@ -725,7 +728,7 @@ class AlarmLogic:
         self._set_contact(t, tgt, level)
         if level > AlarmLevel.CLEAR:
             self._below_since = None
-            self._last_target = tgt
+            self._remember(t, tgt)
             return self._announce(self._decide(t, level, tgt))
         if unknown is not None:
             self._below_since = None
@@ -763,10 +766,19 @@ class AlarmLogic:
             # A standing wearer has been told about this obstacle: not again and again.
             return None
         if tgt is None:
-            tgt = self._last_target          # the newest seen: nearer than when announced
+            # the newest seen (nearer than when announced) if it is what was announced,
+            # or seen within hold_time; an older other one (a passer-by glimpsed after
+            # the announcement, now elsewhere) is no news: the announcement is repeated
+            last = self._last_target
+            if last is not None and (last.id == cur.obstacle_id
+                                     or t - self._last_target_t <= self._cfg.hold_time):
+                tgt = last
         if tgt is None:
             return self._announce(dataclasses.replace(cur, t=t, repeat=True))
         return self._announce(self._decide(t, cur.level, tgt, repeat=True))
+
+    def _remember(self, t: float, tgt: ObstacleInfo | None) -> None:
+        self._last_target, self._last_target_t = tgt, t
 
     def _announce(self, d: Decision) -> Decision:
         self._current = d
