@@ -305,3 +305,37 @@ def test_a_step_at_a_knot_is_a_step(seed, rise):
         beyond = surf.known_until_m > at + 0.5
         assert not (beyond and abs(surf.profile(np.array([at + 0.5]))[0] - rise)
                     < abs(rise) / 2), (at, surf.checks)
+
+
+def kerb_ramp(start, length, rise, half):
+    """The ground's height (m) at (s, lat) m: a ramp rising ``rise`` over ``length`` from
+    ``start`` ahead, |lat| <= ``half``, between kerbs of ``rise`` beside it; level at
+    ``rise`` beyond."""
+    def height(s, lat):
+        ramp = rise * np.clip((np.asarray(s) - start) / length, 0.0, 1.0)
+        kerb = np.where(np.asarray(s) >= start, rise, 0.0)
+        return np.where(np.abs(lat) > half, kerb, ramp)
+    return height
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+@pytest.mark.parametrize('start', [2.9, 3.5, 4.3])
+def test_a_kerb_ramp_is_ground_and_its_kerbs_are_not(seed, start):
+    """A dropped kerb across the path (a 12 cm kerb whose middle 2 m is a 1.5 m ramp):
+    the kerb beside the ramp is a step beside the path, not across it, so the surface
+    follows the ramp up to the footway and stays known beyond; the kerbs' tops at the
+    ramp's foot stay 12 cm above it."""
+    rng = np.random.default_rng(seed)
+    rise, length, half = 0.12, 1.5, 1.0
+    height = kerb_ramp(start, length, rise, half)
+    origin, fwd, left = ground_axes(PLANE)
+    s = rng.uniform(1.5, 9.0, 4000)
+    lat = rng.uniform(-2.0, 2.0, s.size)
+    p = origin + s[:, None] * fwd + lat[:, None] * left + height(s, lat)[:, None] * PLANE.normal_up
+    surf = fit_ground_surface(_through_camera(p, rng, 0.15), PLANE)
+    assert surf.known_until_m >= start + length + 1.0, surf.checks
+    ahead = np.linspace(start, start + length + 1.0, 12)
+    assert np.max(np.abs(surf.profile(ahead) - height(ahead, 0.0))) < 0.04
+    foot = origin + (start + 0.2) * fwd + 1.5 * left + rise * PLANE.normal_up
+    assert surf.height_above(foot[None, :])[0] == pytest.approx(rise - 0.2 * rise / length,
+                                                                abs=0.04)

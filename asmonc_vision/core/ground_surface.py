@@ -29,7 +29,9 @@ taken only if it is ground, not an obstacle or a step:
   are fitted by a line plus a step at each of 9 places along the segment, and the best
   of these, if it cuts the line's residual sum by a quarter or is significant against
   the features' scatter, must have a step of at most ``max_step_m`` (a kerb of 10 cm is
-  a line plus a step; a slope is a line); nor at its start: the features' own line must
+  a line plus a step; a slope is a line) where the walking corridor
+  (``step_half_width_m``) shows it too (a kerb beside a kerb ramp is an obstacle beside
+  the path, not a step of the ground ahead); nor at its start: the features' own line must
   start where the surface is, within 7 cm (a knot lags a sharp bend by up to about 5 cm)
   or its own uncertainty (t < 4) (a
   kerb or a drop just at a knot has all its far side in the next segment, a line that
@@ -106,6 +108,11 @@ class GroundSurfaceConfig:
         0.04, 'Largest step inside a segment (the best line-plus-step fit of its '
         'features, when it cuts the residuals of the line alone by a quarter), metres: a step (a '
         'kerb) is not a slope', range=(0.001, 1.0))
+    step_half_width_m: float = param(
+        0.6, 'A step inside a segment counts when the features within this distance of '
+        'the walking line show it too (their median residual beyond it less that before '
+        'it, at least half of it), metres: a kerb beside the path (beside a kerb ramp) is '
+        'an obstacle there, not a step of the ground ahead', range=(0.1, 50.0))
     max_spread_m: float = param(
         0.05, "Largest robust spread (1.4826 MAD) of a segment's residuals, metres",
         range=(0.001, 1.0))
@@ -279,22 +286,25 @@ def _fit_segment(s: np.ndarray, h: np.ndarray, s_a: float, z_a: float, length: f
     return z_b
 
 
-def _best_step(t: np.ndarray, h: np.ndarray, length: float, splits: int = 9) -> float:
+def _best_step(t: np.ndarray, h: np.ndarray, length: float, splits: int = 9
+               ) -> tuple[float, float, float, float]:
     """The height (m) of the step that best explains a segment's features beside a
     line: for each split t* at 1/(splits+1) .. splits/(splits+1) of the segment,
     least squares of h = c + g t + delta [t > t*] over the features (t: (N,) m from the
-    segment's start, h: (N,) m); the |delta| of the split whose residual sum is least
+    segment's start, h: (N,) m). Returns (delta, t*, c, g) of the split whose residual
+    sum is least, delta
     if it is at most 3/4 of the line's alone, or if the step is significant against the
     features' own scatter (its t statistic, sqrt((rss_line - rss) / (rss / (N - 3))),
     at least ``_STEP_T``: a kerb among noisy far features cuts the residual sum by less
-    than a quarter, yet by many times the noise), else 0 (a slope has no step). NaN
-    with fewer than 3 features on either side of every split.
+    than a quarter, yet by many times the noise), else 0 (a slope has no step). A NaN
+    step with fewer than 3 features on either side of every split.
 
     Every split is solved at once from the sums of the normal equations (A^T A) x =
     A^T h, A = [1, t, [t > t*]]; the residual sum is h^T h - x^T A^T h (a few
     microseconds where a least-squares call per split took tens)."""
+    none = (math.nan, math.nan, math.nan, math.nan)
     if t.size < 6:
-        return math.nan
+        return none
     t = np.asarray(t, float)
     h = np.asarray(h, float)
     n, st, stt = float(t.size), float(t.sum()), float(t @ t)
@@ -302,7 +312,7 @@ def _best_step(t: np.ndarray, h: np.ndarray, length: float, splits: int = 9) -> 
     # the line alone: rss = h^T h - x^T A^T h with A = [1, t]
     det = n * stt - st * st
     if det <= 1e-12 * max(n * stt, 1e-300):
-        return math.nan
+        return none
     c0 = (stt * sh - st * sth) / det
     g0 = (n * sth - st * sh) / det
     rss_line = max(shh - (c0 * sh + g0 * sth), 0.0)
@@ -311,7 +321,7 @@ def _best_step(t: np.ndarray, h: np.ndarray, length: float, splits: int = 9) -> 
     na = after.sum(axis=1).astype(float)
     valid = np.minimum(na, n - na) >= 3
     if not valid.any():
-        return math.nan
+        return none
     sta = after @ t
     sha = after @ h
     ata = np.empty((splits, 3, 3))
@@ -325,7 +335,8 @@ def _best_step(t: np.ndarray, h: np.ndarray, length: float, splits: int = 9) -> 
     k = int(np.argmin(rss))
     best_rss = max(float(rss[k]), 0.0)
     significant = rss_line - best_rss >= _STEP_T ** 2 * best_rss / max(n - 3.0, 1.0)
-    return abs(float(coef[k, 2])) if best_rss <= 0.75 * rss_line or significant else 0.0
+    delta = float(coef[k, 2]) if best_rss <= 0.75 * rss_line or significant else 0.0
+    return delta, float(cuts[k]), float(coef[k, 0]), float(coef[k, 1])
 
 
 def _boundary_step(t: np.ndarray, h: np.ndarray, z_a: float) -> float:
@@ -348,6 +359,30 @@ def _boundary_step(t: np.ndarray, h: np.ndarray, z_a: float) -> float:
     se = sd * math.sqrt(1.0 / t.size + tm * tm / sxx)
     delta = abs(c0 - z_a)
     return delta if delta >= _STEP_T * max(se, 1e-9) else 0.0
+
+
+def _path_step(t: np.ndarray, lat: np.ndarray, h: np.ndarray, z_a: float, length: float,
+               half_width: float) -> float:
+    """The step (m) of the ground ahead in a segment's features (t: (N,) m from its
+    start, lat: (N,) m to the left, h: (N,) m): inside the segment (`_best_step`) if the
+    walking corridor (|lat| <= ``half_width``) shows it too (the median residual of its
+    features beyond the step less that of those before it, at least half the step the
+    same way, when it has 3 features on each side), or at the segment's start
+    (`_boundary_step`) if larger and at least _KNOT_STEP_M. A kerb across the path
+    steps in the corridor; a kerb beside the path (beside a kerb ramp) does not: it is an
+    obstacle beside the path, not a step of the ground ahead."""
+    delta, cut, c0, g = _best_step(t, h, length)
+    step = abs(delta)
+    if step > 0.0:
+        path = np.abs(lat) <= half_width
+        res = h[path] - (c0 + g * t[path])
+        after = t[path] > cut
+        if np.count_nonzero(after) >= 3 and np.count_nonzero(~after) >= 3:
+            shift = float(np.median(res[after]) - np.median(res[~after]))
+            if shift * math.copysign(1.0, delta) < 0.5 * step:
+                step = 0.0
+    at_start = _boundary_step(t, h, z_a)
+    return max(step, at_start) if at_start >= _KNOT_STEP_M else step
 
 
 def depth_noise(cam: StereoCamera, d, sigma_px) -> np.ndarray:
@@ -484,11 +519,8 @@ def _segment(feats: tuple, s_a: float, z_a: float, grade: float, c: GroundSurfac
     # a feature's noise about the segment: its depth's, along its ray, across the line
     dd = np.abs(e_h[inseg] - new_grade * e_s[inseg])
     on = np.abs(res) <= np.maximum(c.gate_m, 2.5 * dd)
-    # a step inside the segment, or at its start
-    step = _best_step(ss[on] - s_a, hh[on], length)
-    at_start = _boundary_step(ss[on] - s_a, hh[on], z_a)
-    if at_start >= _KNOT_STEP_M:
-        step = max(step, at_start)
+    # a step across the walking corridor inside the segment, or at its start
+    step = _path_step(ss[on] - s_a, ll[on], hh[on], z_a, length, c.step_half_width_m)
     spread = _mad(res[on])
     # the spread of a segment is the ground's own unevenness and the disparity noise
     noise = float(np.median(dd[on])) if on.any() else 0.0

@@ -509,9 +509,13 @@ class GpodConfig(PlausiblePlaneConfig):
         0.25, 'surface: largest rise of the grade (rise per metre) from one segment to '
         'the next, the ground bending up (a dip; a kerb up is a step)', range=(0.0, 2.0))
     surface_max_step_m: float = param(
-        0.04, "surface: largest difference of the median residuals of a segment's near "
-        'and far halves, metres (a step inside a segment is not a slope)',
+        0.04, "surface: largest step in a segment's features (the best line-plus-step fit) "
+        'across the walking corridor, metres (a step inside a segment is not a slope)',
         range=(0.001, 1.0))
+    surface_step_half_width_m: float = param(
+        0.6, 'surface: a step counts when the features within this distance of the walking '
+        'line show it too, metres (a kerb beside a kerb ramp is beside the path, not a step '
+        'of the ground ahead)', range=(0.1, 50.0))
     surface_min_width_m: float = param(
         0.8, "surface: least width across the path of a segment's features, metres",
         range=(0.0, 50.0))
@@ -562,5 +566,6 @@ def surface_config(c: 'GpodConfig') -> GroundSurfaceConfig:
                                max_grade_fall=c.surface_max_grade_fall,
                                max_grade_rise=c.surface_max_grade_rise,
                                max_step_m=c.surface_max_step_m,
+                               step_half_width_m=c.surface_step_half_width_m,
                                min_width_m=c.surface_min_width_m)
 
