@@ -339,3 +339,22 @@ def test_a_kerb_ramp_is_ground_and_its_kerbs_are_not(seed, start):
     foot = origin + (start + 0.2) * fwd + 1.5 * left + rise * PLANE.normal_up
     assert surf.height_above(foot[None, :])[0] == pytest.approx(rise - 0.2 * rise / length,
                                                                 abs=0.04)
+
+
+def test_the_lowest_ground_does_not_rise_beyond_the_known():
+    """A slope seen rising to 7 m goes on rising beyond for the obstacle test; the
+    lowest ground it allows (for the drop test) is level there, as where a ramp reaches
+    its top; the known part and a falling tail are the surface's own."""
+    prof = slope_from(3.0, 5.0)
+    surf = fit_ground_surface(ground_points(prof, np.random.default_rng(0), s_max=7.0), PLANE)
+    assert surf.tail_grade > 0.05
+    low = surf.lowest()
+    assert low.tail_grade == 0.0
+    known = np.linspace(2.0, surf.known_until_m, 9)
+    assert np.allclose(low.profile(known), surf.profile(known))
+    beyond = np.array([surf.known_until_m + 1.0, 9.0])
+    assert np.allclose(low.profile(beyond), surf.profile(np.array([surf.known_until_m])))
+    assert np.all(surf.profile(beyond) > low.profile(beyond) + 0.04)
+    down = fit_ground_surface(ground_points(slope_from(3.0, -5.0), np.random.default_rng(0),
+                                            s_max=7.0), PLANE)
+    assert down.tail_grade < 0.0 and down.lowest() is down

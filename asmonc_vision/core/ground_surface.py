@@ -58,6 +58,7 @@ are cyclopean (u, v) with disparity d (docs/CONVENTIONS.md). No ROS here.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -185,6 +186,14 @@ class GroundSurface:
     def bends(self) -> bool:
         """Whether the profile leaves the plane anywhere."""
         return bool(np.any(self.knots_z != 0.0)) or self.tail_grade != 0.0
+
+    def lowest(self) -> 'GroundSurface':
+        """The lowest ground this surface allows: beyond the known ground a rise may end
+        where it was last seen (a ramp or a slope reaches its top, the ground beyond it
+        level), so the tail does not rise; the surface itself where it does not."""
+        if self.tail_grade <= 0.0:
+            return self
+        return dataclasses.replace(self, tail_grade=0.0)
 
     def profile(self, s: np.ndarray) -> np.ndarray:
         """(N,) surface height above the plane (m) at distances s (N,) along the ground

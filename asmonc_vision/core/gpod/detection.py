@@ -187,7 +187,7 @@ class Detection(PlaneTracking):
         features with their obstacle / drop classes, the detections nearest first)."""
         c = self.config
         thr, thr_global = self.pixel_thresholds(_noise_key(m), v)
-        pd, pts, h = self._ground_reference(u, v, d, cam, metric, thr / c.threshold_k)
+        pd, pts, h, low = self._ground_reference(u, v, d, cam, metric, thr / c.threshold_k)
         excess = d - pd
         feet = pts - h[:, None] * metric.normal_up[None, :]
         ground_range = np.linalg.norm(feet + metric.height * metric.normal_up[None, :], axis=1)
@@ -207,7 +207,8 @@ class Detection(PlaneTracking):
         # a periodic pattern matched a period off is no evidence either way
         periodic = self._periodic_matches(m, pd, thr)
         obst = (ex_mean > thr) & (h <= c.max_obstacle_height_m) & usable & ~periodic
-        below = (ex_mean < -thr) & (h >= -c.max_drop_depth_m)
+        # below the lowest ground the surface allows (``low`` px under its disparity)
+        below = (ex_mean < -thr - low) & (h >= -c.max_drop_depth_m)
         if obst.any():
             self._rejected_runs(el, m, cand, prev, run, reliable & in_range, h, excess, pd,
                                 below, slope, obst)
@@ -368,16 +369,21 @@ class Detection(PlaneTracking):
         return out
 
     def _ground_reference(self, u, v, d, cam: StereoCamera, metric: MetricPlane,
-                          sigma_px: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                          sigma_px: np.ndarray
+                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The ground the features are judged against: (its disparity at each feature,
-        the features' 3-D points, their heights above it). The plane, or with
-        ``surface_enabled`` the ground surface ahead where it bends (kept in
+        the features' 3-D points, their heights above it, how far (px, >= 0) the
+        disparity of the lowest ground it allows lies below its own there). The plane,
+        or with ``surface_enabled`` the ground surface ahead where it bends (kept in
         ``self._surface``), fitted knowing each feature's disparity noise ``sigma_px``
-        (K,) px (the obstacle threshold over ``threshold_k``) as a depth noise."""
+        (K,) px (the obstacle threshold over ``threshold_k``) as a depth noise. Beyond
+        the known ground a rise seen to go on is the obstacle test's ground, but it may
+        end there (`GroundSurface.lowest`): a drop is below the level ground too."""
         c = self.config
         pd = plane_disparity(self._abc, u, v)
         pts = cam.triangulate(u, v, d)
         h = metric.signed_height(pts)
+        low = np.zeros(pd.shape)
         self._surface = None
         if c.surface_enabled:
             # The reference of the obstacle test: the plane continued by the profile
@@ -389,7 +395,10 @@ class Detection(PlaneTracking):
                 pd_surf = surf.disparity(cam, u, v)
                 pd = np.where(np.isfinite(pd_surf), pd_surf, pd)
                 h = surf.height_above(pts)
-        return pd, pts, h
+                if surf.tail_grade > 0.0:
+                    pd_low = surf.lowest().disparity(cam, u, v)
+                    low = np.where(np.isfinite(pd_low), np.maximum(pd - pd_low, 0.0), 0.0)
+        return pd, pts, h, low
 
     def _runs(self, m: Matches, el: EdgeMap, excess: np.ndarray) -> tuple:
         """The matched runs: (`run_links`, `matched_run_length`, the excess smoothed along
