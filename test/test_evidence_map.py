@@ -541,6 +541,27 @@ def test_a_drop_is_confirmed_as_a_drop():
     assert drops[0].nearest_xy[0] == pytest.approx(4.0 - 0.6, abs=0.08)
 
 
+@pytest.mark.parametrize('width, reported', [(0.1, False), (0.2, False), (0.3, True),
+                                             (1.6, True)])
+def test_a_drop_is_wide(width, reported):
+    """A strip of lower ground 15 cm down at x = 4 m, one cell deep, seen from a walk,
+    0.1-1.6 m wide across the path: a drop the wearer can step off (a kerb, a step
+    down) is wide, so a drop region of fewer than min_drop_cells (3) cells is not
+    reported (a brow seen at a grazing angle leaves a cell or two of lower ground);
+    with min_drop_cells 1 it is."""
+    emap = EvidenceMap(EvidenceMapConfig(enabled=True))
+    lower = ground_grid(4.01, 4.05, 0.01, 0.01 + width - 0.02, step=0.05)
+    lower[:, 2] = -0.15
+    ground = ground_grid(1.5, 3.95, step=0.1)
+    objs = walk(emap, lambda x: [(lower, DROP, None), (ground, GROUND, None)],
+                np.arange(0.0, 0.61, 0.12))
+    assert bool([o for o in objs[-1] if o.is_drop]) == reported
+    one = EvidenceMap(EvidenceMapConfig(enabled=True, min_drop_cells=1))
+    objs = walk(one, lambda x: [(lower, DROP, None), (ground, GROUND, None)],
+                np.arange(0.0, 0.61, 0.12))
+    assert [o for o in objs[-1] if o.is_drop]
+
+
 @pytest.mark.parametrize('weighs', [True, False])
 def test_ground_seen_for_long_outweighs_three_pairs_below_it(weighs):
     """Ground a few metres ahead seen for 7 pairs of a walk, then below the plane in 3

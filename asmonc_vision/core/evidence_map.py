@@ -64,7 +64,7 @@ Each pair, `EvidenceMap.update`:
    began where the ground was seen at most ``moved_in_s`` before (a thing that moved
    in, a passer-by, may have moved on; a thing walked up to covers its ground). Connected
    regions of them (8-connected, gaps of ``join_cells`` bridged) are obstacles
-   (drop regions: drop-offs) with the nearest point to the wearer, the top height, the
+   (drop regions of at least ``min_drop_cells``: drop-offs, which are wide) with the nearest point to the wearer, the top height, the
    width across the line of sight, a confidence (the largest P of its cells) and an id
    kept from the region of the previous pair it overlaps most (published as the
    detector's reports by `core.map_reports.objects_to_obstacles`).
@@ -694,7 +694,7 @@ class EvidenceMap:
                 continue
             L = (self.L_d if drop else self.L_r).reshape(-1)
             for cs in self._label(mask):
-                if cs.size < c.min_region_cells:
+                if cs.size < (c.min_drop_cells if drop else c.min_region_cells):
                     continue
                 g = self.to_ground(self.pt_xy.reshape(-1, 2)[cs].astype(np.float64))
                 ahead = g[:, 0] > 0

@@ -125,6 +125,10 @@ class EvidenceMapConfig:
         "pass)", range=(0.0, 10.0))
     min_region_cells: int = param(1, 'least confirmed cells in a reported region',
                                   range=(1, 10000))
+    min_drop_cells: int = param(
+        3, 'least confirmed cells in a reported drop region: a drop the wearer can step '
+        'off (a kerb or a step down across the path) is wide; a cell or two of lower '
+        'ground is a brow seen at a grazing angle or noise', range=(1, 10000))
     unseen_report_s: float = param(
         0.35, 'a confirmed raised cell in the image (in plain view or hidden behind a '
         'nearer thing, which is reported itself) that the pair saw nothing at is not '
