@@ -64,10 +64,11 @@ Each pair, `EvidenceMap.update`:
    began where the ground was seen at most ``moved_in_s`` before (a thing that moved
    in, a passer-by, may have moved on; a thing walked up to covers its ground). Connected
    regions of them (8-connected, gaps of ``join_cells`` bridged) are obstacles
-   (drop regions of at least ``min_drop_cells``: drop-offs, which are wide) with the nearest point to the wearer, the top height, the
-   width across the line of sight, a confidence (the largest P of its cells) and an id
-   kept from the region of the previous pair it overlaps most (published as the
-   detector's reports by `core.map_reports.objects_to_obstacles`).
+   (drop regions of at least ``min_drop_cells``: drop-offs, which are wide) with the
+   nearest point to the wearer, the top height, the width across the line of sight,
+   a confidence (the largest P of its cells) and an id kept from the region of the
+   previous pair it overlaps most (published as the detector's reports by
+   `core.map_reports.objects_to_obstacles`).
 
 A cleared cell (``L_r ≤ 0`` and ``L_d ≤ 0``) forgets its height and its views, so a
 passer-by's cells, cleared by the ground seen behind them, leave no trail.
