@@ -297,16 +297,15 @@ def _fit_segment(s: np.ndarray, h: np.ndarray, s_a: float, z_a: float, length: f
 
 def _best_step(t: np.ndarray, h: np.ndarray, length: float, splits: int = 9
                ) -> tuple[float, float, float, float]:
-    """The height (m) of the step that best explains a segment's features beside a
-    line: for each split t* at 1/(splits+1) .. splits/(splits+1) of the segment,
-    least squares of h = c + g t + delta [t > t*] over the features (t: (N,) m from the
-    segment's start, h: (N,) m). Returns (delta, t*, c, g) of the split whose residual
-    sum is least, delta
-    if it is at most 3/4 of the line's alone, or if the step is significant against the
-    features' own scatter (its t statistic, sqrt((rss_line - rss) / (rss / (N - 3))),
-    at least ``_STEP_T``: a kerb among noisy far features cuts the residual sum by less
-    than a quarter, yet by many times the noise), else 0 (a slope has no step). A NaN
-    step with fewer than 3 features on either side of every split.
+    """The step that best explains a segment's features beside a line: for each split
+    t* at 1/(splits+1) .. splits/(splits+1) of the segment, least squares of
+    h = c + g t + delta [t > t*] over the features (t: (N,) m from the segment's start,
+    h: (N,) m). Returns (delta m, t* m, c m, g) of the split whose residual sum is
+    least; delta is 0 (a slope has no step) unless that sum is at most 3/4 of the line's
+    alone or the step is significant against the features' own scatter (its t
+    statistic, sqrt((rss_line - rss) / (rss / (N - 3))), at least ``_STEP_T``: a kerb
+    among noisy far features cuts the residual sum by less than a quarter, yet by many
+    times the noise). NaNs with fewer than 3 features on either side of every split.
 
     Every split is solved at once from the sums of the normal equations (A^T A) x =
     A^T h, A = [1, t, [t > t*]]; the residual sum is h^T h - x^T A^T h (a few
