@@ -327,11 +327,10 @@ class GpodConfig(PlausiblePlaneConfig):
         'camera with a longer one needs as many more pixels, the same angle (KITTI\'s '
         'f = 719 px: 5); 0 = min_obstacle_pixels on any camera', range=(0.0, 100000.0))
     max_floating_height_m: float = param(
-        0.3, 'An obstacle edge string must come down to within this height above the ground '
+        0.5, 'An obstacle edge string must come down to within this height above the ground '
         '(its lowest reliably matched pixel); obstacles stand on the ground, a string '
-        'floating higher is a mismatch (e.g. a distant pole matched to the wrong edge) or '
-        'a flat mark on ground the reference does not know (beyond a dip), metres',
-        range=(0.0, 100.0))
+        'floating higher is a mismatch (e.g. a distant pole matched to the wrong edge), '
+        'metres', range=(0.0, 100.0))
     detect_drops: bool = param(
         True, 'Report drop-offs (disparity below the ground plane) as negative obstacles')
     min_drop_pixels: int = param(
