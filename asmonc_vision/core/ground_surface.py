@@ -58,9 +58,8 @@ are cyclopean (u, v) with disparity d (docs/CONVENTIONS.md). No ROS here.
 """
 from __future__ import annotations
 
-import dataclasses
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -193,7 +192,7 @@ class GroundSurface:
         level), so the tail does not rise; the surface itself where it does not."""
         if self.tail_grade <= 0.0:
             return self
-        return dataclasses.replace(self, tail_grade=0.0)
+        return replace(self, tail_grade=0.0)
 
     def profile(self, s: np.ndarray) -> np.ndarray:
         """(N,) surface height above the plane (m) at distances s (N,) along the ground

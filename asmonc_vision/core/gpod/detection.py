@@ -370,10 +370,11 @@ class Detection(PlaneTracking):
 
     def _ground_reference(self, u, v, d, cam: StereoCamera, metric: MetricPlane,
                           sigma_px: np.ndarray
-                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | float]:
         """The ground the features are judged against: (its disparity at each feature,
-        the features' 3-D points, their heights above it, how far (px, >= 0) the
-        disparity of the lowest ground it allows lies below its own there). The plane,
+        the features' 3-D points, their heights above it, how far (px, >= 0; 0.0 where
+        the surface does not rise beyond the known ground) the disparity of the lowest
+        ground it allows lies below its own there). The plane,
         or with ``surface_enabled`` the ground surface ahead where it bends (kept in
         ``self._surface``), fitted knowing each feature's disparity noise ``sigma_px``
         (K,) px (the obstacle threshold over ``threshold_k``) as a depth noise. Beyond
@@ -383,7 +384,7 @@ class Detection(PlaneTracking):
         pd = plane_disparity(self._abc, u, v)
         pts = cam.triangulate(u, v, d)
         h = metric.signed_height(pts)
-        low = np.zeros(pd.shape)
+        low: np.ndarray | float = 0.0
         self._surface = None
         if c.surface_enabled:
             # The reference of the obstacle test: the plane continued by the profile
