@@ -164,7 +164,11 @@ def _start_nodes(nodes: dict, counter: _Counter, log_dir: Path, echo, env: dict)
                 cmd += ['-p', 'output:=none']
             children[name] = Child(name, cmd, log_dir, echo, env, echo_warnings=False)
         deadline = time.monotonic() + 90.0
-        while not all(connected(counter.node, nodes[n], False) for n in group):
+        def produced(name: str) -> frozenset[str]:
+            return frozenset(t for m in children if m != name for t in nodes[m].outputs)
+
+        while not all(connected(counter.node, nodes[n], False, children[n], produced(n))
+                      for n in group):
             dead = [n for n in group if not children[n].alive()]
             if dead or time.monotonic() > deadline:
                 for c in children.values():

@@ -44,6 +44,12 @@ def _stop(proc, sig=signal.SIGINT, timeout=20.0):
             proc.wait()
 
 
+def _linked(log, topic):
+    """Whether the node's log says its subscription of `topic` has a publisher."""
+    from asmonc_vision.replay.children import LINKED_RE
+    return any(m.group(1) == topic for m in LINKED_RE.finditer(log.read_text()))
+
+
 def test_killing_the_detector_is_heard_as_fault_within_half_a_second(tmp_path):
     import rclpy
     from rclpy.node import Node
@@ -97,7 +103,11 @@ def test_killing_the_detector_is_heard_as_fault_within_half_a_second(tmp_path):
         spin_until(lambda: subscribed('detector_node', '/stereo/right/image_rect')
                    and subscribed('audio_node', '/alarms'), 'the detector and audio nodes')
         procs['alarm'] = _start('asmonc_vision.nodes.alarm_node', {}, env, logs['alarm'])
-        spin_until(lambda: subscribed('alarm_node', '/obstacles'), 'the alarm node')
+        # seen in the graph is not yet linked between two processes: wait for the nodes'
+        # own word that the detector's results and the alarms reach them
+        spin_until(lambda: subscribed('alarm_node', '/obstacles')
+                   and _linked(tmp_path / 'alarm.log', '/obstacles')
+                   and _linked(tmp_path / 'audio.log', '/alarms'), 'the alarm node')
         procs['player'] = _start('asmonc_vision.nodes.player_node', {
             'bag': BAG.resolve(), 'rate': 1.0, 'exit_when_done': 'true',
             'wait_topics': json.dumps(['/stereo/left/image_rect=1', '/stereo/right/image_rect=1',

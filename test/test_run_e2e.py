@@ -4,8 +4,10 @@ the recorded /obstacles are scored against the bag's ground truth here, independ
 of the command's own summary."""
 import json
 import os
+import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -17,9 +19,20 @@ from conftest import BAGS
 
 
 def asmonc_run(*args, timeout=240, **env_overrides):
+    """`asmonc run ARGS` in its own process; on `timeout` its threads' stacks (SIGUSR1,
+    `cli.main`) are in the failure's message."""
     env = dict(os.environ, **env_overrides)
-    return subprocess.run([sys.executable, '-m', 'asmonc_vision.cli', 'run', *map(str, args)],
-                          env=env, capture_output=True, text=True, timeout=timeout)
+    proc = subprocess.Popen([sys.executable, '-m', 'asmonc_vision.cli', 'run', *map(str, args)],
+                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.send_signal(signal.SIGUSR1)
+        time.sleep(2.0)
+        proc.kill()
+        out, err = proc.communicate()
+        pytest.fail(f'asmonc run {args} still running after {timeout} s:\n{out}\n{err}')
+    return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
 
 
 def strict_json(path):
@@ -210,6 +223,33 @@ class _FakeMonitor:
         with self.lock:
             self.gait_states += 1
             self.last_gait_at = time.monotonic()
+
+
+def test_a_node_is_connected_once_it_logs_that_its_inputs_from_the_graph_are_linked(tmp_path):
+    """Seen in the ROS graph is not yet linked between two processes: a node with an input
+    that another running node publishes counts as connected only once its log says the
+    subscription has matched a publisher (`watch_input_links`)."""
+    from types import SimpleNamespace
+
+    from asmonc_vision.graph import GraphNode
+    from asmonc_vision.nodes.common import LINKED_LINE
+    from asmonc_vision.replay.children import Child, connected
+
+    line = '[INFO] [1.5] [alarm_node]: ' + LINKED_LINE.format(topic='/obstacles', n=2)
+    child = Child('alarm', [sys.executable, '-c', f'print({line!r})'], tmp_path,
+                  lambda s: None, dict(os.environ))
+    assert child.proc.wait(timeout=30) == 0
+    child.stop()
+    assert child.linked == {'/obstacles'}
+    everyone = [SimpleNamespace(node_name='alarm_node')]
+    graph = SimpleNamespace(get_publishers_info_by_topic=lambda t: everyone,
+                            get_subscriptions_info_by_topic=lambda t: everyone)
+    spec = GraphNode('alarm', 'alarm_node', 'm', 'alarm_node', 'images', ('/alarms',),
+                     ('/obstacles', '/gait/state'), 'alarm.yaml')
+    assert connected(graph, spec, False, child, frozenset({'/obstacles', '/other'}))
+    # an input of the graph not yet linked; and one without a producer is not waited for
+    assert not connected(graph, spec, False, child, frozenset({'/gait/state'}))
+    assert connected(graph, spec, False, child, frozenset())
 
 
 def test_the_gait_node_is_stopped_after_its_last_state_not_before():

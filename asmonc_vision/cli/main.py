@@ -16,6 +16,9 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import faulthandler
+import signal
 import sys
 
 
@@ -73,6 +76,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    # `kill -USR1 PID` prints every thread's stack to stderr: where a run that seems stuck is
+    # (not where stderr is no file, as under a test's capture)
+    if hasattr(signal, 'SIGUSR1'):
+        with contextlib.suppress(OSError, ValueError, AttributeError):
+            faulthandler.register(signal.SIGUSR1, all_threads=True)
     args = build_parser().parse_args(argv)
     return int(args.func(args) or 0)
 

@@ -43,7 +43,7 @@ from std_msgs.msg import Header
 from asmonc_vision.core.alarm import (CHECK_PERIOD_S, AlarmConfig, AlarmLevel, AlarmLogic,
                                       Contact, Decision, ObstacleInfo, WalkingSpeed)
 from asmonc_vision.nodes.common import (ALARM_QOS, RESULT_QOS, SENSOR_QOS, Diagnostics,
-                                        declare_config, run_node)
+                                        declare_config, run_node, watch_input_links)
 from asmonc_vision.nodes.conversions import stamp_to_ns
 from asmonc_vision_msgs.msg import Alarm, GaitState, GroundPlane, ObstacleArray
 
@@ -145,6 +145,7 @@ class AlarmNode(Node):
         self.create_subscription(TransformStamped, '/egomotion', self._on_egomotion, SENSOR_QOS)
         self.create_subscription(GaitState, '/gait/state', self._on_gait, SENSOR_QOS)
         self._timer = self.create_timer(CHECK_PERIOD, self._on_timer, clock=self._steady)
+        watch_input_links(self, ('/obstacles',))
 
         # Silence at start must not mean "all clear".
         self._publish(self._logic.current, None)

@@ -47,7 +47,7 @@ from asmonc_vision.core.audio.render import URGENT
 from asmonc_vision.core.config import check_fields, param
 from asmonc_vision.nodes.alarm_node import CONTACT_TOPIC, contact_from_msg
 from asmonc_vision.nodes.common import (ALARM_QOS, RESULT_QOS, SENSOR_QOS, Diagnostics,
-                                        declare_config, run_node)
+                                        declare_config, run_node, watch_input_links)
 from asmonc_vision.nodes.conversions import stamp_to_ns
 from asmonc_vision_msgs.msg import Alarm, ObstacleArray
 
@@ -219,6 +219,7 @@ class AudioNode(Node):
                                  SENSOR_QOS)
         self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
         self.create_subscription(ObstacleArray, '/obstacles', self._on_obstacles, RESULT_QOS)
+        watch_input_links(self, ('/alarms',))
         # the cue clock is a plain thread, not an rclpy timer: a hundred executor wake-ups
         # a second cost about a tenth of a core on a small CPU, which the detector needs
         self._tick_stop = threading.Event()

@@ -188,6 +188,35 @@ class Diagnostics:
         self._pub.publish(msg)
 
 
+#: the log line of `watch_input_links` once an input has a publisher (read by `asmonc run`)
+LINKED_LINE = 'input {topic}: {n} publisher(s) matched'
+
+
+def watch_input_links(node: Node, topics: tuple[str, ...], period: float = 0.2) -> None:
+    """Log once, per topic of `topics` the node subscribes, when its subscription has
+    matched a publisher (`LINKED_LINE`), then stop watching.
+
+    Seeing a node's subscription in the ROS graph does not mean the publisher's process
+    has discovered it: DDS discovery between two processes can lag by seconds on a loaded
+    machine (a lost announcement waits for the next one), and a message published before
+    the match is lost. This line says the link itself is up; `asmonc run` waits for it
+    before playing the bag, and a person starting nodes by hand sees it in the log.
+    """
+    subs = [s for s in node.subscriptions if s.topic_name in topics]
+    pending = {s.topic_name: s for s in subs}
+
+    def _check() -> None:
+        for topic, sub in list(pending.items()):
+            n = sub.get_publisher_count()
+            if n > 0:
+                del pending[topic]
+                node.get_logger().info(LINKED_LINE.format(topic=topic, n=n))
+        if not pending:
+            node.destroy_timer(timer)
+
+    timer = node.create_timer(period, _check)
+
+
 def config_overrides(config: Any) -> list[Parameter]:
     """Parameter overrides that make a node declare exactly the settings `config`
     (a settings dataclass), for building nodes in-process. An empty list becomes an

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import threading
@@ -15,6 +16,9 @@ from asmonc_vision.replay.monitor import Console, Monitor
 
 #: the bag player's log line once it has published the whole bag (`nodes.player_node`)
 PLAYED_MARK = ']: published '
+#: a node's log line once its subscription of a topic has matched a publisher
+#: (`nodes.common.LINKED_LINE`)
+LINKED_RE = re.compile(r'\]: input (\S+): \d+ publisher\(s\) matched')
 
 
 class Child:
@@ -28,6 +32,8 @@ class Child:
         #: set when a log line contains ``done_mark`` (the player's end-of-bag line)
         self._done_mark = done_mark
         self.done = threading.Event()
+        #: the inputs whose subscription has matched a publisher, as the node logged them
+        self.linked: set[str] = set()
         self.log_path = log_dir / f'{log_name or name}.log'
         self._log = self.log_path.open('w')
         self._echo = echo
@@ -45,6 +51,8 @@ class Child:
             self._log.flush()
             if self._done_mark is not None and self._done_mark in line:
                 self.done.set()
+            if (m := LINKED_RE.search(line)) is not None:
+                self.linked.add(m.group(1))
             if any(m in line for m in self._marks):
                 self._echo(f'[{self.name}] {line.rstrip()}')
         self._log.flush()
@@ -146,9 +154,14 @@ def wait_topics(nodes: dict[str, GraphNode], topics: dict) -> list[str]:
     return [f'{t}={n}' for t, n in want.items() if n > 0 and t in topics]
 
 
-def connected(node, spec: GraphNode, recording: bool) -> bool:
+def connected(node, spec: GraphNode, recording: bool, child: Child | None = None,
+              produced: frozenset[str] = frozenset()) -> bool:
     """True once `spec`'s node publishes its outputs and subscribes its inputs (and the
-    recorder, when recording, subscribes its outputs)."""
+    recorder, when recording, subscribes its outputs), and, of its inputs in `produced`
+    (the outputs of the graph's other running nodes), `child` has logged each as matched
+    to a publisher: seen in the graph is not yet linked between two processes."""
+    if child is not None and not {t for t in spec.inputs if t in produced} <= child.linked:
+        return False
     for topic in spec.outputs:
         if spec.ros_name not in {i.node_name for i in node.get_publishers_info_by_topic(topic)}:
             return False

@@ -40,6 +40,11 @@ from asmonc_vision.replay.summary import (audio_outputs, bag_time, first_image_s
                                           summarise)
 
 
+#: seconds after the player's last line (and the last result) within which it exits: it
+#: waits at most `player_node.ACK_TIMEOUT` (4 s) for its subscribers' acknowledgements
+PLAYER_EXIT_GRACE = 10.0
+
+
 def _err(text: str) -> None:
     print(text, file=sys.stderr, flush=True)
 
@@ -176,6 +181,8 @@ class Replay:
         self.gait_stopper: GaitStopper | None = None
         self.injector: FaultSchedule | None = None
         self.stopped: set[str] = set()
+        #: the player played the whole bag and then did not exit (`PLAYER_EXIT_GRACE`)
+        self.player_hung = False
 
     # --- ROS side -------------------------------------------------------------------
 
@@ -238,8 +245,8 @@ class Replay:
         # has subscribed every output.
         deadline = time.monotonic() + 60.0
         while time.monotonic() < deadline:
-            if all(connected(self.monitor.node, self.nodes[n], self.recorder is not None)
-                   for n in names):
+            if all(connected(self.monitor.node, self.nodes[n], self.recorder is not None,
+                             self.children[n], self._produced(n)) for n in names):
                 return
             dead = [n for n, c in self.children.items() if not c.alive()]
             if dead:
@@ -247,6 +254,10 @@ class Replay:
                                    f'{self.children[dead[0]].log_path}')
             time.sleep(0.1)
         raise RuntimeError('the nodes did not connect within 60 s')
+
+    def _produced(self, name: str) -> frozenset[str]:
+        """The topics published by the running nodes other than `name`."""
+        return frozenset(t for n in self.children if n != name for t in self.nodes[n].outputs)
 
     def start_nodes(self) -> None:
         # The gait and alarm nodes last, in that order: their start-up graces (the
@@ -347,6 +358,14 @@ class Replay:
                     last_change = monitor.last_result_at or now
             if player_end is None and not player.alive():
                 player_end = now
+            if (player_end is None and player.done.is_set() and played_at is not None
+                    and now - max(last_change, played_at) > PLAYER_EXIT_GRACE):
+                # It said it played every message and has not exited: go on without it
+                # (stopped with the others) rather than wait for a process that hangs.
+                self.console.line(f'asmonc run: the player played the whole bag but had not '
+                                  f'exited {PLAYER_EXIT_GRACE:g} s later; stopping it', err=True)
+                self.player_hung = True
+                player_end = now
             # Played: the player said so (its last line, before it waits for the
             # subscribers' acknowledgements and exits), or every camera_info has come
             # back, or the player has ended.
@@ -376,6 +395,9 @@ class Replay:
         self.show_alarms()
         if self.gait_stopper is not None:
             self.gait_stopper.join(timeout=30.0)
+        if self.player_hung:
+            self.children['player'].stop()
+            return
         try:
             self.player_rc = self.children['player'].proc.wait(timeout=30)
         except subprocess.TimeoutExpired:
