@@ -63,6 +63,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from . import surface_kernels
 from .camera import MetricPlane, StereoCamera, ground_axes
 from .config import check_fields, param
 
@@ -307,15 +308,15 @@ def _best_step(t: np.ndarray, h: np.ndarray, length: float, splits: int = 9
     times the noise). NaNs with fewer than 3 features on either side of every split.
 
     Every split is solved at once from the sums of the normal equations (A^T A) x =
-    A^T h, A = [1, t, [t > t*]]; the residual sum is h^T h - x^T A^T h (a few
-    microseconds where a least-squares call per split took tens)."""
+    A^T h, A = [1, t, [t > t*]] (Cramer's rule); the residual sum is h^T h - x^T A^T h.
+    The sums are numpy's (pairwise), as `surface_kernels` repeats them."""
     none = (math.nan, math.nan, math.nan, math.nan)
     if t.size < 6:
         return none
     t = np.asarray(t, float)
     h = np.asarray(h, float)
-    n, st, stt = float(t.size), float(t.sum()), float(t @ t)
-    sh, sth, shh = float(h.sum()), float(t @ h), float(h @ h)
+    n, st, stt = float(t.size), float(t.sum()), float(np.sum(t * t))
+    sh, sth, shh = float(h.sum()), float(np.sum(t * h)), float(np.sum(h * h))
     # the line alone: rss = h^T h - x^T A^T h with A = [1, t]
     det = n * stt - st * st
     if det <= 1e-12 * max(n * stt, 1e-300):
@@ -329,21 +330,42 @@ def _best_step(t: np.ndarray, h: np.ndarray, length: float, splits: int = 9
     valid = np.minimum(na, n - na) >= 3
     if not valid.any():
         return none
-    sta = after @ t
-    sha = after @ h
+    sta = np.where(after, t[None, :], 0.0).sum(axis=1)
+    sha = np.where(after, h[None, :], 0.0).sum(axis=1)
     ata = np.empty((splits, 3, 3))
     ata[:, 0, 0], ata[:, 0, 1], ata[:, 0, 2] = n, st, na
     ata[:, 1, 0], ata[:, 1, 1], ata[:, 1, 2] = st, stt, sta
     ata[:, 2, 0], ata[:, 2, 1], ata[:, 2, 2] = na, sta, na
     ath = np.stack([np.full(splits, sh), np.full(splits, sth), sha], axis=1)   # (K, 3)
     ata[~valid] = np.eye(3)                         # placeholders, never chosen
-    coef = np.linalg.solve(ata, ath[:, :, None])[:, :, 0]                   # (K, 3)
+    coef = np.stack(_solve3(ata, ath), axis=1)                             # (K, 3)
     rss = np.where(valid, shh - np.sum(coef * ath, axis=1), np.inf)
     k = int(np.argmin(rss))
     best_rss = max(float(rss[k]), 0.0)
     significant = rss_line - best_rss >= _STEP_T ** 2 * best_rss / max(n - 3.0, 1.0)
     delta = float(coef[k, 2]) if best_rss <= 0.75 * rss_line or significant else 0.0
     return delta, float(cuts[k]), float(coef[k, 0]), float(coef[k, 1])
+
+
+def _solve3(m: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The solutions (x0, x1, x2), each (K,), of the 3x3 systems m x = r (m: (K, 3, 3),
+    r: (K, 3)) by Cramer's rule, as `surface_kernels` computes them."""
+    def e(i, j):
+        return m[:, i, j]
+    r0, r1, r2 = r[:, 0], r[:, 1], r[:, 2]
+    det = (e(0, 0) * (e(1, 1) * e(2, 2) - e(1, 2) * e(2, 1))
+           - e(0, 1) * (e(1, 0) * e(2, 2) - e(1, 2) * e(2, 0))
+           + e(0, 2) * (e(1, 0) * e(2, 1) - e(1, 1) * e(2, 0)))
+    x0 = (r0 * (e(1, 1) * e(2, 2) - e(1, 2) * e(2, 1))
+          - e(0, 1) * (r1 * e(2, 2) - e(1, 2) * r2)
+          + e(0, 2) * (r1 * e(2, 1) - e(1, 1) * r2)) / det
+    x1 = (e(0, 0) * (r1 * e(2, 2) - e(1, 2) * r2)
+          - r0 * (e(1, 0) * e(2, 2) - e(1, 2) * e(2, 0))
+          + e(0, 2) * (e(1, 0) * r2 - r1 * e(2, 0))) / det
+    x2 = (e(0, 0) * (e(1, 1) * r2 - r1 * e(2, 1))
+          - e(0, 1) * (e(1, 0) * r2 - r1 * e(2, 0))
+          + r0 * (e(1, 0) * e(2, 1) - e(1, 1) * e(2, 0))) / det
+    return x0, x1, x2
 
 
 def _boundary_step(t: np.ndarray, h: np.ndarray, z_a: float) -> float:
@@ -362,7 +384,7 @@ def _boundary_step(t: np.ndarray, h: np.ndarray, z_a: float) -> float:
     g = float(np.sum((t - tm) * (h - h.mean()))) / sxx
     c0 = float(h.mean()) - g * tm
     res = h - (c0 + g * t)
-    sd = math.sqrt(float(res @ res) / max(t.size - 2, 1))
+    sd = math.sqrt(float(np.sum(res * res)) / max(t.size - 2, 1))
     se = sd * math.sqrt(1.0 / t.size + tm * tm / sxx)
     delta = abs(c0 - z_a)
     return delta if delta >= _STEP_T * max(se, 1e-9) else 0.0
@@ -500,9 +522,26 @@ def _nominal_knots(first: float, last: float, c: GroundSurfaceConfig) -> np.ndar
 def _segment(feats: tuple, s_a: float, z_a: float, grade: float, c: GroundSurfaceConfig
              ) -> tuple[SegmentCheck, float, float]:
     """One segment of the profile from (s_a, z_a) after a segment of ``grade``, fitted to
-    the features ``feats`` = (s, lat, h, e_s, e_h) (N,) m each (e_s, e_h: how far a
-    feature's s and h move for one standard deviation of its depth): (its check, its
-    length (knot_spacing_m, less at far_m), its far knot's height)."""
+    the features ``feats`` = (s, lat, h, e_s, e_h) (N,) float64 m each (e_s, e_h: how far
+    a feature's s and h move for one standard deviation of its depth): (its check, its
+    length (knot_spacing_m, less at far_m), its far knot's height). Compiled
+    (`surface_kernels.segment_kernel`) where numba is, else `_segment_numpy`: the same
+    results."""
+    kernel = surface_kernels.nb_segment
+    if kernel is None:
+        return _segment_numpy(feats, s_a, z_a, grade, c)
+    length = min(c.knot_spacing_m, c.far_m - s_a)
+    rule, n_in, width, change, step, spread, z_b = kernel(
+        *feats, float(s_a), float(z_a), float(grade), float(length), c.gate_m,
+        c.max_grade_rise, c.max_grade_fall, c.min_features, c.min_width_m, c.smoothness_m,
+        c.step_half_width_m, c.max_step_m, c.max_spread_m, _STEP_T, _KNOT_STEP_M)
+    return (SegmentCheck(surface_kernels.RULES[rule], int(n_in), float(width), float(change),
+                         float(step), float(spread)), length, float(z_b))
+
+
+def _segment_numpy(feats: tuple, s_a: float, z_a: float, grade: float,
+                   c: GroundSurfaceConfig) -> tuple[SegmentCheck, float, float]:
+    """`_segment` in numpy."""
     s, lat, h, e_s, e_h = feats
     length = min(c.knot_spacing_m, c.far_m - s_a)
     z_line = z_a + grade * (s - s_a)            # the straight continuation

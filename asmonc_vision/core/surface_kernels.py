@@ -1,0 +1,346 @@
+"""The ground surface's segment test (`ground_surface._segment`), compiled.
+
+One segment of the profile is fitted and judged from a few hundred features with some
+sixty small numpy calls (selections, medians, percentiles, 3x3 solves), about 0.4 ms a
+segment and 3 ms a frame in call overheads alone. `segment_kernel` does the same
+arithmetic in one numba function: the same sums in the same order (numpy's pairwise
+summation, `pairwise_sum`), the same order statistics, numpy's linear interpolation of
+percentiles and the same closed-form 3x3 solve, so that it gives results identical to
+the numpy path (`ground_surface._segment_numpy`; tested on random and recorded
+features). Without numba the numpy path runs.
+
+Arguments are float64 arrays of the features (N,) in metres (s along the ground ahead,
+lat to the left, h above the plane, e_s and e_h: how far s and h move for one standard
+deviation of the feature's depth) and the segment's scalars; see `segment_kernel`.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .jit import jit as _jit
+from .jit import warmed as _warmed
+
+#: `segment_kernel`'s verdicts, in the order the rules are tried
+RULES = ('', 'rule_support', 'rule_grade', 'rule_step', 'rule_spread')
+
+
+def _pairwise_leaf(a, lo, hi):
+    """numpy's pairwise summation of a[lo:hi] for at most 128 values: in order below 8
+    values, else 8 partial sums combined pairwise, then the rest in order."""
+    n = hi - lo
+    if n < 8:
+        r = 0.0
+        for i in range(lo, hi):
+            r += a[i]
+        return r
+    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
+    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
+    m = lo + n - n % 8
+    for i in range(lo + 8, m, 8):
+        r0 += a[i]
+        r1 += a[i + 1]
+        r2 += a[i + 2]
+        r3 += a[i + 3]
+        r4 += a[i + 4]
+        r5 += a[i + 5]
+        r6 += a[i + 6]
+        r7 += a[i + 7]
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    for i in range(m, hi):
+        res += a[i]
+    return res
+
+
+def pairwise_sum(a, lo, hi):
+    """``a[lo:hi].sum()`` of a contiguous float64 array exactly as numpy adds it: above
+    128 values, the sums of the two halves (split at a multiple of 8) added, each summed
+    alike (numpy's recursion, on an explicit stack: numba cannot call a recursive
+    function from another compiled one)."""
+    if hi - lo <= 128:
+        return nb_pairwise_leaf(a, lo, hi)
+    los = np.empty(64, np.int64)
+    his = np.empty(64, np.int64)
+    phase = np.zeros(64, np.int64)
+    left = np.empty(64)
+    top = 0
+    los[0], his[0] = lo, hi
+    ret = 0.0
+    while top >= 0:
+        a_lo, a_hi = los[top], his[top]
+        n = a_hi - a_lo
+        if n <= 128:
+            ret = nb_pairwise_leaf(a, a_lo, a_hi)
+            top -= 1
+            continue
+        n2 = n // 2
+        n2 -= n2 % 8
+        if phase[top] == 0:              # the left half first
+            phase[top] = 1
+            top += 1
+            los[top], his[top], phase[top] = a_lo, a_lo + n2, 0
+        elif phase[top] == 1:            # the left half's sum is in ret: the right half
+            left[top] = ret
+            phase[top] = 2
+            top += 1
+            los[top], his[top], phase[top] = a_lo + n2, a_hi, 0
+        else:                            # both: their sum goes to the caller
+            ret = left[top] + ret
+            top -= 1
+    return ret
+
+
+def _total(a):
+    return nb_pairwise_sum(a, 0, a.shape[0])
+
+
+def _percentile(x, q):
+    """``np.percentile(x, 100 q)`` for q in [0, 1] (numpy's 'linear' method: the order
+    statistics around (n - 1) q and numpy's interpolation between them)."""
+    xs = np.sort(x)
+    n = xs.shape[0]
+    virtual = (n - 1) * q
+    lo = int(math.floor(virtual))
+    hi = lo + 1
+    if lo >= n - 1:
+        lo = hi = n - 1
+    gamma = virtual - math.floor(virtual)
+    a, b = xs[lo], xs[hi]
+    diff = b - a
+    if gamma >= 0.5:
+        return b - diff * (1.0 - gamma)
+    return a + diff * gamma
+
+
+def _fit_line_knot(t, h, z_a, z_prior, sigma_prior, scale, iterations):
+    """`ground_surface._fit_segment` with t = (s - s_a) / length precomputed."""
+    z_b = z_prior
+    n = t.shape[0]
+    wtt = np.empty(n)
+    wth = np.empty(n)
+    for _ in range(iterations):
+        for i in range(n):
+            res = h[i] - (z_a + (z_b - z_a) * t[i])
+            x = min(max(abs(res) / scale, 0.0), 1.0)
+            y = 1.0 - x * x
+            w = y * y
+            wtt[i] = w * t[i] * t[i]
+            wth[i] = w * t[i] * (h[i] - z_a + z_a * t[i])
+        a = nb_total(wtt) / scale ** 2 + 1.0 / sigma_prior ** 2
+        b = nb_total(wth) / scale ** 2 + z_prior / sigma_prior ** 2
+        z_b = b / a
+    return z_b
+
+
+def _solve3(m, r):
+    """The solution of the 3x3 system m x = r by Cramer's rule (m: (3, 3), r: (3,))."""
+    det = (m[0, 0] * (m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1])
+           - m[0, 1] * (m[1, 0] * m[2, 2] - m[1, 2] * m[2, 0])
+           + m[0, 2] * (m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0]))
+    x0 = (r[0] * (m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1])
+          - m[0, 1] * (r[1] * m[2, 2] - m[1, 2] * r[2])
+          + m[0, 2] * (r[1] * m[2, 1] - m[1, 1] * r[2])) / det
+    x1 = (m[0, 0] * (r[1] * m[2, 2] - m[1, 2] * r[2])
+          - r[0] * (m[1, 0] * m[2, 2] - m[1, 2] * m[2, 0])
+          + m[0, 2] * (m[1, 0] * r[2] - r[1] * m[2, 0])) / det
+    x2 = (m[0, 0] * (m[1, 1] * r[2] - r[1] * m[2, 1])
+          - m[0, 1] * (m[1, 0] * r[2] - r[1] * m[2, 0])
+          + r[0] * (m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0])) / det
+    return x0, x1, x2
+
+
+def _best_step(t, h, length, splits, step_t):
+    """`ground_surface._best_step` (delta, cut, c, g), NaNs when it has none."""
+    nan = math.nan
+    if t.shape[0] < 6:
+        return nan, nan, nan, nan
+    n = float(t.shape[0])
+    st, stt = nb_total(t), nb_total(t * t)
+    sh, sth, shh = nb_total(h), nb_total(t * h), nb_total(h * h)
+    det = n * stt - st * st
+    if det <= 1e-12 * max(n * stt, 1e-300):
+        return nan, nan, nan, nan
+    c0 = (stt * sh - st * sth) / det
+    g0 = (n * sth - st * sh) / det
+    rss_line = max(shh - (c0 * sh + g0 * sth), 0.0)
+    best_k = -1
+    best_rss = math.inf
+    best = (nan, nan, nan, nan)
+    m = np.empty((3, 3))
+    r = np.empty(3)
+    masked_t = np.empty(t.shape[0])
+    masked_h = np.empty(t.shape[0])
+    any_valid = False
+    for k in range(splits):
+        cut = length * (k + 1) / (splits + 1)
+        na = 0
+        for i in range(t.shape[0]):
+            if t[i] > cut:
+                na += 1
+                masked_t[i], masked_h[i] = t[i], h[i]
+            else:
+                masked_t[i], masked_h[i] = 0.0, 0.0
+        fna = float(na)
+        if min(fna, n - fna) < 3:
+            continue
+        any_valid = True
+        sta, sha = nb_total(masked_t), nb_total(masked_h)
+        m[0, 0], m[0, 1], m[0, 2] = n, st, fna
+        m[1, 0], m[1, 1], m[1, 2] = st, stt, sta
+        m[2, 0], m[2, 1], m[2, 2] = fna, sta, fna
+        r[0], r[1], r[2] = sh, sth, sha
+        x0, x1, x2 = nb_solve3(m, r)
+        rss = shh - (((0.0 + x0 * sh) + x1 * sth) + x2 * sha)
+        if rss < best_rss:
+            best_rss, best_k = rss, k
+            best = (x2, cut, x0, x1)
+    if not any_valid or best_k < 0:
+        return nan, nan, nan, nan
+    best_rss = max(best_rss, 0.0)
+    significant = rss_line - best_rss >= step_t ** 2 * best_rss / max(n - 3.0, 1.0)
+    delta = best[0] if best_rss <= 0.75 * rss_line or significant else 0.0
+    return delta, best[1], best[2], best[3]
+
+
+def _boundary_step(t, h, z_a, step_t):
+    """`ground_surface._boundary_step`."""
+    n = t.shape[0]
+    if n < 6:
+        return 0.0
+    tm = nb_total(t) / n
+    dt = t - tm
+    sxx = nb_total(dt * dt)
+    if sxx <= 1e-12:
+        return 0.0
+    hm = nb_total(h) / n
+    g = nb_total(dt * (h - hm)) / sxx
+    c0 = hm - g * tm
+    res = h - (c0 + g * t)
+    sd = math.sqrt(nb_total(res * res) / max(n - 2, 1))
+    se = sd * math.sqrt(1.0 / n + tm * tm / sxx)
+    delta = abs(c0 - z_a)
+    return delta if delta >= step_t * max(se, 1e-9) else 0.0
+
+
+def _path_step(t, lat, h, z_a, length, half_width, step_t, knot_step):
+    """`ground_surface._path_step`."""
+    delta, cut, c0, g = nb_best_step(t, h, length, 9, step_t)
+    step = abs(delta)
+    if step > 0.0:
+        n_after = n_before = 0
+        for i in range(t.shape[0]):
+            if abs(lat[i]) <= half_width:
+                if t[i] > cut:
+                    n_after += 1
+                else:
+                    n_before += 1
+        if n_after >= 3 and n_before >= 3:
+            ra = np.empty(n_after)
+            rb = np.empty(n_before)
+            ia = ib = 0
+            for i in range(t.shape[0]):
+                if abs(lat[i]) <= half_width:
+                    res = h[i] - (c0 + g * t[i])
+                    if t[i] > cut:
+                        ra[ia] = res
+                        ia += 1
+                    else:
+                        rb[ib] = res
+                        ib += 1
+            shift = np.median(ra) - np.median(rb)
+            if shift * math.copysign(1.0, delta) < 0.5 * step:
+                step = 0.0
+    at_start = nb_boundary_step(t, h, z_a, step_t)
+    return max(step, at_start) if at_start >= knot_step else step
+
+
+def segment_kernel(s, lat, h, e_s, e_h, s_a, z_a, grade, length, gate, max_rise, max_fall,
+                   min_features, min_width, smoothness, step_half_width, max_step,
+                   max_spread, step_t, knot_step):
+    """`ground_surface._segment_numpy`'s verdict on one segment, compiled.
+
+    Args:
+        s, lat, h, e_s, e_h: (N,) float64 features (m; see the module).
+        s_a, z_a, grade: the segment's start (m along the ground, m above the plane) and
+            the previous segment's grade.
+        length: the segment's length (m); the other scalars are `GroundSurfaceConfig`'s
+            (gate_m, max_grade_rise, max_grade_fall, min_features, min_width_m,
+            smoothness_m, step_half_width_m, max_step_m, max_spread_m) and
+            `ground_surface._STEP_T`, `_KNOT_STEP_M`.
+    Returns:
+        (rule index into `RULES` (0: taken), features in the segment, width m, grade
+        change, step m, spread m, far knot's height m).
+    """
+    nan = math.nan
+    n_all = s.shape[0]
+    lim_hi = gate + length * max_rise
+    lim_lo = -(gate + length * max_fall)
+    sel = np.empty(n_all, np.int64)
+    n_in = 0
+    for i in range(n_all):
+        above = h[i] - (z_a + grade * (s[i] - s_a))
+        if s[i] >= s_a and s[i] < s_a + length and above <= lim_hi and above >= lim_lo:
+            sel[n_in] = i
+            n_in += 1
+    sel = sel[:n_in]
+    ss, ll, hh = s[sel], lat[sel], h[sel]
+    width = nb_percentile(ll, 0.9) - nb_percentile(ll, 0.1) if n_in else 0.0
+    first = 0
+    for i in range(n_in):
+        if ss[i] < s_a + 0.5 * length:
+            first += 1
+    z_b = z_a + grade * length
+    if n_in < min_features or width < min_width or min(first, n_in - first) < min_features // 4:
+        return 1, n_in, width, nan, nan, nan, z_b
+    t = (ss - s_a) / length
+    z_b = nb_fit_line_knot(t, hh, z_a, z_b, smoothness, max(gate, 1e-3), 5)
+    new_grade = (z_b - z_a) / length
+    change = new_grade - grade
+    res = hh - (z_a + (z_b - z_a) * (ss - s_a) / length)
+    dd = np.abs(e_h[sel] - new_grade * e_s[sel])
+    on = np.abs(res) <= np.maximum(gate, 2.5 * dd)
+    idx = np.flatnonzero(on)
+    step = nb_path_step(ss[idx] - s_a, ll[idx], hh[idx], z_a, length, step_half_width, step_t,
+                      knot_step)
+    if idx.shape[0]:
+        r_on = res[idx]
+        spread = 1.4826 * np.median(np.abs(r_on - np.median(r_on)))
+        noise = np.median(dd[idx])
+    else:
+        spread = nan
+        noise = 0.0
+    rule = 0
+    if not -max_fall <= change <= max_rise:
+        rule = 2
+    elif not step <= max_step:
+        rule = 3
+    elif not spread <= math.hypot(max_spread, noise):
+        rule = 4
+    return rule, n_in, width, change, step, spread, z_b
+
+
+nb_pairwise_leaf = _jit(_pairwise_leaf)
+nb_pairwise_sum = _jit(pairwise_sum)
+nb_total = _jit(_total)
+nb_percentile = _jit(_percentile)
+nb_fit_line_knot = _jit(_fit_line_knot)
+nb_solve3 = _jit(_solve3)
+nb_best_step = _jit(_best_step)
+nb_boundary_step = _jit(_boundary_step)
+nb_path_step = _jit(_path_step)
+nb_segment = _jit(segment_kernel)
+_warm = False
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) `segment_kernel` before the first frame;
+    without numba, or if it fails, the numpy path is used."""
+    global _warm, nb_segment
+    if _warm:
+        return
+    _warm = True
+    x = np.array([0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5])
+    z = np.zeros(8)
+    nb_segment = _warmed(nb_segment, x, x - 1.75, z, z, z, 0.0, 0.0, 0.0, 1.0, 0.05, 0.1,
+                         0.05, 4, 0.5, 0.05, 0.6, 0.06, 0.02, 4.0, 0.07)
