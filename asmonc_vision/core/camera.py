@@ -181,7 +181,10 @@ def ground_axes(plane: MetricPlane) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     n = np.asarray(plane.normal_up, float)
     fwd = np.array([0.0, 0.0, 1.0]) - n[2] * n
     fwd /= np.linalg.norm(fwd)
-    return -plane.height * n, fwd, np.cross(n, fwd)
+    # n x fwd, written out (np.cross costs tens of microseconds per call)
+    left = np.array([n[1] * fwd[2] - n[2] * fwd[1], n[2] * fwd[0] - n[0] * fwd[2],
+                     n[0] * fwd[1] - n[1] * fwd[0]])
+    return -plane.height * n, fwd, left
 
 
 def ground_range_bearing(plane: MetricPlane, points_left) -> tuple[np.ndarray, np.ndarray]:
