@@ -31,6 +31,14 @@ def test_the_compiled_percentile_is_numpys(q):
         assert sk.nb_percentile(x, q) == np.percentile(x, 100 * q)
 
 
+@needs_numba
+def test_the_compiled_median_is_numpys():
+    rng = np.random.default_rng(8)
+    for n in range(1, 60):
+        x = rng.normal(size=n)
+        assert sk.nb_median(x) == np.median(x)
+
+
 def _same(a, b):
     return a == b or (isinstance(a, float) and isinstance(b, float)
                       and math.isnan(a) and math.isnan(b))

@@ -113,6 +113,16 @@ def _percentile(x, q):
     return a + diff * gamma
 
 
+def _median(x):
+    """``np.median(x)`` of a non-empty array (the middle order statistic, or the mean of
+    the two middle ones as numpy takes it: their sum halved)."""
+    xs = np.sort(x)
+    k = xs.shape[0] // 2
+    if xs.shape[0] % 2:
+        return xs[k]
+    return (xs[k - 1] + xs[k]) / 2.0
+
+
 def _fit_line_knot(t, h, z_a, z_prior, sigma_prior, scale, iterations):
     """`ground_surface._fit_segment` with t = (s - s_a) / length precomputed."""
     z_b = z_prior
@@ -248,7 +258,7 @@ def _path_step(t, lat, h, z_a, length, half_width, step_t, knot_step):
                     else:
                         rb[ib] = res
                         ib += 1
-            shift = np.median(ra) - np.median(rb)
+            shift = nb_median(ra) - nb_median(rb)
             if shift * math.copysign(1.0, delta) < 0.5 * step:
                 step = 0.0
     at_start = nb_boundary_step(t, h, z_a, step_t)
@@ -305,8 +315,8 @@ def segment_kernel(s, lat, h, e_s, e_h, s_a, z_a, grade, length, gate, max_rise,
                       knot_step)
     if idx.shape[0]:
         r_on = res[idx]
-        spread = 1.4826 * np.median(np.abs(r_on - np.median(r_on)))
-        noise = np.median(dd[idx])
+        spread = 1.4826 * nb_median(np.abs(r_on - nb_median(r_on)))
+        noise = nb_median(dd[idx])
     else:
         spread = nan
         noise = 0.0
@@ -324,6 +334,7 @@ nb_pairwise_leaf = _jit(_pairwise_leaf)
 nb_pairwise_sum = _jit(pairwise_sum)
 nb_total = _jit(_total)
 nb_percentile = _jit(_percentile)
+nb_median = _jit(_median)
 nb_fit_line_knot = _jit(_fit_line_knot)
 nb_solve3 = _jit(_solve3)
 nb_best_step = _jit(_best_step)

@@ -40,6 +40,8 @@ from asmonc_vision.replay.summary import (audio_outputs, bag_time, first_image_s
                                           summarise)
 
 
+#: seconds the nodes of a replay have to start and connect
+CONNECT_TIMEOUT = 120.0
 #: seconds after the player's last line (and the last result) within which it exits: it
 #: waits at most `player_node.ACK_TIMEOUT` (4 s) for its subscribers' acknowledgements
 PLAYER_EXIT_GRACE = 10.0
@@ -243,7 +245,9 @@ class Replay:
         # Wait until they are connected, so no frame is lost to discovery: each node
         # publishes its outputs and subscribes its inputs, and the recorder (if any)
         # has subscribed every output.
-        deadline = time.monotonic() + 60.0
+        # (a first start compiles the numba kernels before subscribing: 20-60 s on a
+        # loaded 2-core machine with a cold cache)
+        deadline = time.monotonic() + CONNECT_TIMEOUT
         while time.monotonic() < deadline:
             if all(connected(self.monitor.node, self.nodes[n], self.recorder is not None,
                              self.children[n], self._produced(n)) for n in names):
@@ -253,7 +257,7 @@ class Replay:
                 raise RuntimeError(f'{", ".join(dead)} node exited at start; see '
                                    f'{self.children[dead[0]].log_path}')
             time.sleep(0.1)
-        raise RuntimeError('the nodes did not connect within 60 s')
+        raise RuntimeError(f'the nodes did not connect within {CONNECT_TIMEOUT:g} s')
 
     def _produced(self, name: str) -> frozenset[str]:
         """The topics published by the running nodes other than `name`."""
