@@ -225,6 +225,41 @@ class _FakeMonitor:
             self.last_gait_at = time.monotonic()
 
 
+def test_a_player_that_played_the_bag_but_does_not_exit_does_not_hang_the_run(monkeypatch):
+    """The player said it published the whole bag and then never exits, and one pair
+    never gives a result: the replay stops the alarm node (before its timeout calls the
+    end a fault), goes on without the player after PLAYER_EXIT_GRACE and stops it."""
+    import threading
+    from types import SimpleNamespace
+
+    from asmonc_vision.replay import session
+    monkeypatch.setattr(session, 'PLAYER_EXIT_GRACE', 0.3)
+    run = object.__new__(session.Replay)
+    player, alarm = _FakeChild(), _FakeChild()
+    player.done.set()
+    lines = []
+    run.monitor = SimpleNamespace(lock=threading.Lock(), frames=5, played=0,
+                                  last_result_at=time.monotonic(),
+                                  take_new_alarms=lambda: [])
+    run.children = {'player': player, 'alarm': alarm}
+    run.plan = SimpleNamespace(n_pairs=6, topics={})
+    run.args = SimpleNamespace(params_file=[], settle=0.2)
+    run.console = SimpleNamespace(bar=lambda n: None,
+                                  line=lambda text, err=False: lines.append(text))
+    run.injector = SimpleNamespace(poll=lambda: None)
+    run.check_nodes = lambda: None
+    run.stopped, run.player_hung, run.gait_stopper, run.player_rc = set(), False, None, None
+    t0 = time.monotonic()
+    waiting = threading.Thread(target=run.wait_for_results, daemon=True)
+    waiting.start()
+    waiting.join(timeout=10.0)
+    assert not waiting.is_alive(), 'the replay waits for the player for ever'
+    assert run.player_hung and any('had not exited' in line for line in lines), lines
+    assert alarm.stop_calls and alarm.stop_calls[0] < t0 + 0.5     # before its timeout
+    run.finish()
+    assert player.stop_calls and run.player_rc is None
+
+
 def test_a_node_is_connected_once_it_logs_that_its_inputs_from_the_graph_are_linked(tmp_path):
     """Seen in the ROS graph is not yet linked between two processes: a node with an input
     that another running node publishes counts as connected only once its log says the
