@@ -35,6 +35,13 @@ def asmonc_run(*args, timeout=240, **env_overrides):
     return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
 
 
+def node_logs(out, lines=15):
+    """The last lines of each node's log that `asmonc run --out DIR` kept (DIR/logs),
+    for a failure's message."""
+    return '\n'.join(f'--- {p.name}\n' + '\n'.join(p.read_text().splitlines()[-lines:])
+                     for p in sorted((out / 'logs').glob('*.log')))
+
+
 def strict_json(path):
     """The JSON file at path, refusing NaN and Infinity (not JSON: other readers fail)."""
     def refuse(name):
@@ -160,7 +167,7 @@ def test_missing_right_images_are_not_announced_as_a_fault(tmp_path):
     # the two lost pairs never come: a 2 s wait for late results is enough
     res = asmonc_run(bag, '--out', out, '--no-progress', '--settle', 2)
     assert res.returncode == 1, res.stdout + res.stderr       # 1: frames were dropped
-    assert '28 of 30 processed, 2 dropped' in res.stdout
+    assert '28 of 30 processed, 2 dropped' in res.stdout, res.stdout + node_logs(out)
     summary = strict_json(out / 'summary.json')
     assert summary['dropped_frames'] == 2 and not summary['errors']
     assert summary['processed_frames'] == summary['input_pairs'] - 2
@@ -362,7 +369,7 @@ def test_truncated_bag_replays_what_can_be_read(tmp_path, capsys):
     assert 'replaying the messages before it' in res.stderr
     summary = strict_json(out / 'summary.json')
     assert 10 <= summary['input_pairs'] < 55
-    assert summary['processed_frames'] == summary['input_pairs']
+    assert summary['processed_frames'] == summary['input_pairs'], node_logs(out)
     assert summary['player_exit_code'] == 2 and summary['errors']
     assert len(frames(out, '/obstacles')) == summary['processed_frames']
     assert summary['ground_truth']                   # the truth before the cut is scored
