@@ -20,44 +20,19 @@ import math
 import numpy as np
 
 from .jit import jit as _jit
+from .jit import nb_pairwise_sum as nb_pairwise_leaf   # numpy's sum of <= 128 values
 from .jit import warmed as _warmed
 
 #: `segment_kernel`'s verdicts, in the order the rules are tried
 RULES = ('', 'rule_support', 'rule_grade', 'rule_step', 'rule_spread')
 
 
-def _pairwise_leaf(a, lo, hi):
-    """numpy's pairwise summation of a[lo:hi] for at most 128 values: in order below 8
-    values, else 8 partial sums combined pairwise, then the rest in order."""
-    n = hi - lo
-    if n < 8:
-        r = 0.0
-        for i in range(lo, hi):
-            r += a[i]
-        return r
-    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
-    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
-    m = lo + n - n % 8
-    for i in range(lo + 8, m, 8):
-        r0 += a[i]
-        r1 += a[i + 1]
-        r2 += a[i + 2]
-        r3 += a[i + 3]
-        r4 += a[i + 4]
-        r5 += a[i + 5]
-        r6 += a[i + 6]
-        r7 += a[i + 7]
-    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-    for i in range(m, hi):
-        res += a[i]
-    return res
-
-
 def pairwise_sum(a, lo, hi):
-    """``a[lo:hi].sum()`` of a contiguous float64 array exactly as numpy adds it: above
-    128 values, the sums of the two halves (split at a multiple of 8) added, each summed
-    alike (numpy's recursion, on an explicit stack: numba cannot call a recursive
-    function from another compiled one)."""
+    """``a[lo:hi].sum()`` of a contiguous float64 array exactly as numpy adds it: up to
+    128 values `jit.pairwise_sum_kernel`'s sum, above that the sums of the two halves
+    (split at a multiple of 8) added, each summed alike (numpy's recursion, on an
+    explicit stack: numba cannot call a recursive function from another compiled
+    one)."""
     if hi - lo <= 128:
         return nb_pairwise_leaf(a, lo, hi)
     los = np.empty(64, np.int64)
@@ -330,7 +305,6 @@ def segment_kernel(s, lat, h, e_s, e_h, s_a, z_a, grade, length, gate, max_rise,
     return rule, n_in, width, change, step, spread, z_b
 
 
-nb_pairwise_leaf = _jit(_pairwise_leaf)
 nb_pairwise_sum = _jit(pairwise_sum)
 nb_total = _jit(_total)
 nb_percentile = _jit(_percentile)

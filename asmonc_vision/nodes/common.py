@@ -202,8 +202,7 @@ def watch_input_links(node: Node, topics: tuple[str, ...], period: float = 0.2) 
     the match is lost. This line says the link itself is up; `asmonc run` waits for it
     before playing the bag, and a person starting nodes by hand sees it in the log.
     """
-    subs = [s for s in node.subscriptions if s.topic_name in topics]
-    pending = {s.topic_name: s for s in subs}
+    pending = {s.topic_name: s for s in node.subscriptions if s.topic_name in topics}
 
     def _check() -> None:
         for topic, sub in list(pending.items()):
