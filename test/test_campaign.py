@@ -78,6 +78,44 @@ def test_one_walk_end_to_end_and_cached(tmp_path, capsys):
     assert main(argv) == 0                                    # rendered once, reused
     assert json.loads(js.read_text())['walks'][0]['render_s'] == 0.0
     assert 'render - (all cached)' in capsys.readouterr().out
+    # the same walk named with --walk (cached), its events asked for
+    assert main(['campaign', '--walk', f'{SCENE_CLASSES[0]}:1000:backpack', '--duration',
+                 '1.5', '--cache', str(tmp_path / 'cache'), '--methods', 'gpod', '--events',
+                 '--no-progress']) == 0
+    out = capsys.readouterr().out
+    assert f'1 walks of 1.5 s (tuning seeds), {SCENE_CLASSES[0]}:1000:backpack;' in out
+    assert f'tuning {SCENE_CLASSES[0]}' in out and 'render 0 s' in out
+
+
+def test_parse_walk():
+    w = C.parse_walk('kerb_ramp:1003:chest', 20.0)
+    assert w == C.Walk('tuning', 'kerb_ramp', 1003, 'chest', 20.0)
+    assert C.parse_walk('grate:900007:backpack', 10.0).seed_set == 'blind'
+    for bad, why in (('kerb_ramp:1003', 'CLASS:SEED:RIG'), ('nowhere:1003:chest', 'nowhere'),
+                     ('grate:1003:helmet', 'helmet'), ('grate:x:chest', "'x'"),
+                     ('grate:5:chest', 'neither')):
+        with pytest.raises(ValueError, match=why):
+            C.parse_walk(bad, 20.0)
+    from asmonc_vision.cli.main import main
+    assert main(['campaign', '--walk', 'grate:5:chest']) == 2
+
+
+def test_event_lines_name_each_false_alarm_and_each_unwarned_obstacle():
+    from asmonc_vision.eval.safety import SafetyScore
+
+    s = SafetyScore(false_alarm_events=[dict(t_s=7.7, level=1, level_name='CAUTION',
+                                             obstacle_id=4, range_m=4.64, bearing_deg=1.2,
+                                             nearest_true_m=1.39)],
+                    path_obstacles=[dict(id=3, kind='drop', height_m=-0.12, outcome='late',
+                                         first_t_s=2.5, first_range_m=6.1),
+                                    dict(id=5, kind='', height_m=0.2, outcome='warned',
+                                         first_t_s=1.0, first_range_m=5.0)])
+    lines = C.event_lines({'scores': {'gpod': s}}, ['gpod'])
+    assert len(lines) == 2
+    assert lines[0] == ('      gpod: false CAUTION  at    7.7 s: range 4.6 m, bearing +1 deg, '
+                        'nearest true obstacle 1.4 m')
+    assert lines[1] == ('      gpod: obstacle 3 (drop, -12 cm): late, on the path at 2.5 s '
+                        'from 6.1 m')
 
 
 def test_sim_bags_carry_the_footprints(tmp_path):

@@ -2,6 +2,7 @@
 
     asmonc campaign [--minutes 20] [--workers 2] [--blind | --tuning]
                     [--classes CLASS ...] [--rigs backpack chest] [--duration 20]
+                    [--walk CLASS:SEED:RIG ...] [--events]
                     [--methods gpod gpod_ego gpod_map gpod_map_lag sgbm] [--cache DIR]
                     [--json FILE]
                     [--markdown FILE] [--no-progress]
@@ -27,6 +28,13 @@ the safety score is taken (`eval.safety`, the definitions of docs/evaluation.md)
 Seeds: TUNING walks use seeds 1000-1999, BLIND walks 900000-900999. Tune only on the
 tuning seeds and quote the blind ones, which no tuning has looked at. By default both
 sets are run, half the minutes each, and reported apart; --blind or --tuning runs one.
+`--walk CLASS:SEED:RIG` (repeatable) runs the walks named instead of a plan (each in the
+set its seed belongs to): to look again at one walk a table showed.
+
+`--events` prints, under each walk's line, what lies behind its numbers: each false
+alarm event (its time in the walk, level, range and bearing, and how far the nearest true
+obstacle was) and each obstacle on the path that was not warned in time (late, never, or
+under FAULT), per method.
 
 Prints per set a table per scene class and per rig, ours and the peer side by side:
 warned in time (warned/on the path), false alarm events per 10 minutes of walking,
@@ -81,6 +89,14 @@ def add_arguments(p) -> None:
     p.add_argument('--rigs', nargs='+', choices=RIGS, default=list(RIGS),
                    help='rigs (default all)')
     p.add_argument('--duration', type=float, default=20.0, help='seconds per walk (default 20)')
+    p.add_argument('--walk', action='append', default=None, metavar='CLASS:SEED:RIG',
+                   help='run this walk (repeatable) instead of the plan: a scene class, a '
+                        'seed of the tuning or the blind range, a rig; e.g. '
+                        'kerb_ramp:1003:chest')
+    p.add_argument('--events', action='store_true',
+                   help='under each walk, its false alarm events (time, level, range, '
+                        'bearing, the nearest true obstacle) and the obstacles on the path '
+                        'not warned in time, per method')
     p.add_argument('--methods', nargs='+', choices=tuple(METHOD_NAMES),
                    default=['gpod_map_lag', 'sgbm'],
                    help='detectors to run: gpod (no map, no motion), gpod_ego (no map, '
@@ -123,6 +139,32 @@ def plan_walks(seed_set: str, minutes: float, classes: list[str], rigs: list[str
     nc = len(classes)
     return [Walk(seed_set, classes[i % nc], start + i, rigs[(i % nc + i // nc) % len(rigs)],
                  float(duration)) for i in range(n)]
+
+
+def parse_walk(text: str, duration: float) -> Walk:
+    """The walk ``CLASS:SEED:RIG`` of `--walk`; its seed set is the range its seed lies
+    in. Raises ValueError naming what is wrong."""
+    from asmonc_vision.sim.scenes import RIGS, SCENE_CLASSES
+
+    parts = text.split(':')
+    if len(parts) != 3:
+        raise ValueError(f'--walk {text!r}: expected CLASS:SEED:RIG')
+    cls, seed_s, rig = parts
+    if cls not in SCENE_CLASSES:
+        raise ValueError(f'--walk {text!r}: scene class {cls!r} is not one of '
+                         f'{", ".join(SCENE_CLASSES)}')
+    if rig not in RIGS:
+        raise ValueError(f'--walk {text!r}: rig {rig!r} is not one of {", ".join(RIGS)}')
+    try:
+        seed = int(seed_s)
+    except ValueError:
+        raise ValueError(f'--walk {text!r}: seed {seed_s!r} is not an integer') from None
+    for name, (lo, hi) in (('tuning', TUNING_SEEDS), ('blind', BLIND_SEEDS)):
+        if lo <= seed < hi:
+            return Walk(name, cls, seed, rig, float(duration))
+    raise ValueError(f'--walk {text!r}: seed {seed} is in neither the tuning seeds '
+                     f'{TUNING_SEEDS[0]}-{TUNING_SEEDS[1] - 1} nor the blind seeds '
+                     f'{BLIND_SEEDS[0]}-{BLIND_SEEDS[1] - 1}')
 
 
 def sim_code_version() -> str:
@@ -328,6 +370,15 @@ def walk_line(r: dict, methods: list[str]) -> str:
             + ' + '.join(f"{r['detect_s'][m]:.0f}" for m in methods) + ' s)')
 
 
+def event_lines(r: dict, methods: list[str]) -> list[str]:
+    """`--events`: per method, the walk's false alarm events and its obstacles on the
+    path not warned in time (`eval.safety.format_events`)."""
+    from asmonc_vision.eval.safety import format_events
+
+    return [f'      {m}: {line.strip()}' for m in methods
+            for line in format_events(r['scores'][m].as_dict())]
+
+
 class _Bar:
     """Progress on stderr: a bar redrawn in place on a terminal, else a line per walk."""
 
@@ -365,17 +416,24 @@ def run(args) -> int:
         return 2
     sets = ['blind'] if args.blind else ['tuning'] if args.tuning else ['tuning', 'blind']
     try:
-        walks = [w for s in sets for w in plan_walks(s, args.minutes / len(sets), args.classes,
-                                                      args.rigs, args.duration)]
+        if args.walk:
+            walks = list(dict.fromkeys(parse_walk(t, args.duration) for t in args.walk))
+            sets = [s for s in ('tuning', 'blind') if any(w.seed_set == s for w in walks)]
+        else:
+            walks = [w for s in sets for w in plan_walks(s, args.minutes / len(sets),
+                                                          args.classes, args.rigs,
+                                                          args.duration)]
     except ValueError as exc:
         err(str(exc))
         return 2
     cache = args.cache or default_cache()
     cache.mkdir(parents=True, exist_ok=True)
     version = sim_code_version()
+    chosen = (', '.join(f'{w.scene_class}:{w.seed}:{w.rig}' for w in walks) if args.walk
+              else f'classes {", ".join(args.classes)}, rigs {", ".join(args.rigs)}')
     print(f'asmonc campaign: {len(walks)} walks of {args.duration:g} s ({", ".join(sets)} '
-          f'seeds), classes {", ".join(args.classes)}, rigs {", ".join(args.rigs)}; '
-          f'{args.workers} worker(s); cache {cache} (simulator {version})', flush=True)
+          f'seeds), {chosen}; {args.workers} worker(s); cache {cache} (simulator {version})',
+          flush=True)
     bar = _Bar(len(walks), not args.no_progress)
     bar.show(0)
     results = []
@@ -389,6 +447,9 @@ def run(args) -> int:
         w = r['walk']
         bar.clear()
         print(walk_line(r, list(args.methods)), flush=True)
+        if args.events:
+            for line in event_lines(r, list(args.methods)):
+                print(line, flush=True)
         bar.show(len(results), f'{w.scene_class} {w.seed} {w.rig}')
 
     if args.workers == 1:

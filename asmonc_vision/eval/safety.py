@@ -660,6 +660,15 @@ def format_safety(s: dict, indent: str = '') -> list[str]:
            f"{s['criteria']['corridor_length']:g} m: {rc['headline_found']}/"
            f"{rc['headline_eligible']} = {rc['headline_recall']:.1%}"
            if rc['headline_eligible'] else '')]
+    return [indent + ln for ln in lines + format_events(s)]
+
+
+def format_events(s: dict) -> list[str]:
+    """Printed lines, indented by two spaces, of what lies behind a `SafetyScore.as_dict()`'s
+    numbers: its false alarm events (the first 20) and its obstacles on the path not warned
+    in time."""
+    w, fa = s['warned_in_time'], s['false_alarms']
+    lines = []
     for e in fa['event_list'][:20]:
         near = (f"{e['nearest_true_m']:.1f} m" if e['nearest_true_m'] is not None
                 else 'no obstacle')
@@ -673,4 +682,4 @@ def format_safety(s: dict, indent: str = '') -> list[str]:
             lines.append(f"  obstacle {o['id']} ({o['kind'] or 'obstacle'}, "
                          f"{o['height_m'] * 100:.0f} cm): {o['outcome'].replace('_', ' ')}, "
                          f"on the path at {o['first_t_s']:.1f} s from {o['first_range_m']:.1f} m")
-    return [indent + ln for ln in lines]
+    return lines
