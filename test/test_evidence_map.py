@@ -304,6 +304,45 @@ def test_a_small_period_is_a_measured_limit():
     assert objs[-1]
 
 
+@pytest.mark.parametrize('weigh', [True, False])
+def test_evidence_counts_by_how_sure_its_match_is(weigh):
+    """A cell's raised evidence of a pair counts hit_logodds times the weight of its
+    surest pixel (1 / (1 + its strong rivals)); with weigh_by_rivals off, fully."""
+    cfg = EvidenceMapConfig(enabled=True, weigh_by_rivals=weigh)
+    emap = EvidenceMap(cfg)
+    ev = pair_evidence(CAM, PLANE, np.array([100.0, 101.0, 220.0]), np.array([150.0] * 3),
+                       np.array([40.0, 40.0, 40.0]), np.full(3, 0.3),
+                       np.array([RAISED] * 3, np.int8), 8.0,
+                       weight=np.array([1 / 3, 1 / 2, 1 / 4]))
+    emap.update(0.0, PLANE, ev, None, True)
+    got = np.sort(emap.L_r[emap.L_r > 0])
+    if weigh:        # the two near pixels share a cell: its surest one, 1/2, counts
+        assert got == pytest.approx([cfg.hit_logodds / 4, cfg.hit_logodds / 2], abs=1e-6)
+    else:
+        assert got == pytest.approx([cfg.hit_logodds] * 2, abs=1e-6)
+
+
+def test_a_box_whose_matches_each_have_a_rival_is_confirmed_a_little_later():
+    """A kerb face's matches may have one rival on the ground as well supported (weight
+    1/2): the box is still confirmed, two pairs later than with sure matches."""
+    box = box_edges(4.0, 0.0, 0.2)
+    ground = ground_grid(1.5, 8.0, holes=[(4.0, 4.3, -0.15, 0.15)])
+    first = {}
+    for w in (1.0, 0.5):
+        emap = EvidenceMap(EvidenceMapConfig(enabled=True, min_baseline_m=0.1))
+        prev = None
+        for i, x in enumerate(np.arange(0.0, 1.01, 0.1)):
+            ev = evidence([(box, RAISED, None), (ground, GROUND, None)], x,
+                          occluders=[(4.0, 0.0, 0.2, 0.15)])
+            ev = PairEvidence(ev.xy, ev.height, ev.sigma_h, ev.kind, np.full(len(ev.kind), w))
+            objs = emap.update(0.1 * i, PLANE, ev, None if prev is None else step_motion(
+                x - prev), False)
+            prev = x
+            if objs and w not in first:
+                first[w] = i
+    assert first[1.0] == 1 and first[0.5] == 3
+
+
 # ------------------------------------------------------------------ clearing, passers-by
 def test_ground_seen_where_a_thing_stood_clears_it():
     emap = EvidenceMap(EvidenceMapConfig(enabled=True))
@@ -784,6 +823,12 @@ def test_perception_with_the_map_reports_confirmed_obstacles():
     # the boxes appear at 2 s, standing still: confirmed after still_min_frames
     assert len(res.obstacles) >= 3
     assert all(o.confidence > 0.5 for o in res.obstacles)
+    # each match's strong rivals weigh its evidence: 1 / (1 + n)
+    n = res.features.strong_rivals
+    assert n is not None and n.shape == res.features.d.shape and (n >= 0).all()
+    ev = p.evidence(res, frames[-1].cam)
+    assert ev.weight is not None
+    assert set(np.round(1.0 / ev.weight - 1.0, 6)) <= set(n.astype(float))
 
 
 

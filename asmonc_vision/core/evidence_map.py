@@ -125,12 +125,15 @@ class PairEvidence:
         height: (N,) float64 height above the plane, m (negative below).
         sigma_h: (N,) float64 standard deviation of the height from the disparity noise, m.
         kind: (N,) int8 1 raised, -1 drop, 0 ground (free), 2 none (unreliable; not used).
+        weight: (N,) float64 how much each pixel's raised or drop evidence counts, 0..1
+            (the probability that its match is right), or None (every pixel fully).
     """
 
     xy: np.ndarray
     height: np.ndarray
     sigma_h: np.ndarray
     kind: np.ndarray
+    weight: np.ndarray | None = None
 
 
 RAISED, DROP, GROUND, NONE = 1, -1, 0, 2
@@ -138,7 +141,7 @@ RAISED, DROP, GROUND, NONE = 1, -1, 0, 2
 
 def pair_evidence(cam: StereoCamera, plane: MetricPlane, u: np.ndarray, v: np.ndarray,
                   d: np.ndarray, sigma_d: np.ndarray, kind: np.ndarray,
-                  max_range_m: float) -> PairEvidence:
+                  max_range_m: float, weight: np.ndarray | None = None) -> PairEvidence:
     """Measurement model: matched edge pixels to points on the ground with a height and σ.
 
     Args:
@@ -148,6 +151,8 @@ def pair_evidence(cam: StereoCamera, plane: MetricPlane, u: np.ndarray, v: np.nd
         sigma_d: (N,) disparity noise of each match, px.
         kind: (N,) int8 RAISED, DROP, GROUND or NONE per match.
         max_range_m: matches whose foot is farther along the ground are dropped.
+        weight: (N,) how much each match's raised or drop evidence counts, 0..1, or None
+            (fully).
     Returns:
         PairEvidence of the matches kept (finite, d > 0, within range, ahead).
     """
@@ -158,6 +163,7 @@ def pair_evidence(cam: StereoCamera, plane: MetricPlane, u: np.ndarray, v: np.nd
     u, v, d = u[ok], v[ok], d[ok]
     sd = np.asarray(sigma_d, float)[ok]
     kind = np.asarray(kind, np.int8)[ok]
+    wt = np.asarray(weight, float)[ok] if weight is not None else None
     origin, fwd, left = ground_axes(plane)
     pts = cam.triangulate(u, v, d)
     h = plane.signed_height(pts)
@@ -167,7 +173,8 @@ def pair_evidence(cam: StereoCamera, plane: MetricPlane, u: np.ndarray, v: np.nd
     g = pts - origin[None, :]
     xy = np.stack([g @ fwd, g @ left], axis=1)
     keep = (xy[:, 0] > 0) & (np.hypot(xy[:, 0], xy[:, 1]) <= max_range_m)
-    return PairEvidence(xy=xy[keep], height=h[keep], sigma_h=sigma_h[keep], kind=kind[keep])
+    return PairEvidence(xy=xy[keep], height=h[keep], sigma_h=sigma_h[keep], kind=kind[keep],
+                        weight=wt[keep] if wt is not None else None)
 
 
 def ground_frame(plane: MetricPlane) -> tuple[np.ndarray, np.ndarray]:
@@ -342,6 +349,19 @@ class EvidenceMap:
         self._plane = plane
         return step
 
+    def _surest(self, ev: PairEvidence, inside: np.ndarray, sel: np.ndarray,
+                flat: np.ndarray, cells: np.ndarray) -> np.ndarray | float:
+        """How much a pair's evidence counts in each of ``cells`` (K,): the weight of the
+        surest of its pixels there (``sel`` (M,) bool over the pixels ``inside`` the grid,
+        ``flat`` (S,) the cells of the selected ones), with ``weigh_by_rivals``; else 1.
+        The pixels of one pair share their errors (a grate's bars are all a period off
+        alike): the cell's evidence is as sure as its surest match."""
+        if ev.weight is None or not self.config.weigh_by_rivals:
+            return 1.0
+        best = np.zeros(self.n * self.n)
+        np.maximum.at(best, flat, ev.weight[inside][sel])
+        return best[cells]
+
     def to_world(self, xy: np.ndarray) -> np.ndarray:
         """(N, 2) points of the current G to W, m."""
         cy, sy = math.cos(self.pose[2]), math.sin(self.pose[2])
@@ -407,8 +427,10 @@ class EvidenceMap:
         # a thing seen now is not held back by the ground seen there before (a thing
         # that appears, a passer-by stepping in): L = max(L, 0) + hit; lower ground
         # does not appear (drop_weighs_ground): L = L + hit
-        Lr[raised] = np.maximum(Lr[raised], 0.0) + hit
-        Ld[dropc] = (Ld[dropc] if c.drop_weighs_ground else np.maximum(Ld[dropc], 0.0)) + hit
+        hit_r = hit * self._surest(ev, inside, kind == RAISED, f_r, raised)
+        hit_d = hit * self._surest(ev, inside, kind == DROP, f_d, dropc)
+        Lr[raised] = np.maximum(Lr[raised], 0.0) + hit_r
+        Ld[dropc] = (Ld[dropc] if c.drop_weighs_ground else np.maximum(Ld[dropc], 0.0)) + hit_d
         Lr[free] -= c.free_logodds
         Ld[free_d] -= c.free_logodds
         for L, cells in ((Lr, np.concatenate((raised, free))),

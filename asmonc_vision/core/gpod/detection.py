@@ -249,7 +249,8 @@ class Detection(PlaneTracking):
         drop &= drop_string[sid]
         sclass = np.where(obst_string[sid], 1, np.where(drop_string[sid], -1, 0)).astype(np.int8)
         features = _features(m, excess.astype(np.float32), obst, drop, sclass,
-                             ex_mean.astype(np.float32), thr.astype(np.float32))
+                             ex_mean.astype(np.float32), thr.astype(np.float32),
+                             self._strong_rivals(m))
         self._frame_thr = thr
         # Ground features: reliably matched edge pixels on the plane (free space).
         ground = (np.abs(ex_mean) <= thr) & usable & ~obst_string[sid]
@@ -519,6 +520,16 @@ class Detection(PlaneTracking):
             nearer = rd[sel] > m.d[j[sel]]
             no_drop[j[sel[nearer]]] = True
         return no_drop
+
+    def _strong_rivals(self, m: Matches) -> np.ndarray | None:
+        """(K,) int32: per match, its rivals (`match_rivals`) with at least
+        ``ambiguous_match_ratio`` of its first-round support; None when the matcher gave
+        no rivals."""
+        r = self.config.ambiguous_match_ratio
+        if m.rival_match is None or m.rival_ratio is None or r <= 0:
+            return None
+        return np.bincount(m.rival_match[m.rival_ratio >= r],
+                           minlength=len(m)).astype(np.int32)
 
     def _periodic_matches(self, m: Matches, pd: np.ndarray, thr: np.ndarray) -> np.ndarray:
         """(K,) bool: the matches of a periodic pattern: at least ``periodic_min_rivals``

@@ -82,6 +82,9 @@ class GpodFeatures:
             unknown).
         threshold: (K,) float32 the obstacle threshold of each pixel, pixels (None if
             unknown).
+        strong_rivals: (K,) int32 how many other candidate matches of the pixel's left or
+            right edge had at least ``ambiguous_match_ratio`` of its first-round PMF
+            support (`core.matching.selection.match_rivals`; None if unknown).
     """
 
     u_left: np.ndarray
@@ -96,6 +99,7 @@ class GpodFeatures:
     strength: np.ndarray | None = None
     excess_mean: np.ndarray | None = None
     threshold: np.ndarray | None = None
+    strong_rivals: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.v.shape[0])
