@@ -550,7 +550,7 @@ class Detection(PlaneTracking):
             return out
         strong = m.rival_ratio >= r
         j = m.rival_match[strong]
-        n_strong = np.bincount(j, minlength=k)
+        n_strong = cast(np.ndarray, self._strong_rivals(m))
         on_ground = np.abs(m.rival_d[strong].astype(np.float64) - pd[j]) <= thr[j]
         ground = np.zeros(k, bool)
         ground[j[on_ground]] = True
