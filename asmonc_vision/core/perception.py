@@ -143,6 +143,7 @@ class Perception:
         u = 0.5 * (np.asarray(f.u_left, float) + np.asarray(f.u_right, float))
         assert result.metric_plane is not None         # evidence of a tracked ground only
         weight = (1.0 / (1.0 + np.asarray(f.strong_rivals, float))
-                  if f.strong_rivals is not None else None)
+                  if f.strong_rivals is not None and self.map_config.weigh_by_rivals
+                  else None)
         return pair_evidence(cam, result.metric_plane, u, f.v, f.d, sigma_d, kind,
                              self.map_config.max_range_m, weight)
