@@ -154,3 +154,34 @@ def test_bars_matched_a_period_off_are_periodic_and_texture_is_not():
     m0 = pmf_match(*_pair(0.0, shift), 1.0, 40.0)[0]
     p0 = det._periodic_matches(m0, np.full(len(m0), shift), np.full(len(m0), 0.8))
     assert p0.mean() < 0.1
+
+
+
+def test_a_pixels_contrary_rivals_are_those_on_the_other_side_of_the_ground():
+    """`GpodFeatures.contrary_rival_share`: per match, the support of its rivals that say
+    otherwise (for a raised pixel: on or below the ground, for a drop: on or above it)
+    over that of the match and all its rivals; the map weighs its evidence 1 - that."""
+    from asmonc_vision.core.gpod.detection import _contrary_rival_share
+
+    class Rivalled:
+        # match 0 (raised, 30 px on ground of 20 +- 1): a rival on the ground (0.9), one
+        # below it (0.2), one raised too (0.5); match 1 (a drop, 15 px on ground of 20):
+        # a rival on the ground (1.0) and one deeper still (0.4); match 2: no rival
+        rival_match = np.array([0, 0, 0, 1, 1], np.int32)
+        rival_d = np.array([20.5, 12.0, 35.0, 19.2, 10.0], np.float32)
+        rival_ratio = np.array([0.9, 0.2, 0.5, 1.0, 0.4], np.float32)
+
+        def __len__(self):
+            return 3
+
+    pd = np.array([20.0, 20.0, 20.0])
+    thr = np.ones(3)
+    raised = np.array([True, False, False])
+    c = _contrary_rival_share(Rivalled(), pd, thr, raised)
+    assert c.dtype == np.float32
+    assert c == pytest.approx([1.1 / 2.6, 1.0 / 2.4, 0.0], rel=1e-6)
+    # a wall's texture matched elsewhere on the wall says nothing against it
+    Rivalled.rival_d = np.array([40.0, 45.0, 35.0, 5.0, 10.0], np.float32)
+    assert _contrary_rival_share(Rivalled(), pd, thr, raised) == pytest.approx([0.0, 0.0, 0.0])
+    Rivalled.rival_match = None
+    assert _contrary_rival_share(Rivalled(), pd, thr, raised) is None

@@ -307,7 +307,8 @@ def test_a_small_period_is_a_measured_limit():
 @pytest.mark.parametrize('weigh', [True, False])
 def test_evidence_counts_by_how_sure_its_match_is(weigh):
     """A cell's raised evidence of a pair counts hit_logodds times the weight of its
-    surest pixel (1 / (1 + its strong rivals)); with weigh_by_rivals off, fully."""
+    surest pixel (1 - the share of its rivals that say otherwise); with weigh_by_rivals
+    off, fully."""
     cfg = EvidenceMapConfig(enabled=True, weigh_by_rivals=weigh)
     emap = EvidenceMap(cfg)
     ev = pair_evidence(CAM, PLANE, np.array([100.0, 101.0, 220.0]), np.array([150.0] * 3),
@@ -823,12 +824,14 @@ def test_perception_with_the_map_reports_confirmed_obstacles():
     # the boxes appear at 2 s, standing still: confirmed after still_min_frames
     assert len(res.obstacles) >= 3
     assert all(o.confidence > 0.5 for o in res.obstacles)
-    # each match's strong rivals weigh its evidence: 1 / (1 + n)
-    n = res.features.strong_rivals
-    assert n is not None and n.shape == res.features.d.shape and (n >= 0).all()
+    # each match's contrary rivals weigh its evidence: 1 - their share of the support
+    c = res.features.contrary_rival_share
+    assert c is not None and c.shape == res.features.d.shape
+    assert (c >= 0).all() and (c < 1).all() and (c > 0).any() and (c == 0).any()
     ev = p.evidence(res, frames[-1].cam)
     assert ev.weight is not None
-    assert set(np.round(1.0 / ev.weight - 1.0, 6)) <= set(n.astype(float))
+    inv = 1.0 - ev.weight
+    assert (np.abs(inv[:, None] - c[None, :].astype(float)).min(1) < 1e-6).all()
 
 
 

@@ -30,12 +30,14 @@ class EvidenceMapConfig:
                                'evidence in a pair', range=(0.01, 10.0))
     weigh_by_rivals: bool = param(
         True, 'raised and drop evidence counts by how sure its match is: hit_logodds times '
-        '1 / (1 + n), n the strong rivals of the surest such pixel in the cell (other '
-        "candidate matches of its edges with the detector's ambiguous_match_ratio of its "
-        'support): a match with one rival as well supported is right about half the time. '
-        "A grate's bars matched a period off stand about 10 cm up, nearly where they are in "
-        'the world from every viewpoint, and their matches have such rivals; off: every '
-        'pixel counts fully')
+        '1 - c of the surest such pixel in the cell, c the first-round support of its '
+        'rivals (the other candidate matches of its edges) that say otherwise (on or below '
+        'the ground for a raised pixel, on or above it for a drop) over that of the match '
+        'and all its rivals: were the supports likelihoods, the chance that it is not the '
+        "ground matched wrongly (one such rival as well supported: half). A grate's bars "
+        'matched a period off stand about 10 cm up, nearly where they are in the world '
+        'from every viewpoint, and texture on the ground matched a few pixels off stays in '
+        'place too; their matches have such rivals. Off: every pixel counts fully')
     drop_weighs_ground: bool = param(
         True, 'drop evidence in a cell adds to what the ground seen there before said '
         '(L_d = L_d + hit): lower ground is terrain, it does not step in as a passer-by '

@@ -124,8 +124,10 @@ class Perception:
         """The pair's matched edge pixels as map evidence (`pair_evidence`): the
         detector's counted obstacle pixels raised, its drop pixels drop, the pixels on
         the plane within their threshold (on no obstacle or drop string) ground; σ_d the
-        pixel's threshold over ``threshold_k``; each weighed 1 / (1 + its strong rivals),
-        the chance that its match is right when its rivals are as well supported."""
+        pixel's threshold over ``threshold_k``; each weighed 1 - c, c the share of its
+        rivals that say otherwise in its and its rivals' support
+        (`GpodFeatures.contrary_rival_share`): the chance that it is not the ground matched
+        wrongly, were the supports likelihoods."""
         f = result.features
         k = len(f)
         thr = (np.asarray(f.threshold, float) if f.threshold is not None
@@ -142,8 +144,8 @@ class Perception:
         kind[f.is_obstacle] = RAISED
         u = 0.5 * (np.asarray(f.u_left, float) + np.asarray(f.u_right, float))
         assert result.metric_plane is not None         # evidence of a tracked ground only
-        weight = (1.0 / (1.0 + np.asarray(f.strong_rivals, float))
-                  if f.strong_rivals is not None and self.map_config.weigh_by_rivals
+        weight = (1.0 - np.asarray(f.contrary_rival_share, float)
+                  if f.contrary_rival_share is not None and self.map_config.weigh_by_rivals
                   else None)
         return pair_evidence(cam, result.metric_plane, u, f.v, f.d, sigma_d, kind,
                              self.map_config.max_range_m, weight)

@@ -82,9 +82,12 @@ class GpodFeatures:
             unknown).
         threshold: (K,) float32 the obstacle threshold of each pixel, pixels (None if
             unknown).
-        strong_rivals: (K,) int32 how many other candidate matches of the pixel's left or
-            right edge had at least ``ambiguous_match_ratio`` of its first-round PMF
-            support (`core.matching.selection.match_rivals`; None if unknown).
+        contrary_rival_share: (K,) float32 the first-round PMF support of the other
+            candidate matches of the pixel's left or right edge that say otherwise (for
+            an obstacle pixel those on the ground or below it, for any other those on
+            the ground or above it), over that of its match and all those candidates
+            (`core.matching.selection.match_rivals`; 0 for a match with no such rival,
+            0.5 for one with one as well supported; None if unknown).
     """
 
     u_left: np.ndarray
@@ -99,7 +102,7 @@ class GpodFeatures:
     strength: np.ndarray | None = None
     excess_mean: np.ndarray | None = None
     threshold: np.ndarray | None = None
-    strong_rivals: np.ndarray | None = None
+    contrary_rival_share: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.v.shape[0])

@@ -122,7 +122,7 @@ def _features(m: Matches, excess: np.ndarray, obst: np.ndarray | None = None,
               drop: np.ndarray | None = None, sclass: np.ndarray | None = None,
               excess_mean: np.ndarray | None = None,
               threshold: np.ndarray | None = None,
-              strong_rivals: np.ndarray | None = None) -> GpodFeatures:
+              contrary_rival_share: np.ndarray | None = None) -> GpodFeatures:
     """GpodFeatures of the matches (no pixel flagged when the flags are None)."""
     k = len(m)
     z = np.zeros(k, bool)
@@ -132,7 +132,8 @@ def _features(m: Matches, excess: np.ndarray, obst: np.ndarray | None = None,
                         string_class=np.zeros(k, np.int8) if sclass is None else sclass,
                         string_id=m.string_id, strength=m.strength,
                         excess_mean=excess if excess_mean is None else excess_mean,
-                        threshold=threshold, strong_rivals=strong_rivals)
+                        threshold=threshold,
+                        contrary_rival_share=contrary_rival_share)
 
 
 def _noise_key(m: Matches) -> np.ndarray:
