@@ -161,7 +161,7 @@ def test_a_pixels_contrary_rivals_are_those_on_the_other_side_of_the_ground():
     """`GpodFeatures.contrary_rival_share`: per match, the support of its rivals that say
     otherwise (for a raised pixel: on or below the ground, for a drop: on or above it)
     over that of the match and all its rivals; the map weighs its evidence 1 - that."""
-    from asmonc_vision.core.gpod.detection import _contrary_rival_share
+    from asmonc_vision.core.gpod.support import contrary_rival_share
 
     class Rivalled:
         # match 0 (raised, 30 px on ground of 20 +- 1): a rival on the ground (0.9), one
@@ -177,11 +177,11 @@ def test_a_pixels_contrary_rivals_are_those_on_the_other_side_of_the_ground():
     pd = np.array([20.0, 20.0, 20.0])
     thr = np.ones(3)
     raised = np.array([True, False, False])
-    c = _contrary_rival_share(Rivalled(), pd, thr, raised)
+    c = contrary_rival_share(Rivalled(), pd, thr, raised)
     assert c.dtype == np.float32
     assert c == pytest.approx([1.1 / 2.6, 1.0 / 2.4, 0.0], rel=1e-6)
     # a wall's texture matched elsewhere on the wall says nothing against it
     Rivalled.rival_d = np.array([40.0, 45.0, 35.0, 5.0, 10.0], np.float32)
-    assert _contrary_rival_share(Rivalled(), pd, thr, raised) == pytest.approx([0.0, 0.0, 0.0])
+    assert contrary_rival_share(Rivalled(), pd, thr, raised) == pytest.approx([0.0, 0.0, 0.0])
     Rivalled.rival_match = None
-    assert _contrary_rival_share(Rivalled(), pd, thr, raised) is None
+    assert contrary_rival_share(Rivalled(), pd, thr, raised) is None

@@ -40,7 +40,7 @@ from .runs import (
     string_pieces,
 )
 from .settings import surface_config
-from .support import _features, _ground_candidates, _noise_key
+from .support import _features, _ground_candidates, _noise_key, contrary_rival_share
 
 #: Obstacle pixels this far above the plane (pixels) or more are checked for a ground
 #: alternative (``GpodConfig.ambiguity_fraction``): a repetitive pattern matched one
@@ -251,7 +251,7 @@ class Detection(PlaneTracking):
         sclass = np.where(obst_string[sid], 1, np.where(drop_string[sid], -1, 0)).astype(np.int8)
         features = _features(m, excess.astype(np.float32), obst, drop, sclass,
                              ex_mean.astype(np.float32), thr.astype(np.float32),
-                             _contrary_rival_share(m, pd, thr, obst))
+                             contrary_rival_share(m, pd, thr, obst))
         self._frame_thr = thr
         # Ground features: reliably matched edge pixels on the plane (free space).
         ground = (np.abs(ex_mean) <= thr) & usable & ~obst_string[sid]
@@ -853,28 +853,3 @@ def _ground_coords(p: np.ndarray, hh: np.ndarray, metric: MetricPlane, axes: boo
     g = feet + metric.height * n_up[None, :]
     g2 = np.stack([g @ fwd, g @ lft], axis=1)
     return (g2, fwd, lft) if axes else g2
-
-
-
-
-def _contrary_rival_share(m: Matches, pd: np.ndarray, thr: np.ndarray,
-                          raised: np.ndarray) -> np.ndarray | None:
-    """(K,) float32: per match, the first-round PMF support of its rivals that say
-    otherwise, over that of the match and all its rivals (`match_rivals`: the other
-    candidates of its left or right edge); None when the matcher gave no rivals. For a
-    ``raised`` (K,) pixel the rivals on the ground or below it say otherwise (disparity at
-    most the ground's ``pd`` (K,) plus the pixel's threshold ``thr`` (K,), pixels), for
-    every other pixel (a drop) those on the ground or above it. Were the supports
-    likelihoods, the chance that the pixel is not what its match says: the ground matched
-    wrongly. A rival on the same side of the ground (a wall's texture matched elsewhere
-    on the wall) is another reading of the same kind."""
-    if m.rival_match is None or m.rival_ratio is None or m.rival_d is None:
-        return None
-    k = len(m)
-    j = m.rival_match
-    r = m.rival_ratio.astype(np.float64)
-    rd = m.rival_d.astype(np.float64)
-    total = 1.0 + np.bincount(j, weights=r, minlength=k)
-    contrary = np.where(raised[j], rd <= pd[j] + thr[j], rd >= pd[j] - thr[j])
-    return (np.bincount(j[contrary], weights=r[contrary], minlength=k) / total
-            ).astype(np.float32)

@@ -1,6 +1,6 @@
-"""Small helpers of the detector's stages: the features of a pass, plane agreement and
-metric planes, stillness from a motion, ground candidates, a moved report's image
-region, noise keys and MAD sigma.
+"""Small helpers of the detector's stages: the features of a pass (with each match's
+share of contrary rivals), plane agreement and metric planes, stillness from a motion,
+ground candidates, a moved report's image region, noise keys and MAD sigma.
 """
 from __future__ import annotations
 
@@ -150,3 +150,25 @@ def _mad_sigma(x: np.ndarray) -> float:
         return float('nan')
     return float(1.4826 * np.median(np.abs(x - np.median(x))))
 
+
+def contrary_rival_share(m: Matches, pd: np.ndarray, thr: np.ndarray,
+                          raised: np.ndarray) -> np.ndarray | None:
+    """(K,) float32: per match, the first-round PMF support of its rivals that say
+    otherwise, over that of the match and all its rivals (`match_rivals`: the other
+    candidates of its left or right edge); None when the matcher gave no rivals. For a
+    ``raised`` (K,) pixel the rivals on the ground or below it say otherwise (disparity at
+    most the ground's ``pd`` (K,) plus the pixel's threshold ``thr`` (K,), pixels), for
+    every other pixel (a drop) those on the ground or above it. Were the supports
+    likelihoods, the chance that the pixel is not what its match says: the ground matched
+    wrongly. A rival on the same side of the ground (a wall's texture matched elsewhere
+    on the wall) is another reading of the same kind."""
+    if m.rival_match is None or m.rival_ratio is None or m.rival_d is None:
+        return None
+    k = len(m)
+    j = m.rival_match
+    r = m.rival_ratio.astype(np.float64)
+    rd = m.rival_d.astype(np.float64)
+    total = 1.0 + np.bincount(j, weights=r, minlength=k)
+    contrary = np.where(raised[j], rd <= pd[j] + thr[j], rd >= pd[j] - thr[j])
+    return (np.bincount(j[contrary], weights=r[contrary], minlength=k) / total
+            ).astype(np.float32)
