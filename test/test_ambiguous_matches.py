@@ -156,7 +156,6 @@ def test_bars_matched_a_period_off_are_periodic_and_texture_is_not():
     assert p0.mean() < 0.1
 
 
-
 def test_a_pixels_contrary_rivals_are_those_on_the_other_side_of_the_ground():
     """`GpodFeatures.contrary_rival_share`: per match, the support of its rivals that say
     otherwise (for a raised pixel: on or below the ground, for a drop: on or above it)

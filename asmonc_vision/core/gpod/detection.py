@@ -205,8 +205,7 @@ class Detection(PlaneTracking):
         usable = reliable & in_range
         amb_drop = self._ambiguous_drops(m, pd, thr)
         # a periodic pattern matched a period off is no evidence either way
-        n_rivals = self._strong_rivals(m)
-        periodic = self._periodic_matches(m, pd, thr, n_rivals)
+        periodic = self._periodic_matches(m, pd, thr)
         obst = (ex_mean > thr) & (h <= c.max_obstacle_height_m) & usable & ~periodic
         # below the lowest ground the surface allows (``low`` px under its disparity)
         below = (ex_mean < -thr - low) & (h >= -c.max_drop_depth_m)
@@ -522,39 +521,26 @@ class Detection(PlaneTracking):
             no_drop[j[sel[nearer]]] = True
         return no_drop
 
-    def _strong_rivals(self, m: Matches) -> np.ndarray | None:
-        """(K,) int32: per match, its rivals (`match_rivals`) with at least
-        ``ambiguous_match_ratio`` of its first-round support; None when the matcher gave
-        no rivals."""
-        r = self.config.ambiguous_match_ratio
-        if m.rival_match is None or m.rival_ratio is None or r <= 0:
-            return None
-        return np.bincount(m.rival_match[m.rival_ratio >= r],
-                           minlength=len(m)).astype(np.int32)
-
-    def _periodic_matches(self, m: Matches, pd: np.ndarray, thr: np.ndarray,
-                          n_strong: np.ndarray | None = None) -> np.ndarray:
+    def _periodic_matches(self, m: Matches, pd: np.ndarray, thr: np.ndarray) -> np.ndarray:
         """(K,) bool: the matches of a periodic pattern: at least ``periodic_min_rivals``
         rivals (`match_rivals`) with ``ambiguous_match_ratio`` of the match's first-round
-        support or more (``n_strong`` (K,), `_strong_rivals`'s when not given), one of them
-        on the ground (within the pixel's threshold ``thr`` (K,) of the ground disparity
-        ``pd`` (K,)). The bars of a grate support candidates a period apart alike, and the
-        one a period nearer stands above the ground by the period over the baseline times
-        the height of the ray (a 3.5 cm period: 10 cm on the paper's rig) wherever the
-        walker is: a world-fixed false obstacle that the map would confirm. A kerb's face
-        has at most one strong rival on the ground (the ground around it supports the
-        ground's disparity), an obstacle's texture few."""
+        support or more, one of them on the ground (within the pixel's threshold ``thr``
+        (K,) of the ground disparity ``pd`` (K,)). The bars of a grate support candidates
+        a period apart alike, and the one a period nearer stands above the ground by the
+        period over the baseline times the height of the ray (a 3.5 cm period: 10 cm on
+        the paper's rig) wherever the walker is: a world-fixed false obstacle that the map
+        would confirm. A kerb's face has at most one strong rival on the ground (the
+        ground around it supports the ground's disparity), an obstacle's texture few."""
         k = len(m)
         out = np.zeros(k, bool)
         r = self.config.ambiguous_match_ratio
         n_min = self.config.periodic_min_rivals
-        if n_strong is None:
-            n_strong = self._strong_rivals(m)
-        if (n_min <= 0 or n_strong is None or m.rival_match is None or m.rival_d is None
+        if (n_min <= 0 or r <= 0 or m.rival_match is None or m.rival_d is None
                 or m.rival_ratio is None or k == 0):
             return out
         strong = m.rival_ratio >= r
         j = m.rival_match[strong]
+        n_strong = np.bincount(j, minlength=k)
         on_ground = np.abs(m.rival_d[strong].astype(np.float64) - pd[j]) <= thr[j]
         ground = np.zeros(k, bool)
         ground[j[on_ground]] = True
