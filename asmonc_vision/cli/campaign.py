@@ -3,7 +3,8 @@
     asmonc campaign [--minutes 20] [--workers 2] [--blind | --tuning]
                     [--classes CLASS ...] [--rigs backpack chest] [--duration 20]
                     [--walk CLASS:SEED:RIG ...] [--events]
-                    [--methods gpod gpod_ego gpod_map gpod_map_lag sgbm] [--cache DIR]
+                    [--methods gpod gpod_ego gpod_map gpod_map_lag gpod_map_wait sgbm]
+                    [--cache DIR]
                     [--json FILE]
                     [--markdown FILE] [--no-progress]
 
@@ -19,7 +20,9 @@ motion from the egomotion estimator (``gpod_ego``), our detector with the eviden
 (``gpod_map``: the map on, with each pair's motion at once, as a graph that waits for it),
 the map as the detector node runs it (``gpod_map_lag``: the detector with no motion, the
 map's motion predicted by `core.map_motion.MotionPredictor` from the motions of the pairs
-``MAP_MOTION_LAG`` (2) or more before, as the graph has them without waiting) and the SGBM
+``MAP_MOTION_LAG`` (2) or more before, as the graph has them without waiting), the map
+given each pair's own motion with the detector given none (``gpod_map_wait``: as a graph
+whose map, not its detector, would wait for the pair's motion) and the SGBM
 peer (`core.baseline`, as `asmonc eval --method sgbm`)
 each run over the stereo pairs in order, the alarm node's logic (`core.alarm`,
 default settings) is replayed over their outputs in bag time (`eval.alarm_replay`), and
@@ -61,6 +64,7 @@ TUNING_SEEDS = (1000, 2000)
 BLIND_SEEDS = (900000, 901000)
 METHOD_NAMES = {'gpod': 'ours (GPOD)', 'gpod_ego': 'ours (GPOD + motion)',
                 'gpod_map': 'ours (GPOD + map)', 'gpod_map_lag': 'ours (GPOD + map, no wait)',
+                'gpod_map_wait': 'ours (GPOD + map, map waits)',
                 'sgbm': 'peer (SGBM)'}
 #: gpod_map_lag: the motion of a pair reaches the map this many pairs later
 MAP_MOTION_LAG = 2
@@ -103,7 +107,9 @@ def add_arguments(p) -> None:
                         'each pair\'s motion from the egomotion estimator), gpod_map (the '
                         'evidence map, with each pair\'s motion), gpod_map_lag (the map, its '
                         'motion predicted from the pairs 2 or more before, as the node '
-                        'graph runs it: the system), sgbm (the peer); default gpod_map_lag '
+                        'graph runs it: the system), gpod_map_wait (the map given each '
+                        'pair\'s own motion, the detector none), sgbm (the peer); default '
+                        'gpod_map_lag '
                         'and sgbm')
     p.add_argument('--cache', type=Path, default=None,
                    help='rendered walks are kept here (default ~/.cache/asmonc_vision/campaign)')
@@ -240,7 +246,8 @@ def score_walk(w: Walk, cache: Path, methods: list[str], version: str) -> dict:
         t0, c0 = time.perf_counter(), time.process_time()
         runs = (run_method(frames, 'gpod', map_enabled=m.startswith('gpod_map'),
                            egomotion=m != 'gpod',
-                           motion_lag=MAP_MOTION_LAG if m == 'gpod_map_lag' else 0)
+                           motion_lag=MAP_MOTION_LAG if m == 'gpod_map_lag' else 0,
+                           map_waits=m == 'gpod_map_wait')
                 if m.startswith('gpod') else run_method(frames, m))
         detect_s[m] = time.perf_counter() - t0
         detect_cpu_s[m] = time.process_time() - c0

@@ -97,7 +97,8 @@ def make_method(method: str, threshold_px: float | None = None, map_enabled: boo
 
 def run_method(frames: list[Frame], method: str = 'gpod', threshold_px: float | None = None,
                progress=None, map_enabled: bool | None = None,
-               egomotion: bool = False, motion_lag: int = 0) -> list[FrameRun]:
+               egomotion: bool = False, motion_lag: int = 0,
+               map_waits: bool = False) -> list[FrameRun]:
     """Run a fresh detector over the frames in order, on one OpenCV thread.
 
     Args:
@@ -113,6 +114,9 @@ def run_method(frames: list[Frame], method: str = 'gpod', threshold_px: float | 
             a graph that waits for it); N >= 1 gives the detector no motion and the map
             the prediction of a `core.map_motion.MotionPredictor` fed the motions of the
             pairs at least N before (as the graph, which does not wait, has them).
+        map_waits: with ``egomotion``, the map and ``motion_lag`` 0, the detector gets
+            no motion and the map the predictor's fed each pair's own motion before the
+            pair (as the graph whose map waits for its pose, ``map_motion_wait``).
 
     GPOD is given each pair's up direction from the frame's inclinometer sample
     (`io.frames.Frame.inclinometer`, `core.rotations.up_for_pair` within the detector's
@@ -132,7 +136,8 @@ def run_method(frames: list[Frame], method: str = 'gpod', threshold_px: float | 
         from asmonc_vision.core.motion import EgomotionEstimator
         est = EgomotionEstimator()
     lagged: list = []            # (frame index, reference stamp, stamp, R, t) not yet known
-    if est is not None and motion_lag > 0 and det.map is not None:
+    if est is not None and motion_lag >= 0 and det.map is not None and (
+            motion_lag > 0 or map_waits):
         from asmonc_vision.core.map_motion import MotionPredictor
         det.motion_predictor = MotionPredictor()
     out = []
