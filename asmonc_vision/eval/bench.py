@@ -115,8 +115,9 @@ def run_method(frames: list[Frame], method: str = 'gpod', threshold_px: float | 
             the prediction of a `core.map_motion.MotionPredictor` fed the motions of the
             pairs at least N before (as the graph, which does not wait, has them).
         map_waits: with ``egomotion``, the map and ``motion_lag`` 0, the detector gets
-            no motion and the map the predictor's fed each pair's own motion before the
-            pair (as the graph whose map waits for its pose, ``map_motion_wait``).
+            no motion and the map the prediction of a predictor fed each pair's own
+            motion before the pair (as a graph whose map, not its detector, waited for
+            the pair's pose; the node's map does not wait, docs/map.md).
 
     GPOD is given each pair's up direction from the frame's inclinometer sample
     (`io.frames.Frame.inclinometer`, `core.rotations.up_for_pair` within the detector's
