@@ -137,8 +137,7 @@ def run_method(frames: list[Frame], method: str = 'gpod', threshold_px: float | 
         from asmonc_vision.core.motion import EgomotionEstimator
         est = EgomotionEstimator()
     lagged: list = []            # (frame index, reference stamp, stamp, R, t) not yet known
-    if est is not None and motion_lag >= 0 and det.map is not None and (
-            motion_lag > 0 or map_waits):
+    if est is not None and det.map is not None and (motion_lag > 0 or map_waits):
         from asmonc_vision.core.map_motion import MotionPredictor
         det.motion_predictor = MotionPredictor()
     out = []
