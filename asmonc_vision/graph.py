@@ -30,10 +30,10 @@ class GraphNode:
         ros_name: the node's ROS name.
         needs: the sensor input the node needs (one of `NEEDS`).
         outputs: topics it publishes that show it is up (and that `asmonc run` records).
-        inputs: topics it subscribes that show it is connected. An input that another
-            node of the graph publishes must be watched by the node
+        inputs: topics it subscribes that show it is connected. The node watches each
             (`nodes.common.watch_input_links`): `asmonc run` waits for the node to log the
-            link before it starts the next node or the player.
+            link of an input another node publishes before it starts the next node or
+            the player, and of an input the bag feeds before the player plays.
         params_file: its file in config/ (``ros__parameters``, equal to the defaults).
         remappings: (from, to) topic remappings passed to the node.
         start_late: started after the others are connected (its start-up grace must not

@@ -115,7 +115,7 @@ def test_walk_stream_gives_gait_state_and_predicted_motion(ros, qos_name):
                'a silence WARN')
 
 
-def test_a_node_waiting_for_its_first_sample_is_not_silent_until_the_grace_ends(ros):
+def test_a_node_waiting_for_its_first_sample_is_not_silent_until_the_grace_ends(ros, capfd):
     """Started before the inclinometer (a replay or a driver comes up a moment later), the
     node reports that it waits, not that the sensor is silent, for ``startup_grace``;
     after that a sensor that never spoke is silent."""
@@ -131,6 +131,19 @@ def test_a_node_waiting_for_its_first_sample_is_not_silent_until_the_grace_ends(
     spin_until(lambda: any('silent' in s.message and s.level == b'\x01' for s in diags),
                'a silence WARN after the grace')
     assert node.counts['imu'] == 0
+    # the sensor starts, then falls silent within the log's throttle (5 s) of the
+    # start-up line: that silence is logged too, as its own kind of line
+    pub = probe.create_publisher(Imu, '/inclinometer/imu', SENSOR_QOS)
+    spin_until(lambda: pub.get_subscription_count() >= 1, 'the node subscribed')
+    for i in range(10):
+        pub.publish(_imu(i * 0.02, (0.0, -0.3, 0.0), 1e-4))
+        ros.spin_for(0.02)
+    spin_until(lambda: node.counts['imu'] > 0, 'samples taken')
+    err = [capfd.readouterr().err]
+    spin_until(lambda: err.append(capfd.readouterr().err)
+               or 'silent for more than 0.2 s' in ''.join(err),
+               'the silence logged after the start-up line', deadline=3.0)
+    assert 'silent since the node started' in ''.join(err)
 
 
 def test_imu_without_orientation_is_ignored(ros):

@@ -183,6 +183,36 @@ def test_clock_and_exit_when_done(tmp_path, ros_context):
     assert h.T0 <= ns[0] and ns[-1] <= h.T0 + 3 * h.STEP + 3000
 
 
+def test_a_player_started_paused_plays_nothing_until_resumed(tmp_path, ros_context):
+    """start_paused holds the first message until ~/resume (std_srvs/Trigger) is called,
+    as `ros2 bag play --start-paused`; a second call says it is already playing."""
+    from std_srvs.srv import Trigger
+
+    msgs = h.sample_messages(4)
+    bag = h.write_bag(tmp_path / 'bag', msgs)
+    player = _player(ros_context, bag=str(bag), rate=5.0, start_paused=True)
+    collector = h.RawCollector(ros_context, TYPES)
+    client = collector.node.create_client(Trigger, '/bag_player_node/resume')
+    spinner = h.Spinner(ros_context, player, collector.node)
+    try:
+        assert collector.wait_matched([p.out_topic for p in player.plan])
+        player.start()
+        time.sleep(1.0)                     # 4 messages at rate 5 would take 0.6 s
+        assert collector.count() == 0 and not player.play_done.is_set()
+        assert client.wait_for_service(timeout_sec=5.0)
+        answers = []
+        for _ in range(2):
+            future = client.call_async(Trigger.Request())
+            assert h.wait_for(future.done, 5.0)
+            answers.append((future.result().success, future.result().message))
+            if len(answers) == 1:
+                assert player.play_done.wait(10.0)
+        assert answers == [(True, 'playing'), (False, 'already playing')]
+        assert h.wait_for(lambda: collector.count() >= len(msgs), 5.0), collector.count()
+    finally:
+        spinner.stop()
+
+
 def test_waits_for_image_and_camera_info_subscribers(tmp_path, ros_context):
     """With wait_for_subscribers, a subscriber that comes late still gets every frame and
     every camera_info: the player waits for both (a stereo node needs both; on a loaded

@@ -208,9 +208,16 @@ class _FakeChild:
         self.done = threading.Event()
         self._alive = alive
         self.stop_calls = []
+        self.freeze_calls = []
+        self.frozen = False
 
     def alive(self):
         return self._alive
+
+    def freeze(self):
+        import time
+        self.freeze_calls.append(time.monotonic())
+        self.frozen = True
 
     def stop(self):
         import time
@@ -262,7 +269,7 @@ def test_a_player_that_played_the_bag_but_does_not_exit_does_not_hang_the_run(mo
     waiting.join(timeout=10.0)
     assert not waiting.is_alive(), 'the replay waits for the player for ever'
     assert run.player_hung and any('had not exited' in line for line in lines), lines
-    assert alarm.stop_calls and alarm.stop_calls[0] < t0 + 0.5     # before its timeout
+    assert alarm.freeze_calls and alarm.freeze_calls[0] < t0 + 0.5   # before its timeout
     run.finish()
     assert player.stop_calls and run.player_rc is None
 
@@ -480,3 +487,22 @@ def test_side_by_side_runs_claim_different_domains(tmp_path):
     fs = [claim_domain(MAX_LINUX_DOMAIN_ID, tmp_path)[1]]
     assert claim_domain(MAX_LINUX_DOMAIN_ID, tmp_path) == (None, None)
     fs[0].close()
+
+
+def test_a_frozen_child_says_nothing_more_and_still_shuts_down_cleanly(tmp_path):
+    """`Child.freeze` (the alarm node at the end of a replay) halts the process at once;
+    `stop` then ends it through its SIGINT handler, not a kill."""
+    from asmonc_vision.replay.children import Child
+    code = ('import signal, sys, time\n'
+            'signal.signal(signal.SIGINT, lambda *a: (print("bye", flush=True), sys.exit(0)))\n'
+            'while True:\n    print("tick", flush=True); time.sleep(0.02)\n')
+    child = Child('ticker', [sys.executable, '-c', code], tmp_path, lambda s: None,
+                  dict(os.environ))
+    time.sleep(1.0)
+    child.freeze()
+    time.sleep(0.1)                              # a line written before the halt
+    n = child.log_path.read_text().count('tick')
+    time.sleep(0.5)
+    assert n > 0 and child.log_path.read_text().count('tick') == n
+    assert child.stop() == 0
+    assert child.log_path.read_text().rstrip().endswith('bye')

@@ -219,7 +219,7 @@ class AudioNode(Node):
                                  SENSOR_QOS)
         self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
         self.create_subscription(ObstacleArray, '/obstacles', self._on_obstacles, RESULT_QOS)
-        watch_input_links(self, ('/alarms',))
+        watch_input_links(self, ('/alarms', '/stereo/left/camera_info'))
         # the cue clock is a plain thread, not an rclpy timer: a hundred executor wake-ups
         # a second cost about a tenth of a core on a small CPU, which the detector needs
         self._tick_stop = threading.Event()

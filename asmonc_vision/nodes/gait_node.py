@@ -53,7 +53,7 @@ from asmonc_vision.io.bagio import imu_to_rpy_var
 from asmonc_vision.core.gait.rotations import (matrix_to_quaternion, quaternion_to_matrix,
                                                wrap_angle)
 from asmonc_vision.nodes.common import (RESULT_QOS, SENSOR_QOS, Diagnostics, declare_config,
-                                        run_node)
+                                        run_node, watch_input_links)
 from asmonc_vision.nodes.conversions import ns_to_stamp, stamp_to_ns
 from asmonc_vision_msgs.msg import GaitState
 
@@ -140,6 +140,7 @@ class GaitFilterNode(Node):
                                                  RESULT_QOS)
         self._diag = Diagnostics(self, 'gait_filter_node')
         self.create_subscription(Imu, '/inclinometer/imu', self._on_imu, SENSOR_QOS)
+        watch_input_links(self, ('/inclinometer/imu',))
         if self.config.use_egomotion:
             self.create_subscription(TransformStamped, '/egomotion', self._on_egomotion,
                                      SENSOR_QOS)
@@ -184,6 +185,8 @@ class GaitFilterNode(Node):
             if est is None:
                 self.counts['out_of_order'] += 1
                 return
+            if self._last_imu_steady is None:
+                self.get_logger().info(f'first inclinometer sample: stamp {ns * 1e-9:.3f} s')
             self._last_imu_ns = ns
             self._last_imu_steady = self._now()
             self.counts['imu'] += 1
@@ -280,10 +283,16 @@ class GaitFilterNode(Node):
         if silent:
             what = ('visual motion only' if ego_alive else 'walking false')
             self._diag.update(Diagnostics.WARN, f'inclinometer silent ({what})', **values)
-            since = ('since the node started' if self._last_imu_steady is None
-                     else 'for more than %.1f s' % self.config.timeout)
-            self.get_logger().warning(f'/inclinometer/imu silent {since}: {what}',
-                                      throttle_duration_sec=THROTTLE)
+            # two kinds of line, throttled apart (rclpy throttles per call site): a
+            # sensor that never started must not hide the first silence after it did
+            if self._last_imu_steady is None:
+                self.get_logger().warning(
+                    f'/inclinometer/imu silent since the node started: {what}',
+                    throttle_duration_sec=THROTTLE)
+            else:
+                self.get_logger().warning(
+                    f'/inclinometer/imu silent for more than {self.config.timeout:.1f} s: '
+                    f'{what}', throttle_duration_sec=THROTTLE)
         elif self._last_imu_steady is None:
             self._diag.update(Diagnostics.OK, 'waiting for the inclinometer', **values)
         elif self._jumped_lately(now):

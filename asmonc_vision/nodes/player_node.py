@@ -121,6 +121,8 @@ class BagPlayerNode(Node):
         self.passes = 0
         self.error: str | None = None
         self._stop = threading.Event()
+        #: set by ~/resume (or at once without ``start_paused``): playing may begin
+        self._resumed = threading.Event()
         self._thread: threading.Thread | None = None
         self._destroyed = False
         #: pacing (``pace_topic``): the stamps of the unanswered images, whether pacing
@@ -201,6 +203,11 @@ class BagPlayerNode(Node):
             log.warning('injecting faults: ' + '; '.join(map(str, self._faults.faults)))
         if cfg.pace_topic:
             self._setup_pacing()
+        if cfg.start_paused:
+            from std_srvs.srv import Trigger
+            self.create_service(Trigger, '~/resume', self._on_resume)
+        else:
+            self._resumed.set()
         self._clock_pub = None
         if cfg.publish_clock:
             from rosgraph_msgs.msg import Clock
@@ -244,6 +251,13 @@ class BagPlayerNode(Node):
                                  QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
         self.get_logger().info(f'pacing {topic} by {cfg.pace_topic}: at most {cfg.pace_lead} '
                                'image(s) ahead of their answers')
+
+    def _on_resume(self, request, response):
+        """~/resume (std_srvs/Trigger): let a player started paused begin."""
+        response.success = not self._resumed.is_set()
+        response.message = 'playing' if response.success else 'already playing'
+        self._resumed.set()
+        return response
 
     def _on_pace_answer(self, msg) -> None:
         # The node answers in the order it got the images: an answer for stamp s also
@@ -367,6 +381,12 @@ class BagPlayerNode(Node):
                 log.info('waiting for subscribers: ' + ', '.join(
                     f'{t} ({n})' for t, n in sorted(targets.items())))
                 self.wait_for_targets(targets, cfg.wait_timeout)
+            if cfg.start_paused and not self._resumed.is_set():
+                log.info('paused before the first message: waiting for ~/resume')
+                while not self._resumed.wait(0.05):
+                    if self._stop.is_set() or not self.context.ok():
+                        raise _ContextGone
+                log.info('resumed')
             while not self._stop.is_set():
                 self._play_pass()
                 if self._stop.is_set():

@@ -25,7 +25,7 @@ from sensor_msgs.msg import CameraInfo, Image
 
 from asmonc_vision.core.camera import StereoCamera
 from asmonc_vision.core.config import check_fields, param
-from asmonc_vision.nodes.common import IMAGE_QOS, Diagnostics
+from asmonc_vision.nodes.common import IMAGE_QOS, Diagnostics, watch_input_links
 from asmonc_vision.nodes.conversions import (ImageFormatError, image_msg_to_gray, stamp_to_ns,
                                              stereo_camera_from_infos)
 
@@ -201,6 +201,7 @@ class StereoInputNode(Node):
                                  lambda m: self._on_info('left', m), IMAGE_QOS)
         self.create_subscription(CameraInfo, '/stereo/right/camera_info',
                                  lambda m: self._on_info('right', m), IMAGE_QOS)
+        watch_input_links(self, ('/stereo/left/image_rect', '/stereo/right/image_rect'))
         self.create_timer(0.5, self._check_input)
         self._worker = threading.Thread(target=self._work, name=f'{self.label}-worker',
                                         daemon=True)

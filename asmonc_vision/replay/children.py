@@ -1,6 +1,7 @@
 """The nodes of a replay as processes: start, watch, stop, restart, inject faults."""
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import signal
@@ -34,6 +35,8 @@ class Child:
         self.done = threading.Event()
         #: the inputs whose subscription has matched a publisher, as the node logged them
         self.linked: set[str] = set()
+        #: halted by `freeze`
+        self.frozen = False
         self.log_path = log_dir / f'{log_name or name}.log'
         self._log = self.log_path.open('w')
         self._echo = echo
@@ -60,10 +63,21 @@ class Child:
     def alive(self) -> bool:
         return self.proc.poll() is None
 
+    def freeze(self) -> None:
+        """Stop the process at once (SIGSTOP: the kernel halts it before its next
+        instruction, however loaded the machine), so it publishes nothing more until
+        `stop` ends it."""
+        if self.alive():
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(self.proc.pid, signal.SIGSTOP)
+                self.frozen = True
+
     def stop(self, timeout: float = 5.0) -> int:
         if self.alive():
             try:
                 os.killpg(self.proc.pid, signal.SIGINT)
+                if self.frozen:       # the SIGINT waits for it to run again
+                    os.killpg(self.proc.pid, signal.SIGCONT)
                 self.proc.wait(timeout=timeout)
             except (subprocess.TimeoutExpired, ProcessLookupError):
                 self.proc.kill()

@@ -42,6 +42,10 @@ from asmonc_vision.replay.summary import (audio_outputs, bag_time, first_image_s
 
 #: seconds the nodes of a replay have to start and connect
 CONNECT_TIMEOUT = 120.0
+#: seconds the started player waits for every node's side of the links from it
+LINK_TIMEOUT = 30.0
+#: seconds the player's ~/resume service has to answer
+RESUME_TIMEOUT = 10.0
 #: seconds after the player's last line (and the last result) within which it exits: it
 #: waits at most `player_node.ACK_TIMEOUT` (4 s) for its subscribers' acknowledgements
 PLAYER_EXIT_GRACE = 10.0
@@ -280,10 +284,11 @@ class Replay:
         # their camera_info, the inclinometer) before the first message: a message sent
         # before its subscriber is matched is lost.
         plan, args = self.plan, self.args
+        # It starts paused: `release_player` lets it play once the readers have matched.
         player_cmd = [sys.executable, '-m', 'asmonc_vision.nodes.player_node', '--ros-args',
                       '-p', f'bag:={plan.bag.resolve()}', '-p', f'rate:={float(args.rate)}',
                       '-p', f'wait_topics:={json.dumps(wait_topics(self.nodes, plan.topics))}',
-                      '-p', 'exit_when_done:=true']
+                      '-p', 'start_paused:=true', '-p', 'exit_when_done:=true']
         message_faults = '; '.join(str(f) for f in plan.faults if f.kind in MESSAGE_KINDS)
         if message_faults:
             player_cmd += ['-p', f'faults:={message_faults}']
@@ -303,6 +308,56 @@ class Replay:
             self.gait_stopper.start()
         self.injector = FaultSchedule(plan.faults, self.children, self.monitor, self.console,
                                       self.t0)
+        self.release_player()
+
+    def _fed(self, name: str) -> set[str]:
+        """The inputs of node `name` that the bag feeds (none of the graph's nodes
+        publishes them, and the bag holds them, as images or compressed)."""
+        produced = {t for spec in self.nodes.values() for t in spec.outputs}
+        return {t for t in self.nodes[name].inputs if t not in produced
+                and (t in self.plan.topics or t + '/compressed' in self.plan.topics)}
+
+    def release_player(self) -> None:
+        """Let the paused player play once every node has logged the link of each input
+        the bag feeds it (`nodes.common.watch_input_links`). The player's own wait sees
+        its side of each link only; a reader's side can match a second or more later on
+        a loaded machine, and a best-effort reader (the walk model's inclinometer) drops
+        every message sent before. After LINK_TIMEOUT the replay plays anyway, saying
+        which links were missing."""
+        from std_srvs.srv import Trigger
+
+        player = self.children['player']
+        deadline = time.monotonic() + LINK_TIMEOUT
+        missing: dict[str, set[str]] = {}
+        while time.monotonic() < deadline and player.alive():
+            missing = {n: m for n in self.nodes if n in self.children
+                       and (m := self._fed(n) - self.children[n].linked)}
+            if not missing:
+                break
+            time.sleep(0.05)
+        if missing:
+            self.console.line('asmonc run: playing before these inputs were linked: '
+                              + '; '.join(f'{n} {", ".join(sorted(m))}'
+                                          for n, m in sorted(missing.items())), err=True)
+        client = self.monitor.node.create_client(Trigger, '/bag_player_node/resume')
+        try:
+            deadline = time.monotonic() + RESUME_TIMEOUT
+            while not client.wait_for_service(timeout_sec=0.1):
+                if not player.alive():
+                    return                  # it said why in its log; the replay ends
+                if time.monotonic() > deadline:
+                    raise RuntimeError('the bag player offered no ~/resume service within '
+                                       f'{RESUME_TIMEOUT:g} s')
+            future = client.call_async(Trigger.Request())
+            while not future.done():
+                if not player.alive():
+                    return
+                if time.monotonic() > deadline:
+                    raise RuntimeError('the bag player did not answer ~/resume within '
+                                       f'{RESUME_TIMEOUT:g} s')
+                time.sleep(0.02)
+        finally:
+            self.monitor.node.destroy_client(client)
 
     def show_alarms(self) -> None:
         for a in self.monitor.take_new_alarms():
@@ -384,8 +439,7 @@ class Replay:
                 # before its timeout announces the silence as a fault, then wait out
                 # --settle for late results (recorded, but no longer alarmed).
                 self.show_alarms()
-                self.children['alarm'].stop()
-                self.stopped.add('alarm')
+                self.stand_down_alarm()
             if player_end is not None and now - max(last_change, player_end) > self.args.settle:
                 break
 
@@ -393,9 +447,8 @@ class Replay:
         """After the last result: the alarm node stopped, the gait node and player ended."""
         time.sleep(0.1)  # the alarm for the last frame (the alarm node has the frame too)
         self.show_alarms()
-        # The replay is over: stop the alarm node before it reports the silence as a fault.
-        if 'alarm' in self.children:
-            self.children['alarm'].stop()
+        # The replay is over: halt the alarm node before it reports the silence as a fault.
+        self.stand_down_alarm()
         self.show_alarms()
         if self.gait_stopper is not None:
             self.gait_stopper.join(timeout=30.0)
@@ -407,17 +460,32 @@ class Replay:
         except subprocess.TimeoutExpired:
             self.failed.append('the player did not finish within 30 s of the last frame')
 
+    def stand_down_alarm(self) -> None:
+        """The replay is over: halt the alarm node at once (`Child.freeze`), before its
+        timeout announces the end of the input as a fault. A signal to shut down would
+        race that timeout: on a loaded 2-core machine a node has been seen to take 0.2 s
+        or more to act on SIGINT, half the default timeout. It is shut down in
+        `stop_all`, once nothing records or plays what it might still say."""
+        if 'alarm' in self.children and 'alarm' not in self.stopped:
+            self.children['alarm'].freeze()
+            self.stopped.add('alarm')
+
     def stop_all(self) -> None:
         self.console.done()
         if self.gait_stopper is not None:
             self.gait_stopper.cancel()
             self.gait_stopper.join(timeout=10.0)
         # Player, then alarm, then detector: the alarm must not outlive the detector
-        # and announce the end of the replay as a fault.
+        # and announce the end of the replay as a fault. A halted alarm node goes last,
+        # after the recorder has closed its bag and the audio node has stopped.
+        halted = self.children.get('alarm')
+        halted = halted if halted is not None and halted.frozen else None
         for name in ['player', 'alarm', *self.children]:
-            if name in self.children:
+            if name in self.children and self.children[name] is not halted:
                 self.children[name].stop()
         self.stop_ros()
+        if halted is not None:
+            halted.stop()
 
     def play(self) -> None:
         """The whole replay, from the monitor's start to the last node's stop."""
