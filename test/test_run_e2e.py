@@ -163,6 +163,10 @@ def test_missing_right_images_are_not_announced_as_a_fault(tmp_path):
     node is stopped once every frame has been played and the results have stopped)."""
     bag = tmp_path / 'lost_right'
     assert _without_right_images(BAGS / 'clear_static', bag, [5, -1]) == 2
+    # the pairs the bag plays: the alarm node is halted once it has answered each
+    all_pairs = sorted(bagio.pair_stamps(BAGS / 'clear_static'))
+    assert len(all_pairs) == 30
+    assert bagio.pair_stamps(bag) == frozenset(all_pairs) - {all_pairs[5], all_pairs[-1]}
     out = tmp_path / 'out'
     # the two lost pairs never come: a 2 s wait for late results is enough
     res = asmonc_run(bag, '--out', out, '--no-progress', '--settle', 2)

@@ -259,6 +259,38 @@ def read_messages(path, topics):
         reader.close()
 
 
+def pair_stamps(path) -> frozenset[int] | None:
+    """Header stamps (ns) that both the left and the right image topic hold (raw or
+    ``/compressed``): the stereo pairs a replay of the bag plays. The stamp is read from
+    the CDR bytes (a header comes first), nothing is deserialized. None for a bag that
+    cannot be read to its end."""
+    import struct
+
+    from rosbags.rosbag2.errors import ReaderError
+
+    sides = {TOPICS['left_image'][0]: 0, TOPICS['right_image'][0]: 1}
+    sides.update({t + '/compressed': i for t, i in list(sides.items())})
+    stamps: tuple[set[int], set[int]] = (set(), set())
+    try:
+        reader = open_reader(path)
+    except BagError:
+        return None
+    try:
+        conns = [c for c in reader.connections if c.topic in sides]
+        if not conns:
+            return frozenset()
+        for conn, _, raw in reader.messages(connections=conns):
+            # the encapsulation's second byte: 1 little-endian CDR, 0 big-endian
+            sec, nsec = struct.unpack_from('<iI' if raw[1] & 1 else '>iI', raw, 4)
+            stamps[sides[conn.topic]].add(sec * 1_000_000_000 + nsec)
+    except (ReaderError, OSError, ValueError, EOFError, struct.error,
+            *bagplay_read_errors()):
+        return None
+    finally:
+        reader.close()
+    return frozenset(stamps[0] & stamps[1])
+
+
 def _deserialize(store, path, topic: str, raw, msgtype: str):
     """One message from its CDR bytes; BagError when they are damaged."""
     try:

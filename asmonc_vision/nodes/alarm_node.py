@@ -15,7 +15,8 @@ Publishes:
         (0..3), ``obstacle_id``, ``range`` (m), ``bearing`` (rad from the walking
         direction, positive left), ``time_to_contact`` (s, ``inf`` while standing or
         unknown), ``drop`` and ``moving`` (``true``/``false``), ``speed`` (m/s, ``nan``
-        unknown). Level 0: no obstacle on the path.
+        unknown). Level 0: no obstacle on the path. Published after any /alarms
+        message for the same list: it is the node's whole answer to that list.
     /diagnostics
 
 An /obstacles entry whose height is NaN is ground the detector cannot see from its
@@ -227,10 +228,11 @@ class AlarmNode(Node):
             if msg.header.frame_id:
                 self._frame_id = msg.header.frame_id
             d = self._logic.update(self._now(), obstacles)
-            self._contact_pub.publish(contact_msg(self._logic.contact, msg.header,
-                                                  self._walk.speed))
             if d is not None:
                 self._publish(d, msg.header)
+            # last: the list's answer is complete once its contact is out
+            self._contact_pub.publish(contact_msg(self._logic.contact, msg.header,
+                                                  self._walk.speed))
 
     def _on_egomotion(self, msg: TransformStamped) -> None:
         ns = stamp_to_ns(msg.header.stamp)

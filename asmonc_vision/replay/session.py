@@ -42,6 +42,9 @@ from asmonc_vision.replay.summary import (audio_outputs, bag_time, first_image_s
 
 #: seconds the nodes of a replay have to start and connect
 CONNECT_TIMEOUT = 120.0
+#: seconds between the alarm node's answer to the last pair and its halt (its alarm for
+#: that pair was published just before the answer, on another topic)
+ANSWER_GRACE = 0.05
 #: seconds the started player waits for every node's side of the links from it
 LINK_TIMEOUT = 30.0
 #: seconds the player's ~/resume service has to answer
@@ -67,6 +70,8 @@ class ReplayPlan:
     nodes: dict[str, GraphNode]
     paced: bool
     faults: list
+    #: header stamps of the stereo pairs the bag holds (None: the bag is damaged)
+    pair_stamps: frozenset[int] | None = None
 
 
 def plan_replay(args) -> ReplayPlan | int:
@@ -107,7 +112,8 @@ def plan_replay(args) -> ReplayPlan | int:
     if args.out is not None and args.out.exists() and any(args.out.iterdir()):
         _err(f"asmonc run: --out '{args.out}' exists and is not empty")
         return 2
-    return ReplayPlan(bag, topics, damage, n_pairs, n_imu, nodes, paced, faults)
+    pairs = bagio.pair_stamps(bag) if n_pairs and not damage else None
+    return ReplayPlan(bag, topics, damage, n_pairs, n_imu, nodes, paced, faults, pairs)
 
 
 def _faults(args, nodes: dict) -> list | int:
@@ -460,6 +466,17 @@ class Replay:
         except subprocess.TimeoutExpired:
             self.failed.append('the player did not finish within 30 s of the last frame')
 
+    def watch_answers(self) -> None:
+        """Halt the alarm node ANSWER_GRACE s after it has answered every pair of the bag
+        (`Monitor.on_all_answered`): the end of the replay known, not guessed from a
+        silence. A pair that gives no result (refused, or taken by a fault) leaves the
+        guess (`wait_for_results`)."""
+        if self.plan.pair_stamps and 'alarm' in self.nodes:
+            with self.monitor.lock:
+                self.monitor.expected = self.plan.pair_stamps
+                self.monitor.on_all_answered = lambda: threading.Timer(
+                    ANSWER_GRACE, self.stand_down_alarm).start()
+
     def stand_down_alarm(self) -> None:
         """The replay is over: halt the alarm node at once (`Child.freeze`), before its
         timeout announces the end of the input as a fault. A signal to shut down would
@@ -491,6 +508,7 @@ class Replay:
         """The whole replay, from the monitor's start to the last node's stop."""
         self.start_ros()
         try:
+            self.watch_answers()
             self.start_nodes()
             self.start_player()
             self.wait_for_results()
