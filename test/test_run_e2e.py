@@ -105,7 +105,7 @@ def test_static_bag_every_true_obstacle_is_reported(static_run):
     assert 'obstacles on the path' in res.stdout
     assert '=== summary ===' in res.stdout and 'DETECTED' in res.stdout
     # the end of the replay is not reported as a silent inclinometer (the gait filter is
-    # stopped once the bag has been played and its last states are out)
+    # halted once the bag has been played and its last states are out)
     assert 'silent' not in res.stderr, res.stderr
 
 
@@ -316,7 +316,7 @@ def test_the_gait_node_is_stopped_after_its_last_state_not_before():
     stopper = _GaitStopper(gait, player, monitor, n_imu=100, quiet=0.2)
     stopper.start()
     time.sleep(0.4)
-    assert not gait.stop_calls                      # the bag is still being played
+    assert not gait.freeze_calls                    # the bag is still being played
     player.done.set()
     # states still coming in (a node catching up): not stopped while they come
     t_end = time.monotonic() + 0.6
@@ -324,10 +324,10 @@ def test_the_gait_node_is_stopped_after_its_last_state_not_before():
         monitor.state()
         time.sleep(0.05)
     last = monitor.last_gait_at
-    assert not gait.stop_calls and not stopper.stopping.is_set()
+    assert not gait.freeze_calls and not stopper.stopping.is_set()
     stopper.join(timeout=2.0)
-    assert len(gait.stop_calls) == 1 and stopper.stopping.is_set()
-    assert 0.2 <= gait.stop_calls[0] - last < 0.5
+    assert len(gait.freeze_calls) == 1 and stopper.stopping.is_set()
+    assert 0.2 <= gait.freeze_calls[0] - last < 0.5
 
     # every reading has its state: stopped at once, without waiting for the quiet time
     gait, player, monitor = _FakeChild(), _FakeChild(), _FakeMonitor()
@@ -338,7 +338,7 @@ def test_the_gait_node_is_stopped_after_its_last_state_not_before():
     player.done.set()
     t0 = time.monotonic()
     stopper.join(timeout=2.0)
-    assert len(gait.stop_calls) == 1 and gait.stop_calls[0] - t0 < 0.5
+    assert len(gait.freeze_calls) == 1 and gait.freeze_calls[0] - t0 < 0.5
 
     # a player that dies without saying it is done counts as done; cancel() ends the
     # thread without stopping anything
@@ -346,13 +346,13 @@ def test_the_gait_node_is_stopped_after_its_last_state_not_before():
     stopper = _GaitStopper(gait, player, monitor, n_imu=3, quiet=0.1)
     stopper.start()
     stopper.join(timeout=2.0)
-    assert len(gait.stop_calls) == 1
+    assert len(gait.freeze_calls) == 1
     gait, player = _FakeChild(), _FakeChild()
     stopper = _GaitStopper(gait, player, _FakeMonitor(), n_imu=3, quiet=0.1)
     stopper.start()
     stopper.cancel()
     stopper.join(timeout=2.0)
-    assert not stopper.is_alive() and not gait.stop_calls
+    assert not stopper.is_alive() and not gait.freeze_calls
 
 
 def test_domain_id_out_of_range_is_a_clear_error(capsys, monkeypatch):

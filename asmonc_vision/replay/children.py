@@ -94,7 +94,8 @@ class GaitStopper(threading.Thread):
     node would report the end of the replay as a silent sensor ``timeout`` s after its
     last sample. Its last /gait/state follows that sample at once, so the node is stopped
     ``quiet`` s after the newest state (or the end of the replay, if later) -- however late
-    the player's end is seen -- or as soon as every inclinometer reading has its state.
+    the player's end is seen -- or as soon as every inclinometer reading has its state:
+    halted (`Child.freeze`), and shut down with the other halted nodes at the end.
     Runs on its own thread, so that stopping other nodes cannot delay it."""
 
     def __init__(self, child: 'Child', player: 'Child', monitor: 'Monitor', n_imu: int,
@@ -117,8 +118,10 @@ class GaitStopper(threading.Thread):
             with self.monitor.lock:
                 states, last = self.monitor.gait_states, self.monitor.last_gait_at
             if states >= self.n_imu or now - max(played_at, last or played_at) >= self.quiet:
+                # halted at once (a SIGINT may take longer than the node's timeout to act
+                # on a loaded machine); `Replay.stop_all` shuts it down last
                 self.stopping.set()
-                self.child.stop()
+                self.child.freeze()
                 return
 
     def cancel(self) -> None:

@@ -493,16 +493,16 @@ class Replay:
             self.gait_stopper.cancel()
             self.gait_stopper.join(timeout=10.0)
         # Player, then alarm, then detector: the alarm must not outlive the detector
-        # and announce the end of the replay as a fault. A halted alarm node goes last,
-        # after the recorder has closed its bag and the audio node has stopped.
-        halted = self.children.get('alarm')
-        halted = halted if halted is not None and halted.frozen else None
+        # and announce the end of the replay as a fault. Halted nodes (the alarm and gait
+        # nodes at the end) go last, after the recorder has closed its bag and the audio
+        # node has stopped.
+        halted = [c for c in self.children.values() if c.frozen]
         for name in ['player', 'alarm', *self.children]:
-            if name in self.children and self.children[name] is not halted:
+            if name in self.children and self.children[name] not in halted:
                 self.children[name].stop()
         self.stop_ros()
-        if halted is not None:
-            halted.stop()
+        for child in halted:
+            child.stop()
 
     def play(self) -> None:
         """The whole replay, from the monitor's start to the last node's stop."""
