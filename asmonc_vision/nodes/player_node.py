@@ -13,7 +13,10 @@ back, with the whole replay, while more than ``pace_lead`` images are unanswered
 machine slower than the bag's rate slows the replay instead of dropping pairs
 (``asmonc run`` paces by /obstacles). Before the end is
 reported, the player waits (at most ACK_TIMEOUT) until reliable subscribers have
-acknowledged the last messages, so exiting right after does not lose them. For the ``asmonc run``
+acknowledged the last messages, so exiting right after does not lose them. With ``start_paused``
+the first message waits for the ``~/resume`` service (std_srvs/Trigger), as with
+``ros2 bag play --start-paused``: ``asmonc run`` calls it once every node has logged its
+own side of each link (a best-effort reader drops what comes before). For the ``asmonc run``
 orchestrator the node offers `play_done` (an Event), `published_counts` and `error`.
 
 Errors: a missing, unreadable or empty bag is logged (naming the file) and raises
