@@ -316,12 +316,13 @@ class Replay:
                                       self.t0)
         self.release_player()
 
-    def _fed(self, name: str) -> set[str]:
-        """The inputs of node `name` that the bag feeds (none of the graph's nodes
+    def _fed(self) -> dict[str, set[str]]:
+        """Per running node, its inputs that the bag feeds (none of the graph's nodes
         publishes them, and the bag holds them, as images or compressed)."""
         produced = {t for spec in self.nodes.values() for t in spec.outputs}
-        return {t for t in self.nodes[name].inputs if t not in produced
-                and (t in self.plan.topics or t + '/compressed' in self.plan.topics)}
+        return {n: {t for t in self.nodes[n].inputs if t not in produced
+                    and (t in self.plan.topics or t + '/compressed' in self.plan.topics)}
+                for n in self.nodes if n in self.children}
 
     def release_player(self) -> None:
         """Let the paused player play once every node has logged the link of each input
@@ -332,12 +333,12 @@ class Replay:
         which links were missing."""
         from std_srvs.srv import Trigger
 
-        player = self.children['player']
+        player, fed = self.children['player'], self._fed()
         deadline = time.monotonic() + LINK_TIMEOUT
         missing: dict[str, set[str]] = {}
         while time.monotonic() < deadline and player.alive():
-            missing = {n: m for n in self.nodes if n in self.children
-                       and (m := self._fed(n) - self.children[n].linked)}
+            missing = {n: m for n, want in fed.items()
+                       if (m := want - self.children[n].linked)}
             if not missing:
                 break
             time.sleep(0.05)
@@ -346,22 +347,21 @@ class Replay:
                               + '; '.join(f'{n} {", ".join(sorted(m))}'
                                           for n, m in sorted(missing.items())), err=True)
         client = self.monitor.node.create_client(Trigger, '/bag_player_node/resume')
+        deadline = time.monotonic() + RESUME_TIMEOUT
+        future = None
         try:
-            deadline = time.monotonic() + RESUME_TIMEOUT
-            while not client.wait_for_service(timeout_sec=0.1):
-                if not player.alive():
-                    return                  # it said why in its log; the replay ends
-                if time.monotonic() > deadline:
-                    raise RuntimeError('the bag player offered no ~/resume service within '
-                                       f'{RESUME_TIMEOUT:g} s')
-            future = client.call_async(Trigger.Request())
-            while not future.done():
+            # the service offered, then answered; a player that dies has said why in its
+            # log, and the replay ends
+            while future is None or not future.done():
                 if not player.alive():
                     return
                 if time.monotonic() > deadline:
                     raise RuntimeError('the bag player did not answer ~/resume within '
                                        f'{RESUME_TIMEOUT:g} s')
-                time.sleep(0.02)
+                if future is None and client.wait_for_service(timeout_sec=0.1):
+                    future = client.call_async(Trigger.Request())
+                elif future is not None:
+                    time.sleep(0.02)
         finally:
             self.monitor.node.destroy_client(client)
 
