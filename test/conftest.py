@@ -319,3 +319,24 @@ def ros(request):
                      getattr(request.module, 'DEADLINE', 15.0))
     yield graph
     graph.close()
+
+
+def fault_timeline(out) -> str:
+    """Where each FAULT on /alarms of the replay recorded in ``out`` came, for an
+    assertion's message: its text, its receive time after the first /obstacles list and
+    before the last one (s, the recorder's clock), and the lists received before it."""
+    from asmonc_vision.io import bagio
+    lists, faults = [], []
+    for topic, t, m in bagio.read_messages(out, ['/obstacles', '/alarms']):
+        if topic == '/obstacles':
+            lists.append(t)
+        elif int(m.level) == 4:
+            faults.append((t, m.text))
+    if not lists:
+        return f'{len(faults)} FAULT(s), no /obstacles'
+    first, last = min(lists), max(lists)
+    return '; '.join(f'FAULT {text!r} at +{(t - first) / 1e9:.3f} s, '
+                     f'{(last - t) / 1e9:.3f} s before the last list, after '
+                     f'{sum(x <= t for x in lists)} of {len(lists)} lists (the newest '
+                     f'{(t - max([x for x in lists if x <= t], default=t)) / 1e9:.3f} s before)'
+                     for t, text in faults)

@@ -14,7 +14,7 @@ import pytest
 
 from asmonc_vision.io import bagio
 from asmonc_vision.core.alarm import TEXT_NO_DATA
-from conftest import BAGS
+from conftest import BAGS, fault_timeline
 
 FAULT = 4
 T0 = 1_700_000_000_000_000_000      # the bundled bags' first stamp
@@ -77,7 +77,7 @@ def image_faults(tmp_path_factory):
 
 
 def test_image_and_camera_info_faults(image_faults):
-    res, summary, logs, diags, _ = image_faults
+    res, summary, logs, diags, out = image_faults
     # changed: one pair each, the second of the reorder window; dup changes none
     survived(res, summary, logs, affected=7)
     det = logs['detector']
@@ -107,7 +107,7 @@ def test_image_and_camera_info_faults(image_faults):
         said(diags, name, 'stamps not increasing', 1)
     # single bad pairs are shorter than the alarm's timeout: no FAULT, nothing lost
     assert [a['text'] for a in summary['alarm_log'] if a['level'] == FAULT] == \
-        ['starting up, hold still']
+        ['starting up, hold still'], fault_timeline(out)
     assert summary['path_warnings']['never_warned'] == 0
 
 

@@ -15,7 +15,7 @@ import pytest
 from asmonc_vision.io import bagio
 from asmonc_vision.io.frames import frame_from_obstacle_array
 from asmonc_vision.eval.evaluation import score_sequence
-from conftest import BAGS
+from conftest import BAGS, fault_timeline
 
 
 def asmonc_run(*args, timeout=240, **env_overrides):
@@ -177,7 +177,7 @@ def test_missing_right_images_are_not_announced_as_a_fault(tmp_path):
     assert summary['processed_frames'] == summary['input_pairs'] - 2
     levels = [m.level for _, _, m in bagio.read_messages(out, ['/alarms'])]
     assert levels[0] == 4 and 0 in levels                    # "starting up", then clear
-    assert 4 not in levels[levels.index(0):], levels         # no FAULT after that
+    assert 4 not in levels[levels.index(0):], (levels, fault_timeline(out))  # no FAULT after
 
 
 def test_the_alarm_timeout_comes_from_the_params_files(tmp_path):

@@ -70,8 +70,10 @@ class ReplayPlan:
     nodes: dict[str, GraphNode]
     paced: bool
     faults: list
-    #: header stamps of the stereo pairs the bag holds (None: the bag is damaged)
-    pair_stamps: frozenset[int] | None = None
+    #: header stamp (ns) of the newest stereo pair the bag holds that no injected fault
+    #: changes or leaves out: once the alarm node has answered it, nothing is left to
+    #: answer (None: not known, as in a damaged bag)
+    last_pair: int | None = None
 
 
 def plan_replay(args) -> ReplayPlan | int:
@@ -112,8 +114,17 @@ def plan_replay(args) -> ReplayPlan | int:
     if args.out is not None and args.out.exists() and any(args.out.iterdir()):
         _err(f"asmonc run: --out '{args.out}' exists and is not empty")
         return 2
-    pairs = bagio.pair_stamps(bag) if n_pairs and not damage else None
-    return ReplayPlan(bag, topics, damage, n_pairs, n_imu, nodes, paced, faults, pairs)
+    return ReplayPlan(bag, topics, damage, n_pairs, n_imu, nodes, paced, faults,
+                      _last_pair(bag, faults) if n_pairs and not damage else None)
+
+
+def _last_pair(bag: Path, faults: list) -> int | None:
+    """The newest pair's stamp (ns) among those the bag holds whole (`bagio.pair_stamps`)
+    that no message fault of ``faults`` changes or leaves out; None when none is known."""
+    pairs = bagio.pair_stamps(bag)
+    if pairs and any(f.kind in MESSAGE_KINDS for f in faults):
+        pairs = pairs - affected_pairs(BagSource(bag), faults)[1]
+    return max(pairs) if pairs else None
 
 
 def _faults(args, nodes: dict) -> list | int:
@@ -467,14 +478,15 @@ class Replay:
             self.failed.append('the player did not finish within 30 s of the last frame')
 
     def watch_answers(self) -> None:
-        """Halt the alarm node ANSWER_GRACE s after it has answered every pair of the bag
-        (`Monitor.on_all_answered`): the end of the replay known, not guessed from a
-        silence. A pair that gives no result (refused, or taken by a fault) leaves the
-        guess (`wait_for_results`)."""
-        if self.plan.pair_stamps and 'alarm' in self.nodes:
+        """Halt the alarm node ANSWER_GRACE s after it has answered the newest whole pair
+        of the bag (`Monitor.on_last_answered`): the end of the replay known, not guessed
+        from a silence. The pipeline keeps stamp order (a pair not newer than the last one
+        is refused), so no older pair can be answered after it. When that pair gives no
+        result (refused by the detector), the guess stays (`wait_for_results`)."""
+        if self.plan.last_pair is not None and 'alarm' in self.nodes:
             with self.monitor.lock:
-                self.monitor.expected = self.plan.pair_stamps
-                self.monitor.on_all_answered = lambda: threading.Timer(
+                self.monitor.last_expected = self.plan.last_pair
+                self.monitor.on_last_answered = lambda: threading.Timer(
                     ANSWER_GRACE, self.stand_down_alarm).start()
 
     def stand_down_alarm(self) -> None:
