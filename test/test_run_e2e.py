@@ -267,6 +267,7 @@ def test_a_player_that_played_the_bag_but_does_not_exit_does_not_hang_the_run(mo
     run.injector = SimpleNamespace(poll=lambda: None)
     run.check_nodes = lambda: None
     run.stopped, run.player_hung, run.gait_stopper, run.player_rc = set(), False, None, None
+    run.end_watch = None
     t0 = time.monotonic()
     waiting = threading.Thread(target=run.wait_for_results, daemon=True)
     waiting.start()

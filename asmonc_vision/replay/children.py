@@ -76,8 +76,9 @@ class Child:
         if self.alive():
             try:
                 os.killpg(self.proc.pid, signal.SIGINT)
-                if self.frozen:       # the SIGINT waits for it to run again
-                    os.killpg(self.proc.pid, signal.SIGCONT)
+                # a halted process (`freeze`, or `replay.end_watch`) acts on the SIGINT
+                # once it runs again; a running one ignores SIGCONT
+                os.killpg(self.proc.pid, signal.SIGCONT)
                 self.proc.wait(timeout=timeout)
             except (subprocess.TimeoutExpired, ProcessLookupError):
                 self.proc.kill()

@@ -29,17 +29,6 @@ class Monitor:
         self.new_alarms: list[dict] = []
         self.node.create_subscription(ObstacleArray, '/obstacles', self._on_obstacles, RESULT_QOS)
         self.node.create_subscription(Alarm, '/alarms', self._on_alarm, ALARM_QOS)
-        # The alarm node's answer to each list (its contact, published after any alarm
-        # for that list): once the newest pair the bag plays has one, `on_last_answered`
-        # runs (on this node's executor thread, so a busy main loop cannot delay it).
-        from diagnostic_msgs.msg import DiagnosticArray
-
-        from asmonc_vision.nodes.alarm_node import CONTACT_TOPIC
-        #: header stamp (ns) of the newest pair the bag plays (None: not known)
-        self.last_expected: int | None = None
-        self.on_last_answered = None
-        self.node.create_subscription(DiagnosticArray, CONTACT_TOPIC, self._on_contact,
-                                      RESULT_QOS)
         self.gait_states = 0
         self.gait_walking = 0
         #: time.monotonic() of the newest /gait/state (None before the first)
@@ -71,17 +60,6 @@ class Monitor:
         with self.lock:
             self.detections[frame.stamp_ns] = frame
             self.last_result_at = time.monotonic()
-
-    def _on_contact(self, msg) -> None:
-        stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-        with self.lock:
-            done = (self.last_expected is not None and self.on_last_answered is not None
-                    and stamp >= self.last_expected)
-            hook = self.on_last_answered if done else None
-            if done:
-                self.on_last_answered = None
-        if hook is not None:
-            hook()
 
     def _on_alarm(self, msg) -> None:
         a = {'stamp_ns': msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec,

@@ -30,6 +30,7 @@ from asmonc_vision.io import bagio
 from asmonc_vision.io.bagplay import BagSource
 from asmonc_vision.replay.children import (PLAYED_MARK, Child, FaultSchedule, GaitStopper,
                                            connected, pacing, wait_topics)
+from asmonc_vision.replay.end_watch import HALTED_LINE
 from asmonc_vision.replay.domain import MAX_DOMAIN_ID, MAX_LINUX_DOMAIN_ID, claim_domain, \
     domain_search_limit
 from asmonc_vision.replay.monitor import Console, Monitor
@@ -43,7 +44,7 @@ from asmonc_vision.replay.summary import (audio_outputs, bag_time, first_image_s
 #: seconds the nodes of a replay have to start and connect
 CONNECT_TIMEOUT = 120.0
 #: seconds between the alarm node's answer to the last pair and its halt (its alarm for
-#: that pair was published just before the answer, on another topic)
+#: that pair was published just before the answer, on another topic): `end_watch --grace`
 ANSWER_GRACE = 0.05
 #: seconds the started player waits for every node's side of the links from it
 LINK_TIMEOUT = 30.0
@@ -206,6 +207,9 @@ class Replay:
         self.stopped: set[str] = set()
         #: the player played the whole bag and then did not exit (`PLAYER_EXIT_GRACE`)
         self.player_hung = False
+        #: the process that halts the alarm node once it has answered the newest pair
+        #: (`replay.end_watch`; None without one)
+        self.end_watch: Child | None = None
 
     # --- ROS side -------------------------------------------------------------------
 
@@ -325,6 +329,7 @@ class Replay:
             self.gait_stopper.start()
         self.injector = FaultSchedule(plan.faults, self.children, self.monitor, self.console,
                                       self.t0)
+        self.start_end_watch()
         self.release_player()
 
     def _fed(self) -> dict[str, set[str]]:
@@ -344,12 +349,16 @@ class Replay:
         which links were missing."""
         from std_srvs.srv import Trigger
 
-        player, fed = self.children['player'], self._fed()
+        player = self.children['player']
+        readers = {n: (self.children[n], want) for n, want in self._fed().items()}
+        if self.end_watch is not None:
+            from asmonc_vision.nodes.alarm_node import CONTACT_TOPIC
+            readers['end_watch'] = (self.end_watch, {CONTACT_TOPIC})
         deadline = time.monotonic() + LINK_TIMEOUT
         missing: dict[str, set[str]] = {}
         while time.monotonic() < deadline and player.alive():
-            missing = {n: m for n, want in fed.items()
-                       if (m := want - self.children[n].linked)}
+            missing = {n: m for n, (child, want) in readers.items()
+                       if (m := want - child.linked)}
             if not missing:
                 break
             time.sleep(0.05)
@@ -403,6 +412,9 @@ class Replay:
             self.children[name] = self.spawn(name, f'{name}.restart{self.restarts[name]}')
             if name == 'gait' and self.gait_stopper is not None:
                 self.gait_stopper.child = self.children[name]
+            if name == 'alarm' and self.end_watch is not None:
+                self.end_watch.stop()
+                self.start_end_watch()
 
     def wait_for_results(self) -> None:
         """Until every pair has its result (or, with no cameras, the bag has been played),
@@ -426,6 +438,7 @@ class Replay:
             self.console.bar(monitor.frames)
             self.injector.poll()
             self.check_nodes()
+            self.note_end_watch()
             time.sleep(0.02 if played_at is not None and 'alarm' not in self.stopped else 0.1)
             now = time.monotonic()
             if monitor.frames != last:
@@ -477,17 +490,27 @@ class Replay:
         except subprocess.TimeoutExpired:
             self.failed.append('the player did not finish within 30 s of the last frame')
 
-    def watch_answers(self) -> None:
-        """Halt the alarm node ANSWER_GRACE s after it has answered the newest whole pair
-        of the bag (`Monitor.on_last_answered`): the end of the replay known, not guessed
-        from a silence. The pipeline keeps stamp order (a pair not newer than the last one
-        is refused), so no older pair can be answered after it. When that pair gives no
-        result (refused by the detector), the guess stays (`wait_for_results`)."""
-        if self.plan.last_pair is not None and 'alarm' in self.nodes:
-            with self.monitor.lock:
-                self.monitor.last_expected = self.plan.last_pair
-                self.monitor.on_last_answered = lambda: threading.Timer(
-                    ANSWER_GRACE, self.stand_down_alarm).start()
+    def start_end_watch(self) -> None:
+        """Start `replay.end_watch`: it halts the alarm node ANSWER_GRACE s after the node
+        has answered the newest pair the bag holds whole, from a process of its own (the
+        end of the replay known, not guessed from a silence, and acted on at once however
+        busy this process is). When that pair gives no result (the detector refused it),
+        the guess stays (`wait_for_results`)."""
+        if self.plan.last_pair is None or 'alarm' not in self.children:
+            return
+        cmd = [sys.executable, '-m', 'asmonc_vision.replay.end_watch',
+               '--last-stamp', str(self.plan.last_pair),
+               '--pgid', str(self.children['alarm'].proc.pid), '--grace', str(ANSWER_GRACE)]
+        self.end_watch = Child('end_watch', cmd, self.log_dir,
+                               lambda s: self.console.line(s, err=True), self.env,
+                               done_mark=HALTED_LINE)
+
+    def note_end_watch(self) -> None:
+        """Take note once `replay.end_watch` has halted the alarm node."""
+        if (self.end_watch is not None and self.end_watch.done.is_set()
+                and 'alarm' not in self.stopped):
+            self.children['alarm'].frozen = True
+            self.stopped.add('alarm')
 
     def stand_down_alarm(self) -> None:
         """The replay is over: halt the alarm node at once (`Child.freeze`), before its
@@ -495,12 +518,16 @@ class Replay:
         race that timeout: on a loaded 2-core machine a node has been seen to take 0.2 s
         or more to act on SIGINT, half the default timeout. It is shut down in
         `stop_all`, once nothing records or plays what it might still say."""
+        self.note_end_watch()
         if 'alarm' in self.children and 'alarm' not in self.stopped:
             self.children['alarm'].freeze()
             self.stopped.add('alarm')
 
     def stop_all(self) -> None:
         self.console.done()
+        if self.end_watch is not None:
+            self.end_watch.stop()
+            self.note_end_watch()
         if self.gait_stopper is not None:
             self.gait_stopper.cancel()
             self.gait_stopper.join(timeout=10.0)
@@ -520,7 +547,6 @@ class Replay:
         """The whole replay, from the monitor's start to the last node's stop."""
         self.start_ros()
         try:
-            self.watch_answers()
             self.start_nodes()
             self.start_player()
             self.wait_for_results()
