@@ -1,5 +1,5 @@
-"""`replay.end_watch`: the alarm node is halted once it has answered the bag's newest pair,
-not before, from a process of its own."""
+"""`replay.end_watch`: the alarm node is halted once it has answered the last pair the bag
+plays, not before, from a process of its own."""
 import os
 import subprocess
 import sys
@@ -50,7 +50,8 @@ def test_the_alarm_node_is_halted_after_the_newest_pair_is_answered():
             time.sleep(0.05)
         assert pub.get_subscription_count() == 1, 'end_watch never subscribed'
         time.sleep(0.3)                    # its side of the link too
-        for stamp in (last - 2_000_000_000, last - 100_000_000):   # older pairs
+        # the pairs before the last: one with a newer stamp (a clock that jumped back)
+        for stamp in (last - 2_000_000_000, last + 5_000_000_000, last - 100_000_000):
             pub.publish(_contact(stamp))
         time.sleep(0.5)
         assert _state(alarm.pid) != 'T' and watch.poll() is None   # not yet

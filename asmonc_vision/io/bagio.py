@@ -259,18 +259,19 @@ def read_messages(path, topics):
         reader.close()
 
 
-def pair_stamps(path) -> frozenset[int] | None:
+def pair_stamps(path) -> list[int] | None:
     """Header stamps (ns) that both the left and the right image topic hold (raw or
-    ``/compressed``): the stereo pairs a replay of the bag plays. The stamp is read from
-    the CDR bytes (a header comes first), nothing is deserialized. None for a bag that
-    cannot be read to its end."""
+    ``/compressed``): the stereo pairs a replay of the bag plays, in the order the bag
+    holds their left images (its log time; a stamp seen twice counts where first seen).
+    The stamp is read from the CDR bytes (a header comes first), nothing is
+    deserialized. None for a bag that cannot be read to its end."""
     import struct
 
     from rosbags.rosbag2.errors import ReaderError
 
     sides = {TOPICS['left_image'][0]: 0, TOPICS['right_image'][0]: 1}
     sides.update({t + '/compressed': i for t, i in list(sides.items())})
-    stamps: tuple[set[int], set[int]] = (set(), set())
+    stamps: tuple[dict[int, None], set[int]] = ({}, set())
     try:
         reader = open_reader(path)
     except BagError:
@@ -278,17 +279,21 @@ def pair_stamps(path) -> frozenset[int] | None:
     try:
         conns = [c for c in reader.connections if c.topic in sides]
         if not conns:
-            return frozenset()
+            return []
         for conn, _, raw in reader.messages(connections=conns):
             # the encapsulation's second byte: 1 little-endian CDR, 0 big-endian
             sec, nsec = struct.unpack_from('<iI' if raw[1] & 1 else '>iI', raw, 4)
-            stamps[sides[conn.topic]].add(sec * 1_000_000_000 + nsec)
+            stamp = sec * 1_000_000_000 + nsec
+            if sides[conn.topic]:
+                stamps[1].add(stamp)
+            else:
+                stamps[0].setdefault(stamp, None)      # a dict keeps the order
     except (ReaderError, OSError, ValueError, EOFError, struct.error,
             *bagplay_read_errors()):
         return None
     finally:
         reader.close()
-    return frozenset(stamps[0] & stamps[1])
+    return [s for s in stamps[0] if s in stamps[1]]
 
 
 def _deserialize(store, path, topic: str, raw, msgtype: str):

@@ -1,15 +1,15 @@
 """The end of a replay, watched from a process of its own: halt the alarm node once it has
-answered the bag's newest pair.
+answered the last pair the bag plays.
 
 At the end of a replay the input stops, and the alarm node's timeout (0.4 s) would
 announce that silence to the wearer as a fault. The alarm node publishes its whole answer
 to each obstacle list on ``/alarms/contact`` (after any ``/alarms`` message for the same
-list). The pipeline keeps stamp order (a pair not newer than the last one is refused), so
-once the answer to the newest pair the bag holds whole has come, nothing older can come
-after it, and the replay is over for the alarm node.
+list). The pipeline keeps the order the pairs are played in (a pair not newer than the
+last one is refused), so once the answer to the last pair the bag plays whole has come,
+nothing can come after it, and the replay is over for the alarm node.
 
 This process subscribes that topic and halts the alarm node's process group with
-SIGSTOP ``--grace`` s after the answer whose stamp is at least ``--last-stamp``, prints
+SIGSTOP ``--grace`` s after the answer stamped ``--last-stamp``, prints
 `HALTED_LINE` and exits. It does nothing else, so it answers within milliseconds however
 busy `asmonc run`'s own process is (recording and compressing the debug images there, a
 watcher thread was seen to act 0.3 s late, when the timeout had already fired). `asmonc
@@ -34,7 +34,7 @@ HALTED_LINE = 'end_watch: alarm node halted'
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog='end_watch', description=__doc__.splitlines()[0])
     p.add_argument('--last-stamp', type=int, required=True,
-                   help='header stamp (ns) of the newest pair the bag holds whole')
+                   help='header stamp (ns) of the last pair the bag plays whole')
     p.add_argument('--pgid', type=int, required=True,
                    help="the alarm node's process group id")
     p.add_argument('--grace', type=float, default=0.05,
@@ -65,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
 
     def on_contact(msg) -> None:
         stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-        if stamp >= args.last_stamp and not halted.is_set():
+        if stamp == args.last_stamp and not halted.is_set():
             node.destroy_subscription(sub)
             if args.grace > 0:
                 threading.Timer(args.grace, halt).start()

@@ -30,9 +30,9 @@ from asmonc_vision.io import bagio
 from asmonc_vision.io.bagplay import BagSource
 from asmonc_vision.replay.children import (PLAYED_MARK, Child, FaultSchedule, GaitStopper,
                                            connected, pacing, wait_topics)
-from asmonc_vision.replay.end_watch import HALTED_LINE
 from asmonc_vision.replay.domain import MAX_DOMAIN_ID, MAX_LINUX_DOMAIN_ID, claim_domain, \
     domain_search_limit
+from asmonc_vision.replay.end_watch import HALTED_LINE
 from asmonc_vision.replay.monitor import Console, Monitor
 from asmonc_vision.replay.params import (LEVEL_NAMES, OUTPUT_TOPICS, PACE_LEAD, alarm_timeout,
                                          audio_params, default_bag, gait_timeout)
@@ -71,9 +71,9 @@ class ReplayPlan:
     nodes: dict[str, GraphNode]
     paced: bool
     faults: list
-    #: header stamp (ns) of the newest stereo pair the bag holds that no injected fault
-    #: changes or leaves out: once the alarm node has answered it, nothing is left to
-    #: answer (None: not known, as in a damaged bag)
+    #: header stamp (ns) of the last stereo pair the bag plays whole that no injected
+    #: fault changes or leaves out: once the alarm node has answered it, nothing is
+    #: left to answer (None: not known, as in a damaged bag)
     last_pair: int | None = None
 
 
@@ -120,12 +120,15 @@ def plan_replay(args) -> ReplayPlan | int:
 
 
 def _last_pair(bag: Path, faults: list) -> int | None:
-    """The newest pair's stamp (ns) among those the bag holds whole (`bagio.pair_stamps`)
-    that no message fault of ``faults`` changes or leaves out; None when none is known."""
+    """The stamp (ns) of the last pair the bag plays whole (`bagio.pair_stamps`, in the
+    bag's order) that no message fault of ``faults`` changes or leaves out; None when
+    none is known. The last played, not the newest stamp: a recording whose clock
+    jumped back holds a newer stamp before its end."""
     pairs = bagio.pair_stamps(bag)
     if pairs and any(f.kind in MESSAGE_KINDS for f in faults):
-        pairs = pairs - affected_pairs(BagSource(bag), faults)[1]
-    return max(pairs) if pairs else None
+        affected = affected_pairs(BagSource(bag), faults)[1]
+        pairs = [s for s in pairs if s not in affected]
+    return pairs[-1] if pairs else None
 
 
 def _faults(args, nodes: dict) -> list | int:
@@ -492,7 +495,7 @@ class Replay:
 
     def start_end_watch(self) -> None:
         """Start `replay.end_watch`: it halts the alarm node ANSWER_GRACE s after the node
-        has answered the newest pair the bag holds whole, from a process of its own (the
+        has answered the last pair the bag plays whole, from a process of its own (the
         end of the replay known, not guessed from a silence, and acted on at once however
         busy this process is). When that pair gives no result (the detector refused it),
         the guess stays (`wait_for_results`)."""
