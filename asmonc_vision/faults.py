@@ -239,6 +239,20 @@ def _pitch_by(msg, angle: float) -> None:
     q.w, q.x, q.y, q.z = (w * c - y * s, x * c - z * s, y * c + w * s, z * c + x * s)
 
 
+def changed_stamps(src, faults: list[Fault], topic: str) -> set[int]:
+    """The header stamps (ns) of the messages on ``topic`` (one of the fault plan's
+    topics) of the open bag ``src`` (an `asmonc_vision.io.bagplay.BagSource`) that
+    ``faults`` change or leave out. A damaged bag is read up to the damage."""
+    plan = FaultPlan(faults, src.info.start_ns)
+    out: set[int] = set()
+    if not plan or topic not in src.info.topics:
+        return out
+    for m in src.messages_before_damage({topic: src.info.topics[topic].msgtype}):
+        if m.data not in plan.apply(m.topic, m.data, m.timestamp):
+            out.add(_stamp_ns(m.topic, m.data))
+    return out
+
+
 def affected_pairs(src, faults: list[Fault]) -> tuple[set[int], set[int]]:
     """(every left image's header stamp, the stamps of the pairs ``faults`` change or
     leave out), in ns, of the open bag ``src`` (an `asmonc_vision.io.bagplay.BagSource`).

@@ -259,41 +259,47 @@ def read_messages(path, topics):
         reader.close()
 
 
-def pair_stamps(path) -> list[int] | None:
-    """Header stamps (ns) that both the left and the right image topic hold (raw or
-    ``/compressed``): the stereo pairs a replay of the bag plays, in the order the bag
-    holds their left images (its log time; a stamp seen twice counts where first seen).
-    The stamp is read from the CDR bytes (a header comes first), nothing is
-    deserialized. None for a bag that cannot be read to its end."""
+def header_stamps(path, topics) -> dict[str, list[int]] | None:
+    """Per topic of ``topics`` (also read as ``TOPIC/compressed``, counted under
+    ``TOPIC``), the header stamps (ns) of its messages in the order the bag holds them
+    (its log time), each stamp once. The stamp is read from the CDR bytes (a header
+    comes first), nothing is deserialized. None for a bag that cannot be read to its end."""
     import struct
 
     from rosbags.rosbag2.errors import ReaderError
 
-    sides = {TOPICS['left_image'][0]: 0, TOPICS['right_image'][0]: 1}
-    sides.update({t + '/compressed': i for t, i in list(sides.items())})
-    stamps: tuple[dict[int, None], set[int]] = ({}, set())
+    names = {t: t for t in topics}
+    names.update({t + '/compressed': t for t in topics})
+    found: dict[str, dict[int, None]] = {t: {} for t in topics}   # a dict keeps the order
     try:
         reader = open_reader(path)
     except BagError:
         return None
     try:
-        conns = [c for c in reader.connections if c.topic in sides]
-        if not conns:
-            return []
+        conns = [c for c in reader.connections if c.topic in names]
         for conn, _, raw in reader.messages(connections=conns):
             # the encapsulation's second byte: 1 little-endian CDR, 0 big-endian
             sec, nsec = struct.unpack_from('<iI' if raw[1] & 1 else '>iI', raw, 4)
-            stamp = sec * 1_000_000_000 + nsec
-            if sides[conn.topic]:
-                stamps[1].add(stamp)
-            else:
-                stamps[0].setdefault(stamp, None)      # a dict keeps the order
+            found[names[conn.topic]].setdefault(sec * 1_000_000_000 + nsec, None)
     except (ReaderError, OSError, ValueError, EOFError, struct.error,
             *bagplay_read_errors()):
         return None
     finally:
         reader.close()
-    return [s for s in stamps[0] if s in stamps[1]]
+    return {t: list(stamps) for t, stamps in found.items()}
+
+
+def pair_stamps(path) -> list[int] | None:
+    """Header stamps (ns) that both the left and the right image topic hold (raw or
+    ``/compressed``): the stereo pairs a replay of the bag plays, in the order the bag
+    holds their left images (`header_stamps`). None for a bag that cannot be read to
+    its end."""
+    left, right = TOPICS['left_image'][0], TOPICS['right_image'][0]
+    stamps = header_stamps(path, (left, right))
+    if stamps is None:
+        return None
+    rights = set(stamps[right])
+    return [s for s in stamps[left] if s in rights]
 
 
 def _deserialize(store, path, topic: str, raw, msgtype: str):

@@ -33,6 +33,8 @@ class Child:
         #: set when a log line contains ``done_mark`` (the player's end-of-bag line)
         self._done_mark = done_mark
         self.done = threading.Event()
+        #: the log lines that contained ``done_mark``
+        self.done_lines: list[str] = []
         #: the inputs whose subscription has matched a publisher, as the node logged them
         self.linked: set[str] = set()
         #: halted by `freeze`
@@ -53,6 +55,7 @@ class Child:
             self._log.write(line)
             self._log.flush()
             if self._done_mark is not None and self._done_mark in line:
+                self.done_lines.append(line.rstrip())
                 self.done.set()
             if (m := LINKED_RE.search(line)) is not None:
                 self.linked.add(m.group(1))
@@ -97,7 +100,10 @@ class GaitStopper(threading.Thread):
     ``quiet`` s after the newest state (or the end of the replay, if later) -- however late
     the player's end is seen -- or as soon as every inclinometer reading has its state:
     halted (`Child.freeze`), and shut down with the other halted nodes at the end.
-    Runs on its own thread, so that stopping other nodes cannot delay it."""
+    Runs on its own thread, so that stopping other nodes cannot delay it. The fallback of
+    `replay.end_watch`, which halts the node on its state for the bag's last reading from
+    a process of its own (cancelled then); this thread shares its process with the
+    recorder and was seen to act more than 0.75 s late."""
 
     def __init__(self, child: 'Child', player: 'Child', monitor: 'Monitor', n_imu: int,
                  quiet: float):

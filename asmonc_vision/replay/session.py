@@ -24,7 +24,8 @@ from pathlib import Path
 
 from asmonc_vision import graph
 from asmonc_vision.eval.evaluation import json_ready
-from asmonc_vision.faults import MESSAGE_KINDS, PROCESS_KINDS, affected_pairs, parse_faults
+from asmonc_vision.faults import (MESSAGE_KINDS, PROCESS_KINDS, affected_pairs,
+                                  changed_stamps, parse_faults)
 from asmonc_vision.graph import GraphNode
 from asmonc_vision.io import bagio
 from asmonc_vision.io.bagplay import BagSource
@@ -32,7 +33,7 @@ from asmonc_vision.replay.children import (PLAYED_MARK, Child, FaultSchedule, Ga
                                            connected, pacing, wait_topics)
 from asmonc_vision.replay.domain import MAX_DOMAIN_ID, MAX_LINUX_DOMAIN_ID, claim_domain, \
     domain_search_limit
-from asmonc_vision.replay.end_watch import HALTED_LINE
+from asmonc_vision.replay.end_watch import HALTED_MARK
 from asmonc_vision.replay.monitor import Console, Monitor
 from asmonc_vision.replay.params import (LEVEL_NAMES, OUTPUT_TOPICS, PACE_LEAD, alarm_timeout,
                                          audio_params, default_bag, gait_timeout)
@@ -46,6 +47,9 @@ CONNECT_TIMEOUT = 120.0
 #: seconds between the alarm node's answer to the last pair and its halt (its alarm for
 #: that pair was published just before the answer, on another topic): `end_watch --grace`
 ANSWER_GRACE = 0.05
+#: the topics on which `replay.end_watch` hears a node's answer to its last input, and
+#: the node
+END_WATCHED = {'/alarms/contact': 'alarm', '/gait/state': 'gait'}
 #: seconds the started player waits for every node's side of the links from it
 LINK_TIMEOUT = 30.0
 #: seconds the player's ~/resume service has to answer
@@ -75,6 +79,8 @@ class ReplayPlan:
     #: fault changes or leaves out: once the alarm node has answered it, nothing is
     #: left to answer (None: not known, as in a damaged bag)
     last_pair: int | None = None
+    #: the same for the last inclinometer reading and the walk model's node
+    last_imu: int | None = None
 
 
 def plan_replay(args) -> ReplayPlan | int:
@@ -115,20 +121,29 @@ def plan_replay(args) -> ReplayPlan | int:
     if args.out is not None and args.out.exists() and any(args.out.iterdir()):
         _err(f"asmonc run: --out '{args.out}' exists and is not empty")
         return 2
+    last_pair, last_imu = (None, None) if damage else _last_inputs(bag, faults, n_pairs, n_imu)
     return ReplayPlan(bag, topics, damage, n_pairs, n_imu, nodes, paced, faults,
-                      _last_pair(bag, faults) if n_pairs and not damage else None)
+                      last_pair, last_imu)
 
 
-def _last_pair(bag: Path, faults: list) -> int | None:
-    """The stamp (ns) of the last pair the bag plays whole (`bagio.pair_stamps`, in the
-    bag's order) that no message fault of ``faults`` changes or leaves out; None when
-    none is known. The last played, not the newest stamp: a recording whose clock
-    jumped back holds a newer stamp before its end."""
-    pairs = bagio.pair_stamps(bag)
-    if pairs and any(f.kind in MESSAGE_KINDS for f in faults):
+def _last_inputs(bag: Path, faults: list, n_pairs: int, n_imu: int
+                 ) -> tuple[int | None, int | None]:
+    """The stamps (ns) of the last stereo pair the bag plays whole (`bagio.pair_stamps`)
+    and of its last inclinometer reading, each the last in the bag's order that no
+    message fault of ``faults`` changes or leaves out; None where none is known. The
+    last played, not the newest stamp: a recording whose clock jumped back holds a
+    newer stamp before its end."""
+    injected = any(f.kind in MESSAGE_KINDS for f in faults)
+    pairs = bagio.pair_stamps(bag) if n_pairs else None
+    if pairs and injected:
         affected = affected_pairs(BagSource(bag), faults)[1]
         pairs = [s for s in pairs if s not in affected]
-    return pairs[-1] if pairs else None
+    imu_topic = bagio.TOPICS['imu'][0]
+    readings = (bagio.header_stamps(bag, (imu_topic,)) or {}).get(imu_topic) if n_imu else None
+    if readings and injected:
+        changed = changed_stamps(BagSource(bag), faults, imu_topic)
+        readings = [s for s in readings if s not in changed]
+    return (pairs[-1] if pairs else None), (readings[-1] if readings else None)
 
 
 def _faults(args, nodes: dict) -> list | int:
@@ -210,9 +225,11 @@ class Replay:
         self.stopped: set[str] = set()
         #: the player played the whole bag and then did not exit (`PLAYER_EXIT_GRACE`)
         self.player_hung = False
-        #: the process that halts the alarm node once it has answered the newest pair
-        #: (`replay.end_watch`; None without one)
+        #: the process that halts the alarm and gait nodes once each has answered the
+        #: last input the bag plays it (`replay.end_watch`; None without one)
         self.end_watch: Child | None = None
+        #: the topics it watches, and their nodes
+        self.end_watched: dict[str, str] = {}
 
     # --- ROS side -------------------------------------------------------------------
 
@@ -355,8 +372,7 @@ class Replay:
         player = self.children['player']
         readers = {n: (self.children[n], want) for n, want in self._fed().items()}
         if self.end_watch is not None:
-            from asmonc_vision.nodes.alarm_node import CONTACT_TOPIC
-            readers['end_watch'] = (self.end_watch, {CONTACT_TOPIC})
+            readers['end_watch'] = (self.end_watch, set(self.end_watched))
         deadline = time.monotonic() + LINK_TIMEOUT
         missing: dict[str, set[str]] = {}
         while time.monotonic() < deadline and player.alive():
@@ -415,7 +431,7 @@ class Replay:
             self.children[name] = self.spawn(name, f'{name}.restart{self.restarts[name]}')
             if name == 'gait' and self.gait_stopper is not None:
                 self.gait_stopper.child = self.children[name]
-            if name == 'alarm' and self.end_watch is not None:
+            if name in END_WATCHED.values() and self.end_watch is not None:
                 self.end_watch.stop()
                 self.start_end_watch()
 
@@ -494,26 +510,38 @@ class Replay:
             self.failed.append('the player did not finish within 30 s of the last frame')
 
     def start_end_watch(self) -> None:
-        """Start `replay.end_watch`: it halts the alarm node ANSWER_GRACE s after the node
-        has answered the last pair the bag plays whole, from a process of its own (the
-        end of the replay known, not guessed from a silence, and acted on at once however
-        busy this process is). When that pair gives no result (the detector refused it),
-        the guess stays (`wait_for_results`)."""
-        if self.plan.last_pair is None or 'alarm' not in self.children:
+        """Start `replay.end_watch`: it halts the alarm node ANSWER_GRACE s after that node
+        has answered the last pair the bag plays whole, and the walk model's node after
+        its state for the last inclinometer reading, from a process of its own (the end
+        of the replay known, not guessed from a silence, and acted on at once however
+        busy this process is). Where that input gives no answer (refused), the guesses
+        stay (`wait_for_results`, `GaitStopper`)."""
+        last = {'alarm': self.plan.last_pair, 'gait': self.plan.last_imu}
+        self.end_watched = {topic: name for topic, name in END_WATCHED.items()
+                            if last[name] is not None and name in self.children
+                            and name not in self.stopped}
+        if not self.end_watched:
+            self.end_watch = None
             return
         cmd = [sys.executable, '-m', 'asmonc_vision.replay.end_watch',
-               '--last-stamp', str(self.plan.last_pair),
-               '--pgid', str(self.children['alarm'].proc.pid), '--grace', str(ANSWER_GRACE)]
+               '--grace', str(ANSWER_GRACE)]
+        for topic, name in self.end_watched.items():
+            cmd += ['--watch', topic, str(last[name]), str(self.children[name].proc.pid)]
         self.end_watch = Child('end_watch', cmd, self.log_dir,
                                lambda s: self.console.line(s, err=True), self.env,
-                               done_mark=HALTED_LINE)
+                               done_mark=HALTED_MARK)
 
     def note_end_watch(self) -> None:
-        """Take note once `replay.end_watch` has halted the alarm node."""
-        if (self.end_watch is not None and self.end_watch.done.is_set()
-                and 'alarm' not in self.stopped):
-            self.children['alarm'].frozen = True
-            self.stopped.add('alarm')
+        """Take note of the nodes `replay.end_watch` has halted."""
+        if self.end_watch is None or not self.end_watch.done.is_set():
+            return
+        for line in list(self.end_watch.done_lines):
+            name = self.end_watched.get(line.rsplit(' ', 1)[-1])
+            if name is not None and name not in self.stopped:
+                self.children[name].frozen = True
+                self.stopped.add(name)
+                if name == 'gait' and self.gait_stopper is not None:
+                    self.gait_stopper.cancel()
 
     def stand_down_alarm(self) -> None:
         """The replay is over: halt the alarm node at once (`Child.freeze`), before its
