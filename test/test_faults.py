@@ -198,3 +198,26 @@ def test_stereo_input_reports_missing_pairs(ros_context):
         assert len(node.cams) == 8 and node.frames_missing == 4
     finally:
         node.destroy_node()
+
+
+def test_the_stamps_a_fault_changes_on_a_topic_and_every_stamp_in_bag_order():
+    """`faults.changed_stamps` (what `asmonc run` leaves out of the last input it waits
+    for) and `bagio.header_stamps` on a bundled bag: the inclinometer silent for 0.5 s
+    changes exactly the readings in that window, and the stamps come in the bag's order,
+    each once."""
+    from asmonc_vision.faults import changed_stamps
+    from asmonc_vision.io import bagio
+    from asmonc_vision.io.bagplay import BagSource
+    from conftest import BAGS
+
+    bag = BAGS / 'walk_obstacles'
+    imu = '/inclinometer/imu'
+    stamps = bagio.header_stamps(bag, (imu, L_IMG))
+    readings = stamps[imu]
+    n = sum(1 for _ in bagio.read_messages(bag, [imu]))
+    assert len(readings) == n > 100 and readings == sorted(readings)
+    assert stamps[L_IMG] == bagio.pair_stamps(bag)       # every pair whole
+    changed = changed_stamps(BagSource(bag), parse_faults('imu_silent@1.5+0.5'), imu)
+    window = {s for s in readings if T0 + 1_500_000_000 <= s < T0 + 2_000_000_000}
+    assert changed and abs(len(changed) - len(window)) <= 1 and changed <= set(readings)
+    assert changed_stamps(BagSource(bag), parse_faults('stall@1.0+0.5'), imu) == set()
