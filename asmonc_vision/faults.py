@@ -239,18 +239,27 @@ def _pitch_by(msg, angle: float) -> None:
     q.w, q.x, q.y, q.z = (w * c - y * s, x * c - z * s, y * c + w * s, z * c + x * s)
 
 
-def changed_stamps(src, faults: list[Fault], topic: str) -> set[int]:
-    """The header stamps (ns) of the messages on ``topic`` (one of the fault plan's
-    topics) of the open bag ``src`` (an `asmonc_vision.io.bagplay.BagSource`) that
-    ``faults`` change or leave out. A damaged bag is read up to the damage."""
+def _scan(src, faults: list[Fault], topics) -> tuple[dict[str, set[int]], dict[str, set[int]]]:
+    """(every header stamp, the stamps ``faults`` change or leave out), in ns, per topic
+    of ``topics`` that the open bag ``src`` (an `asmonc_vision.io.bagplay.BagSource`)
+    holds, in one pass. A damaged bag is read up to the damage."""
     plan = FaultPlan(faults, src.info.start_ns)
-    out: set[int] = set()
-    if not plan or topic not in src.info.topics:
-        return out
-    for m in src.messages_before_damage({topic: src.info.topics[topic].msgtype}):
-        if m.data not in plan.apply(m.topic, m.data, m.timestamp):
-            out.add(_stamp_ns(m.topic, m.data))
-    return out
+    selected = {t: src.info.topics[t].msgtype for t in topics if t in src.info.topics}
+    every: dict[str, set[int]] = {t: set() for t in topics}
+    out: dict[str, set[int]] = {t: set() for t in topics}
+    for m in src.messages_before_damage(selected):
+        stamp = _stamp_ns(m.topic, m.data)
+        every[m.topic].add(stamp)
+        if plan and m.data not in plan.apply(m.topic, m.data, m.timestamp):
+            out[m.topic].add(stamp)
+    return every, out
+
+
+def changed_stamps(src, faults: list[Fault], topics) -> dict[str, set[int]]:
+    """Per topic of ``topics`` (the fault plan's), the header stamps (ns) of the messages
+    of the open bag ``src`` (an `asmonc_vision.io.bagplay.BagSource`) that ``faults``
+    change or leave out. A damaged bag is read up to the damage."""
+    return _scan(src, faults, topics)[1]
 
 
 def affected_pairs(src, faults: list[Fault]) -> tuple[set[int], set[int]]:
@@ -259,13 +268,5 @@ def affected_pairs(src, faults: list[Fault]) -> tuple[set[int], set[int]]:
     A pair is affected when any of its images or camera_infos is changed or left out: it
     may go without a result. A duplicated message still reaches the graph unchanged: its
     pair counts as good. A damaged bag is read up to the damage."""
-    plan = FaultPlan(faults, src.info.start_ns)
-    selected = {t: src.info.topics[t].msgtype for t in STEREO if t in src.info.topics}
-    every: set[int] = set()
-    out: set[int] = set()
-    for m in src.messages_before_damage(selected):
-        if m.topic == LEFT_IMAGE:
-            every.add(_stamp_ns(m.topic, m.data))
-        if plan and m.data not in plan.apply(m.topic, m.data, m.timestamp):
-            out.add(_stamp_ns(m.topic, m.data))
-    return every, out
+    every, out = _scan(src, faults, STEREO)
+    return every[LEFT_IMAGE], set().union(*out.values())

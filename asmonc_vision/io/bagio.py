@@ -294,12 +294,15 @@ def pair_stamps(path) -> list[int] | None:
     ``/compressed``): the stereo pairs a replay of the bag plays, in the order the bag
     holds their left images (`header_stamps`). None for a bag that cannot be read to
     its end."""
-    left, right = TOPICS['left_image'][0], TOPICS['right_image'][0]
-    stamps = header_stamps(path, (left, right))
-    if stamps is None:
-        return None
-    rights = set(stamps[right])
-    return [s for s in stamps[left] if s in rights]
+    stamps = header_stamps(path, (TOPICS['left_image'][0], TOPICS['right_image'][0]))
+    return None if stamps is None else whole_pairs(stamps)
+
+
+def whole_pairs(stamps: dict[str, list[int]]) -> list[int]:
+    """The stamps of ``stamps`` (`header_stamps` of the left and right image topics, at
+    least) on both image topics, in the left topic's order."""
+    rights = set(stamps[TOPICS['right_image'][0]])
+    return [s for s in stamps[TOPICS['left_image'][0]] if s in rights]
 
 
 def _deserialize(store, path, topic: str, raw, msgtype: str):

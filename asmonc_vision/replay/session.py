@@ -24,7 +24,7 @@ from pathlib import Path
 
 from asmonc_vision import graph
 from asmonc_vision.eval.evaluation import json_ready
-from asmonc_vision.faults import (MESSAGE_KINDS, PROCESS_KINDS, affected_pairs,
+from asmonc_vision.faults import (MESSAGE_KINDS, PROCESS_KINDS, STEREO, affected_pairs,
                                   changed_stamps, parse_faults)
 from asmonc_vision.graph import GraphNode
 from asmonc_vision.io import bagio
@@ -121,28 +121,27 @@ def plan_replay(args) -> ReplayPlan | int:
     if args.out is not None and args.out.exists() and any(args.out.iterdir()):
         _err(f"asmonc run: --out '{args.out}' exists and is not empty")
         return 2
-    last_pair, last_imu = (None, None) if damage else _last_inputs(bag, faults, n_pairs, n_imu)
+    last_pair, last_imu = (None, None) if damage else _last_inputs(bag, faults)
     return ReplayPlan(bag, topics, damage, n_pairs, n_imu, nodes, paced, faults,
                       last_pair, last_imu)
 
 
-def _last_inputs(bag: Path, faults: list, n_pairs: int, n_imu: int
-                 ) -> tuple[int | None, int | None]:
-    """The stamps (ns) of the last stereo pair the bag plays whole (`bagio.pair_stamps`)
+def _last_inputs(bag: Path, faults: list) -> tuple[int | None, int | None]:
+    """The stamps (ns) of the last stereo pair the bag plays whole (`bagio.whole_pairs`)
     and of its last inclinometer reading, each the last in the bag's order that no
     message fault of ``faults`` changes or leaves out; None where none is known. The
     last played, not the newest stamp: a recording whose clock jumped back holds a
     newer stamp before its end."""
-    injected = any(f.kind in MESSAGE_KINDS for f in faults)
-    pairs = bagio.pair_stamps(bag) if n_pairs else None
-    if pairs and injected:
-        affected = affected_pairs(BagSource(bag), faults)[1]
+    left, right, imu = (bagio.TOPICS[k][0] for k in ('left_image', 'right_image', 'imu'))
+    stamps = bagio.header_stamps(bag, (left, right, imu))         # one read of the bag
+    if stamps is None:
+        return None, None
+    pairs, readings = bagio.whole_pairs(stamps), stamps[imu]
+    if any(f.kind in MESSAGE_KINDS for f in faults):
+        changed = changed_stamps(BagSource(bag), faults, (*STEREO, imu))
+        affected = set().union(*(changed[t] for t in STEREO))
         pairs = [s for s in pairs if s not in affected]
-    imu_topic = bagio.TOPICS['imu'][0]
-    readings = (bagio.header_stamps(bag, (imu_topic,)) or {}).get(imu_topic) if n_imu else None
-    if readings and injected:
-        changed = changed_stamps(BagSource(bag), faults, imu_topic)
-        readings = [s for s in readings if s not in changed]
+        readings = [s for s in readings if s not in changed[imu]]
     return (pairs[-1] if pairs else None), (readings[-1] if readings else None)
 
 
