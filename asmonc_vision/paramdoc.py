@@ -12,6 +12,8 @@ import argparse
 import dataclasses
 import importlib
 
+from asmonc_vision.core.config import flat_fields
+
 # node name, its YAML file, [(parameter prefix, 'module:Class')] in declaration order
 NODES: tuple[tuple[str, str, tuple[tuple[str, str], ...]], ...] = (
     ('detector_node', 'config/detector.yaml', (
@@ -80,11 +82,11 @@ def rows(node: str) -> list[tuple[str, str, str, str, str]]:
             continue
         for prefix, spec in specs:
             cls = load_class(spec)
-            for f in dataclasses.fields(cls):
+            for name, f in flat_fields(cls, prefix):
                 desc = f.metadata.get('description', '')
                 if f.metadata.get('read_only'):
                     desc = (desc + ' (read-only)').strip()
-                out.append((prefix + f.name, _default(f), _range(f), desc, cls.__name__))
+                out.append((name, _default(f), _range(f), desc, cls.__name__))
     return out
 
 

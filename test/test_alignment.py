@@ -11,6 +11,7 @@ from asmonc_vision.core.alignment import (AlignmentConfig, VerticalAlignment,
                                           brightness_gain_offset, corner_displacement_steps,
                                           corner_displacements, fit_misalignment,
                                           matched_brightness)
+from asmonc_vision.core.config import override
 from asmonc_vision.core.gpod import GpodConfig, GpodDetector
 from asmonc_vision.sim import RigSettings
 from asmonc_vision.sim.scenarios import make_scenario, simulate_frame
@@ -121,7 +122,8 @@ def test_the_cameras_exposures_do_not_bias_the_measurement(gain, offset):
 def test_a_well_rectified_rig_is_left_untouched():
     """No correction, and the detector's output is bit for bit that without the check."""
     sc, frames = _frames('static_obstacles', 32, range(0, 36, 2))
-    on, off = GpodDetector(GpodConfig()), GpodDetector(GpodConfig(align_vertical=False))
+    on = GpodDetector(GpodConfig())
+    off = GpodDetector(override(GpodConfig(), {'image.align_vertical': False}))
     cam = sc.rig.camera()
     h_on, h_off = hashlib.sha1(), hashlib.sha1()
     for f in frames:
@@ -149,7 +151,7 @@ def test_the_correction_brings_the_obstacle_threshold_back():
     for name, tilt, align in (('good', 0.0, True), ('turned', 0.2, False),
                               ('corrected', 0.2, True)):
         sc, frames = rendered[tilt]
-        det = GpodDetector(GpodConfig(align_vertical=align))
+        det = GpodDetector(override(GpodConfig(), {'image.align_vertical': align}))
         res = [det.process(f.left, f.right, sc.rig.camera()) for f in frames]
         assert res[-1].status == 'tracking'
         sigma[name] = res[-1].sigma_px

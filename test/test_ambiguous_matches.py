@@ -7,8 +7,9 @@ import cv2
 import numpy as np
 import pytest
 
+from asmonc_vision.core.config import override
 from asmonc_vision.core.edges import detect_vertical_edges
-from asmonc_vision.core.gpod import GpodConfig, GpodDetector
+from asmonc_vision.core.gpod import GpodConfig, GpodDetector, rules
 from asmonc_vision.core.matching import Candidates, Matches, match_rivals, pmf_match
 
 
@@ -95,7 +96,7 @@ def _matches(d, rivals):
 
 @pytest.mark.parametrize('ratio', [0.6, 0.0])
 def test_a_rival_on_the_ground_takes_the_evidence_away(ratio):
-    det = GpodDetector(GpodConfig(ambiguous_match_ratio=ratio))
+    det = GpodDetector(override(GpodConfig(), {'detection.ambiguous_match_ratio': ratio}))
     pd = np.full(6, 10.0)                 # the ground's disparity at every match
     thr = np.full(6, 0.8)
     m = _matches([15.5, 15.5, 15.5, 4.6, 4.6, 4.6],
@@ -105,7 +106,7 @@ def test_a_rival_on_the_ground_takes_the_evidence_away(ratio):
                   (3, 21.0, 1.0), (3, 9.5, 0.95),       # one on the ground, one above
                   (4, 13.0, 0.95),                      # above the ground
                   (5, 10.0, 0.2), (5, 3.0, 0.8)])       # on the ground too weak
-    no_drop = det._ambiguous_drops(m, pd, thr)
+    no_drop = rules.ambiguous_drops(det.config, m, pd, thr)
     if ratio == 0.0:                      # off
         assert not no_drop.any()
         return
@@ -114,17 +115,17 @@ def test_a_rival_on_the_ground_takes_the_evidence_away(ratio):
     np.testing.assert_array_equal(no_drop, [False, False, False, True, False, False])
     # a rival marks the side it lies on only (here, matches on the ground themselves)
     m = _matches([15.5, 4.6], [(0, 16.0, 1.0), (1, 4.0, 1.0)])
-    no_drop = det._ambiguous_drops(m, np.array([15.3, 4.4]), thr[:2])
+    no_drop = rules.ambiguous_drops(det.config, m, np.array([15.3, 4.4]), thr[:2])
     np.testing.assert_array_equal(no_drop, [True, False])
     # matches made without rivals (other matchers) are never ambiguous
     plain = dataclasses.replace(_matches([15.5], []), rival_match=None, rival_d=None,
                                 rival_ratio=None)
-    assert not det._ambiguous_drops(plain, pd[:1], thr[:1]).any()
+    assert not rules.ambiguous_drops(det.config, plain, pd[:1], thr[:1]).any()
 
 
 @pytest.mark.parametrize('n_min', [2, 0])
 def test_a_periodic_match_is_no_evidence(n_min):
-    det = GpodDetector(GpodConfig(periodic_min_rivals=n_min))
+    det = GpodDetector(override(GpodConfig(), {'detection.periodic_min_rivals': n_min}))
     pd = np.full(5, 10.0)                 # the ground's disparity at every match
     thr = np.full(5, 0.8)
     m = _matches([13.4, 13.4, 13.4, 13.4, 13.4],
@@ -133,14 +134,14 @@ def test_a_periodic_match_is_no_evidence(n_min):
                   (2, 16.8, 0.9), (2, 20.2, 0.95),      # two strong, none on the ground
                   (3, 10.0, 0.9), (3, 16.8, 0.5),       # the second too weak
                   (4, 6.6, 0.85), (4, 9.5, 0.8)])       # a period below and the ground
-    periodic = det._periodic_matches(m, pd, thr)
+    periodic = rules.periodic_matches(det.config, m, pd, thr)
     if n_min == 0:                        # off
         assert not periodic.any()
         return
     np.testing.assert_array_equal(periodic, [True, False, False, False, True])
     plain = dataclasses.replace(_matches([15.5], []), rival_match=None, rival_d=None,
                                 rival_ratio=None)
-    assert not det._periodic_matches(plain, pd[:1], thr[:1]).any()
+    assert not rules.periodic_matches(det.config, plain, pd[:1], thr[:1]).any()
 
 
 def test_bars_matched_a_period_off_are_periodic_and_texture_is_not():
@@ -148,11 +149,11 @@ def test_bars_matched_a_period_off_are_periodic_and_texture_is_not():
     det = GpodDetector()
     m = pmf_match(*_pair(period, shift), 1.0, 40.0)[0]
     pd = np.full(len(m), shift)           # the true disparity plays the ground's
-    periodic = det._periodic_matches(m, pd, np.full(len(m), 0.8))
+    periodic = rules.periodic_matches(det.config, m, pd, np.full(len(m), 0.8))
     off = np.abs(m.d - shift) > 1.0       # matched a period (or more) off
     assert off.sum() > 20 and periodic[off].mean() > 0.8
     m0 = pmf_match(*_pair(0.0, shift), 1.0, 40.0)[0]
-    p0 = det._periodic_matches(m0, np.full(len(m0), shift), np.full(len(m0), 0.8))
+    p0 = rules.periodic_matches(det.config, m0, np.full(len(m0), shift), np.full(len(m0), 0.8))
     assert p0.mean() < 0.1
 
 

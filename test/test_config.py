@@ -1,5 +1,4 @@
 """Settings dataclasses: validation messages, and config/*.yaml equal to the defaults."""
-import dataclasses
 import importlib
 from dataclasses import dataclass
 from pathlib import Path
@@ -7,7 +6,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from asmonc_vision.core.config import check_fields, param
+from asmonc_vision.core.config import (check_fields, flat_fields, flat_values, group, override,
+                                       param, to_dict)
 
 CONFIG = Path(__file__).resolve().parent.parent / 'config'
 
@@ -63,6 +63,33 @@ def test_check_fields_names_field_and_range():
         _Demo(gain='x')
 
 
+@dataclass(frozen=True)
+class _Outer:
+    level: float = param(0.5, 'a level', range=(0.0, 1.0))
+    demo: _Demo = group(_Demo, 'a stage')
+
+    def __post_init__(self):
+        check_fields(self)
+
+
+def test_a_group_is_named_by_dotted_paths_and_overridden_by_them():
+    assert [n for n, _ in flat_fields(_Outer)] == ['level', 'demo.gain', 'demo.mode', 'demo.on']
+    assert [n for n, _ in flat_fields(_Outer, 'x.')][1] == 'x.demo.gain'
+    assert flat_values(_Outer()) == {'level': 0.5, 'demo.gain': 1.0, 'demo.mode': 'a',
+                                     'demo.on': True}
+    assert to_dict(_Outer()) == {'level': 0.5, 'demo': {'gain': 1.0, 'mode': 'a', 'on': True}}
+    o = override(_Outer(), {'demo.gain': 1.5, 'level': 0.25})
+    assert o == _Outer(level=0.25, demo=_Demo(gain=1.5)) and _Outer().demo.gain == 1.0
+    # a group's own check, named by its path in the outer settings
+    with pytest.raises(ValueError, match=r'^_Outer\.demo\.gain = 3\.0 is out of range'):
+        override(_Outer(), {'demo.gain': 3.0})
+    for bad in ('gain', 'demo', 'demo.nope', 'level.x'):
+        with pytest.raises(ValueError, match=f"_Outer has no setting '{bad}'"):
+            override(_Outer(), {bad: 1.0})
+    with pytest.raises(TypeError, match=r'_Outer\.demo must be a _Demo, got dict'):
+        _Outer(demo={'gain': 1.0})
+
+
 def test_every_config_file_is_covered():
     assert {p.name for p in CONFIG.glob('*.yaml')} <= set(NODE_CONFIGS)
 
@@ -77,10 +104,8 @@ def test_yaml_equals_dataclass_defaults(fname):
     params = doc[node]['ros__parameters']
     expected = {}
     for prefix, spec in parts:
-        cls = _load(spec)
-        for f in dataclasses.fields(cls):
-            v = f.default
-            expected[prefix + f.name] = list(v) if isinstance(v, tuple) else v
+        for name, v in flat_values(_load(spec)()).items():
+            expected[prefix + name] = list(v) if isinstance(v, tuple) else v
 
     def flatten(d, pre=''):
         out = {}

@@ -287,10 +287,24 @@ def test_parameter_out_of_range_is_a_clear_error_and_exit_2():
     import sys
     res = subprocess.run(
         [sys.executable, '-m', 'asmonc_vision.nodes.detector_node', '--ros-args',
-         '-p', 'gpod.threshold_px:=-1.0'],
+         '-p', 'gpod.threshold.px:=-1.0'],
         env=dict(os.environ), capture_output=True, text=True, timeout=60)
     assert res.returncode == 2
-    assert 'invalid settings' in res.stderr and 'gpod.threshold_px' in res.stderr
+    assert 'invalid settings' in res.stderr and 'gpod.threshold.px' in res.stderr
+
+
+def test_a_setting_that_does_not_exist_is_a_clear_error_and_exit_2():
+    """A detector setting under a name it does not have (misspelt, or from before the
+    settings were grouped by stage) stops the node rather than running the default."""
+    import os
+    import subprocess
+    import sys
+    res = subprocess.run(
+        [sys.executable, '-m', 'asmonc_vision.nodes.detector_node', '--ros-args',
+         '-p', 'gpod.threshold_k:=3.0', '-p', 'gpod.threshold.k:=3.0'],
+        env=dict(os.environ), capture_output=True, text=True, timeout=60)
+    assert res.returncode == 2
+    assert 'no such setting: gpod.threshold_k ' in res.stderr, res.stderr[-2000:]
 
 
 def test_the_map_takes_odometry_and_never_waits(ros_context):
@@ -421,7 +435,7 @@ def test_the_inclinometer_gives_each_pair_its_up_direction(graph):
             send(*f)
             assert spin_until(ex, lambda i=i: len(got['obstacles']) == i + 1, timeout=15)
             up = det.detector._up
-            if age_s < det.gpod_config.gravity_prior_max_age_s:
+            if age_s < det.gpod_config.plane.gravity_prior_max_age_s:
                 assert np.allclose(up, [0.0, -math.cos(pitch), -math.sin(pitch)])
             else:
                 assert up is None

@@ -276,4 +276,4 @@ def test_eval_refuses_bad_input(tmp_path, capsys):
 def test_threshold_px_selects_gpod_fixed_threshold():
     from asmonc_vision.eval.bench import make_method
     det = make_method('gpod', 1.2)
-    assert det.config.threshold_mode == 'fixed' and det.config.threshold_px == 1.2
+    assert det.config.threshold.mode == 'fixed' and det.config.threshold.px == 1.2

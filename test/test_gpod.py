@@ -14,6 +14,7 @@ import pytest
 
 from asmonc_vision.core.alarm import AlarmConfig
 from asmonc_vision.core.camera import StereoCamera
+from asmonc_vision.core.config import override
 from asmonc_vision.core.draw import draw_debug, excess_colours
 from asmonc_vision.core.gpod import GpodConfig, GpodDetector, cluster_points_2d
 from asmonc_vision.core.gpod import faces as gpod_faces
@@ -145,23 +146,27 @@ def _calibrated(pair, config=None, frames=3):
 # ---------------------------------------------------------------- configuration
 def test_config_defaults_and_validation():
     c = GpodConfig()
-    assert c.threshold_px == 1.7 and c.plane_update == 'refit'
-    assert c.threshold_mode == 'sigma' and c.threshold_ceiling_px == 1.7
-    assert c.pmf_disparity_gradient_limit == 1.0
-    with pytest.raises(ValueError, match='threshold_floor_px'):
-        GpodConfig(threshold_floor_px=2.0, threshold_ceiling_px=1.0)
-    with pytest.raises(ValueError, match='threshold_mode'):
-        GpodConfig(threshold_mode='adaptive')
-    with pytest.raises(ValueError, match='threshold_px'):
-        GpodConfig(threshold_px=-1.0)
-    with pytest.raises(ValueError, match='plane_update'):
-        GpodConfig(plane_update='kalman')
-    with pytest.raises(ValueError, match='min_range_m'):
-        GpodConfig(min_range_m=50.0, search_max_range_m=20.0, max_range_m=10.0)
-    with pytest.raises(ValueError, match='max_range_m'):
-        GpodConfig(max_range_m=30.0, search_max_range_m=20.0)
+    assert c.threshold.px == 1.7 and c.plane.update == 'refit'
+    assert c.threshold.mode == 'sigma' and c.threshold.ceiling_px == 1.7
+    assert c.matching.pmf_disparity_gradient_limit == 1.0
+    with pytest.raises(ValueError, match='threshold.floor_px'):
+        override(GpodConfig(), {'threshold.floor_px': 2.0, 'threshold.ceiling_px': 1.0})
+    with pytest.raises(ValueError, match='threshold.mode'):
+        override(GpodConfig(), {'threshold.mode': 'adaptive'})
+    with pytest.raises(ValueError, match='threshold.px'):
+        override(GpodConfig(), {'threshold.px': -1.0})
+    with pytest.raises(ValueError, match='plane.update'):
+        override(GpodConfig(), {'plane.update': 'kalman'})
+    with pytest.raises(ValueError, match='matching.min_range_m'):
+        override(GpodConfig(), {'matching.min_range_m': 50.0,
+                                'matching.search_max_range_m': 20.0,
+                                'detection.max_range_m': 10.0})
+    with pytest.raises(ValueError, match='detection.max_range_m'):
+        override(GpodConfig(), {'detection.max_range_m': 30.0, 'matching.search_max_range_m': 20.0})
     with pytest.raises(TypeError):
-        GpodConfig(detect_drops='yes')
+        override(GpodConfig(), {'drops.enabled': 'yes'})
+    with pytest.raises(ValueError, match="GpodConfig has no setting 'threshold_k'"):
+        override(GpodConfig(), {'threshold_k': 3.0})
     for f in dataclasses.fields(GpodConfig):
         assert f.metadata.get('description')
 
@@ -190,10 +195,10 @@ def test_no_obstacles_on_flat_ground(scenes):
             assert r.status == 'tracking'
             # This texture (blurred noise, soft at near range) has one two-pixel string
             # of badly located edges ~2 px above the plane in 'free2': the least evidence
-            # the detector acts on (min_obstacle_pixels), detected with low confidence,
+            # the detector acts on (detection.min_obstacle_pixels), detected with low confidence,
             # and reported below the alarm's min_confidence (0.3): the same images again
             # are one view, whose evidence does not add up over its frames (nor would two
-            # pixels' reach it in track_confidence_frames (3) views). Nothing more may be
+            # pixels' reach it in tracks.confidence_frames (3) views). Nothing more may be
             # there.
             assert all(o.num_edge_pixels <= 2 and o.confidence < 0.2
                        for o in r.detections), [(o.height, o.range, o.roi) for o in r.obstacles]
@@ -247,18 +252,20 @@ def test_track_confidence_accumulates_over_views_not_over_still_frames(scenes, w
     its best detection. Walking, each frame is a new view, and the evidence adds up."""
     forward = to_left_optical([0.0, 0.0, _STEP_M])
     for k in (1, 3):
-        det, _ = _calibrated(scenes['free'], GpodConfig(track_confidence_frames=k))
+        det, _ = _calibrated(scenes['free'],
+                             override(GpodConfig(), {'tracks.confidence_frames': k}))
         noisy = np.random.default_rng(5)
         combined, over = _views_confidence_check(det, [scenes['box']] * 6, [None] * 6, k,
                                                  noisy)
         assert combined == 0 and over <= 1e-9
-        det, _ = _calibrated(scenes['free'], GpodConfig(track_confidence_frames=k))
+        det, _ = _calibrated(scenes['free'],
+                             override(GpodConfig(), {'tracks.confidence_frames': k}))
         combined, over = _views_confidence_check(
             det, walk, [(np.eye(3), forward)] * len(walk), k, noisy)
         assert (combined > 0) == (k > 1)                     # weak tracks seen again
         assert (over > 0.01) == (k > 1)
-    with pytest.raises(ValueError, match='track_confidence_frames'):
-        GpodConfig(track_confidence_frames=0)
+    with pytest.raises(ValueError, match='tracks.confidence_frames'):
+        override(GpodConfig(), {'tracks.confidence_frames': 0})
 
 
 def test_a_detection_of_weak_edges_has_the_confidence_of_its_weighted_pixels():
@@ -283,9 +290,9 @@ def test_a_detection_of_weak_edges_has_the_confidence_of_its_weighted_pixels():
         for o in r.detections:
             px = f.is_obstacle & np.isin(f.string_id, o.string_ids)
             assert px.sum() == o.num_edge_pixels
-            w = np.minimum(f.strength[px] / cfg.obstacle_min_strength, 1.0) ** 2
-            full = min(1.0, o.num_edge_pixels / cfg.confidence_full_pixels)
-            assert o.confidence <= min(1.0, w.sum() / cfg.confidence_full_pixels) + 1e-9
+            w = np.minimum(f.strength[px] / cfg.detection.min_strength, 1.0) ** 2
+            full = min(1.0, o.num_edge_pixels / cfg.detection.confidence_full_pixels)
+            assert o.confidence <= min(1.0, w.sum() / cfg.detection.confidence_full_pixels) + 1e-9
             if k == 1.0:
                 assert o.confidence == pytest.approx(full, abs=0.02)
             weakened += o.confidence < full - 0.02
@@ -294,7 +301,7 @@ def test_a_detection_of_weak_edges_has_the_confidence_of_its_weighted_pixels():
 
 @pytest.mark.parametrize('mode', ['refit', 'fixed'])
 def test_finds_the_box(scenes, mode):
-    det, _ = _calibrated(scenes['free'], GpodConfig(plane_update=mode))
+    det, _ = _calibrated(scenes['free'], override(GpodConfig(), {'plane.update': mode}))
     r = det.process(*scenes['box'], CAM)
     assert r.status == 'tracking'
     assert len(r.obstacles) == 1, [(o.height, o.range) for o in r.obstacles]
@@ -422,7 +429,7 @@ def test_a_walking_start_calibrates_the_threshold_on_one_plane(scenario, seed):
     cam = sc.rig.camera()
     det = GpodDetector(GpodConfig())
     n_last = 0
-    for k in range(GpodConfig().init_frames):
+    for k in range(GpodConfig().plane.init_frames):
         f = simulate_frame(sc, k)
         r = det.process(f.left, f.right, cam)
         n_last = len(r.features)
@@ -444,7 +451,7 @@ def test_no_texture_is_a_status_not_an_exception(scenes):
     assert r.plane_abc is None and r.metric_plane is None and len(r.features) == 0
     r = det.process(*scenes['free'], CAM)                # recovers at once
     assert r.status == 'tracking' and r.obstacles == ()
-    det, _ = _calibrated(scenes['free'], GpodConfig(plane_update='fixed'))
+    det, _ = _calibrated(scenes['free'], override(GpodConfig(), {'plane.update': 'fixed'}))
     assert det.process(blank, blank, CAM).status == 'lost'
     assert det.process(*scenes['free'], CAM).status == 'tracking'
 
@@ -475,7 +482,7 @@ def test_refit_follows_a_pitch_change(scenes):
     finally:
         PITCH = base
     for mode, ok in (('refit', True), ('fixed', False)):
-        det, _ = _calibrated(scenes['free'], GpodConfig(plane_update=mode))
+        det, _ = _calibrated(scenes['free'], override(GpodConfig(), {'plane.update': mode}))
         for _ in range(4):
             r = det.process(*tilted, CAM)
         assert r.status == 'tracking'
@@ -645,18 +652,19 @@ def test_sigma_threshold_from_the_initial_fit(scenes):
     c = det.config
     assert np.isnan(results[0].sigma_px) and 0.05 < det.sigma_px < 0.5
     assert r.sigma_px == det.sigma_px
-    assert r.threshold_px == pytest.approx(np.clip(c.threshold_k * det.sigma_px,
-                                                   c.threshold_floor_px,
-                                                   c.threshold_ceiling_px))
+    assert r.threshold_px == pytest.approx(np.clip(c.threshold.k * det.sigma_px,
+                                                   c.threshold.floor_px,
+                                                   c.threshold.ceiling_px))
     thr = r.features.threshold
-    assert thr.min() >= c.threshold_floor_px and thr.max() <= c.threshold_ceiling_px
+    assert thr.min() >= c.threshold.floor_px and thr.max() <= c.threshold.ceiling_px
     # Precise (sharp, contrasted) edges get lower thresholds than imprecise ones.
     key = r.features.strength
     assert np.median(thr[key > np.quantile(key, 0.8)]) < np.median(thr[key < np.quantile(key, 0.2)])
-    det, results = _calibrated(scenes['free'], GpodConfig(threshold_mode='fixed',
-                                                          threshold_px=1.3))
+    det, results = _calibrated(scenes['free'], override(GpodConfig(), {'threshold.mode': 'fixed',
+                                                                       'threshold.px': 1.3}))
     assert results[-1].threshold_px == 1.3 and np.all(results[-1].features.threshold == 1.3)
-    det, results = _calibrated(scenes['free'], GpodConfig(sigma_per_edge=False))
+    det, results = _calibrated(scenes['free'],
+                               override(GpodConfig(), {'threshold.sigma_per_edge': False}))
     assert np.all(results[-1].features.threshold == results[-1].threshold_px)
 
 
@@ -667,7 +675,8 @@ def test_excess_is_averaged_while_still_and_not_when_moving(scenes):
         return tuple(np.clip(p + rng.normal(0.0, 2.0, p.shape), 0, 255).astype(np.uint8)
                      for p in pair)
 
-    det, _ = _calibrated(scenes['free'], GpodConfig(string_window=1))   # no smoothing along strings
+    # no smoothing along strings
+    det, _ = _calibrated(scenes['free'], override(GpodConfig(), {'detection.string_window': 1}))
     feats = []
     for _ in range(6):
         r = det.process(*noisy(scenes['free']), CAM)
@@ -944,7 +953,7 @@ def test_tracks_bridge_a_missed_detection_and_end_when_the_obstacle_goes(scenes,
 
 
 def test_tracks_off_reports_the_detections_only(scenes, monkeypatch):
-    det, _ = _calibrated(scenes['free'], GpodConfig(track_coast_s=0.0))
+    det, _ = _calibrated(scenes['free'], override(GpodConfig(), {'tracks.coast_s': 0.0}))
     for _ in range(3):
         r = det.process(*scenes['box'], CAM)
         assert len(r.obstacles) == 1 and r.obstacles[0].track_id > 0
@@ -964,7 +973,8 @@ def test_a_small_box_track_is_not_ended_by_its_own_lowest_rows(monkeypatch):
     from asmonc_vision.eval import smallbox
     monkeypatch.setattr(gpod_faces, '_LONE_MAX_HEIGHT_M', 0.0)
     r = smallbox.run_scene(0.08, 5.0, 69, methods=('gpod',),
-                           gpod_config=GpodConfig(track_sure_hits=0), map_enabled=False)
+                           gpod_config=override(GpodConfig(), {'tracks.sure_hits': 0}),
+                           map_enabled=False)
     assert r['gpod']['box_frames'] == 20
     assert r['gpod/frame']['found'] <= 10
     assert r['gpod']['found'] >= 19
@@ -984,7 +994,7 @@ def test_a_small_box_that_appears_is_not_averaged_with_the_ground_it_stands_on(
     # the old count without the lone-face placement (it also places two misplaced frames)
     monkeypatch.setattr(gpod_faces, '_LONE_MAX_HEIGHT_M', 0.0)
     old = smallbox.run_scene(0.08, 5.0, 49, methods=('gpod',),
-                             gpod_config=GpodConfig(temporal_gate_thr=0.0))
+                             gpod_config=override(GpodConfig(), {'temporal.gate_thr': 0.0}))
     assert old['gpod/frame']['found'] <= 16
 
 
@@ -1246,7 +1256,8 @@ def test_two_bodies_closer_than_the_cluster_radius_are_reported_each():
         xs = np.clip(0.0, x0, x1)
         truth = np.array([z0, -xs])
         assert np.min(np.hypot(*(xy - truth).T)) < 0.3, (truth, xy)
-    det0, _ = _calibrated(render_pair(seed=6), GpodConfig(part_radius_m=0.0))
+    det0, _ = _calibrated(render_pair(seed=6),
+                          override(GpodConfig(), {'detection.part_radius_m': 0.0}))
     for _ in range(2):
         r0 = det0.process(*pair, CAM)
     assert len([o for o in r0.obstacles if not o.is_drop]) < len(xy)
@@ -1334,7 +1345,7 @@ def test_hanging_runs():
     good = matches([13.0] * n)                           # the gap: the same depth below
     assert not hanging_runs(edges, good, run_links(edges, good, 1.0), h, 0.5, 1.0, 0.1).any()
     # Held up only by two stray pixels at its depth (rows 7-8, no run of their own as the
-    # caller's min_matched_run counts it): the run hangs once they may not hold it.
+    # caller's detection.min_matched_run counts it): the run hangs once they may not hold it.
     stray = matches([56.0] * 4 + [13.0] * 2 + [0.0] + [56.0] * 2 + [13.0] * 3)
     hs = np.array([1.5, 1.4, 1.3, 1.2, 1.1, 1.0, 0.0, 0.4, 0.35, 0.2, 0.1, 0.0])[keep]
     links = run_links(edges, stray, 1.0)
@@ -2128,7 +2139,7 @@ def test_stillness_and_temporal_kernels_equal_numpy(box_frame, monkeypatch):
     thr = rng.uniform(0.3, 1.5, len(m))
 
     def run():
-        d = GpodDetector(dataclasses.replace(det.config, still_overlap=0.5))
+        d = GpodDetector(override(det.config, {'temporal.still_overlap': 0.5}))
         still = []
         for el in shifted:
             d._prev_edges = None
@@ -2167,7 +2178,7 @@ def test_an_obstacle_walked_up_to_is_still_reported_once_its_foot_leaves_the_vie
     go on being reported, coasted, at its true place once its foot has left the bottom
     of the image -- not dropped there as passed. With the motion of two pairs missing
     (a missed /egomotion) the tracks are carried by the motion before
-    (``track_motion_hold_frames``); with five missing, the bollard is held where it was
+    (``tracks.motion_hold_frames``); with five missing, the bollard is held where it was
     last placed once the hold runs out, not forgotten."""
     cam, frames = bollard_walk
     det, prev, near = GpodDetector(), None, []
@@ -2349,8 +2360,8 @@ def test_weakly_textured_ground_lowers_the_edge_threshold_to_find_the_plane():
     rend, cam = StereoRenderer(sc.rig), sc.rig.camera()
     frames = [simulate_frame(sc, k, rend) for k in range(sc.n_frames)]
     runs = {}
-    for density in (GpodConfig().edge_min_density, 0.0):
-        det = GpodDetector(GpodConfig(edge_min_density=density))
+    for density in (GpodConfig().edges.min_density, 0.0):
+        det = GpodDetector(override(GpodConfig(), {'edges.min_density': density}))
         tracked, off, thr = 0, [], []
         for k, f in enumerate(frames):
             r = det.process(f.left, f.right, cam)
@@ -2360,14 +2371,14 @@ def test_weakly_textured_ground_lowers_the_edge_threshold_to_find_the_plane():
                 if _plane_off_px(r.plane_abc, f.plane, cam) > 1.0:
                     off.append(k)
         runs[density] = tracked, off, float(np.median(thr))
-    tracked, off, thr = runs[GpodConfig().edge_min_density]
+    tracked, off, thr = runs[GpodConfig().edges.min_density]
     assert tracked >= len(frames) - 3, runs
     assert len(off) <= 3, runs
-    noise_floor = GpodConfig().edge_noise_floor_snr * 0.433 * 2.0   # pixel noise 2
+    noise_floor = GpodConfig().edges.noise_floor_snr * 0.433 * 2.0   # pixel noise 2
     assert noise_floor * 0.9 <= thr < 3.0, runs
     # without it (seen: 17 frames tracked, all 17 over 1 px off)
     tracked0, off0, thr0 = runs[0.0]
-    assert thr0 == GpodConfig().edge_threshold
+    assert thr0 == GpodConfig().edges.threshold
     assert len(off0) >= tracked0 // 2, runs
 
 
@@ -2390,8 +2401,9 @@ def test_the_initial_plane_must_hold_a_part_of_the_features(ground_fraction, fra
     d = rng.uniform(2.0, 30.0, n)                         # mismatches
     on = rng.random(n) < ground_fraction
     d[on] = abc[0] * u[on] + abc[1] * v[on] + abc[2] + rng.normal(0.0, 0.1, on.sum())
-    det = GpodDetector(GpodConfig(init_frames=1, init_min_inlier_fraction=fraction,
-                                  ransac_iterations=30000))
+    det = GpodDetector(override(GpodConfig(), {'plane.init_frames': 1,
+                                               'plane.init_min_inlier_fraction': fraction,
+                                               'plane.ransac_iterations': 30000}))
     status, _ = det._update_plane(u, v, d, np.full(n, 10.0), CAM)
     assert status == want
 
@@ -2469,7 +2481,7 @@ def test_an_unconfirmed_plane_is_carried_without_motion_only_where_it_may_be(vie
     told among 30 % mismatches (which flatten a plain least-squares slope to nothing: a
     vigorous walker's ground 1.7 px above the plane was taken for a wall)."""
     rng = np.random.default_rng(8)
-    det = GpodDetector(GpodConfig(init_frames=1))
+    det = GpodDetector(override(GpodConfig(), {'plane.init_frames': 1}))
     u, v, d = _ground_features(600, rng)
     assert det._update_plane(u, v, d, np.full(600, 10.0), CAM)[0] == 'tracking'
     if view == 'wall':
@@ -2485,7 +2497,7 @@ def test_an_unconfirmed_plane_is_carried_without_motion_only_where_it_may_be(vie
 
 def test_the_right_cameras_gain_is_the_median_ratio_of_the_spreads():
     rng = np.random.default_rng(12)
-    det, off = GpodDetector(), GpodDetector(GpodConfig(right_gain_frames=0))
+    det, off = GpodDetector(), GpodDetector(override(GpodConfig(), {'image.right_gain_frames': 0}))
     gains = []
     for g in (0.7, 0.7, 0.5, 0.7, 0.7):      # one pair off (content that differs)
         left = np.clip(rng.normal(110, 30, (60, 80)), 0, 255).astype(np.uint8)
@@ -2496,8 +2508,8 @@ def test_the_right_cameras_gain_is_the_median_ratio_of_the_spreads():
     assert gains[-1] == pytest.approx(1 / 0.7, rel=0.01)      # the median ignores the 0.5
     flat = np.full((60, 80), 90, np.uint8)
     assert det._right_gain(flat, flat) == pytest.approx(gains[-1])   # no contrast: kept
-    with pytest.raises(ValueError, match='right_gain_frames'):
-        GpodConfig(right_gain_frames=-1)
+    with pytest.raises(ValueError, match='image.right_gain_frames'):
+        override(GpodConfig(), {'image.right_gain_frames': -1})
 
 
 def test_a_right_camera_with_its_own_gain_gives_no_phantom():
@@ -2543,3 +2555,20 @@ def test_a_right_camera_with_its_own_gain_gives_no_phantom():
                             round(o.height, 2), round(dist, 2)))
     assert reports > 20                         # the wall and the box ahead are reported
     assert not far, far
+
+
+def test_every_named_rule_left_out_the_papers_test_alone_decides():
+    """With the three lists of `GpodConfig.rules` empty a frame still gives its features
+    and detections, and the box is still found; the rules only take evidence out (bar
+    drop_region, which level ground never meets), so no rule gives an obstacle pixel."""
+    bare = override(GpodConfig(), {'rules.pixels': (), 'rules.strings': (),
+                                   'rules.drops': ()})
+    pair = render_pair(boxes=[BOX], seed=2)
+    _, ruled = _calibrated(pair, frames=4)
+    _, plain = _calibrated(pair, bare, frames=4)
+    assert ruled[-1].status == plain[-1].status == 'tracking'
+    assert ruled[-1].obstacles and plain[-1].obstacles
+    n_ruled = int(ruled[-1].features.is_obstacle.sum())
+    n_plain = int(plain[-1].features.is_obstacle.sum())
+    assert n_plain >= n_ruled > 0
+

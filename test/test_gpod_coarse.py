@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from asmonc_vision.core.camera import StereoCamera
+from asmonc_vision.core.config import override
 from asmonc_vision.core.gpod import GpodConfig, GpodDetector, GpodFeatures, GpodObstacle, bin_pair
 from asmonc_vision.core.gpod.coarse import _coarse_consistent, _disparity_image
 
@@ -120,12 +121,12 @@ def _wall_found(cam, frames, config):
 def test_a_faint_wall_ahead_is_found_by_the_binned_pass(faint_wall):
     cam, frames = faint_wall
     # the unseen-ground cue, which also finds this wall, is off in both runs
-    det, found = _wall_found(cam, frames, GpodConfig(unseen_max_ratio=0.0))
+    det, found = _wall_found(cam, frames, override(GpodConfig(), {'unseen.max_ratio': 0.0}))
     assert det._coarse is not None and det._coarse.calibrated_plane is not None
     assert sum(found[1:]) >= 5, found              # from the second frame it stands there
     # the scene is one the full-size pass alone misses
-    det0, found0 = _wall_found(cam, frames, GpodConfig(coarse_min_width=0,
-                                                       unseen_max_ratio=0.0))
+    det0, found0 = _wall_found(cam, frames, override(GpodConfig(), {'coarse.min_width': 0,
+                                                                    'unseen.max_ratio': 0.0}))
     assert det0._coarse is None
     assert sum(found0) <= 1, found0
 
@@ -138,7 +139,7 @@ def test_small_images_have_no_binned_pass():
     for _ in range(4):
         r = det.process(pair[0], pair[1], CAM)
     assert r.status == 'tracking' and 'coarse' not in r.timings and det._coarse is None
-    with pytest.raises(ValueError, match='coarse_min_height_m'):
-        GpodConfig(coarse_min_height_m=-0.1)
-    with pytest.raises(ValueError, match='coarse_min_width'):
-        GpodConfig(coarse_min_width=-1)
+    with pytest.raises(ValueError, match='coarse.min_height_m'):
+        override(GpodConfig(), {'coarse.min_height_m': -0.1})
+    with pytest.raises(ValueError, match='coarse.min_width'):
+        override(GpodConfig(), {'coarse.min_width': -1})

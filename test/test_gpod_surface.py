@@ -1,4 +1,4 @@
-"""GPOD with the ground surface ahead (GpodConfig.surface_*) on rendered stereo pairs of a
+"""GPOD with the ground surface ahead (GpodConfig.surface) on rendered stereo pairs of a
 walkway whose profile bends ahead (the simulator's ground is one plane, so the pairs are
 ray-cast here: a textured height profile z(s) along the walking direction, no
 obstacles), seen by the paper's rig (320 x 240, f = 300 px, B = 0.35 m, 1.25 m high,
@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from asmonc_vision.core.camera import StereoCamera
-from asmonc_vision.core.gpod import GpodConfig, GpodDetector
+from asmonc_vision.core.config import override
+from asmonc_vision.core.gpod import GpodConfig, GpodDetector, rules
 
 CAM = StereoCamera(f=300.0, cx=159.5, cy=119.5, baseline=0.35, width=320, height=240)
 PITCH = np.radians(20.0)
@@ -92,11 +93,10 @@ def reports_ahead(profile, surface: bool, frames: int = 4, seed: int = 0,
     """Per tracked frame, the obstacles reported from ``from_m`` ahead (where the ground
     bends; nearer, this renderer's coarse texture gives a few 5-8 cm reports on flat
     ground too, with or without the surface)."""
-    # the plane alone: no surface, and no ground_bend_min_grade either (which takes a
+    # the plane alone: no surface, and no bend.min_grade either (which takes a
     # steady bend's reports on its own)
-    det = GpodDetector(GpodConfig(surface_enabled=surface,
-                                  ground_bend_min_grade=GpodConfig().ground_bend_min_grade
-                                  if surface else 0.0))
+    bend = GpodConfig().bend.min_grade if surface else 0.0
+    det = GpodDetector(override(GpodConfig(), {'surface.enabled': surface, 'bend.min_grade': bend}))
     out = []
     for left, right in rendered(profile, frames, seed):
         r = det.process(left.copy(), right.copy(), CAM)
@@ -148,7 +148,7 @@ def _along(s, lat, h):
 
 @pytest.mark.parametrize('seed', [0, 1, 2])
 def test_ground_bending_away_is_no_drop_nor_obstacle_but_a_step_is(seed):
-    """`_bending_ground`: drop pixels along a joint running ahead beyond a brow (their
+    """`rules.bending_ground`: drop pixels along a joint running ahead beyond a brow (their
     depth grows by 0.19 a metre from 3.3 to 5.5 m, 2 cm of noise) are ground falling
     away; those of the level lower ground beyond a 12 cm drop (the same joint, the same
     noise) stay a drop, and so do those of ground falling as steeply from 15 cm below
@@ -163,21 +163,21 @@ def test_ground_bending_away_is_no_drop_nor_obstacle_but_a_step_is(seed):
                        (-0.15 - 0.19 * (s - 3.3), False)):
         h = h + rng.normal(0.0, 0.02, 30)
         pts, plane = _along(s, lat, h)
-        got = GpodDetector()._bending_ground(drop, pts, h, plane, 2, sid, 1.0, -1.0)
+        got = rules.bending_ground(GpodConfig(), drop, pts, h, plane, 2, sid, 1.0, -1.0)
         assert got.tolist() == [falling, falling]
         # mirrored: ground rising beyond a dip is ground, a kerb's level top is not
         pts, plane = _along(s, lat, -h)
-        got = GpodDetector()._bending_ground(drop, pts, -h, plane, 2, sid, 0.7, 1.0)
+        got = rules.bending_ground(GpodConfig(), drop, pts, -h, plane, 2, sid, 0.7, 1.0)
         assert got.tolist() == [falling, falling]
 
 
 @pytest.mark.parametrize('seed', [0, 1, 2])
 def test_short_or_gentle_bend_is_ground_but_a_short_look_at_lower_ground_is_a_drop(seed):
-    """`_bending_ground` on what a walker sees of a bend in a few frames: a joint
+    """`rules.bending_ground` on what a walker sees of a bend in a few frames: a joint
     beyond a brow seen over 0.6 m (falling 0.16 a metre from 2 cm below the ground), and
     the level top of a kerb ramp seen from the ramp over 3 m (falling at the ramp's
     grade, 0.06 a metre), are ground; the level lower ground of a 12 cm drop seen over
-    0.6 m stays a drop; with ground_bend_min_span_m above the 0.6 m the short look is
+    0.6 m stays a drop; with bend.min_span_m above the 0.6 m the short look is
     not judged at all."""
     rng = np.random.default_rng(seed)
     sid = np.repeat([0, 1], 12)
@@ -191,10 +191,10 @@ def test_short_or_gentle_bend_is_ground_but_a_short_look_at_lower_ground_is_a_dr
                        (long_, -0.03 - 0.06 * (long_ - 3.0) + noise, True),
                        (short, -0.12 + noise, False)):
         pts, plane = _along(s, lat, h)
-        got = GpodDetector()._bending_ground(drop, pts, h, plane, 2, sid, 1.0, -1.0)
+        got = rules.bending_ground(GpodConfig(), drop, pts, h, plane, 2, sid, 1.0, -1.0)
         assert got.tolist() == [bend, bend]
     pts, plane = _along(short, lat, brow)
-    det = GpodDetector(GpodConfig(ground_bend_min_span_m=0.8))
-    assert det._bending_ground(drop, pts, brow, plane, 2, sid, 1.0, -1.0).tolist() == [
+    det = GpodDetector(override(GpodConfig(), {'bend.min_span_m': 0.8}))
+    assert rules.bending_ground(det.config, drop, pts, brow, plane, 2, sid, 1.0, -1.0).tolist() == [
         False, False]
 

@@ -91,4 +91,5 @@ def test_kerb_and_cars_are_found(run):
     tracking = results[2:]
     assert np.mean([kerb(r) for r in tracking]) >= 0.8
     assert all(car_left(r) for r in results[12:14])
-    assert all(ob.range <= GpodConfig().max_range_m for r in tracking for ob in r.obstacles)
+    max_range = GpodConfig().detection.max_range_m
+    assert all(ob.range <= max_range for r in tracking for ob in r.obstacles)

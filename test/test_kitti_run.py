@@ -106,7 +106,7 @@ def test_nothing_on_the_painted_road_the_kerb_and_the_car_are(replay):
         assert not on_road.any(), (i, [(o.roi.x_offset, o.roi.y_offset, o.height, o.range)
                                       for o, r in zip(obs, on_road) if r])
         kerb.append(any(is_kerb(*f) for f in zip(u, v, h)))
-        assert all(o.range <= GpodConfig().max_range_m for o in obs), i
+        assert all(o.range <= GpodConfig().detection.max_range_m for o in obs), i
     assert np.mean(kerb) >= 0.8, kerb
     for i in (12, 13):
         assert any(is_car_left((o.roi.x_offset, o.roi.y_offset, o.roi.width, o.roi.height),

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from asmonc_vision.core.camera import MetricPlane, StereoCamera
+from asmonc_vision.core.config import override
 from asmonc_vision.core.gpod import GpodConfig, GpodDetector, GpodObstacle
 from asmonc_vision.core.unseen_ground import UnseenGroundMonitor, _texture_energy, is_unknown
 
@@ -274,8 +275,8 @@ def test_bad_settings_are_refused(kw, match):
     args.update(kw)
     with pytest.raises(ValueError, match=match):
         UnseenGroundMonitor(**args)
-    with pytest.raises(ValueError, match='unseen_max_ratio'):
-        GpodConfig(unseen_max_ratio=0.99)
+    with pytest.raises(ValueError, match='unseen.max_ratio'):
+        override(GpodConfig(), {'unseen.max_ratio': 0.99})
 
 
 @functools.lru_cache(maxsize=None)
@@ -320,8 +321,8 @@ def test_a_plain_wall_that_appears_ahead_is_reported_at_its_foot():
     it, so GPOD alone does not find it, and the ground it hides does: unknown ahead from
     the wall's foot (height NaN), not an obstacle of some height."""
     cam, frames = _plain_wall_frames()
-    found = {ratio: _wall_hits(GpodDetector(GpodConfig(unseen_max_ratio=ratio)), cam, frames,
-                               unknown_only=ratio > 0)
+    found = {ratio: _wall_hits(GpodDetector(override(GpodConfig(), {'unseen.max_ratio': ratio})),
+                               cam, frames, unknown_only=ratio > 0)
              for ratio in (0.15, 0.0)}
     assert found[0.15] >= 9, found                  # of 10 frames (measured 10)
     assert found[0.0] <= 1, found                   # the scene needs the cue (measured 0)

@@ -66,9 +66,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     e.add_argument('--ranges', type=float, nargs='+', default=list(RANGES_M),
                    help='box ranges, m (one box per range in each scene)')
     e.add_argument('--plane-update', choices=('fixed', 'refit'), default=None,
-                   help="detector plane_update (default: GpodConfig's)")
+                   help="detector plane.update (default: GpodConfig's)")
     e.add_argument('--param', action='append', default=[], metavar='NAME=VALUE',
-                   help='any other GpodConfig setting, e.g. --param threshold_mode=fixed '
+                   help='any other GpodConfig setting as GROUP.NAME=VALUE, e.g. --param '
+                   'threshold.mode=fixed '
                    '(repeatable)')
     e.add_argument('--jobs', type=int, default=2, help='worker processes (2)')
     e.add_argument('--json', type=Path, default=None, help='write the results as JSON')

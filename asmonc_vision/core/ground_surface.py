@@ -70,7 +70,7 @@ from .config import check_fields, param
 
 @dataclass(frozen=True)
 class GroundSurfaceConfig:
-    """Settings of the ground surface ahead (``GpodConfig.surface_*``)."""
+    """Settings of the ground surface ahead (``GpodConfig.surface``; in ROS ``gpod.surface.*``)."""
 
     enabled: bool = param(
         True, 'Judge obstacles against the ground surface ahead (the near plane continued '

@@ -93,7 +93,7 @@ class Perception:
             m = (self.motion_predictor.predict(stamp_ns, still=bool(result.still))
                  if stamp_ns is not None else None)
         stamp_s = (stamp_ns * 1e-9 if stamp_ns is not None
-                   else result.frame_index * self.gpod_config.track_frame_period_s)
+                   else result.frame_index * self.gpod_config.tracks.frame_period_s)
         plane = result.metric_plane if result.status == 'tracking' else None
         ev = self.evidence(result, cam) if plane is not None else None
         objects = self.map.update(stamp_s, plane, ev, m, result.still, cam)
@@ -124,7 +124,7 @@ class Perception:
         """The pair's matched edge pixels as map evidence (`pair_evidence`): the
         detector's counted obstacle pixels raised, its drop pixels drop, the pixels on
         the plane within their threshold (on no obstacle or drop string) ground; σ_d the
-        pixel's threshold over ``threshold_k``; each weighed 1 - c, c the share of its
+        pixel's threshold over ``threshold.k``; each weighed 1 - c, c the share of its
         rivals that say otherwise in its and its rivals' support
         (`GpodFeatures.contrary_rival_share`): the chance that it is not the ground matched
         wrongly, were the supports likelihoods."""
@@ -132,8 +132,8 @@ class Perception:
         k = len(f)
         thr = (np.asarray(f.threshold, float) if f.threshold is not None
                else np.full(k, float(result.threshold_px)))
-        tk = self.gpod_config.threshold_k
-        sigma_d = thr / tk if self.gpod_config.threshold_mode == 'sigma' else np.full(
+        tk = self.gpod_config.threshold.k
+        sigma_d = thr / tk if self.gpod_config.threshold.mode == 'sigma' else np.full(
             k, float(result.sigma_px) if math.isfinite(result.sigma_px)
             else self.map_config.default_sigma_px)
         ex = f.excess_mean if f.excess_mean is not None else f.excess

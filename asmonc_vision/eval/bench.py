@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from asmonc_vision.core.config import override
 from asmonc_vision.io import bagio
 from asmonc_vision.io.frames import Frame, load_frames
 
@@ -83,8 +84,8 @@ def make_method(method: str, threshold_px: float | None = None, map_enabled: boo
         from asmonc_vision.core.evidence_map import EvidenceMapConfig
         from asmonc_vision.core.gpod import GpodConfig
         from asmonc_vision.core.perception import Perception
-        cfg = GpodConfig() if threshold_px is None else GpodConfig(
-            threshold_px=threshold_px, threshold_mode='fixed')
+        cfg = GpodConfig() if threshold_px is None else override(
+            GpodConfig(), {'threshold.px': threshold_px, 'threshold.mode': 'fixed'})
         mcfg = (EvidenceMapConfig() if map_enabled is None
                 else EvidenceMapConfig(enabled=map_enabled))
         return Perception(cfg, mcfg)
@@ -121,7 +122,7 @@ def run_method(frames: list[Frame], method: str = 'gpod', threshold_px: float | 
 
     GPOD is given each pair's up direction from the frame's inclinometer sample
     (`io.frames.Frame.inclinometer`, `core.rotations.up_for_pair` within the detector's
-    ``gravity_prior_max_age_s``), as the node takes it from `/inclinometer/imu`; none
+    ``plane.gravity_prior_max_age_s``), as the node takes it from `/inclinometer/imu`; none
     for frames without one.
     """
     import cv2
@@ -131,7 +132,7 @@ def run_method(frames: list[Frame], method: str = 'gpod', threshold_px: float | 
 
     cv2.setNumThreads(1)
     det = make_method(method, threshold_px, map_enabled)
-    max_age_s = det.gpod_config.gravity_prior_max_age_s if method == 'gpod' else 0.0
+    max_age_s = det.gpod_config.plane.gravity_prior_max_age_s if method == 'gpod' else 0.0
     est = None
     if egomotion and method == 'gpod':
         from asmonc_vision.core.motion import EgomotionEstimator

@@ -304,11 +304,12 @@ def _seed_job(seed: int, heights_m: list, ranges_m: list, frames: int, rig_kw: d
     pavement, then run it on ``frames`` frames with the boxes. Returns plain data."""
     import cv2
 
+    from asmonc_vision.core.config import override
     from asmonc_vision.core.gpod import GpodConfig
 
     cv2.setNumThreads(1)
     scene = _SeedScene(seed, rig_kw, threads)
-    config = GpodConfig(**config_kw)
+    config = override(GpodConfig(), config_kw)
     out = {'seed': seed, 'cases': [], 'missing': [], 'false_obstacles': 0, 'frames': 0,
            'not_tracking': 0}
     log = _FeatureLog()
@@ -354,7 +355,7 @@ def _height_job(scene: _SeedScene, config, hi: int, h: float, ranges_m: list, fr
     pix_range[fin] = ground_range_bearing(plane, pts[fin])[0]
     det = GpodDetector(config)
     noise = np.random.default_rng([seed, scene.salt, hi, 1])
-    for _ in range(config.init_frames + 5):
+    for _ in range(config.plane.init_frames + 5):
         res = det.process(*scene.pair(scene.clear_rad, noise), cam)
         if res.status != 'initialising':
             break
@@ -470,6 +471,7 @@ def run_empirical(seeds: int = 20, frames: int = 4, heights_m=None, ranges_m=RAN
         cm) per model; false obstacles, frames and the elapsed time.
     """
     from asmonc_vision.core.config import to_dict
+    from asmonc_vision.core.config import override
     from asmonc_vision.core.gpod import GpodConfig
     from asmonc_vision.sim import RigSettings
 
@@ -479,7 +481,7 @@ def run_empirical(seeds: int = 20, frames: int = 4, heights_m=None, ranges_m=RAN
     rig_kw = dict(rig_kw or {})
     config_kw = dict(config_kw or {})
     rig = RigSettings(**rig_kw)
-    config = GpodConfig(**config_kw)
+    config = override(GpodConfig(), config_kw)
     t0 = time.perf_counter()
     seed_list = list(range(first_seed, first_seed + seeds))
     results = _run_seeds(seed_list, (heights_m, ranges_m, frames, rig_kw, config_kw), jobs,
@@ -487,7 +489,7 @@ def run_empirical(seeds: int = 20, frames: int = 4, heights_m=None, ranges_m=RAN
     st = _sigma_and_thresholds(results, ranges_m, config, sigma_px, keep)
     threshold, sigma_model = st['threshold'], st['sigma_model']
     model_rig = ModelRig(rig.focal, rig.baseline, rig.camera_height, rig.camera_pitch_deg)
-    m_det = config.min_obstacle_pixels
+    m_det = config.detection.min_obstacle_pixels
     models = _models(st['deciles'], threshold, m_det, sigma_model)
 
     def model_p(md: dict, hs, rs) -> np.ndarray:
@@ -503,11 +505,12 @@ def run_empirical(seeds: int = 20, frames: int = 4, heights_m=None, ranges_m=RAN
         'detector': {'threshold_px': threshold, 'threshold_q10_q50_q90_px': st['thr_q'],
                      'box_threshold_q10_q50_q90_px': st['thr_box_q'],
                      'box_threshold_deciles_px': st['deciles'],
-                     'config_threshold_px': config.threshold_px,
-                     'threshold_mode': getattr(config, 'threshold_mode', 'fixed'),
-                     'plane_update': config.plane_update,
+                     'config_threshold_px': config.threshold.px,
+                     'threshold_mode': config.threshold.mode,
+                     'plane_update': config.plane.update,
                      'min_obstacle_pixels': m_det,
-                     'min_matched_run': config.min_matched_run, 'init_frames': config.init_frames},
+                     'min_matched_run': config.detection.min_matched_run,
+                     'init_frames': config.plane.init_frames},
         'seeds': seed_list, 'frames_per_scene': frames, 'heights_cm': [100 * h for h in heights_m],
         'ranges_m': ranges_m, 'match_radius_m': MATCH_RADIUS_M,
         'sigma': st['sig'], 'sigma_raw_excess': st['sig_raw'], 'sigma_box_strength': st['sig_box'],
@@ -563,7 +566,7 @@ def _sigma_and_thresholds(results: list[dict], ranges_m: list, config, sigma_px,
     # sigma from the ground features of the same edge strengths as the boxes' (10-90%).
     thr_span = g_thr[in_span & np.isfinite(g_thr)]
     thr_q = ([float(np.quantile(thr_span, q)) for q in (0.1, 0.5, 0.9)] if thr_span.size
-             else [config.threshold_px] * 3)
+             else [config.threshold.px] * 3)
     thr_box_q = ([float(np.quantile(b_thr, q)) for q in (0.1, 0.5, 0.9)] if b_thr.size
                  else thr_q)
     threshold = thr_box_q[1]
@@ -844,10 +847,11 @@ def _write_json(path: Path, obj: dict) -> None:
 
 
 def _parse_params(items: list, cls) -> dict:
-    """NAME=VALUE strings to settings of the dataclass ``cls``, typed as its defaults."""
-    import dataclasses
+    """NAME=VALUE strings to settings of the dataclass ``cls`` (a group's as
+    GROUP.NAME), typed as its defaults."""
+    from asmonc_vision.core.config import flat_fields
 
-    fields = {f.name: f for f in dataclasses.fields(cls)}
+    fields = dict(flat_fields(cls))
     out = {}
     for item in items:
         name, sep, text = item.partition('=')
@@ -870,6 +874,7 @@ def _parse_params(items: list, cls) -> dict:
 
 
 def _run_empirical_cli(args) -> int:
+    from asmonc_vision.core.config import override
     from asmonc_vision.core.gpod import GpodConfig
     from asmonc_vision.sim import RigSettings
 
@@ -881,13 +886,13 @@ def _run_empirical_cli(args) -> int:
         rig_kw['camera_pitch_deg'] = args.pitch_deg
     config_kw = {}
     if args.threshold is not None:
-        config_kw['threshold_px'] = args.threshold
+        config_kw['threshold.px'] = args.threshold
     if args.plane_update is not None:
-        config_kw['plane_update'] = args.plane_update
+        config_kw['plane.update'] = args.plane_update
     try:
         config_kw.update(_parse_params(args.param, GpodConfig))
         RigSettings(**rig_kw)
-        GpodConfig(**config_kw)
+        override(GpodConfig(), config_kw)
     except (ValueError, TypeError) as exc:
         print(f'asmonc fig5: {exc}', file=sys.stderr)
         return 2

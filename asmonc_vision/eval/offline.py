@@ -406,6 +406,7 @@ def _method_runs(args, bag: Path, name: str, frames, thresholds: list, map_enabl
                  criteria: dict, progress) -> list[dict]:
     """One in-process run per method and threshold on one bag's frames, scored."""
     from asmonc_vision.core.config import to_dict
+    from asmonc_vision.core.gpod import GpodConfig
     from asmonc_vision.eval.truth import truth_from_bag
 
     truth = truth_from_bag(bag, frames)
@@ -421,7 +422,9 @@ def _method_runs(args, bag: Path, name: str, frames, thresholds: list, map_enabl
             det = make_method(method, thr, map_enabled)
             cfg = det.config
             run = {'bag': str(bag), 'name': name, 'method': method,
-                   'source': 'in-process', 'threshold_px': cfg.threshold_px,
+                   'source': 'in-process',
+                   'threshold_px': (cfg.threshold.px if isinstance(cfg, GpodConfig)
+                                    else cfg.threshold_px),
                    'config': to_dict(cfg), 'safety': method_safety(truth, rs),
                    'evaluation': ev}
             if method == 'gpod':

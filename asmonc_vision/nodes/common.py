@@ -25,6 +25,8 @@ from rclpy.parameter import Parameter
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy,
                        qos_profile_sensor_data)
 
+from asmonc_vision.core.config import flat_fields, flat_values, override
+
 T = TypeVar('T')
 
 #: Large images: RELIABLE so that a replay loses no frame; shallow so a slow reader
@@ -95,7 +97,9 @@ def declare_config(node: Node, cls: type[T], prefix: str = '',
 
     Each parameter gets a descriptor with the field's description and range, so
     `ros2 param describe` explains it and rclpy rejects values out of range. Values
-    that pass the descriptor but fail the dataclass's own checks are rejected too.
+    that pass the descriptor but fail the dataclass's own checks are rejected too. The
+    fields of a group (core.config.group) are parameters named ``<prefix><group>.<field>``
+    (in YAML, a mapping under the group's name).
 
     Args:
         node: the node that owns the parameters.
@@ -106,9 +110,18 @@ def declare_config(node: Node, cls: type[T], prefix: str = '',
     Returns:
         The settings built from the declared (YAML or command-line) values.
     Raises:
-        ValueError: the start-up values are out of range (the message names the field).
+        ValueError: the start-up values are out of range (the message names the field),
+            or a value is given under `prefix` for no setting (a misspelt or stale name
+            would otherwise be dropped in silence and the default run instead).
     """
-    fields = {prefix + f.name: f for f in dataclasses.fields(cls)}
+    fields = dict(flat_fields(cls, prefix))
+    if prefix:
+        # rclpy keeps the values given for the node (YAML, -p) in _parameter_overrides
+        given = getattr(node, '_parameter_overrides', {})
+        unknown = sorted(n for n in given if n.startswith(prefix) and n not in fields)
+        if unknown:
+            raise ValueError(f'no such setting: {", ".join(unknown)} (`asmonc params` or '
+                             'docs/parameters.md lists them)')
     for name, f in fields.items():
         desc = _descriptor(f)
         default = _ros_default(f.default)
@@ -117,8 +130,9 @@ def declare_config(node: Node, cls: type[T], prefix: str = '',
             # descriptor's array type with no value; unset reads back as empty.
             default = Parameter.Type(desc.type)
         node.declare_parameter(name, default, desc)
-    values = {f.name: _from_ros(f, _get_value(node, name)) for name, f in fields.items()}
-    config = cls(**values)
+    values = {name[len(prefix):]: _from_ros(f, _get_value(node, name))
+              for name, f in fields.items()}
+    config = override(cls(), values)
     state = {'config': config}
 
     def _on_set(params) -> SetParametersResult:
@@ -128,11 +142,9 @@ def declare_config(node: Node, cls: type[T], prefix: str = '',
         if on_change is None:
             return SetParametersResult(
                 successful=False, reason='these settings are fixed at start-up')
-        new = dataclasses.asdict(state['config'])
-        for p in mine:
-            new[fields[p.name].name] = _from_ros(fields[p.name], p.value)
+        new = {p.name[len(prefix):]: _from_ros(fields[p.name], p.value) for p in mine}
         try:
-            cfg = cls(**new)
+            cfg = override(state['config'], new)
         except (ValueError, TypeError) as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         state['config'] = cfg
@@ -221,12 +233,11 @@ def config_overrides(config: Any) -> list[Parameter]:
     (a settings dataclass), for building nodes in-process. An empty list becomes an
     unset override, which `declare_config` reads back as empty."""
     out = []
-    for f in dataclasses.fields(config):
-        value = getattr(config, f.name)
+    for name, value in flat_values(config).items():
         if isinstance(value, tuple) and not value:
-            out.append(Parameter(f.name, Parameter.Type.NOT_SET))
+            out.append(Parameter(name, Parameter.Type.NOT_SET))
         else:
-            out.append(Parameter(f.name, value=list(value) if isinstance(value, tuple) else value))
+            out.append(Parameter(name, value=list(value) if isinstance(value, tuple) else value))
     return out
 
 

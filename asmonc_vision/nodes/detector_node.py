@@ -20,7 +20,7 @@ callbacks that receive images stay fast. Publishes, per processed pair:
 * `/diagnostics`
 
 Subscribes to `/inclinometer/imu` (sensor_msgs/Imu, SENSOR_QOS) and keeps the latest
-orientation: a pair stamped within ``gpod.gravity_prior_max_age_s`` of it gets the world's
+orientation: a pair stamped within ``gpod.plane.gravity_prior_max_age_s`` of it gets the world's
 up direction (`core.rotations.up_for_pair`) as the prior on the ground plane's orientation
 (``gpod.gravity_prior_*``); without an inclinometer the plane comes from the images alone.
 
@@ -41,7 +41,7 @@ With ``use_egomotion`` (off by default), subscribes to `/egomotion`
 the previous pair to this one) as the motion input of the ground plane and the obstacle
 tracks: once a pair's edges are matched the worker waits up to ``egomotion_wait`` for that
 pair's motion (the egomotion node works on the pair meanwhile); the ground plane is
-predicted through the motion (`gpod.motion_*`) and the tracks are carried through it.
+predicted through the motion (`gpod.plane.motion_*`) and the tracks are carried through it.
 The wait puts the egomotion node's time (about 35 ms a pair at 320x240) on the path from
 camera to ear, and on the campaign's walks the motion input gave more false reports, not
 fewer; so by default the plane is refitted on each pair without a prediction, and the
@@ -298,7 +298,7 @@ class DetectorNode(StereoInputNode):
             return m
 
         # the up direction: the latest inclinometer sample, if near the pair's time
-        up = up_for_pair(self._imu, pair.stamp_ns, self.gpod_config.gravity_prior_max_age_s)
+        up = up_for_pair(self._imu, pair.stamp_ns, self.gpod_config.plane.gravity_prior_max_age_s)
         result = self.perception.process(left, right, cam, stamp_ns=pair.stamp_ns,
                                          motion=motion if self.use_motion else None, up=up)
         header = pair.left.header

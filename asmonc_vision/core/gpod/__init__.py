@@ -43,7 +43,7 @@ from .runs import (
     smooth_along_runs,
     string_pieces,
 )
-from .settings import STATUSES, GpodConfig, surface_config
+from .settings import STATUSES, GpodConfig
 
 __all__ = [
     'GpodConfig', 'GpodDetector', 'GpodFeatures', 'GpodObstacle', 'GpodPlane', 'GpodResult',
@@ -51,5 +51,5 @@ __all__ = [
     'face_gap_points', 'floating_bottom_runs', 'hanging_runs', 'hidden_corner', 'hidden_corners',
     'lone_face_points', 'matched_run_length', 'nearest_point', 'nearest_points',
     'occluded_matches', 'run_links', 'silhouette_owners', 'smooth_along_runs', 'soft_nearest',
-    'string_feet', 'string_pieces', 'surface_config', 'view_edge_points',
+    'string_feet', 'string_pieces', 'view_edge_points',
 ]

@@ -23,35 +23,19 @@ from .faces import (
     silhouette_owners,
     view_edge_points,
 )
-from .footing import _cross3, _FrameContext, string_feet
+from .footing import _FrameContext, ground_coords, string_feet
 from .grouping import _brink_bearings, _group_quantile, _normal_cdf, cluster_points_2d
 from .nearest import nearest_points
 from .plane_tracking import PlaneTracking
 from .results import GpodFeatures, GpodObstacle
+from .rules import DROP_RULES, PIXEL_RULES, STRING_RULES, FrameEvidence, run_rules
 from .runs import (
     _TRUE,
-    continuation_alternatives,
-    floating_bottom_runs,
-    hanging_runs,
     matched_run_length,
-    occluded_matches,
     run_links,
     smooth_along_runs,
-    string_pieces,
 )
-from .settings import surface_config
-from .support import _features, _ground_candidates, _noise_key, contrary_rival_share
-
-#: Obstacle pixels this far above the plane (pixels) or more are checked for a ground
-#: alternative (``GpodConfig.ambiguity_fraction``): a repetitive pattern matched one
-#: period off; genuine small obstacles are never this far above the plane.
-_AMBIGUOUS_EXCESS_PX = 3.0
-
-#: A run hanging over lower ground (`continuation_alternatives`) is checked only when that
-#: ground is seen: at least this fraction of the frame's matches lie on it (beyond a kerb
-#: down, 15-70 %; scattered mismatches of obstacle texture that look like a lower ground,
-#: at most 1.4 % on the simulator's walks).
-_LOWER_GROUND_FRACTION = 0.05
+from .support import _features, _noise_key, contrary_rival_share
 
 #: A drop-off's reported foot is at its nearest range, in the median direction of the
 #: nearest feet of its edge strings (one per string) that lie within this distance
@@ -99,7 +83,7 @@ class Detection(PlaneTracking):
     def _stillness(self, el: EdgeMap) -> bool:
         """Whether the rig stood still since the previous frame: most left edge pixels
         are where an edge pixel was (same row, within one column). Only the edges at
-        least as strong as an obstacle's evidence needs (``obstacle_min_strength``, or
+        least as strong as an obstacle's evidence needs (``detection.min_strength``, or
         more on a noisy camera) are compared, when there are ``_STILL_MIN_EDGES`` of
         them: the weak ones come and go with the pixel noise (a camera of noise sigma 4
         standing still kept 0.68 of all its edges in place, 0.93 of the strong ones).
@@ -118,36 +102,36 @@ class Detection(PlaneTracking):
             img, hits = kn.nb_still(prev if use else np.zeros((1, 1), bool), use, v, u_int,
                                   h, w)
             self._prev_edges = img
-            return use and bool(hits / n >= self.config.still_overlap)
+            return use and bool(hits / n >= self.config.temporal.still_overlap)
         img = np.zeros((h, w + 2), bool)
         img[v, u_int + 1] = True
         self._prev_edges = img
         if prev is None or prev.shape != img.shape or n == 0:
             return False
         hit = prev[v, u_int] | prev[v, u_int + 1] | prev[v, u_int + 2]
-        return bool(hit.mean() >= self.config.still_overlap)
+        return bool(hit.mean() >= self.config.temporal.still_overlap)
 
     def _temporal_excess(self, m: Matches, excess: np.ndarray, still: bool,
                          shape: tuple[int, int], thr: np.ndarray | None = None) -> np.ndarray:
         """The excess of each match averaged (exponentially, over about
-        ``temporal_frames`` frames) with the running average found at its place (same
+        ``temporal.frames`` frames) with the running average found at its place (same
         row, within one column) in the previous frame, when the rig stood still and the
-        two agree to within ``temporal_gate_px`` and ``temporal_gate_thr`` times the
+        two agree to within ``temporal.gate_px`` and ``temporal.gate_thr`` times the
         pixel's threshold ``thr`` (K,) px, if given. Updates the running sums."""
         c = self.config
         h, w = shape
         k = len(m)
-        lam = 1.0 - 1.0 / c.temporal_frames
+        lam = 1.0 - 1.0 / c.temporal.frames
         if kn.nb_temporal is not None:
             # The same neighbours, gate and sums, compiled.
             use = bool(still and self._acc is not None and lam > 0 and k)
             ps, pw = (self._acc if use and self._acc is not None     # (use: it is set)
                       else (np.zeros((1, 1), np.float32),) * 2)
-            gate_thr = thr is not None and c.temporal_gate_thr > 0
+            gate_thr = thr is not None and c.temporal.gate_thr > 0
             s_new, w_new, acc_s, acc_w = kn.nb_temporal(
                 m.v, m.u_left, np.asarray(excess, np.float64),
                 np.asarray(thr if gate_thr else np.zeros(0), np.float64), gate_thr,
-                float(c.temporal_gate_px), float(c.temporal_gate_thr), float(lam), use, ps,
+                float(c.temporal.gate_px), float(c.temporal.gate_thr), float(lam), use, ps,
                 pw, h, w)
             self._acc = (acc_s, acc_w)
             return s_new / w_new
@@ -164,9 +148,9 @@ class Detection(PlaneTracking):
             w0 = wp[np.arange(k), j].astype(np.float64)
             s0 = ps[vv, cols[np.arange(k), j]].astype(np.float64)
             with np.errstate(divide='ignore', invalid='ignore'):
-                gate: float | np.ndarray = c.temporal_gate_px
-                if thr is not None and c.temporal_gate_thr > 0:
-                    gate = np.minimum(gate, c.temporal_gate_thr * thr)
+                gate: float | np.ndarray = c.temporal.gate_px
+                if thr is not None and c.temporal.gate_thr > 0:
+                    gate = np.minimum(gate, c.temporal.gate_thr * thr)
                 ok = (w0 > 0) & (np.abs(excess - s0 / w0) <= gate)
             s_new = np.where(ok, s_new + lam * s0, s_new)
             w_new = np.where(ok, w_new + lam * w0, w_new)
@@ -187,64 +171,48 @@ class Detection(PlaneTracking):
         features with their obstacle / drop classes, the detections nearest first)."""
         c = self.config
         thr, thr_global = self.pixel_thresholds(_noise_key(m), v)
-        pd, pts, h, low = self._ground_reference(u, v, d, cam, metric, thr / c.threshold_k)
+        pd, pts, h, low = self._ground_reference(u, v, d, cam, metric, thr / c.threshold.k)
         excess = d - pd
         feet = pts - h[:, None] * metric.normal_up[None, :]
         ground_range = np.linalg.norm(feet + metric.height * metric.normal_up[None, :], axis=1)
         prev, run, smooth, nxt = self._runs(m, el, excess)
-        in_range = ground_range <= c.max_range_m
+        in_range = ground_range <= c.detection.max_range_m
         ex_mean = self._temporal_excess(m, smooth, still, el.shape, thr)
-        # Figural continuity: a run of min_matched_run pixels at least, and longer for a
+        # Figural continuity: a run of detection.min_matched_run pixels at least, and longer for a
         # larger excess -- an edge standing on the ground rises by |b| px of excess per
         # row, so an excess E needs about E / |b| rows of it (a fraction of them, up to
-        # max_required_run, must be matched in one run).
+        # detection.max_required_run, must be matched in one run).
         slope = max(abs(float(cast(np.ndarray, self._abc)[1])), 1e-3)   # (tracking: set)
-        need = np.clip(np.ceil(c.obstacle_run_fraction * np.abs(ex_mean) / slope),
-                       c.min_matched_run, max(c.max_required_run, c.min_matched_run))
-        reliable = run >= need
-        usable = reliable & in_range
-        amb_drop = self._ambiguous_drops(m, pd, thr)
-        # a periodic pattern matched a period off is no evidence either way
-        periodic = self._periodic_matches(m, pd, thr)
-        obst = (ex_mean > thr) & (h <= c.max_obstacle_height_m) & usable & ~periodic
-        # below the lowest ground the surface allows (``low`` px under its disparity)
-        below = (ex_mean < -thr - low) & (h >= -c.max_drop_depth_m)
-        if obst.any():
-            self._rejected_runs(el, m, cand, prev, run, reliable & in_range, h, excess, pd,
-                                below, slope, obst)
+        det = c.detection
+        need = np.clip(np.ceil(det.obstacle_run_fraction * np.abs(ex_mean) / slope),
+                       det.min_matched_run, max(det.max_required_run, det.min_matched_run))
+        usable = (run >= need) & in_range
+        # The paper's test: obstacle pixels above the threshold, drop pixels as far below
+        # the lowest ground the surface allows (``low`` px under its disparity) where the
+        # plane is within the detection range; then the named rules (rules.py) in order.
+        obst = (ex_mean > thr) & (h <= c.detection.max_obstacle_height_m) & usable
         drop = np.zeros_like(obst)
-        if c.detect_drops:
-            # Below the plane where the plane itself is within the detection range.
-            pd_far = cam.fb / c.max_range_m
-            drop = below & (pd >= pd_far) & (pd <= d_max) & usable & ~amb_drop & ~periodic
+        below = (ex_mean < -thr - low) & (h >= -c.drops.max_depth_m)
+        if c.drops.enabled:
+            drop = below & (pd >= cam.fb / c.detection.max_range_m) & (pd <= d_max) & usable
         sid = m.string_id
         n_s = max(el.num_strings, int(sid.max()) + 1 if sid.size else 0)
-        weight = self._evidence_weight(m.strength)
-        min_px = self.min_obstacle_pixels(cam)
-        if obst.any():
-            self._piece_rule(m, ex_mean, thr, usable, weight, min_px, n_s, obst)
+        ev = FrameEvidence(m=m, el=el, er=er, cand=cand, metric=metric,
+                           abc=cast(np.ndarray, self._abc), pd=pd, pts=pts, h=h,
+                           excess=excess, ex_mean=ex_mean, thr=thr, thr_global=thr_global,
+                           prev=prev, run=run, usable=usable, below=below, slope=slope,
+                           weight=self._evidence_weight(m.strength),
+                           min_px=self.min_obstacle_pixels(cam), n_s=n_s, obst=obst, drop=drop)
+        run_rules(c, c.rules.pixels, PIXEL_RULES, ev)
+        weight, min_px = ev.weight, ev.min_px
         n_obst = np.bincount(sid[obst], weights=weight[obst], minlength=n_s) + 1e-9
-        n_drop = np.bincount(sid[drop], weights=weight[drop], minlength=n_s) + 1e-9
-        obst_string = self._obstacle_strings(n_obst >= min_px, obst, reliable & in_range,
-                                             pts, h, metric, n_s, sid)
-        if c.ambiguity_fraction > 0 and obst_string.any():
-            obst_string &= ~self._ambiguous_strings(m, excess, obst, cand, el, er, thr_global,
-                                                    n_s)
-        if obst_string.any():
-            # Half-occlusion: a left edge matched to the silhouette of an obstacle (a
-            # nearer surface) in the right image is hidden there. A string that is an
-            # obstacle or a drop only through such pixels is none (strings with enough
-            # other evidence are kept whole).
-            occluded = occluded_matches(er, m, c.pmf_disparity_gradient_limit,
-                                        trusted=obst_string[sid] & (run >= c.min_matched_run))
-            if occluded.any():
-                seen = obst & ~occluded
-                n_seen = np.bincount(sid[seen], weights=weight[seen], minlength=n_s)
-                obst_string &= n_seen + 1e-9 >= min_px
-                seen = drop & ~occluded
-                n_drop = np.bincount(sid[seen], weights=weight[seen], minlength=n_s) + 1e-9
-        drop_string = self._drop_strings(drop, n_drop, weight, pts, h, metric, n_s, sid,
-                                         obst_string)
+        ev.n_drop = np.bincount(sid[drop], weights=weight[drop], minlength=n_s) + 1e-9
+        ev.obst_string = n_obst >= min_px
+        run_rules(c, c.rules.strings, STRING_RULES, ev)
+        obst_string = ev.obst_string
+        ev.drop_string = (ev.n_drop >= c.drops.min_pixels) & ~obst_string
+        run_rules(c, c.rules.drops, DROP_RULES, ev)
+        drop_string = ev.drop_string
         obst &= obst_string[sid]
         drop &= drop_string[sid]
         sclass = np.where(obst_string[sid], 1, np.where(drop_string[sid], -1, 0)).astype(np.int8)
@@ -256,7 +224,7 @@ class Detection(PlaneTracking):
         ground = (np.abs(ex_mean) <= thr) & usable & ~obst_string[sid]
         abc = cast(np.ndarray, self._abc)              # (tracking: the plane is set)
         self._ctx = _FrameContext(cam=cam, metric=metric, abc=abc.copy(), u=u, v=v,
-                                  pd=pd, excess_mean=ex_mean, sigma=thr / c.threshold_k,
+                                  pd=pd, excess_mean=ex_mean, sigma=thr / c.threshold.k,
                                   prev=prev, ground_points=pts[ground], left=self._left,
                                   u_left=m.u_left, usable=usable, nxt=nxt)
         if obst_string.any():
@@ -266,108 +234,14 @@ class Detection(PlaneTracking):
                 self._ctx.weak_start, self._ctx.weak_top = weak
         found: list[GpodObstacle] = []
         for sel, sign, radius, min_px in (
-                (obst, 1.0, c.cluster_radius_m, 1),
-                (drop, -1.0, c.drop_cluster_radius_m, c.min_drop_cluster_pixels)):
+                (obst, 1.0, c.detection.cluster_radius_m, 1),
+                (drop, -1.0, c.drops.cluster_radius_m, c.drops.min_cluster_pixels)):
             idx = np.flatnonzero(sel)
             if idx.size:
                 found.extend(self._clusters(idx, sign, radius, min_px, m, pts, h, excess,
                                             cam, metric))
         found.sort(key=lambda o: o.range)
         return features, tuple(found)
-
-    def _drop_strings(self, drop: np.ndarray, n_drop: np.ndarray, weight: np.ndarray,
-                      pts: np.ndarray, h: np.ndarray, metric: MetricPlane, n_s: int,
-                      sid: np.ndarray, obst_string: np.ndarray) -> np.ndarray:
-        """(n_s,) bool: the drop strings: ``min_drop_pixels`` of drop evidence (``n_drop``
-        (n_s,)), or, with ``drop_region_pixels``, a string in a region of lower ground
-        (`_drop_regions`); not an obstacle string (``obst_string`` (n_s,)), nor, with
-        ``ground_bend_min_grade``, ground falling away beyond a brow (`_bending_ground`)."""
-        c = self.config
-        out = n_drop >= c.min_drop_pixels
-        if c.drop_region_pixels > 0.0:
-            out |= self._drop_regions(drop & (n_drop[sid] > 1e-6), weight, pts, h, metric,
-                                      n_s, sid)
-        out &= ~obst_string
-        if c.ground_bend_min_grade > 0 and out.any():
-            out &= ~self._bending_ground(drop & out[sid], pts, h, metric, n_s, sid,
-                                         c.drop_cluster_radius_m, -1.0)
-        return out
-
-    def _obstacle_strings(self, strings: np.ndarray, obst: np.ndarray, ok: np.ndarray,
-                          pts: np.ndarray, h: np.ndarray, metric: MetricPlane, n_s: int,
-                          sid: np.ndarray) -> np.ndarray:
-        """(n_s,) bool: of the candidate obstacle strings ``strings`` (n_s,), those that
-        stand on the ground: a string whose reliably matched pixels (``ok`` (K,)) all
-        float higher than max_floating_height_m above it is a mismatch (a distant pole
-        matched to the wrong edge); strings whose obstacle pixels (``obst`` (K,)) are
-        ground rising beyond a dip (`_bending_ground`) are none."""
-        c = self.config
-        if strings.any():
-            low = np.full(n_s, np.inf)
-            np.minimum.at(low, sid[ok], h[ok])
-            strings = strings & (low <= c.max_floating_height_m)
-        if c.ground_bend_min_grade > 0 and strings.any():
-            strings = strings & ~self._bending_ground(obst & strings[sid], pts, h, metric,
-                                                      n_s, sid, c.cluster_radius_m, 1.0)
-        return strings
-
-    def _bending_ground(self, px: np.ndarray, pts: np.ndarray, h: np.ndarray,
-                        metric: MetricPlane, n_s: int, sid: np.ndarray, radius: float,
-                        sign: float) -> np.ndarray:
-        """(n_s,) bool: the strings that are ground bending away from the ground
-        reference: in a cluster of their pixels (``px`` (K,) bool; feet clustered at
-        ``radius`` m) of at least 8 pixels spread over ``ground_bend_min_span_m`` or
-        more along the walking direction whose heights ``h`` (K,) (m above the ground
-        reference; ``sign`` -1: drop pixels, below it) fit a line leaving it at
-        ``ground_bend_min_grade`` or more from less than ``_BEND_MAX_START_M`` off it at
-        its near end. Beyond a brow the ground goes on falling, beyond a dip rising,
-        from where the ground is: the farther its points the farther off; the lower
-        ground beyond a drop and the top of a kerb are level, as far off near as far,
-        and start a step away."""
-        c = self.config
-        out = np.zeros(n_s, bool)
-        idx = np.flatnonzero(px)
-        if idx.size < 8:
-            return out
-        g2 = _ground_coords(pts[idx], h[idx], metric)
-        label = cluster_points_2d(g2, sid[idx], radius)
-        for k in range(int(label.max()) + 1):
-            sel = label == k
-            s_k, h_k = g2[sel, 0], sign * h[idx][sel]
-            if sel.sum() < 8 or float(s_k.max() - s_k.min()) < c.ground_bend_min_span_m:
-                continue
-            grade, at0 = (float(x) for x in np.polyfit(s_k, h_k, 1))
-            near = grade * float(s_k.min()) + at0
-            if grade >= c.ground_bend_min_grade and near < _BEND_MAX_START_M:
-                out[sid[idx][sel]] = True
-        return out
-
-    def _drop_regions(self, drop: np.ndarray, weight: np.ndarray, pts: np.ndarray,
-                      h: np.ndarray, metric: MetricPlane, n_s: int, sid: np.ndarray
-                      ) -> np.ndarray:
-        """(n_s,) bool: the strings whose drop pixels (``drop`` (K,) bool) belong to a
-        region of lower ground: their feet clustered at ``drop_cluster_radius_m``, of at
-        least ``drop_region_min_strings`` strings, whose drop pixels weigh (``weight``
-        (K,)) at least ``drop_region_pixels`` times ``min_drop_pixels`` in all and lie
-        at one depth below the plane (``h`` (K,): the median absolute deviation of
-        their heights at most ``drop_region_max_spread`` times their median)."""
-        c = self.config
-        out = np.zeros(n_s, bool)
-        idx = np.flatnonzero(drop)
-        if idx.size == 0:
-            return out
-        g2 = _ground_coords(pts[idx], h[idx], metric)
-        label = cluster_points_2d(g2, sid[idx], c.drop_cluster_radius_m)
-        total = np.bincount(label, weights=weight[idx])
-        for k in np.flatnonzero(total >= c.drop_region_pixels * c.min_drop_pixels):
-            sel = idx[label == k]
-            if np.unique(sid[sel]).size < c.drop_region_min_strings:
-                continue
-            depth = h[sel]
-            med = float(np.median(depth))
-            if float(np.median(np.abs(depth - med))) <= c.drop_region_max_spread * abs(med):
-                out[sid[sel]] = True
-        return out
 
     def _ground_reference(self, u, v, d, cam: StereoCamera, metric: MetricPlane,
                           sigma_px: np.ndarray
@@ -376,9 +250,9 @@ class Detection(PlaneTracking):
         the features' 3-D points, their heights above it, how far (px, >= 0; 0.0 where
         the surface does not rise beyond the known ground) the disparity of the lowest
         ground it allows lies below its own there). The plane,
-        or with ``surface_enabled`` the ground surface ahead where it bends (kept in
+        or with ``surface.enabled`` the ground surface ahead where it bends (kept in
         ``self._surface``), fitted knowing each feature's disparity noise ``sigma_px``
-        (K,) px (the obstacle threshold over ``threshold_k``) as a depth noise. Beyond
+        (K,) px (the obstacle threshold over ``threshold.k``) as a depth noise. Beyond
         the known ground a rise seen to go on is the obstacle test's ground, but it may
         end there (`GroundSurface.lowest`): a drop is below the level ground too."""
         c = self.config
@@ -387,10 +261,10 @@ class Detection(PlaneTracking):
         h = metric.signed_height(pts)
         low: np.ndarray | float = 0.0
         self._surface = None
-        if c.surface_enabled:
+        if c.surface.enabled:
             # The reference of the obstacle test: the plane continued by the profile
             # ahead where features support it (core/ground_surface.py).
-            surf = fit_ground_surface(pts, metric, surface_config(c),
+            surf = fit_ground_surface(pts, metric, c.surface,
                                       depth_noise(cam, d, sigma_px))
             self._surface = surf
             if surf.bends:
@@ -406,67 +280,20 @@ class Detection(PlaneTracking):
         """The matched runs: (`run_links`, `matched_run_length`, the excess smoothed along
         the runs, the links downwards or None)."""
         c = self.config
-        tol = c.string_disparity_tolerance_px
+        tol = c.detection.string_disparity_tolerance_px
         nxt = None
         if kn.nb_runs is not None and type(tol) in (float, int) and len(m):
             # run_links, matched_run_length and smooth_along_runs in one compiled pass
             # (the same links, lengths and sums; the tolerance compared in single
             # precision, as numpy compares the float32 disparities with it).
             prev, run, smooth, nxt = kn.nb_runs(el.string_prev, m.left_index, m.d, len(el),
-                                                np.float32(tol), int(c.string_window), excess)
+                                                np.float32(tol), int(c.detection.string_window),
+                                                excess)
         else:
             prev = run_links(el, m, tol)
             run = matched_run_length(el, m, tol, prev)
-            smooth = smooth_along_runs(excess, prev, c.string_window)
+            smooth = smooth_along_runs(excess, prev, c.detection.string_window)
         return prev, run, smooth, nxt
-
-    def _rejected_runs(self, el: EdgeMap, m: Matches, cand: Candidates, prev, run, reliable,
-                       h, excess, pd, below, slope: float, obst: np.ndarray) -> None:
-        """Obstacle pixels ``obst`` (changed in place) that are no evidence: runs that
-        hang over another depth of their own string or float above the ground, and runs
-        that hang over their string's continuation on the lower ground beyond a drop
-        (``reliable``: reliably matched and in range)."""
-        c = self.config
-        obst &= ~hanging_runs(el, m, prev, h, c.max_floating_height_m,
-                              c.string_disparity_tolerance_px, slope, obst,
-                              solid=run >= c.min_matched_run)
-        obst &= ~floating_bottom_runs(m.string_id, m.v, prev, h, reliable,
-                                      c.max_floating_height_m, obst)
-        high = obst & (excess > _AMBIGUOUS_EXCESS_PX)
-        if high.any():
-            # A run, at any height, that hangs over its own string's continuation on
-            # the lower ground beyond a drop and could have been matched there: the
-            # paving beyond a kerb down matched one period off. Every stretch of
-            # these strings well above the plane is tested (one matched the same
-            # period off may hold up another).
-            in_s = np.zeros(int(m.string_id.max()) + 1, bool)
-            in_s[m.string_id[high]] = True
-            high = (excess > _AMBIGUOUS_EXCESS_PX) & in_s[m.string_id]
-            support = max(c.min_drop_cluster_pixels,
-                          math.ceil(_LOWER_GROUND_FRACTION * len(m)))
-            obst &= ~continuation_alternatives(
-                el, m, prev, cand, high, below & (run >= c.min_matched_run), pd,
-                c.string_disparity_tolerance_px, slope, support)
-
-    @staticmethod
-    def _piece_rule(m: Matches, ex_mean, thr, usable, weight, min_px: float, n_s: int,
-                    obst: np.ndarray) -> None:
-        """The edge-string rule per piece of a string: obstacle pixels ``obst`` (changed in
-        place) of pieces with fewer than ``min_px`` (weighted) of them are dropped."""
-        sid = m.string_id
-        # The edge-string rule holds for each piece of a string between stretches of
-        # it on the ground (`string_pieces`): a noisy pixel far below a post, on the
-        # post's edge continued by a tile joint, is no part of the post (its foot
-        # would be taken there).
-        has = np.zeros(n_s, bool)
-        has[sid[obst]] = True
-        sel = np.flatnonzero(has[sid])
-        piece = string_pieces(sid[sel], m.v[sel], (np.abs(ex_mean[sel]) <= thr[sel])
-                              & usable[sel])
-        o_sel = obst[sel]
-        n_piece = np.bincount(piece[o_sel], weights=weight[sel][o_sel],
-                              minlength=int(piece.max()) + 1)
-        obst[sel] &= n_piece[piece] + 1e-9 >= min_px
 
     def _weak_silhouettes(self, m: Matches, ex_mean, thr, h, usable, taken: np.ndarray
                           ) -> tuple[np.ndarray, np.ndarray] | None:
@@ -481,11 +308,11 @@ class Detection(PlaneTracking):
         # reliably matched pixels above _WEAK_FRACTION of it, at least
         # _WEAK_MIN_PIXELS, whose mean excess is _WEAK_SIGMAS standard errors above
         # the plane (sum of z > K sqrt(n _WEAK_CORR)).
-        weak = (usable & (ex_mean > _WEAK_FRACTION * thr) & (h <= c.max_obstacle_height_m)
+        weak = (usable & (ex_mean > _WEAK_FRACTION * thr) & (h <= c.detection.max_obstacle_height_m)
                 & ~taken[sid])
         wi = np.flatnonzero(weak)
         if wi.size:
-            z = ex_mean[wi] * (c.threshold_k / thr[wi])
+            z = ex_mean[wi] * (c.threshold.k / thr[wi])
             n_w = np.bincount(sid[wi], minlength=n_s)
             z_sum = np.bincount(sid[wi], weights=z, minlength=n_s)
             ok_s = (n_w >= _WEAK_MIN_PIXELS) & (
@@ -499,77 +326,17 @@ class Detection(PlaneTracking):
             return wi[head], top
         return None
 
-    def _ambiguous_drops(self, m: Matches, pd: np.ndarray, thr: np.ndarray) -> np.ndarray:
-        """(K,) bool: the matches that are no evidence of a drop-off: a rival of the match
-        (`match_rivals`) with at least ``ambiguous_match_ratio`` of its first-round support
-        lies on the ground (within the pixel's threshold ``thr`` (K,) of the ground
-        disparity ``pd`` (K,)) and nearer than the match: the edge may as well be ground
-        matched a period off (a grate's bars). Obstacle evidence is not judged so: the face
-        of a 10 cm kerb has ground rivals as strong as its match, and a kerb must not be
-        lost to a grate's false reports."""
-        k = len(m)
-        no_drop = np.zeros(k, bool)
-        r = self.config.ambiguous_match_ratio
-        if (r <= 0 or m.rival_match is None or m.rival_d is None or m.rival_ratio is None
-                or k == 0):
-            return no_drop
-        j = m.rival_match
-        rd = m.rival_d.astype(np.float64)
-        sel = np.flatnonzero((m.rival_ratio >= r) & (np.abs(rd - pd[j]) <= thr[j]))
-        if sel.size:
-            nearer = rd[sel] > m.d[j[sel]]
-            no_drop[j[sel[nearer]]] = True
-        return no_drop
-
-    def _periodic_matches(self, m: Matches, pd: np.ndarray, thr: np.ndarray) -> np.ndarray:
-        """(K,) bool: the matches of a periodic pattern: at least ``periodic_min_rivals``
-        rivals (`match_rivals`) with ``ambiguous_match_ratio`` of the match's first-round
-        support or more, one of them on the ground (within the pixel's threshold ``thr``
-        (K,) of the ground disparity ``pd`` (K,)). The bars of a grate support candidates
-        a period apart alike, and the one a period nearer stands above the ground by the
-        period over the baseline times the height of the ray (a 3.5 cm period: 10 cm on
-        the paper's rig) wherever the walker is: a world-fixed false obstacle that the map
-        would confirm. A kerb's face has at most one strong rival on the ground (the
-        ground around it supports the ground's disparity), an obstacle's texture few."""
-        k = len(m)
-        out = np.zeros(k, bool)
-        r = self.config.ambiguous_match_ratio
-        n_min = self.config.periodic_min_rivals
-        if (n_min <= 0 or r <= 0 or m.rival_match is None or m.rival_d is None
-                or m.rival_ratio is None or k == 0):
-            return out
-        strong = m.rival_ratio >= r
-        j = m.rival_match[strong]
-        n_strong = np.bincount(j, minlength=k)
-        on_ground = np.abs(m.rival_d[strong].astype(np.float64) - pd[j]) <= thr[j]
-        ground = np.zeros(k, bool)
-        ground[j[on_ground]] = True
-        return (n_strong >= n_min) & ground
-
-    def _ambiguous_strings(self, m: Matches, excess: np.ndarray, obst: np.ndarray,
-                           cand: Candidates, el: EdgeMap, er: EdgeMap, threshold: float,
-                           n_s: int) -> np.ndarray:
-        """(n_s,) bool: edge strings whose obstacle pixels are well above the plane
-        (> ``_AMBIGUOUS_EXCESS_PX``) but, for at least ``ambiguity_fraction`` of them,
-        the left edge also had a candidate match on the ground (|excess| <= threshold):
-        a repetitive pattern matched one period off."""
-        on_ground = _ground_candidates(cand, el, er, cast(np.ndarray, self._abc), threshold)
-        alt = obst & (excess > _AMBIGUOUS_EXCESS_PX) & on_ground[m.left_index]
-        n_alt = np.bincount(m.string_id[alt], minlength=n_s)
-        n_obst = np.bincount(m.string_id[obst], minlength=n_s)
-        return n_alt >= self.config.ambiguity_fraction * np.maximum(n_obst, 1)
-
     def _clusters(self, idx: np.ndarray, sign: float, radius: float, min_pixels: int,
                   m: Matches, pts: np.ndarray, h: np.ndarray, excess: np.ndarray,
                   cam: StereoCamera, metric: MetricPlane) -> list[GpodObstacle]:
         """Cluster the selected pixels (by string, feet proximity) into obstacles; drop
         clusters of fewer than ``min_pixels`` pixels."""
         hh = h[idx]
-        g2, fwd, lft = _ground_coords(pts[idx], hh, metric, axes=True)
+        g2, fwd, lft = ground_coords(pts[idx], hh, metric, axes=True)
         label = cluster_points_2d(g2, m.string_id[idx], radius)
         out = self._describe(idx, label, sign, min_pixels, hh, g2, m, excess, cam, metric,
                              fwd, lft)
-        pr = self.config.part_radius_m
+        pr = self.config.detection.part_radius_m
         if sign > 0 and 0.0 < pr < radius and out:
             out, parts = self._parts(out, idx, label, pr, sign, min_pixels, hh, g2, m,
                                      excess, cam, metric, fwd, lft)
@@ -640,7 +407,7 @@ class Detection(PlaneTracking):
         xy_w = None
         if n_w:
             lw = silhouette_owners(xw, ctx.weak_top, xy, g_lab, height,
-                                   self.config.cluster_radius_m, lambda: ctx.ground_xy,
+                                   self.config.detection.cluster_radius_m, lambda: ctx.ground_xy,
                                    ctx.metric.height, sw, sr)
             keep = lw >= 0
             if keep.any():
@@ -791,14 +558,14 @@ class Detection(PlaneTracking):
             uniq = np.concatenate((_TRUE, (sid_s[1:] != sid_s[:-1]) | (lab_s[1:] != lab_s[:-1])))
             sid_u, lab_u = sid_s[uniq], lab_s[uniq]
             sid_start = np.searchsorted(lab_u, np.arange(n_c + 1))
-        z = (np.abs(ex) - self._frame_thr[idx]) / c.disparity_sigma_px
+        z = (np.abs(ex) - self._frame_thr[idx]) / c.detection.disparity_sigma_px
         p_i = np.clip(_normal_cdf(z), 0.0, 1.0 - 1e-12)
         p_any = 1.0 - np.exp(np.bincount(label, weights=np.log1p(-p_i), minlength=n_c))
         # Small evidence lowers the confidence: the pixels counted as the edge-string rule
-        # counts them, a weak edge as (strength / obstacle_min_strength)^2 of a pixel.
+        # counts them, a weak edge as (strength / detection.min_strength)^2 of a pixel.
         n_ev = np.bincount(label, weights=self._evidence_weight(m.strength[idx]),
                            minlength=n_c)
-        conf = np.clip(p_any * np.minimum(1.0, n_ev / c.confidence_full_pixels), 0.0, 1.0)
+        conf = np.clip(p_any * np.minimum(1.0, n_ev / c.detection.confidence_full_pixels), 0.0, 1.0)
         out = []
         for k in range(n_c):
             if count[k] < min_pixels:
@@ -819,23 +586,3 @@ class Detection(PlaneTracking):
                 confidence=float(conf[k]), roi=roi, num_edge_pixels=int(count[k]),
                 string_ids=sid_u[sid_start[k]:sid_start[k + 1]].astype(np.int32)))
         return out
-
-
-#: `_bending_ground`: ground bending away beyond a brow or a dip starts where the ground
-#: is; a cluster whose line lies this far off the ground at its near end is a drop or an
-#: obstacle whatever its grade (the least step the wearer must be told of, m)
-_BEND_MAX_START_M = 0.10
-
-
-def _ground_coords(p: np.ndarray, hh: np.ndarray, metric: MetricPlane, axes: bool = False):
-    """The feet of points ``p`` (K, 3) (heights ``hh`` (K,) above the plane) on the ground:
-    (K, 2) (forward, left) from the point below the camera, metres; with ``axes`` also
-    the forward and left unit vectors (3,)."""
-    n_up = metric.normal_up
-    feet = p - hh[:, None] * n_up[None, :]
-    fwd = np.array([0.0, 0.0, 1.0]) - n_up[2] * n_up
-    fwd /= np.linalg.norm(fwd)
-    lft = _cross3(n_up, fwd)
-    g = feet + metric.height * n_up[None, :]
-    g2 = np.stack([g @ fwd, g @ lft], axis=1)
-    return (g2, fwd, lft) if axes else g2

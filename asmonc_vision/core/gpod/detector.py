@@ -13,6 +13,7 @@ import numpy as np
 
 from ..alignment import AlignmentConfig, VerticalAlignment, brightness_gain_offset
 from ..camera import MetricPlane, StereoCamera
+from ..config import override
 from ..edges import detect_vertical_edges, image_noise_sigma, textured_edge_threshold
 from ..matching import pmf_match
 from ..unseen_ground import UNKNOWN_HEIGHT
@@ -44,8 +45,8 @@ class GpodDetector(Tracking):
         #: the rig's vertical misalignment (a property of the cameras: kept over resets
         #: of the detector, restarted by a new camera)
         self.alignment = VerticalAlignment(AlignmentConfig(
-            enabled=c.align_vertical, every_frames=c.align_every_frames,
-            apply_min_px=c.align_apply_px))
+            enabled=c.image.align_vertical, every_frames=c.image.align_every_frames,
+            apply_min_px=c.image.align_apply_px))
         self.reset()
 
     # ------------------------------------------------------------------ helpers
@@ -73,7 +74,7 @@ class GpodDetector(Tracking):
             cam: the rectified stereo camera. A camera different from the previous
                 call's resets the detector.
             stamp_ns: the pair's time, ns (for the obstacle tracks' coasting time); None:
-                frames ``track_frame_period_s`` apart.
+                frames ``tracks.frame_period_s`` apart.
             motion: the left camera's motion from the previous pair to this one, the
                 obstacle tracks' input: (R (3, 3), t (3,)) or (R, t, cov (3, 3) of t, m²),
                 ``X_prev = R X_curr + t`` (metres, left optical frames; `/egomotion`'s
@@ -83,7 +84,7 @@ class GpodDetector(Tracking):
                 (so a node can wait for the motion while the detector works).
             up: (3,) the world's up direction in the left optical frame at the pair's
                 time (`core.rotations.up_for_pair`: the inclinometer's), or None
-                (unknown): the prior of ``gravity_prior_deg`` on the ground's
+                (unknown): the prior of ``plane.gravity_prior_deg`` on the ground's
                 orientation.
         Returns:
             The GpodResult (status 'initialising', 'tracking' or 'lost').
@@ -115,7 +116,7 @@ class GpodDetector(Tracking):
         t3 = time.perf_counter()
         obstacles: tuple[GpodObstacle, ...] = ()
         if status == 'tracking':
-            stamp_s = (self._frame * c.track_frame_period_s if stamp_ns is None
+            stamp_s = (self._frame * c.tracks.frame_period_s if stamp_ns is None
                        else stamp_ns * 1e-9)
             if callable(motion):            # the frame that completed the calibration
                 motion = motion()
@@ -175,9 +176,10 @@ class GpodDetector(Tracking):
         t0 = time.perf_counter()
         self._estimate_noise(left)
         edge_kw: dict[str, Any] = dict(abs_threshold=self._edge_threshold(left),
-                       rel_threshold=c.edge_rel_threshold,
-                       max_angle_deg=c.edge_max_angle_deg, min_string_length=c.min_string_length,
-                       blur_sigma=c.edge_blur_sigma)
+                       rel_threshold=c.edges.rel_threshold,
+                       max_angle_deg=c.edges.max_angle_deg,
+                       min_string_length=c.edges.min_string_length,
+                       blur_sigma=c.edges.blur_sigma)
         el = detect_vertical_edges(left, **edge_kw)
         er = detect_vertical_edges(right, **edge_kw)
         t1 = time.perf_counter()
@@ -185,11 +187,12 @@ class GpodDetector(Tracking):
 
         d_min, d_max = self.disparity_range(cam)
         m, cand, _ = pmf_match(el, er, d_min, d_max,
-                               min_strength_ratio=c.match_min_strength_ratio,
-                               max_orientation_diff_deg=c.match_max_orientation_diff_deg,
-                               support_radius=c.pmf_support_radius_px,
-                               disparity_gradient_limit=c.pmf_disparity_gradient_limit,
-                               iterations=c.pmf_iterations, min_support=c.pmf_min_support,
+                               min_strength_ratio=c.matching.min_strength_ratio,
+                               max_orientation_diff_deg=c.matching.max_orientation_diff_deg,
+                               support_radius=c.matching.pmf_support_radius_px,
+                               disparity_gradient_limit=c.matching.pmf_disparity_gradient_limit,
+                               iterations=c.matching.pmf_iterations,
+                               min_support=c.matching.pmf_min_support,
                                right_gain=self._right_gain(left, right))
         t2 = time.perf_counter()
         timings['matching'] = (t2 - t1) * 1e3
@@ -232,18 +235,18 @@ class GpodDetector(Tracking):
                        metric: MetricPlane, known: tuple[GpodObstacle, ...]
                        ) -> tuple[GpodObstacle, ...]:
         """The frame's band of unseen corridor ground (`core.unseen_ground`), unless an
-        obstacle or drop-off in ``known`` at least ``unseen_explain_min_confidence``
+        obstacle or drop-off in ``known`` at least ``unseen.explain_min_confidence``
         confident explains it, as unknown ground straight ahead: an untracked entry
         (``track_id`` 0) whose ``height`` is ``UNKNOWN_HEIGHT`` (NaN: ground that cannot
         be seen is not a thing; ``disparity_excess`` 0, ``num_edge_pixels`` 0;
         ``confidence`` 1 - seen / expected). Empty when there is none or
-        ``unseen_max_ratio`` is 0."""
+        ``unseen.max_ratio`` is 0."""
         if self._unseen is None:
             return ()
         # the known feet on the ground: (forward, left) from their range and bearing; a
         # weak report (a 4 cm blip at 0.08) would hide a wall from the wearer
         known = tuple(o for o in known
-                      if o.confidence >= self.config.unseen_explain_min_confidence)
+                      if o.confidence >= self.config.unseen.explain_min_confidence)
         explained = _ground_points(known) if known else None
         thr = features.threshold if features.threshold is not None else threshold
         r = self._unseen.update(cam, metric, features.u_left, features.v, features.excess,
@@ -266,8 +269,8 @@ class GpodDetector(Tracking):
     # ------------------------------------------------------------ binned pass
     def _coarse_wanted(self, cam: StereoCamera) -> bool:
         """Whether this camera's images are also searched binned 2 x 2
-        (``coarse_min_width``)."""
-        w = self.config.coarse_min_width
+        (``coarse.min_width``)."""
+        w = self.config.coarse.min_width
         return w > 0 and cam.width >= w and cam.height >= 2
 
     def _with_coarse(self, detections: tuple[GpodObstacle, ...], features: GpodFeatures,
@@ -279,8 +282,8 @@ class GpodDetector(Tracking):
 
         The binned pass is a second detector (its own plane, threshold and noise
         estimates, no tracks) on the pair binned 2 x 2 (`bin_pair`). Its obstacles at least
-        ``coarse_min_height_m`` high (drop-offs as deep) whose foot lies farther than
-        ``part_radius_m`` from every full-size detection's foot join, their image regions
+        ``coarse.min_height_m`` high (drop-offs as deep) whose foot lies farther than
+        ``detection.part_radius_m`` from every full-size detection's foot join, their image regions
         scaled to the full image. It runs on every pair, so that its plane calibrates
         along with this one's; while this detector has no plane its detections are not
         used.
@@ -295,7 +298,7 @@ class GpodDetector(Tracking):
         """
         c = self.config
         if self._coarse is None:
-            self._coarse = GpodDetector(dataclasses.replace(c, coarse_min_width=0))
+            self._coarse = GpodDetector(override(c, {'coarse.min_width': 0}))
         lb, rb, cam_b = bin_pair(left, right, cam)
         self._coarse._begin(lb, rb, cam_b)
         self._coarse._up = self._up
@@ -307,7 +310,7 @@ class GpodDetector(Tracking):
         fine_d = None
         added = []
         for ob in p.detections:
-            if abs(ob.height) < c.coarse_min_height_m:
+            if abs(ob.height) < c.coarse.min_height_m:
                 continue
             if fine_d is None:
                 fine_d = _disparity_image(features, cam)
@@ -317,7 +320,7 @@ class GpodDetector(Tracking):
             if len(feet):
                 gap = feet - foot
                 gap -= np.outer(gap @ n, n)            # along the ground
-                if float(np.min(np.linalg.norm(gap, axis=1))) <= c.part_radius_m:
+                if float(np.min(np.linalg.norm(gap, axis=1))) <= c.detection.part_radius_m:
                     continue
             x, y, w, h = ob.roi
             x0, y0 = 2 * x, 2 * y
@@ -329,10 +332,10 @@ class GpodDetector(Tracking):
 
     def _right_gain(self, left: np.ndarray, right: np.ndarray) -> float:
         """The factor that puts the right image's grey levels on the left's scale: the
-        median over the latest ``right_gain_frames`` pairs of the ratio of their grey-level
+        median over the latest ``image.right_gain_frames`` pairs of the ratio of their grey-level
         spreads (`alignment.brightness_gain_offset`), within [1/4, 4]; 1 when disabled or
         before a pair with contrast."""
-        if self.config.right_gain_frames == 0:
+        if self.config.image.right_gain_frames == 0:
             return 1.0
         go = brightness_gain_offset(left, right)
         if go is not None:
@@ -350,25 +353,25 @@ class GpodDetector(Tracking):
     def _estimate_noise(self, left: np.ndarray) -> None:
         """Estimate the left image's pixel noise on the first frame and every
         ``_NOISE_EVERY`` frames after, and set the obstacle edge strength in force from it
-        (``obstacle_min_edge_snr``)."""
+        (``detection.min_edge_snr``)."""
         if (self._frame - 1) % _NOISE_EVERY:
             return
         c = self.config
         self._image_noise = image_noise_sigma(left)
-        self._min_strength = max(c.obstacle_min_strength, c.obstacle_min_edge_snr
+        self._min_strength = max(c.detection.min_strength, c.detection.min_edge_snr
                                  * self._noise_gain * self._image_noise)
 
     def _edge_threshold(self, left: np.ndarray) -> float:
-        """The edge threshold of this pair, grey levels per pixel: ``edge_threshold``,
+        """The edge threshold of this pair, grey levels per pixel: ``edges.threshold``,
         lowered on weakly textured ground (`edges.textured_edge_threshold`:
-        ``edge_min_density``, ``edge_target_density``) to no less than
-        ``edge_noise_floor_snr`` times the gradient noise; unchanged while the pixel noise
+        ``edges.min_density``, ``edges.target_density``) to no less than
+        ``edges.noise_floor_snr`` times the gradient noise; unchanged while the pixel noise
         is unknown."""
         c = self.config
-        if not c.edge_min_density > 0 or not math.isfinite(self._image_noise):
-            return c.edge_threshold
-        floor = c.edge_noise_floor_snr * self._noise_gain * self._image_noise
-        return textured_edge_threshold(left, c.edge_threshold, min_density=c.edge_min_density,
-                                       target_density=c.edge_target_density, floor=floor,
-                                       blur_sigma=c.edge_blur_sigma)
+        if not c.edges.min_density > 0 or not math.isfinite(self._image_noise):
+            return c.edges.threshold
+        floor = c.edges.noise_floor_snr * self._noise_gain * self._image_noise
+        return textured_edge_threshold(left, c.edges.threshold, min_density=c.edges.min_density,
+                                       target_density=c.edges.target_density, floor=floor,
+                                       blur_sigma=c.edges.blur_sigma)
 

@@ -53,7 +53,7 @@ _FACE_BEHIND_FRACTION = 0.25
 _FACE_BAND_M = 1.0
 _FACE_SEEN_THROUGH = 0.5
 #: ... and so within the widest gap between a face's successive feet, if at least this
-#: wide (metres: a gap one could walk through, `GpodConfig.part_radius_m`'s default).
+#: wide (metres: a gap one could walk through, `GpodConfig.detection.part_radius_m`'s default).
 _FACE_GAP_SEEN_M = 0.35
 #: Least span (metres) of the feet of two obstacles taken for one face (`face_gap_points`).
 _GAP_MIN_SPAN_M = 1.0
@@ -265,7 +265,7 @@ def described_by_part(whole: list[GpodObstacle], parts: list[GpodObstacle],
         whole: the C obstacles (heights > 0), each made of one or more parts.
         parts: the P parts of the wholes of more than one.
         owner: (P,) int, the index in ``whole`` of each part's whole.
-        radius: metres along the ground (``part_radius_m``).
+        radius: metres along the ground (``detection.part_radius_m``).
         normal_up: (3,) the ground's unit normal, left optical frame.
         ground_xy: (G, 2) the frame's ground features, metres along the ground
             (forward, left) from the point below the camera, or a callable returning
@@ -507,7 +507,7 @@ def silhouette_owners(xw: np.ndarray, top: np.ndarray, xy: np.ndarray, g_lab: np
         xw: (W, 2) ground coordinates of the candidates' feet, ``top`` (W,) their tops.
         xy: (S, 2) the obstacles' string feet, ``g_lab`` (S,) their obstacle.
         height: (C,) the obstacles' heights, metres.
-        radius: metres (``GpodConfig.cluster_radius_m``).
+        radius: metres (``GpodConfig.detection.cluster_radius_m``).
         ground_xy: (G, 2) visible ground, or a callable returning it.
         camera_height: metres above the ground (inf: no test of hidden ground).
         sigma_w, sigma: (W,), (S,) range sigmas of the candidates' feet and the

@@ -293,3 +293,16 @@ def string_feet(ctx: _FrameContext, start: np.ndarray) -> tuple[np.ndarray, np.n
     rows = np.maximum(sig[cur] / slope, _FOOT_MIN_ROWS)
     return xy, np.abs(ground_range(0.5) - ground_range(-0.5)) * rows
 
+
+def ground_coords(p: np.ndarray, hh: np.ndarray, metric: MetricPlane, axes: bool = False):
+    """The feet of points ``p`` (K, 3) (heights ``hh`` (K,) above the plane) on the ground:
+    (K, 2) (forward, left) from the point below the camera, metres; with ``axes`` also
+    the forward and left unit vectors (3,)."""
+    n_up = metric.normal_up
+    feet = p - hh[:, None] * n_up[None, :]
+    fwd = np.array([0.0, 0.0, 1.0]) - n_up[2] * n_up
+    fwd /= np.linalg.norm(fwd)
+    lft = _cross3(n_up, fwd)
+    g = feet + metric.height * n_up[None, :]
+    g2 = np.stack([g @ fwd, g @ lft], axis=1)
+    return (g2, fwd, lft) if axes else g2

@@ -18,7 +18,7 @@ from .state import DetectorState
 from .support import _mad_sigma, _planes_agree, _state_metric, _still_motion
 
 #: The residual spread sigma of the initial fit is taken over the calibration features
-#: within this many ``plane_inlier_px`` of the fitted plane.
+#: within this many ``plane.inlier_px`` of the fitted plane.
 _SIGMA_GATE = 3.0
 #: The initial plane is fitted to the calibration window's frames together only if each
 #: frame's residual spread about it is at most this many times that about the frame's
@@ -39,29 +39,29 @@ class PlaneTracking(DetectorState):
         """Robust, plausibility-checked plane fit of features (u, v, d) with the settings
         (``min_support``: least fraction of the features on a RANSAC hypothesis;
         ``prior``: the pair's up direction, when known, is a soft prior on the plane's
-        orientation, ``gravity_prior_deg`` and ``gravity_prior_cost``)."""
+        orientation, ``plane.gravity_prior_deg`` and ``plane.gravity_prior_cost``)."""
         c = self.config
         up = self._up if prior else None
         # Weighted by disparity cubed: of two competing surfaces (the ground here and the
         # ground beyond a step), the nearer one is the one the wearer stands on; far
         # features, least flat and least well measured, count little.
         return fit_ground_plane(
-            u, v, d, cam=cam, method=c.plane_method, inlier_threshold_px=c.plane_inlier_px,
-            iterations=c.ransac_iterations, weights=np.maximum(d, 0.0) ** 3,
-            min_features=c.min_plane_features, min_spread_px=c.plane_min_spread_px,
+            u, v, d, cam=cam, method=c.plane.method, inlier_threshold_px=c.plane.inlier_px,
+            iterations=c.plane.ransac_iterations, weights=np.maximum(d, 0.0) ** 3,
+            min_features=c.plane.min_features, min_spread_px=c.plane.min_spread_px,
             min_support_fraction=min_support, up_prior=up,
-            prior_scale_deg=c.gravity_prior_deg, prior_cost=c.gravity_prior_cost,
+            prior_scale_deg=c.plane.gravity_prior_deg, prior_cost=c.plane.gravity_prior_cost,
             rng=self._rng,
-            **cast(dict[str, Any], c.plausibility()))
+            **cast(dict[str, Any], c.plane.plausibility()))
 
     def _refit(self, u, v, d, cam: StereoCamera) -> PlaneFit | None:
         """A per-frame refit of features (u, v, d): `_fit` without the gravity prior (the
         refits must follow the ground's slope; measured, the prior paid only in the
-        calibration), then, with ``refit_hold_height``, `_held` at the anchor height."""
+        calibration), then, with ``plane.refit_hold_height``, `_held` at the anchor height."""
         fit = self._fit(u, v, d, cam, prior=False)
-        if fit is None or not self.config.refit_hold_height:
+        if fit is None or not self.config.plane.refit_hold_height:
             return fit
-        if not _height_sd(cam, fit) > self.config.hold_min_height_sd_m:
+        if not _height_sd(cam, fit) > self.config.plane.hold_min_height_sd_m:
             return fit
         return self._held(fit, u, v, d, cam)
 
@@ -69,7 +69,7 @@ class PlaneTracking(DetectorState):
         """The plane of the refit ``fit`` of features (u, v, d: (N,) pixels) refitted at
         the anchor height (`_anchor_height`): least squares of its orientation alone on
         its inliers (weighted as `_fit` weighs them), the inliers re-selected within
-        ``plane_inlier_px`` of it until they settle (at most 3 rounds). The free least
+        ``plane.inlier_px`` of it until they settle (at most 3 rounds). The free least
         squares on the final inliers gives the height this frame adds to the anchor
         (kept in ``_free_height`` until the refit is taken). None when too few inliers
         remain or the plane is not a plausible ground."""
@@ -85,13 +85,13 @@ class PlaneTracking(DetectorState):
             if held is None:
                 return None
             abc = held
-            new = np.abs(d - plane_disparity(abc, u, v)) <= c.plane_inlier_px
-            if int(new.sum()) < c.min_plane_features:
+            new = np.abs(d - plane_disparity(abc, u, v)) <= c.plane.inlier_px
+            if int(new.sum()) < c.plane.min_features:
                 return None
             if np.array_equal(new, inl):
                 break
             inl = new
-        metric = plane_is_plausible(cam, abc, **cast(dict[str, Any], c.plausibility()))
+        metric = plane_is_plausible(cam, abc, **cast(dict[str, Any], c.plane.plausibility()))
         if metric is None:
             return None
         free = lsq_plane(u[inl], v[inl], d[inl], w[inl])
@@ -100,9 +100,9 @@ class PlaneTracking(DetectorState):
                                    num_features=int(inl.sum()), metric=metric)
 
     def _anchor_height(self) -> float:
-        """The cyclopean camera height the refits are held at (``refit_hold_height``):
+        """The cyclopean camera height the refits are held at (``plane.refit_hold_height``):
         the median of the calibrated one and the free heights of the latest
-        ``height_anchor_frames`` refits taken, metres (NaN before the calibration)."""
+        ``plane.height_anchor_frames`` refits taken, metres (NaN before the calibration)."""
         if not self._heights:
             return math.nan
         return float(np.median(np.asarray(self._heights)))
@@ -113,10 +113,10 @@ class PlaneTracking(DetectorState):
         cal = self._calib.metric if self._calib is not None else None
         if cal is None or fit.metric is None:
             return False
-        if abs(fit.metric.height - cal.height) > c.recover_height_tolerance * cal.height:
+        if abs(fit.metric.height - cal.height) > c.plane.recover_height_tolerance * cal.height:
             return False
         cosang = float(np.clip(np.dot(fit.metric.normal_up, cal.normal_up), -1.0, 1.0))
-        return math.degrees(math.acos(cosang)) <= c.recover_max_angle_deg
+        return math.degrees(math.acos(cosang)) <= c.plane.recover_max_angle_deg
 
     def _predict_plane(self, cam: StereoCamera, motion: tuple) -> bool:
         """Carry the plane state (and the plane the rig stopped with) through the camera's
@@ -148,9 +148,9 @@ class PlaneTracking(DetectorState):
         off) must not reject the ground; another surface differs from both)."""
         c = self.config
         if tight:
-            max_h, max_a = c.motion_max_height_change_m, c.motion_max_angle_change_deg
+            max_h, max_a = c.plane.motion_max_height_change_m, c.plane.motion_max_angle_change_deg
         else:
-            max_h, max_a = c.refit_max_height_change_m, c.refit_max_angle_change_deg
+            max_h, max_a = c.plane.refit_max_height_change_m, c.plane.refit_max_angle_change_deg
         if cur is None:
             cur = _state_metric(cam, cast(np.ndarray, self._abc))   # (calibrated)
         if cur is None or fit.metric is None:
@@ -178,13 +178,13 @@ class PlaneTracking(DetectorState):
     def _window_shares_plane(self, joint: PlaneFit, cam: StereoCamera) -> bool:
         """Whether the calibration window's frames all lie on the plane ``joint`` fitted
         to them together: each frame's own plane (least squares from ``joint``, refitted
-        on its features within ``plane_inlier_px``, weighted as `_fit` weights them)
-        differs from it by at most ``plane_inlier_px`` over the image's lower half, and
+        on its features within ``plane.inlier_px``, weighted as `_fit` weights them)
+        differs from it by at most ``plane.inlier_px`` over the image's lower half, and
         the frame's residual spread about ``joint`` (robust sigma within ``_SIGMA_GATE *
         plane_inlier_px``) is at most ``_WINDOW_SIGMA_RATIO`` times that about its own.
         Deterministic (draws nothing from the detector's random generator). A frame
         whose own plane cannot be fitted counts as not sharing it."""
-        tol = self.config.plane_inlier_px
+        tol = self.config.plane.inlier_px
         for u, v, d, _ in self._init_window:
             own = joint.abc
             for it in range(3):
@@ -210,13 +210,13 @@ class PlaneTracking(DetectorState):
         features whose spread is the fit's error; far off it are other surfaces, walls,
         trees)."""
         res = d - plane_disparity(abc, u, v)
-        return res, np.abs(res) <= _SIGMA_GATE * self.config.plane_inlier_px
+        return res, np.abs(res) <= _SIGMA_GATE * self.config.plane.inlier_px
 
     def _calibrate_sigma(self, u, v, d, s) -> None:
         """Residual spread of the calibration features about the calibrated plane.
 
         ``sigma_px``: one robust sigma (1.4826 * MAD) over the features within
-        ``_SIGMA_GATE * plane_inlier_px`` of the plane. For ``sigma_per_edge``: sigmas in
+        ``_SIGMA_GATE * plane_inlier_px`` of the plane. For ``threshold.sigma_per_edge``: sigmas in
         (equal-count) bins of the features' precision s (made non-increasing with it),
         and factors (>= 1) in bands of image rows by which the residuals, divided by their
         bin's sigma, are still spread (the far ground, foreshortened, matches less well).
@@ -252,11 +252,11 @@ class PlaneTracking(DetectorState):
         """
         c = self.config
         k = precision.shape[0]
-        if c.threshold_mode == 'fixed' or not np.isfinite(self._sigma):
-            return np.full(k, c.threshold_px), c.threshold_px
+        if c.threshold.mode == 'fixed' or not np.isfinite(self._sigma):
+            return np.full(k, c.threshold.px), c.threshold.px
         ceiling = self.threshold_ceiling()
-        glob = float(np.clip(c.threshold_k * self._sigma, c.threshold_floor_px, ceiling))
-        if not c.sigma_per_edge or self._sigma_bins is None:
+        glob = float(np.clip(c.threshold.k * self._sigma, c.threshold.floor_px, ceiling))
+        if not c.threshold.sigma_per_edge or self._sigma_bins is None:
             return np.full(k, glob), glob
         log_s, sig_b, v_b, f_b = self._sigma_bins
         log_p = np.log(np.maximum(precision.astype(np.float64), 1e-3))
@@ -265,33 +265,34 @@ class PlaneTracking(DetectorState):
         sig *= np.exp(np.maximum(log_s[0] - log_p, 0.0))
         if v is not None:
             sig = sig * np.interp(v, v_b, f_b)
-        thr = np.clip(c.threshold_k * sig, c.threshold_floor_px, ceiling)
+        thr = np.clip(c.threshold.k * sig, c.threshold.floor_px, ceiling)
         return thr, glob
 
     def min_obstacle_pixels(self, cam: StereoCamera) -> float:
-        """Obstacle pixels an edge string needs on this camera: ``min_obstacle_pixels``
-        times f / ``min_obstacle_pixels_focal_px`` (rounded), at least
-        ``min_obstacle_pixels``: the same angle of evidence on any rig."""
-        c = self.config
-        if c.min_obstacle_pixels_focal_px <= 0.0:
-            return float(c.min_obstacle_pixels)
-        return float(max(c.min_obstacle_pixels,
-                         round(c.min_obstacle_pixels * cam.f / c.min_obstacle_pixels_focal_px)))
+        """Obstacle pixels an edge string needs on this camera:
+        ``detection.min_obstacle_pixels`` times f / ``detection.min_obstacle_pixels_focal_px``
+        (rounded), at least ``detection.min_obstacle_pixels``: the same angle of evidence
+        on any rig."""
+        d = self.config.detection
+        if d.min_obstacle_pixels_focal_px <= 0.0:
+            return float(d.min_obstacle_pixels)
+        return float(max(d.min_obstacle_pixels,
+                         round(d.min_obstacle_pixels * cam.f / d.min_obstacle_pixels_focal_px)))
 
     def threshold_ceiling(self) -> float:
         """The largest obstacle threshold of the 'sigma' mode, pixels: the larger of
-        ``threshold_ceiling_px`` and the disparity excess ``f*B*h/(H*z)`` of an obstacle
-        ``threshold_ceiling_height_m`` high at depth ``threshold_ceiling_depth_m`` for the
+        ``threshold.ceiling_px`` and the disparity excess ``f*B*h/(H*z)`` of an obstacle
+        ``threshold.ceiling_height_m`` high at depth ``threshold.ceiling_depth_m`` for the
         calibrated camera height H (the paper's rig: 1.7 px and 1.68 px; the KITTI car's:
-        4.7 px). ``threshold_ceiling_px`` alone before the calibration."""
+        4.7 px). ``threshold.ceiling_px`` alone before the calibration."""
         c = self.config
         cal = self._calib.metric if self._calib is not None else None
-        if (c.threshold_ceiling_height_m <= 0.0 or cal is None or self._cam is None
+        if (c.threshold.ceiling_height_m <= 0.0 or cal is None or self._cam is None
                 or not cal.height > 0.0):
-            return c.threshold_ceiling_px
-        excess = (self._cam.fb * c.threshold_ceiling_height_m
-                  / (cal.height * c.threshold_ceiling_depth_m))
-        return max(c.threshold_ceiling_px, float(excess))
+            return c.threshold.ceiling_px
+        excess = (self._cam.fb * c.threshold.ceiling_height_m
+                  / (cal.height * c.threshold.ceiling_depth_m))
+        return max(c.threshold.ceiling_px, float(excess))
 
     def _update_plane(self, u, v, d, s, cam: StereoCamera, still: bool = False,
                       motion: tuple | None = None) -> tuple[str, bool]:
@@ -311,8 +312,8 @@ class PlaneTracking(DetectorState):
         self._free_height = math.nan
         if self._calib is None:
             return self._calibrate(u, v, d, s, cam)
-        enough = u.shape[0] >= c.min_plane_features
-        if c.plane_update == 'fixed':
+        enough = u.shape[0] >= c.plane.min_features
+        if c.plane.update == 'fixed':
             # The plane is known, but a frame with too few features cannot vouch that
             # nothing stands on it: lost, as in 'refit' mode.
             return ('tracking', False) if enough else ('lost', False)
@@ -329,28 +330,28 @@ class PlaneTracking(DetectorState):
         # moving: the plane the rig stopped with is kept, carried through the motion,
         # while the camera is still near where it stopped (on the same ground)
         if not still and not (predicted and self._still_plane is not None
-                              and self._still_travel <= c.still_anchor_travel_m):
+                              and self._still_travel <= c.plane.still_anchor_travel_m):
             self._still_plane = None
         elif self._still_plane is None:
             self._still_plane = current             # the plane when the rig stopped
             self._still_travel = 0.0
         # Refits near the prediction through the motion: a narrower gate and tighter
-        # change limits, unless refits were rejected by those limits max_coast_frames
+        # change limits, unless refits were rejected by those limits plane.max_coast_frames
         # times in a row (the motion may be wrong: then as without one, around the
         # predicted plane). With a motion the plane is carried through frames with too
-        # few ground features to refit for up to motion_coast_frames.
+        # few ground features to refit for up to plane.motion_coast_frames.
         # A plane carried unrefitted over a frame whose motion was missing has not moved
         # with the camera over that frame: its prediction through the later motions is
         # off by that frame's motion (a vigorous walker's sway: 10 px of disparity). It
         # gets neither the narrow gate nor the long coast until a refit has found the
-        # ground again (it coasted at most max_coast_frames, then recovers).
-        tight = predicted and not self._stale and self._rejected < c.max_coast_frames
-        gate_m = c.motion_gate_m if tight else c.refit_gate_m
-        coast_frames = (c.motion_coast_frames if predicted and not self._stale
-                        else c.max_coast_frames)
+        # ground again (it coasted at most plane.max_coast_frames, then recovers).
+        tight = predicted and not self._stale and self._rejected < c.plane.max_coast_frames
+        gate_m = c.plane.motion_gate_m if tight else c.plane.refit_gate_m
+        coast_frames = (c.plane.motion_coast_frames if predicted and not self._stale
+                        else c.plane.max_coast_frames)
         fit, rejected = self._refit_plane(u, v, d, cam, current, enough, predicted, tight,
                                           gate_m, coast_frames)
-        noise = c.motion_process_noise_px if predicted else c.refit_process_noise_px
+        noise = c.plane.motion_process_noise_px if predicted else c.plane.refit_process_noise_px
         sq = noise ** 2
         q = np.diag([sq / (0.5 * cam.width) ** 2, sq / (0.5 * cam.height) ** 2, sq])
         if fit is None:
@@ -366,14 +367,14 @@ class PlaneTracking(DetectorState):
         none: `_coarse_then_fine` (not while the plane the rig stopped with is kept); a
         fit of the features within ``gate_m`` of that plane (else of ``current``), then,
         kept but not predicted, `_coarse_then_fine`; while the prediction is stale or
-        missing, `_coarse_then_fine` with the wider ``refit_retry_gate_px``; `_recover`
+        missing, `_coarse_then_fine` with the wider ``plane.refit_retry_gate_px``; `_recover`
         once coasted ``coast_frames``.
 
         Args:
             u, v, d: (N,) float the features' column, row and disparity, pixels.
             cam: the rectified stereo camera.
             current: the plane state's metric plane (left optical frame), or None.
-            enough: at least ``min_plane_features`` features.
+            enough: at least ``plane.min_features`` features.
             predicted: the plane was carried through this frame's motion.
             tight: the change limits around the motion's prediction apply
                 (`_close_to_current`).
@@ -387,7 +388,7 @@ class PlaneTracking(DetectorState):
         anchored = self._still_plane is not None
         rejected = False
 
-        def coarse_then_fine(gate_px: float = c.refit_gate_px) -> PlaneFit | None:
+        def coarse_then_fine(gate_px: float = c.plane.refit_gate_px) -> PlaneFit | None:
             nonlocal rejected
             out, no = self._coarse_then_fine(u, v, d, cam, current, tight, gate_m, gate_px)
             rejected = rejected or no
@@ -397,7 +398,7 @@ class PlaneTracking(DetectorState):
             fit = coarse_then_fine()
         if enough and current is not None and fit is None:
             # Standing still the current plane is where the ground is: refit from the
-            # features within refit_gate_m of it. So too when the coarse fit took another
+            # features within plane.refit_gate_m of it. So too when the coarse fit took another
             # surface while walking: the ground beyond a step down can fill more of the
             # view than the ground the wearer stands on, even in the nearer half (and a
             # mixture of the two tilts the plane).
@@ -421,32 +422,33 @@ class PlaneTracking(DetectorState):
                 # the ground by pixels). Refit as when moving.
                 fit = coarse_then_fine()
         if (fit is None and enough and current is not None and (self._stale or not predicted)
-                and self._coast < coast_frames and c.refit_retry_gate_px > c.refit_gate_px):
+                and self._coast < coast_frames
+                and c.plane.refit_retry_gate_px > c.plane.refit_gate_px):
             # Nothing predicted where the ground went: a vigorous walker (the paper's
             # extreme motion: 5 degrees of sway) moves the ground by 10 px of disparity
             # between frames, and a frame whose /egomotion is missing then kept the
             # previous frame's plane, 10 px off, and reported the whole ground as a drop.
             # (Not once lost: the plane to widen the gate around is then stale.)
-            fit = coarse_then_fine(c.refit_retry_gate_px)
+            fit = coarse_then_fine(c.plane.refit_retry_gate_px)
         if fit is None and enough and self._coast >= coast_frames:
             fit = self._recover(u, v, d, cam)
         return fit, rejected
 
     def _calibrate(self, u, v, d, s, cam: StereoCamera) -> tuple[str, bool]:
         """The calibration step of `_update_plane`: this frame's features join the
-        calibration window; once it holds ``init_frames`` frames, the plane is fitted
+        calibration window; once it holds ``plane.init_frames`` frames, the plane is fitted
         from them (or from the latest frame alone when the frames' planes disagree).
         Returns (status, updated)."""
         c = self.config
         self._init_window.append((u, v, d, s))
-        if len(self._init_window) < c.init_frames:
+        if len(self._init_window) < c.plane.init_frames:
             return 'initialising', False
         uu, vv, dd, ss = (np.concatenate(x) for x in zip(*self._init_window))
-        # No plane is known yet: the ground must hold init_min_inlier_fraction of the
+        # No plane is known yet: the ground must hold plane.init_min_inlier_fraction of the
         # features to be a candidate at all (not only the winner checked below), so
         # that the disparity weighting cannot crown a few wrong matches at large
         # disparity, which a long baseline searched from min_range_m gives.
-        support = c.init_min_inlier_fraction
+        support = c.plane.init_min_inlier_fraction
         fit = self._fit(uu, vv, dd, cam, support)
         if fit is None:
             return 'initialising', False
@@ -463,10 +465,10 @@ class PlaneTracking(DetectorState):
             # from the joint plane does not.
             last = self._fit(u, v, d, cam, support)
             if last is not None and (
-                    not _planes_agree(fit.abc, last.abc, cam, c.plane_inlier_px)
+                    not _planes_agree(fit.abc, last.abc, cam, c.plane.inlier_px)
                     or not self._window_shares_plane(fit, cam)):
                 fit, uu, vv, dd, ss = last, u, v, d, s
-        if fit.num_features < c.init_min_inlier_fraction * uu.shape[0]:
+        if fit.num_features < c.plane.init_min_inlier_fraction * uu.shape[0]:
             return 'initialising', False
         self._calib = self._last_fit = fit
         self._heights.clear()
@@ -543,7 +545,7 @@ class PlaneTracking(DetectorState):
                 self._cov = self._cov + q
             return 'tracking', False
         # stay lost until a refit succeeds
-        self._coast = max(c.max_coast_frames, c.motion_coast_frames)
+        self._coast = max(c.plane.max_coast_frames, c.plane.motion_coast_frames)
         return 'lost', False
 
     def _near_ground_agrees(self, u: np.ndarray, v: np.ndarray, d: np.ndarray) -> bool:
@@ -552,21 +554,21 @@ class PlaneTracking(DetectorState):
         pixels; "near": the half with d at least the median).
 
         It may if it still lies on the near features (their median disparity residual
-        within ``plane_inlier_px``), or if they stand above it as a surface that is not
+        within ``plane.inlier_px``), or if they stand above it as a surface that is not
         the ground (an obstacle filling the near view: their disparity does not grow
         down the image as the plane's does), or if there are fewer than twice
-        ``min_plane_features`` of them (a plain wall filling the view leaves a few
+        ``plane.min_features`` of them (a plain wall filling the view leaves a few
         mismatches). Not if they lie below it (the near view is the ground the wearer
         stands on, or an obstacle on it: never lower; the plane is off and every
         feature a drop) or above it as a ground (the plane is too low: every feature an
         obstacle)."""
         near = d >= fast_median(d)
         un, vn, dn = u[near], v[near], d[near]
-        if un.shape[0] < 2 * self.config.min_plane_features:
+        if un.shape[0] < 2 * self.config.plane.min_features:
             return True
         res = dn - plane_disparity(self._abc, un, vn)
         med = fast_median(res)
-        if abs(med) <= self.config.plane_inlier_px:
+        if abs(med) <= self.config.plane.inlier_px:
             return True
         if med < 0:
             return False
@@ -574,9 +576,10 @@ class PlaneTracking(DetectorState):
 
     def disparity_range(self, cam: StereoCamera) -> tuple[float, float]:
         """Disparity search range (d_min, d_max) of the matcher, pixels, from
-        ``search_max_range_m`` and ``min_range_m`` (d_max at most the image width - 1)."""
-        d_min = cam.fb / self.config.search_max_range_m
-        d_max = min(cam.fb / self.config.min_range_m, float(cam.width - 1))
+        ``matching.search_max_range_m`` and ``matching.min_range_m`` (d_max at most the
+        image width - 1)."""
+        d_min = cam.fb / self.config.matching.search_max_range_m
+        d_max = min(cam.fb / self.config.matching.min_range_m, float(cam.width - 1))
         return d_min, max(d_max, d_min)
 
 

@@ -26,10 +26,10 @@ class GpodObstacle:
         disparity_excess: pixels, measured minus plane disparity, largest in magnitude
             over the obstacle's pixels (negative for a drop-off).
         confidence: 0..1. A detection's: P(any of its pixels truly beyond the threshold)
-            * min(1, pixels / ``confidence_full_pixels``), a pixel weaker than
-            ``obstacle_min_strength`` counted as (strength / that)^2 of one (as the
+            * min(1, pixels / ``detection.confidence_full_pixels``), a pixel weaker than
+            ``detection.min_strength`` counted as (strength / that)^2 of one (as the
             edge-string rule counts it). A reported (tracked) obstacle's:
-            1 - prod(1 - c) over its track's latest ``track_confidence_frames`` views, c
+            1 - prod(1 - c) over its track's latest ``tracks.confidence_frames`` views, c
             the largest detection confidence in a view (the frames while the rig stands
             still are one view).
         roi: (x, y, w, h) ints, region in the left image (from the top of the obstacle
@@ -39,7 +39,7 @@ class GpodObstacle:
         track_id: id of its obstacle track (> 0), 0 if untracked.
         age_s: seconds since it was last detected: 0 when detected in this frame, > 0
             when the track is coasted (reported at its tracked place, see
-            ``GpodConfig.track_coast_s``).
+            ``GpodConfig.tracks.coast_s``).
     """
 
     position: np.ndarray
@@ -147,11 +147,11 @@ class GpodResult:
             (``age_s`` > 0).
         features: the matched edge features.
         threshold_px: the obstacle threshold used, pixels ('sigma' mode: threshold_k
-            times sigma_px within the floor and ceiling; with ``sigma_per_edge`` each
+            times sigma_px within the floor and ceiling; with ``threshold.sigma_per_edge`` each
             pixel has its own, see ``features.threshold``).
         num_edges: (left, right) numbers of edge pixels.
         timings_ms: stage -> milliseconds ('edges', 'matching', 'plane', 'obstacles',
-            'total'; on images at least ``coarse_min_width`` wide, 'coarse': the binned
+            'total'; on images at least ``coarse.min_width`` wide, 'coarse': the binned
             pass).
         sigma_px: robust (MAD) spread of the disparity residuals of the initial ground
             plane fit, pixels (NaN before it).
@@ -163,9 +163,9 @@ class GpodResult:
             image, pixels (NaN before the first measurement; core.alignment).
         misalignment_corrected: True when the right image was resampled to remove it.
         edge_threshold: the edge threshold used for this pair, grey levels per pixel
-            (``edge_threshold``, or lower on weakly textured ground: ``edge_min_density``).
+            (``edges.threshold``, or lower on weakly textured ground: ``edges.min_density``).
         surface: the ground surface ahead the obstacles were judged against
-            (``surface_enabled``; its ``known_until_m``: how far the ground is known),
+            (``surface.enabled``; its ``known_until_m``: how far the ground is known),
             or None.
     """
 

@@ -188,7 +188,7 @@ def hanging_runs(edges: EdgeMap, m: Matches, prev: np.ndarray, h: np.ndarray,
         edges: the left EdgeMap the matches index; m: the matches.
         prev: :func:`run_links` of the matches.
         h: (K,) height of each match above the ground plane, metres.
-        max_height: metres (``GpodConfig.max_floating_height_m``).
+        max_height: metres (``GpodConfig.detection.max_floating_height_m``).
         tolerance_px: largest disparity step within a run, pixels.
         slope: |b| of the plane, pixels of disparity per row.
         only: (K,) bool, or None: only the runs of edge strings with such a match are
@@ -197,7 +197,7 @@ def hanging_runs(edges: EdgeMap, m: Matches, prev: np.ndarray, h: np.ndarray,
         solid: (K,) bool, or None (every match): the matches that can hold a run up. A
             stray match or two at the run's depth below it is as likely a mismatch the
             same period off as the run: only a matched run of its own (figural
-            continuity, ``min_matched_run``) holds it up. A wall's streak matched 7 px off
+            continuity, ``detection.min_matched_run``) holds it up. A wall's streak matched 7 px off
             for 11 rows, 5 m away, was held up by two pixels matched alike 25 rows below.
     Returns:
         (K,) bool.
@@ -290,7 +290,7 @@ def floating_bottom_runs(sid: np.ndarray, v: np.ndarray, prev: np.ndarray, h: np
     """Matches in the lowest matched run of their edge string when that run floats: its
     lowest usable pixel more than ``max_height`` metres above the ground, while the
     string stands on the ground elsewhere (a usable pixel within ``max_height``). The
-    string-wide test (`GpodConfig.max_floating_height_m`) let such a run through: a
+    string-wide test (`GpodConfig.detection.max_floating_height_m`) let such a run through: a
     stretch of a far wall's streak matched 58 px off for 10 rows, at the bottom of a
     string whose upper pixels lie on the wall 9 m away, made an obstacle "1.5 metres
     ahead" floating 1 m high. Nothing of its string below it holds it up (that is

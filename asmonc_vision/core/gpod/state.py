@@ -32,10 +32,10 @@ class DetectorState:
     def reset(self) -> None:
         """Forget the ground plane and the calibration frames (status 'initialising')."""
         self._cam: StereoCamera | None = None
-        self._rng = np.random.default_rng(self.config.seed)
+        self._rng = np.random.default_rng(self.config.plane.seed)
         #: the world's up direction in the left optical frame for the pair (None: unknown)
         self._up: np.ndarray | None = None
-        self._init_window: deque = deque(maxlen=self.config.init_frames)
+        self._init_window: deque = deque(maxlen=self.config.plane.init_frames)
         self._frame = 0
         self._calib: PlaneFit | None = None
         self._abc: np.ndarray | None = None
@@ -52,8 +52,8 @@ class DetectorState:
         #: is not where the camera's later motions would carry it (until a refit)
         self._stale = False
         #: the calibrated camera height and the free heights of the latest refits taken
-        #: (cyclopean, metres): the anchor of ``refit_hold_height``
-        self._heights: deque = deque(maxlen=self.config.height_anchor_frames + 1)
+        #: (cyclopean, metres): the anchor of ``plane.refit_hold_height``
+        self._heights: deque = deque(maxlen=self.config.plane.height_anchor_frames + 1)
         #: the free height of this frame's refit (NaN: none)
         self._free_height = math.nan
         #: the plane before this frame's motion (None: no motion this frame)
@@ -72,22 +72,22 @@ class DetectorState:
         #: the left image's pixel noise, grey levels (NaN until estimated)
         self._image_noise = float('nan')
         #: the deviation of |dI/du| per grey level of pixel noise, after the edges' blur
-        self._noise_gain = gradient_noise_gain(self.config.edge_blur_sigma)
-        #: obstacle_min_strength in force (raised on a noisy camera)
-        self._min_strength = self.config.obstacle_min_strength
+        self._noise_gain = gradient_noise_gain(self.config.edges.blur_sigma)
+        #: detection.min_strength in force (raised on a noisy camera)
+        self._min_strength = self.config.detection.min_strength
         #: the current left image and the current frame's context for describing obstacles
         self._left: np.ndarray | None = None
         self._ctx: _FrameContext | None = None
-        #: the ground surface ahead of the latest pair (surface_enabled), or None
+        #: the ground surface ahead of the latest pair (surface.enabled), or None
         self._surface: GroundSurface | None = None
         c = self.config
-        self._tracker = ObstacleTracker(coast_s=c.track_coast_s, gate_chi2=c.track_gate_chi2,
-                                        process_noise_m=c.track_process_noise_m,
-                                        confirm_hits=c.track_confirm_hits,
-                                        min_hit_fraction=c.track_min_hit_fraction,
-                                        sure_hits=c.track_sure_hits,
-                                        unseen_coast_s=c.track_unseen_coast_s)
-        #: track id -> (the detection confidences of its latest track_confidence_frames
+        self._tracker = ObstacleTracker(coast_s=c.tracks.coast_s, gate_chi2=c.tracks.gate_chi2,
+                                        process_noise_m=c.tracks.process_noise_m,
+                                        confirm_hits=c.tracks.confirm_hits,
+                                        min_hit_fraction=c.tracks.min_hit_fraction,
+                                        sure_hits=c.tracks.sure_hits,
+                                        unseen_coast_s=c.tracks.unseen_coast_s)
+        #: track id -> (the detection confidences of its latest tracks.confidence_frames
         #: views, the view of the latest); a view: the frames from one that moved to the
         #: next that moves (a still rig's frames see one view)
         self._track_conf: dict[int, tuple[deque, int]] = {}
@@ -98,12 +98,12 @@ class DetectorState:
         self._motion_held = 0
         self._track_stamp: float | None = None
         #: log of the right camera's gain relative to the left's, latest pairs
-        self._log_gains: deque = deque(maxlen=max(self.config.right_gain_frames, 1))
+        self._log_gains: deque = deque(maxlen=max(self.config.image.right_gain_frames, 1))
         #: the detector of the binned pass (`_with_coarse`), made on its first pair
         self._coarse: GpodDetector | None = None
         #: the corridor's ground edge pixels expected, and its bands gone unseen
-        self._unseen = (UnseenGroundMonitor(c.unseen_max_ratio, c.unseen_min_expected,
-                                            c.unseen_frames, c.unseen_range_m,
-                                            c.unseen_half_width_m)
-                        if c.unseen_max_ratio > 0 else None)
+        self._unseen = (UnseenGroundMonitor(c.unseen.max_ratio, c.unseen.min_expected,
+                                            c.unseen.frames, c.unseen.range_m,
+                                            c.unseen.half_width_m)
+                        if c.unseen.max_ratio > 0 else None)
 

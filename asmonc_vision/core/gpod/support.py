@@ -137,7 +137,7 @@ def _features(m: Matches, excess: np.ndarray, obst: np.ndarray | None = None,
 
 
 def _noise_key(m: Matches) -> np.ndarray:
-    """What the disparity noise of a match is binned by for ``sigma_per_edge``: the
+    """What the disparity noise of a match is binned by for ``threshold.sigma_per_edge``: the
     precision of its edges' sub-pixel positions (their gradient curvature,
     ``Matches.precision``), or the edge strength when that is unknown."""
     return m.precision if m.precision is not None else m.strength

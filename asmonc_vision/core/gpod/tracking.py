@@ -73,11 +73,11 @@ class Tracking(Detection):
         # point, so a detection of the same obstacle placed elsewhere (its far corner when
         # one silhouette edge dips) keeps its track seen; in motion the nearest visible
         # part of a large obstacle moves with the view, and it does not. The detection
-        # must not lie more than cluster_radius_m farther than the track: a nearer one
+        # must not lie more than detection.cluster_radius_m farther than the track: a nearer one
         # (boxes reported as one obstacle at the nearest) or a far corner may be the
         # same obstacle, but an obstacle seen metres beyond a track shows the track's
         # placement was wrong (a pole's foot once followed down a paving joint).
-        radius = self.config.cluster_radius_m
+        radius = self.config.detection.cluster_radius_m
         tracks = self._tracker.update(
             feet, cov, obst, is_free,
             (lambda a, b: _same_object(cast(GpodObstacle, a), cast(GpodObstacle, b), radius))
@@ -106,7 +106,7 @@ class Tracking(Detection):
         the first): ``motion`` when given (and remembered); else, while the rig moves,
         the last given motion scaled to this pair's time step (rotation vector and
         translation times dt / dt_last, at most 3x), with a translation covariance of
-        (|t| / 2)² I, for at most ``track_motion_hold_frames`` pairs in a row; else None
+        (|t| / 2)² I, for at most ``tracks.motion_hold_frames`` pairs in a row; else None
         (the identity while standing still, the tracks end otherwise)."""
         if motion is not None:
             self._last_motion = ((np.asarray(motion[0], float), np.asarray(motion[1], float),
@@ -117,7 +117,7 @@ class Tracking(Detection):
         if still or last is None or dt is None or dt <= 0:
             self._last_motion = None
             return None
-        if self._motion_held >= self.config.track_motion_hold_frames:
+        if self._motion_held >= self.config.tracks.motion_hold_frames:
             return None
         R0, t0, dt0 = last
         k = dt / dt0
@@ -133,14 +133,14 @@ class Tracking(Detection):
     def _track_confidences(self, tracks, still: bool = False) -> list[float]:
         """The confidence of each track (`ObstacleTracker.update`'s outputs) reported this
         frame: 1 - prod(1 - c) over its detection confidences c in its latest
-        ``track_confidence_frames`` views, this frame's included when it was detected.
+        ``tracks.confidence_frames`` views, this frame's included when it was detected.
         A view is one frame, or a run of frames while the rig stands still (``still``:
         this frame saw what the previous one saw), which counts once, at its largest
         confidence: each view's evidence is taken as independent of the others', but a
         still view's frames repeat the same matches, their errors as well (a mismatch
         made by the scene repeats in every frame), and their noise is already averaged
-        in the detection (``temporal_frames``). Forgets the tracks that ended."""
-        k = self.config.track_confidence_frames
+        in the detection (``temporal.frames``). Forgets the tracks that ended."""
+        k = self.config.tracks.confidence_frames
         if not still:
             self._view += 1
         old, self._track_conf = self._track_conf, {}
@@ -162,13 +162,13 @@ class Tracking(Detection):
 
     def _foot_covariance(self, feet: np.ndarray, cam: StereoCamera) -> np.ndarray:
         """(N, 3, 3) covariance of detected feet (N, 3), m²: triangulation of the foot's
-        pixel (``track_pixel_sigma_px`` in u and v, the ground's disparity noise) plus
-        ``track_position_sigma_m``² (which point of the obstacle is nearest)."""
+        pixel (``tracks.pixel_sigma_px`` in u and v, the ground's disparity noise) plus
+        ``tracks.position_sigma_m``² (which point of the obstacle is nearest)."""
         c = self.config
         k = feet.shape[0]
         z = np.maximum(feet[:, 2], 1e-3)
         d = cam.fb / z
-        sig_d = self._sigma if np.isfinite(self._sigma) else c.disparity_sigma_px
+        sig_d = self._sigma if np.isfinite(self._sigma) else c.detection.disparity_sigma_px
         # X = (u - cx) B / d + B / 2, Y = (v - cy) B / d, Z = f B / d (cyclopean u):
         # J = d(X, Y, Z)/d(u, v, d)
         J = np.zeros((k, 3, 3))
@@ -177,9 +177,9 @@ class Tracking(Detection):
         J[:, 0, 2] = -(feet[:, 0] - cam.baseline / 2.0) / d
         J[:, 1, 2] = -feet[:, 1] / d
         J[:, 2, 2] = -z / d
-        S = np.diag([c.track_pixel_sigma_px ** 2, c.track_pixel_sigma_px ** 2, sig_d ** 2])
+        S = np.diag([c.tracks.pixel_sigma_px ** 2, c.tracks.pixel_sigma_px ** 2, sig_d ** 2])
         return (np.einsum('nij,jk,nlk->nil', J, S, J)
-                + (c.track_position_sigma_m ** 2) * np.eye(3)[None])
+                + (c.tracks.position_sigma_m ** 2) * np.eye(3)[None])
 
     def _track_is_free(self, ob: GpodObstacle, foot: np.ndarray,
                        roi: tuple[int, int, int, int] | None) -> bool:
@@ -193,7 +193,7 @@ class Tracking(Detection):
         Returns:
             True when the foot is behind the camera or out of view to the side or above
             (passed, or gone from view), or when the region holds at least
-            ``track_free_min_features`` reliably matched edge pixels on the ground plane
+            ``tracks.free_min_features`` reliably matched edge pixels on the ground plane
             (within half their threshold) where the obstacle would have stood out (the
             foot's disparity at least the threshold above the plane's), and three times
             as many as above it. A foot below the image (an obstacle walked up to) is
@@ -221,5 +221,5 @@ class Tracking(Detection):
         informative = (cam.fb / foot[2] - ctx.pd[inside]) >= thr
         on_ground = int(np.count_nonzero((np.abs(ex) <= 0.5 * thr) & informative))
         above = int(np.count_nonzero(ex > 0.5 * thr))
-        return on_ground >= self.config.track_free_min_features and on_ground >= 3 * above
+        return on_ground >= self.config.tracks.free_min_features and on_ground >= 3 * above
 

@@ -1,0 +1,381 @@
+"""GPOD's named rules (stages 6-7): the special cases of the obstacle and drop-off test,
+each a function of one frame's evidence, run in the order `GpodConfig.rules` lists them
+(as nav2 runs the costmap layers its YAML lists).
+
+The test itself is the paper's: a pixel is obstacle evidence when its excess over the
+ground is above the threshold in a long enough matched run, drop evidence when it is as
+far below, and a string is an obstacle (drop-off) when it holds enough such pixels. The
+rules take out evidence that a known failure gives (a periodic pattern matched a period
+off, a run hanging over its own string, ground bending away beyond a brow, ...) or add
+what the test misses (a region of lower ground). There are three lists:
+
+* ``pixels``: on the obstacle and drop pixels (``FrameEvidence.obst``, ``.drop``);
+* ``strings``: on the obstacle strings (``.obst_string``; ``.n_drop`` too);
+* ``drops``: on the drop-off strings (``.drop_string``).
+
+A rule left out of its list is off; `docs/gpod.md` says what each costs and gains. No
+ROS here.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from ..camera import MetricPlane
+from ..edges import EdgeMap
+from ..matching import Candidates, Matches
+from .footing import ground_coords
+from .grouping import cluster_points_2d
+from .runs import (
+    continuation_alternatives,
+    floating_bottom_runs,
+    hanging_runs,
+    occluded_matches,
+    string_pieces,
+)
+from .settings import GpodConfig
+from .support import _ground_candidates
+
+#: Obstacle pixels this far above the plane (pixels) or more are checked for a ground
+#: alternative (rule ``repetitive_pattern``): a repetitive pattern matched one period
+#: off; genuine small obstacles are never this far above the plane.
+AMBIGUOUS_EXCESS_PX = 3.0
+
+#: A run hanging over lower ground (rule ``lower_ground_continuation``) is checked only
+#: when that ground is seen: at least this fraction of the frame's matches lie on it
+#: (beyond a kerb down, 15-70 %; scattered mismatches of obstacle texture that look like
+#: a lower ground, at most 1.4 % on the simulator's walks).
+LOWER_GROUND_FRACTION = 0.05
+
+#: Rule ``ground_bend``: ground bending away beyond a brow or a dip starts where the
+#: ground is; a cluster whose line lies this far off the ground at its near end is a drop
+#: or an obstacle whatever its grade (the least step the wearer must be told of, m).
+BEND_MAX_START_M = 0.10
+
+
+@dataclass
+class FrameEvidence:
+    """One frame's evidence as the rules read and change it: K matches of n_s edge
+    strings. Heights in metres above the ground reference, disparities in pixels."""
+
+    m: Matches
+    el: EdgeMap                 # left edges (the matches' strings)
+    er: EdgeMap                 # right edges
+    cand: Candidates            # every candidate match of the left edges
+    metric: MetricPlane
+    abc: np.ndarray             # (3,) the plane d = a*u + b*v + c
+    pd: np.ndarray              # (K,) the ground reference's disparity at each match
+    pts: np.ndarray             # (K, 3) each match in the camera frame, m
+    h: np.ndarray               # (K,) height above the ground reference, m
+    excess: np.ndarray          # (K,) disparity excess over the ground
+    ex_mean: np.ndarray         # (K,) the excess averaged along runs (and over frames)
+    thr: np.ndarray             # (K,) obstacle threshold per match, px
+    thr_global: float           # the frame's threshold, px
+    prev: np.ndarray            # (K,) run links (`run_links`)
+    run: np.ndarray             # (K,) matched run length
+    usable: np.ndarray          # (K,) bool: reliably matched (long enough run), in range
+    below: np.ndarray           # (K,) bool: below the lowest ground the surface allows
+    slope: float                # |b| of the plane, px of disparity per row
+    weight: np.ndarray          # (K,) evidence weight per match (edge strength)
+    min_px: float               # the (weighted) obstacle pixels a string needs
+    n_s: int                    # edge strings
+    obst: np.ndarray            # (K,) bool: obstacle pixels (rules ``pixels``)
+    drop: np.ndarray            # (K,) bool: drop pixels (rules ``pixels``)
+    obst_string: np.ndarray | None = None   # (n_s,) bool (rules ``strings``)
+    n_drop: np.ndarray | None = None        # (n_s,) weighted drop pixels per string
+    drop_string: np.ndarray | None = None   # (n_s,) bool (rules ``drops``)
+
+    @property
+    def sid(self) -> np.ndarray:
+        """(K,) the edge string of each match."""
+        return self.m.string_id
+
+
+Rule = Callable[[GpodConfig, FrameEvidence], None]
+
+
+# --- pixel rules ---------------------------------------------------------------------
+
+def periodic_matches(c: GpodConfig, m: Matches, pd: np.ndarray, thr: np.ndarray
+                     ) -> np.ndarray:
+    """(K,) bool: the matches of a periodic pattern: at least
+    ``detection.periodic_min_rivals`` rivals (`match_rivals`) with
+    ``detection.ambiguous_match_ratio`` of the match's first-round support or more, one of
+    them on the ground (within the pixel's threshold ``thr`` (K,) of the ground disparity
+    ``pd`` (K,)). The bars of a grate support candidates a period apart alike, and the
+    one a period nearer stands above the ground by the period over the baseline times the
+    height of the ray (a 3.5 cm period: 10 cm on the paper's rig) wherever the walker is:
+    a world-fixed false obstacle that the map would confirm. A kerb's face has at most
+    one strong rival on the ground (the ground around it supports the ground's
+    disparity), an obstacle's texture few."""
+    k = len(m)
+    out = np.zeros(k, bool)
+    r = c.detection.ambiguous_match_ratio
+    n_min = c.detection.periodic_min_rivals
+    if (n_min <= 0 or r <= 0 or m.rival_match is None or m.rival_d is None
+            or m.rival_ratio is None or k == 0):
+        return out
+    strong = m.rival_ratio >= r
+    j = m.rival_match[strong]
+    n_strong = np.bincount(j, minlength=k)
+    on_ground = np.abs(m.rival_d[strong].astype(np.float64) - pd[j]) <= thr[j]
+    ground = np.zeros(k, bool)
+    ground[j[on_ground]] = True
+    return (n_strong >= n_min) & ground
+
+
+def ambiguous_drops(c: GpodConfig, m: Matches, pd: np.ndarray, thr: np.ndarray
+                    ) -> np.ndarray:
+    """(K,) bool: the matches that are no evidence of a drop-off: a rival of the match
+    (`match_rivals`) with at least ``detection.ambiguous_match_ratio`` of its first-round
+    support lies on the ground (within the pixel's threshold ``thr`` (K,) of the ground
+    disparity ``pd`` (K,)) and nearer than the match: the edge may as well be ground
+    matched a period off (a grate's bars). Obstacle evidence is not judged so: the face
+    of a 10 cm kerb has ground rivals as strong as its match, and a kerb must not be
+    lost to a grate's false reports."""
+    k = len(m)
+    no_drop = np.zeros(k, bool)
+    r = c.detection.ambiguous_match_ratio
+    if (r <= 0 or m.rival_match is None or m.rival_d is None or m.rival_ratio is None
+            or k == 0):
+        return no_drop
+    j = m.rival_match
+    rd = m.rival_d.astype(np.float64)
+    sel = np.flatnonzero((m.rival_ratio >= r) & (np.abs(rd - pd[j]) <= thr[j]))
+    if sel.size:
+        nearer = rd[sel] > m.d[j[sel]]
+        no_drop[j[sel[nearer]]] = True
+    return no_drop
+
+
+def _periodic_pattern(c: GpodConfig, ev: FrameEvidence) -> None:
+    """A periodic pattern matched a period off is no evidence either way."""
+    periodic = periodic_matches(c, ev.m, ev.pd, ev.thr)
+    ev.obst &= ~periodic
+    ev.drop &= ~periodic
+
+
+def _ambiguous_drop(c: GpodConfig, ev: FrameEvidence) -> None:
+    """A drop pixel with a strong nearer rival on the ground is no drop evidence."""
+    ev.drop &= ~ambiguous_drops(c, ev.m, ev.pd, ev.thr)
+
+
+def _hanging_run(c: GpodConfig, ev: FrameEvidence) -> None:
+    """Runs that hang over another depth of their own string (`hanging_runs`)."""
+    if ev.obst.any():
+        ev.obst &= ~hanging_runs(ev.el, ev.m, ev.prev, ev.h, c.detection.max_floating_height_m,
+                                 c.detection.string_disparity_tolerance_px, ev.slope, ev.obst,
+                                 solid=ev.run >= c.detection.min_matched_run)
+
+
+def _floating_bottom_run(c: GpodConfig, ev: FrameEvidence) -> None:
+    """The lowest run of a string floating above the ground (`floating_bottom_runs`)."""
+    if ev.obst.any():
+        ev.obst &= ~floating_bottom_runs(ev.sid, ev.m.v, ev.prev, ev.h, ev.usable,
+                                         c.detection.max_floating_height_m, ev.obst)
+
+
+def _lower_ground_continuation(c: GpodConfig, ev: FrameEvidence) -> None:
+    """A run, at any height, that hangs over its own string's continuation on the lower
+    ground beyond a drop and could have been matched there: the paving beyond a kerb down
+    matched one period off (`continuation_alternatives`). Every stretch of these strings
+    well above the plane is tested (one matched the same period off may hold up
+    another)."""
+    high = ev.obst & (ev.excess > AMBIGUOUS_EXCESS_PX)
+    if not high.any():
+        return
+    m = ev.m
+    in_s = np.zeros(int(m.string_id.max()) + 1, bool)
+    in_s[m.string_id[high]] = True
+    high = (ev.excess > AMBIGUOUS_EXCESS_PX) & in_s[m.string_id]
+    support = max(c.drops.min_cluster_pixels, math.ceil(LOWER_GROUND_FRACTION * len(m)))
+    ev.obst &= ~continuation_alternatives(
+        ev.el, m, ev.prev, ev.cand, high, ev.below & (ev.run >= c.detection.min_matched_run),
+        ev.pd, c.detection.string_disparity_tolerance_px, ev.slope, support)
+
+
+def _string_pieces(c: GpodConfig, ev: FrameEvidence) -> None:
+    """The edge-string rule per piece of a string between stretches of it on the ground
+    (`string_pieces`): obstacle pixels of pieces with fewer than ``min_px`` (weighted)
+    of them are dropped -- a noisy pixel far below a post, on the post's edge continued
+    by a tile joint, is no part of the post (its foot would be taken there)."""
+    if not ev.obst.any():
+        return
+    sid = ev.sid
+    has = np.zeros(ev.n_s, bool)
+    has[sid[ev.obst]] = True
+    sel = np.flatnonzero(has[sid])
+    piece = string_pieces(sid[sel], ev.m.v[sel],
+                          (np.abs(ev.ex_mean[sel]) <= ev.thr[sel]) & ev.usable[sel])
+    o_sel = ev.obst[sel]
+    n_piece = np.bincount(piece[o_sel], weights=ev.weight[sel][o_sel],
+                          minlength=int(piece.max()) + 1)
+    ev.obst[sel] &= n_piece[piece] + 1e-9 >= ev.min_px
+
+
+# --- string rules --------------------------------------------------------------------
+
+def bending_ground(c: GpodConfig, px: np.ndarray, pts: np.ndarray, h: np.ndarray,
+                   metric: MetricPlane, n_s: int, sid: np.ndarray, radius: float,
+                   sign: float) -> np.ndarray:
+    """(n_s,) bool: the strings that are ground bending away from the ground reference:
+    in a cluster of their pixels (``px`` (K,) bool; feet clustered at ``radius`` m) of at
+    least 8 pixels spread over ``bend.min_span_m`` or more along the walking direction
+    whose heights ``h`` (K,) (m above the ground reference; ``sign`` -1: drop pixels,
+    below it) fit a line leaving it at ``bend.min_grade`` or more from less than
+    `BEND_MAX_START_M` off it at its near end. Beyond a brow the ground goes on falling,
+    beyond a dip rising, from where the ground is: the farther its points the farther
+    off; the lower ground beyond a drop and the top of a kerb are level, as far off near
+    as far, and start a step away."""
+    out = np.zeros(n_s, bool)
+    idx = np.flatnonzero(px)
+    if idx.size < 8 or c.bend.min_grade <= 0:
+        return out
+    g2 = ground_coords(pts[idx], h[idx], metric)
+    label = cluster_points_2d(g2, sid[idx], radius)
+    for k in range(int(label.max()) + 1):
+        sel = label == k
+        s_k, h_k = g2[sel, 0], sign * h[idx][sel]
+        if sel.sum() < 8 or float(s_k.max() - s_k.min()) < c.bend.min_span_m:
+            continue
+        grade, at0 = (float(x) for x in np.polyfit(s_k, h_k, 1))
+        near = grade * float(s_k.min()) + at0
+        if grade >= c.bend.min_grade and near < BEND_MAX_START_M:
+            out[sid[idx][sel]] = True
+    return out
+
+
+def _floating_string(c: GpodConfig, ev: FrameEvidence) -> None:
+    """A string whose reliably matched pixels all float higher than
+    ``detection.max_floating_height_m`` above the ground is a mismatch (a distant pole
+    matched to the wrong edge)."""
+    s = ev.obst_string
+    assert s is not None
+    if s.any():
+        low = np.full(ev.n_s, np.inf)
+        np.minimum.at(low, ev.sid[ev.usable], ev.h[ev.usable])
+        s &= low <= c.detection.max_floating_height_m
+
+
+def _ground_bend_up(c: GpodConfig, ev: FrameEvidence) -> None:
+    """Strings whose obstacle pixels are ground rising beyond a dip (`bending_ground`)."""
+    s = ev.obst_string
+    assert s is not None
+    if s.any():
+        s &= ~bending_ground(c, ev.obst & s[ev.sid], ev.pts, ev.h, ev.metric, ev.n_s, ev.sid,
+                             c.detection.cluster_radius_m, 1.0)
+
+
+def _repetitive_pattern(c: GpodConfig, ev: FrameEvidence) -> None:
+    """Edge strings whose obstacle pixels are well above the plane (>
+    `AMBIGUOUS_EXCESS_PX`) but, for at least ``detection.ambiguity_fraction`` of them,
+    the left edge also had a candidate match on the ground (|excess| <= the frame's
+    threshold): a repetitive pattern matched one period off."""
+    s = ev.obst_string
+    assert s is not None
+    if c.detection.ambiguity_fraction <= 0 or not s.any():
+        return
+    m = ev.m
+    on_ground = _ground_candidates(ev.cand, ev.el, ev.er, ev.abc, ev.thr_global)
+    alt = ev.obst & (ev.excess > AMBIGUOUS_EXCESS_PX) & on_ground[m.left_index]
+    n_alt = np.bincount(m.string_id[alt], minlength=ev.n_s)
+    n_obst = np.bincount(m.string_id[ev.obst], minlength=ev.n_s)
+    s &= ~(n_alt >= c.detection.ambiguity_fraction * np.maximum(n_obst, 1))
+
+
+def _half_occlusion(c: GpodConfig, ev: FrameEvidence) -> None:
+    """A left edge matched to the silhouette of an obstacle (a nearer surface) in the
+    right image is hidden there (`occluded_matches`): a string that is an obstacle or a
+    drop only through such pixels is none (strings with enough other evidence are kept
+    whole)."""
+    s = ev.obst_string
+    assert s is not None
+    if not s.any():
+        return
+    sid = ev.sid
+    occluded = occluded_matches(ev.er, ev.m, c.matching.pmf_disparity_gradient_limit,
+                                trusted=s[sid] & (ev.run >= c.detection.min_matched_run))
+    if occluded.any():
+        seen = ev.obst & ~occluded
+        n_seen = np.bincount(sid[seen], weights=ev.weight[seen], minlength=ev.n_s)
+        s &= n_seen + 1e-9 >= ev.min_px
+        seen = ev.drop & ~occluded
+        ev.n_drop = np.bincount(sid[seen], weights=ev.weight[seen], minlength=ev.n_s) + 1e-9
+
+
+# --- drop-off rules ------------------------------------------------------------------
+
+def drop_regions(c: GpodConfig, drop: np.ndarray, weight: np.ndarray, pts: np.ndarray,
+                 h: np.ndarray, metric: MetricPlane, n_s: int, sid: np.ndarray
+                 ) -> np.ndarray:
+    """(n_s,) bool: the strings whose drop pixels (``drop`` (K,) bool) belong to a region
+    of lower ground: their feet clustered at ``drops.cluster_radius_m``, of at least
+    ``drops.region_min_strings`` strings, whose drop pixels weigh (``weight`` (K,)) at
+    least ``drops.region_pixels`` times ``drops.min_pixels`` in all and lie at one depth
+    below the plane (``h`` (K,): the median absolute deviation of their heights at most
+    ``drops.region_max_spread`` times their median)."""
+    out = np.zeros(n_s, bool)
+    idx = np.flatnonzero(drop)
+    if idx.size == 0 or c.drops.region_pixels <= 0.0:
+        return out
+    g2 = ground_coords(pts[idx], h[idx], metric)
+    label = cluster_points_2d(g2, sid[idx], c.drops.cluster_radius_m)
+    total = np.bincount(label, weights=weight[idx])
+    for k in np.flatnonzero(total >= c.drops.region_pixels * c.drops.min_pixels):
+        sel = idx[label == k]
+        if np.unique(sid[sel]).size < c.drops.region_min_strings:
+            continue
+        depth = h[sel]
+        med = float(np.median(depth))
+        if float(np.median(np.abs(depth - med))) <= c.drops.region_max_spread * abs(med):
+            out[sid[sel]] = True
+    return out
+
+
+def _drop_region(c: GpodConfig, ev: FrameEvidence) -> None:
+    """A string with a little drop evidence in a region of lower ground is a drop-off
+    (`drop_regions`); not an obstacle string."""
+    s, n_drop, obst_string = ev.drop_string, ev.n_drop, ev.obst_string
+    assert s is not None and n_drop is not None and obst_string is not None
+    s |= drop_regions(c, ev.drop & (n_drop[ev.sid] > 1e-6), ev.weight, ev.pts, ev.h,
+                      ev.metric, ev.n_s, ev.sid) & ~obst_string
+
+
+def _ground_bend_down(c: GpodConfig, ev: FrameEvidence) -> None:
+    """Drop strings that are ground falling away beyond a brow (`bending_ground`)."""
+    s = ev.drop_string
+    assert s is not None
+    if s.any():
+        s &= ~bending_ground(c, ev.drop & s[ev.sid], ev.pts, ev.h, ev.metric, ev.n_s,
+                             ev.sid, c.drops.cluster_radius_m, -1.0)
+
+
+#: Every rule by list and name (`GpodConfig.rules` names them in the order they run).
+PIXEL_RULES: dict[str, Rule] = {
+    'periodic_pattern': _periodic_pattern,
+    'ambiguous_drop': _ambiguous_drop,
+    'hanging_run': _hanging_run,
+    'floating_bottom_run': _floating_bottom_run,
+    'lower_ground_continuation': _lower_ground_continuation,
+    'string_pieces': _string_pieces,
+}
+STRING_RULES: dict[str, Rule] = {
+    'floating_string': _floating_string,
+    'ground_bend': _ground_bend_up,
+    'repetitive_pattern': _repetitive_pattern,
+    'half_occlusion': _half_occlusion,
+}
+DROP_RULES: dict[str, Rule] = {
+    'drop_region': _drop_region,
+    'ground_bend': _ground_bend_down,
+}
+
+
+def run_rules(c: GpodConfig, names: tuple[str, ...], table: dict[str, Rule],
+              ev: FrameEvidence) -> None:
+    """Run the rules ``names`` of ``table`` on ``ev`` in that order."""
+    for name in names:
+        table[name](c, ev)
