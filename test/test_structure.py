@@ -23,7 +23,7 @@ PRIVATE_IMPORTS_PENDING: dict[str, tuple[str, ...]] = {
     'core.gait.state': ('_D2R',),
     'core.gpod.coarse': ('_coarse_consistent', '_disparity_image'),
     'core.gpod.faces': ('_ground_points',),
-    'core.gpod.footing': ('_FrameContext', '_LONE_STEP_M', '_cross3'),
+    'core.gpod.footing': ('_FrameContext', '_LONE_STEP_M'),
     'core.gpod.grouping': ('_brink_bearings', '_fit_line', '_group_quantile', '_normal_cdf',
                            '_same_object'),
     'core.gpod.kernels_geometry': ('_ARC_LIN', '_BODY_GAP_BAND_M', '_BODY_GAP_END_M',

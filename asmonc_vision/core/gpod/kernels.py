@@ -452,7 +452,7 @@ nb_extent = _jit(_extent_kernel)
 
 
 def _on_ground_kernel(c_left, c_right, c_d, u_l, v_l, u_r, abc, threshold, n_left):
-    """`GpodDetector._ambiguous_strings`' left edges with a candidate match on the ground
+    """The left edges of rule repetitive_pattern (`rules.py`) with a candidate match on the ground
     (for numba): (n_left,) bool, some candidate's disparity within ``threshold`` pixels
     of the plane ``abc`` at its cyclopean position (``(a u + b v) + c``, as
     `plane_disparity`)."""

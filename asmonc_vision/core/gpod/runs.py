@@ -417,7 +417,7 @@ def continuation_alternatives(edges: EdgeMap, m: Matches, prev: np.ndarray,
         min_support: the lower ground must be seen: at least this many ``lower``
             matches lie on it (within ``tolerance_px``). Beyond a kerb down they are
             15-70 % of a frame's matches; scattered mismatches of obstacles' textures
-            that look like a ground 0.7-1.2 m down, at most 1.4 % (`_LOWER_GROUND_FRACTION`).
+            that look like a ground 0.7-1.2 m down, at most 1.4 % (`rules.LOWER_GROUND_FRACTION`).
         max_gap: rows searched below a run's bottom.
     Returns:
         (K,) bool. The run must hang: no matched pixel of its string within ``max_gap``
