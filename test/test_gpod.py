@@ -2558,11 +2558,11 @@ def test_a_right_camera_with_its_own_gain_gives_no_phantom():
 
 
 def test_every_named_rule_left_out_the_papers_test_alone_decides():
-    """With the three lists of `GpodConfig.rules` empty a frame still gives its features
+    """With the lists of `GpodConfig.rules` empty a frame still gives its features
     and detections, and the box is still found; the rules only take evidence out (bar
     drop_region, which level ground never meets), so no rule gives an obstacle pixel."""
     bare = override(GpodConfig(), {'rules.pixels': (), 'rules.strings': (),
-                                   'rules.drops': ()})
+                                   'rules.drops': (), 'rules.placement': ()})
     pair = render_pair(boxes=[BOX], seed=2)
     _, ruled = _calibrated(pair, frames=4)
     _, plain = _calibrated(pair, bare, frames=4)

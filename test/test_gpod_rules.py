@@ -1,12 +1,13 @@
 """GPOD's named rules (core/gpod/rules.py): the lists in `GpodConfig.rules`, their order,
-and what a rule takes out of one frame's evidence."""
+and what a rule takes out of one frame's evidence or does to a nearest point."""
 import numpy as np
 import pytest
 
 from asmonc_vision.core.config import override
 from asmonc_vision.core.gpod import GpodConfig, rules
 from asmonc_vision.core.gpod.settings import (DROP_RULE_NAMES, PIXEL_RULE_NAMES,
-                                              STRING_RULE_NAMES, RuleSettings)
+                                              PLACEMENT_RULE_NAMES, STRING_RULE_NAMES,
+                                              RuleSettings)
 from asmonc_vision.core.matching import Matches
 
 
@@ -14,6 +15,7 @@ def test_every_listed_rule_is_a_rule_and_every_rule_is_listed_by_default():
     assert tuple(rules.PIXEL_RULES) == PIXEL_RULE_NAMES == RuleSettings().pixels
     assert tuple(rules.STRING_RULES) == STRING_RULE_NAMES == RuleSettings().strings
     assert tuple(rules.DROP_RULES) == DROP_RULE_NAMES == RuleSettings().drops
+    assert tuple(rules.PLACEMENT_RULES) == PLACEMENT_RULE_NAMES == RuleSettings().placement
 
 
 def test_a_list_with_an_unknown_or_repeated_rule_is_refused():
@@ -25,7 +27,7 @@ def test_a_list_with_an_unknown_or_repeated_rule_is_refused():
         RuleSettings(strings=('drop_region',))           # a rule of another list
     with pytest.raises(TypeError, match='list of rule names'):
         RuleSettings(pixels='string_pieces')
-    assert RuleSettings(pixels=(), strings=(), drops=()).pixels == ()
+    assert RuleSettings(pixels=(), strings=(), drops=(), placement=()).pixels == ()
 
 
 def test_rules_run_in_the_order_listed_and_only_those_listed():
@@ -71,3 +73,16 @@ def test_the_periodic_and_ambiguous_drop_rules_take_out_only_their_own_evidence(
     ev = _evidence([13.4, 4.6, 13.0], rivals, 10.0, 0.8)
     rules.run_rules(c, (), rules.PIXEL_RULES, ev)                 # none listed: none run
     assert ev.obst.all() and ev.drop.all()
+
+
+def test_a_placement_rule_moves_a_nearest_point_only_as_it_says():
+    """`_nearer`: a placement rule's points replace those it sets, and, for the rules that
+    may only reveal a nearer point (silhouettes, view_edge), only where nearer."""
+    q = np.array([[2.0, 0.0], [3.0, 1.0], [4.0, 0.0]])
+    new = np.array([[1.5, 0.0], [3.5, 1.0], [np.nan, np.nan]])
+    np.testing.assert_array_equal(rules._nearer(q, new, True), [[1.5, 0.0], [3.0, 1.0],
+                                                                [4.0, 0.0]])
+    np.testing.assert_array_equal(rules._nearer(q, new, False), [[1.5, 0.0], [3.5, 1.0],
+                                                                 [4.0, 0.0]])
+    assert rules._nearer(q, np.full((3, 2), np.nan), False) is q
+

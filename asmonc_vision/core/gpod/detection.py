@@ -18,17 +18,21 @@ from . import kernels as kn
 from .faces import (
     _ground_points,
     described_by_part,
-    face_gap_points,
-    lone_face_points,
-    silhouette_owners,
-    view_edge_points,
 )
 from .footing import _FrameContext, ground_coords, string_feet
 from .grouping import _brink_bearings, _group_quantile, _normal_cdf, cluster_points_2d
 from .nearest import nearest_points
 from .plane_tracking import PlaneTracking
 from .results import GpodFeatures, GpodObstacle
-from .rules import DROP_RULES, PIXEL_RULES, STRING_RULES, FrameEvidence, run_rules
+from .rules import (
+    DROP_RULES,
+    PIXEL_RULES,
+    PLACEMENT_RULES,
+    STRING_RULES,
+    FrameEvidence,
+    Placement,
+    run_rules,
+)
 from .runs import (
     _TRUE,
     matched_run_length,
@@ -404,57 +408,20 @@ class Detection(PlaneTracking):
         g_lab = lab_o[head]
         ul = m.u_left[start]
         at_border = (ul < _BORDER_PX) | (ul > ctx.cam.width - 1 - _BORDER_PX)
-        xy_w = None
+        q0 = nearest_points(xy, sr, g_lab, n_c, lambda: ctx.ground_xy,
+                            ctx.contact_edge_scores, at_border)
+        weak = None
         if n_w:
-            lw = silhouette_owners(xw, ctx.weak_top, xy, g_lab, height,
-                                   self.config.detection.cluster_radius_m, lambda: ctx.ground_xy,
-                                   ctx.metric.height, sw, sr)
-            keep = lw >= 0
-            if keep.any():
-                uw = m.u_left[ctx.weak_start[keep]]
-                xy_w, sr_w, lab_w = xw[keep], sw[keep], lw[keep]
-                bd_w = (uw < _BORDER_PX) | (uw > ctx.cam.width - 1 - _BORDER_PX)
-        q = q0 = nearest_points(xy, sr, g_lab, n_c, lambda: ctx.ground_xy,
-                                ctx.contact_edge_scores, at_border)
-        if xy_w is not None:
-            # The candidate silhouettes can only reveal a nearer point (a hidden near
-            # corner), never move an obstacle away.
-            # (Only the obstacles with candidates are searched again.)
-            ks = np.unique(lab_w)
-            sub = np.full(n_c, -1, np.int64)
-            sub[ks] = np.arange(ks.size)
-            mine = sub[g_lab] >= 0
-            qw = nearest_points(np.concatenate([xy[mine], xy_w]),
-                                np.concatenate([sr[mine], sr_w]),
-                                np.concatenate([sub[g_lab[mine]], sub[lab_w]]), ks.size,
-                                lambda: ctx.ground_xy, ctx.contact_edge_scores,
-                                np.concatenate([at_border[mine], bd_w]))
-            nearer = np.hypot(qw[:, 0], qw[:, 1]) < np.hypot(q[ks, 0], q[ks, 1])
-            q = q.copy()
-            q[ks[nearer]] = qw[nearer]
-        # A face going out of the view (a wall beside the path): its nearest visible
-        # point is where it leaves the image.
-        qe = view_edge_points(xy, g_lab, n_c, ctx.to_image, ctx.cam.width, ctx.cam.height,
-                              lambda: ctx.ground_xy)
-        ext = ~np.isnan(qe[:, 0])
-        if ext.any():
-            ext &= np.hypot(qe[:, 0], qe[:, 1]) < np.hypot(q[:, 0], q[:, 1])
-            q = q.copy()
-            q[ext] = qe[ext]
-        # A face seen as two obstacles (its middle has no edges): its nearest point.
-        qg = face_gap_points(xy, g_lab, n_c, q, lambda: ctx.ground_xy)
-        gap = ~np.isnan(qg[:, 0])
-        if gap.any():
-            q = q.copy()
-            q[gap] = qg[gap]
-        # A low obstacle seen by one silhouette edge: the face the image shows beside it.
-        ql = lone_face_points(ctx, xy, g_lab, n_c, q, height, at_border,
-                              _LONE_FLOOR_SIGMAS * _SOBEL_NOISE_GAIN * self._image_noise
-                              if math.isfinite(self._image_noise) else 0.0)
-        lone = ~np.isnan(ql[:, 0])
-        if lone.any():
-            q = q.copy()
-            q[lone] = ql[lone]
+            uw = m.u_left[ctx.weak_start]
+            weak = (xw, sw, ctx.weak_top, (uw < _BORDER_PX) | (uw > ctx.cam.width - 1 - _BORDER_PX))
+        noise = self._image_noise
+        pl = Placement(ctx=ctx, xy=xy, sr=sr, group=g_lab, n=n_c, height=height,
+                       at_border=at_border, weak=weak,
+                       lone_floor=(_LONE_FLOOR_SIGMAS * _SOBEL_NOISE_GAIN * noise
+                                   if math.isfinite(noise) else 0.0))
+        q = q0
+        for name in self.config.rules.placement:
+            q = PLACEMENT_RULES[name](self.config, pl, q)
         rng = np.array([math.hypot(x, y) for x, y in q.tolist()])
         brg = np.array([math.atan2(y, x) for x, y in q.tolist()])
         return rng, brg, q0

@@ -1,4 +1,4 @@
-"""GPOD's named rules (stages 6-7): the special cases of the obstacle and drop-off test,
+"""GPOD's named rules (stages 6-10): the special cases of the obstacle and drop-off test,
 each a function of one frame's evidence, run in the order `GpodConfig.rules` lists them
 (as nav2 runs the costmap layers its YAML lists).
 
@@ -7,11 +7,13 @@ ground is above the threshold in a long enough matched run, drop evidence when i
 far below, and a string is an obstacle (drop-off) when it holds enough such pixels. The
 rules take out evidence that a known failure gives (a periodic pattern matched a period
 off, a run hanging over its own string, ground bending away beyond a brow, ...) or add
-what the test misses (a region of lower ground). There are three lists:
+what the test misses (a region of lower ground), or place an obstacle better than its
+own feet do (a face running out of the view). There are four lists:
 
 * ``pixels``: on the obstacle and drop pixels (``FrameEvidence.obst``, ``.drop``);
 * ``strings``: on the obstacle strings (``.obst_string``; ``.n_drop`` too);
-* ``drops``: on the drop-off strings (``.drop_string``).
+* ``drops``: on the drop-off strings (``.drop_string``);
+* ``placement``: on each obstacle's nearest point (stages 9-10: `Placement`).
 
 A rule left out of its list is off; `docs/gpod.md` says what each costs and gains. No
 ROS here.
@@ -27,8 +29,10 @@ import numpy as np
 from ..camera import MetricPlane
 from ..edges import EdgeMap
 from ..matching import Candidates, Matches
-from .footing import ground_coords
+from .faces import face_gap_points, lone_face_points, silhouette_owners, view_edge_points
+from .footing import _FrameContext, ground_coords
 from .grouping import cluster_points_2d
+from .nearest import nearest_points
 from .runs import (
     continuation_alternatives,
     floating_bottom_runs,
@@ -353,6 +357,92 @@ def _ground_bend_down(c: GpodConfig, ev: FrameEvidence) -> None:
                              ev.sid, c.drops.cluster_radius_m, -1.0)
 
 
+# --- placement rules -----------------------------------------------------------------
+
+@dataclass
+class Placement:
+    """What the placement rules read of one frame's obstacle clusters: one foot per
+    (cluster, edge string), on the ground (forward, left) from below the camera, metres."""
+
+    ctx: _FrameContext
+    xy: np.ndarray              # (F, 2) the feet of the obstacles' own strings
+    sr: np.ndarray              # (F,) each foot's standard error along its ray, m
+    group: np.ndarray           # (F,) the cluster of each foot (0 .. n-1)
+    n: int                      # clusters
+    height: np.ndarray          # (n,) each cluster's height, m
+    at_border: np.ndarray       # (F,) bool: the string lies at the image's left or right edge
+    #: the candidate silhouette strings (near the threshold, no obstacle), or None:
+    #: (feet (W, 2), standard errors (W,), top heights (W,), at the border (W,))
+    weak: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None
+    lone_floor: float           # the lone-face search's least edge evidence
+
+
+PlacementRule = Callable[[GpodConfig, Placement, np.ndarray], np.ndarray]
+
+
+def _nearer(q: np.ndarray, new: np.ndarray, only_nearer: bool) -> np.ndarray:
+    """(n, 2) ``q`` with the rows of ``new`` that are set (not NaN) and, with
+    ``only_nearer``, nearer to the wearer."""
+    take = ~np.isnan(new[:, 0])
+    if only_nearer and take.any():
+        take &= np.hypot(new[:, 0], new[:, 1]) < np.hypot(q[:, 0], q[:, 1])
+    if not take.any():
+        return q
+    q = q.copy()
+    q[take] = new[take]
+    return q
+
+
+def _silhouettes(c: GpodConfig, pl: Placement, q: np.ndarray) -> np.ndarray:
+    """Edge strings just under the thresholds that `silhouette_owners` gives to an
+    obstacle add their feet to its nearest-point search; the result is kept only where
+    nearer (a silhouette can reveal a hidden near corner, never move an obstacle away)."""
+    if pl.weak is None:
+        return q
+    xw, sw, top, bd = pl.weak
+    ctx = pl.ctx
+    lw = silhouette_owners(xw, top, pl.xy, pl.group, pl.height, c.detection.cluster_radius_m,
+                           lambda: ctx.ground_xy, ctx.metric.height, sw, pl.sr)
+    keep = lw >= 0
+    if not keep.any():
+        return q
+    xy_w, sr_w, lab_w, bd_w = xw[keep], sw[keep], lw[keep], bd[keep]
+    # only the obstacles with candidates are searched again
+    ks = np.unique(lab_w)
+    sub = np.full(pl.n, -1, np.int64)
+    sub[ks] = np.arange(ks.size)
+    mine = sub[pl.group] >= 0
+    qw = nearest_points(np.concatenate([pl.xy[mine], xy_w]), np.concatenate([pl.sr[mine], sr_w]),
+                        np.concatenate([sub[pl.group[mine]], sub[lab_w]]), ks.size,
+                        lambda: ctx.ground_xy, ctx.contact_edge_scores,
+                        np.concatenate([pl.at_border[mine], bd_w]))
+    new = np.full_like(q, np.nan)
+    new[ks] = qw
+    return _nearer(q, new, True)
+
+
+def _view_edge(c: GpodConfig, pl: Placement, q: np.ndarray) -> np.ndarray:
+    """A face going out of the view (a wall beside the path): its nearest visible point
+    is where it leaves the image (`view_edge_points`), when nearer."""
+    ctx = pl.ctx
+    return _nearer(q, view_edge_points(pl.xy, pl.group, pl.n, ctx.to_image, ctx.cam.width,
+                                       ctx.cam.height, lambda: ctx.ground_xy), True)
+
+
+def _face_gap(c: GpodConfig, pl: Placement, q: np.ndarray) -> np.ndarray:
+    """A face seen as two obstacles (its middle has no edges): its nearest point
+    (`face_gap_points`)."""
+    return _nearer(q, face_gap_points(pl.xy, pl.group, pl.n, q, lambda: pl.ctx.ground_xy),
+                   False)
+
+
+def _lone_face(c: GpodConfig, pl: Placement, q: np.ndarray) -> np.ndarray:
+    """A low obstacle seen by one silhouette edge: the face the image shows beside it
+    (`lone_face_points`)."""
+    return _nearer(q, lone_face_points(pl.ctx, pl.xy, pl.group, pl.n, q, pl.height,
+                                       pl.at_border, pl.lone_floor), False)
+
+
 #: Every rule by list and name (`GpodConfig.rules` names them in the order they run).
 PIXEL_RULES: dict[str, Rule] = {
     'periodic_pattern': _periodic_pattern,
@@ -371,6 +461,12 @@ STRING_RULES: dict[str, Rule] = {
 DROP_RULES: dict[str, Rule] = {
     'drop_region': _drop_region,
     'ground_bend': _ground_bend_down,
+}
+PLACEMENT_RULES: dict[str, PlacementRule] = {
+    'silhouettes': _silhouettes,
+    'view_edge': _view_edge,
+    'face_gap': _face_gap,
+    'lone_face': _lone_face,
 }
 
 

@@ -621,12 +621,14 @@ PIXEL_RULE_NAMES = ('periodic_pattern', 'ambiguous_drop', 'hanging_run', 'floati
                     'lower_ground_continuation', 'string_pieces')
 STRING_RULE_NAMES = ('floating_string', 'ground_bend', 'repetitive_pattern', 'half_occlusion')
 DROP_RULE_NAMES = ('drop_region', 'ground_bend')
+PLACEMENT_RULE_NAMES = ('silhouettes', 'view_edge', 'face_gap', 'lone_face')
 
 
 @dataclass(frozen=True)
 class RuleSettings:
-    """GPOD stages 6-7: the named rules of the obstacle and drop-off test, run in the
-    order listed (core/gpod/rules.py; a rule left out is off) (``GpodConfig.rules``)."""
+    """GPOD stages 6-10: the named rules of the obstacle and drop-off test and of the
+    nearest point, run in the order listed (core/gpod/rules.py; a rule left out is off)
+    (``GpodConfig.rules``)."""
 
     pixels: tuple[str, ...] = param(
         PIXEL_RULE_NAMES, 'Rules on the obstacle and drop pixels, in order: '
@@ -648,10 +650,18 @@ class RuleSettings:
         'in a region of lower ground, drops.region_*), ground_bend (ground falling away '
         'beyond a brow, bend.*)')
 
+    placement: tuple[str, ...] = param(
+        PLACEMENT_RULE_NAMES, "Rules that move an obstacle's nearest point from that of its "
+        'own feet, in order: silhouettes (edges just under the thresholds that are its '
+        'silhouette reveal a hidden near corner), view_edge (a face running out of the '
+        'image: where it leaves the view), face_gap (a face seen as two obstacles: its '
+        'middle), lone_face (a low obstacle seen by one silhouette edge: the face the '
+        'image shows beside it)')
+
     def __post_init__(self) -> None:
         check_fields(self)
         for name, known in (('pixels', PIXEL_RULE_NAMES), ('strings', STRING_RULE_NAMES),
-                            ('drops', DROP_RULE_NAMES)):
+                            ('drops', DROP_RULE_NAMES), ('placement', PLACEMENT_RULE_NAMES)):
             listed = getattr(self, name)
             if not isinstance(listed, tuple):
                 raise TypeError(f'RuleSettings.{name} must be a list of rule names, got '
@@ -679,7 +689,7 @@ class GpodConfig:
     detection: DetectionSettings = group(DetectionSettings,
                                          'stages 5-7: obstacle pixels, runs and clusters')
     drops: DropSettings = group(DropSettings, 'stages 6-7: drop-offs')
-    rules: RuleSettings = group(RuleSettings, 'stages 6-7: the named rules, in order')
+    rules: RuleSettings = group(RuleSettings, 'stages 6-10: the named rules, in order')
     bend: BendSettings = group(BendSettings, 'stage 7: rule ground_bend')
     coarse: CoarseSettings = group(CoarseSettings, 'stage 11: the binned second pass')
     unseen: UnseenSettings = group(UnseenSettings, 'stage 12: unseen ground')
