@@ -1355,29 +1355,6 @@ def test_hanging_runs():
     np.testing.assert_array_equal(np.flatnonzero(got), [0, 1, 2, 3])
 
 
-def test_floating_bottom_runs():
-    """The lowest matched run of a string that floats (nothing of the string below holds
-    it up), while the string stands on the ground above it in the image (farther: a far
-    wall's streak whose bottom stretch was matched 58 px off, 1 m up, made an obstacle
-    "1.5 metres ahead"), is found. A string whose lowest run stands on the ground with a
-    floating run above it (a post's top, matched at another depth or not), and a string
-    that floats whole (the string-wide test's case), are not."""
-    from asmonc_vision.core.gpod import floating_bottom_runs
-    #            string 0: wall on top, mismatch below | string 1: post | string 2: floats
-    sid = np.array([0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 2, 2, 2])
-    v = np.array([36, 37, 38, 40, 41, 42, 50, 51, 52, 53, 54, 60, 61, 62])
-    prev = np.array([-1, 0, 1, -1, 3, 4, -1, 6, 7, -1, 9, -1, 11, 12])
-    h = np.array([0.4, 0.35, 0.3, 1.1, 1.08, 1.06, 1.2, 1.1, 1.0, 0.2, 0.0, 0.9, 0.8, 0.7])
-    ok = np.ones(14, bool)
-    got = floating_bottom_runs(sid, v, prev, h, ok, 0.5, ok)
-    np.testing.assert_array_equal(np.flatnonzero(got), [3, 4, 5])
-    # only the strings with a tested match are looked at; unusable matches do not count
-    assert not floating_bottom_runs(sid, v, prev, h, ok, 0.5, sid == 1).any()
-    unusable = ok.copy()
-    unusable[:3] = False                       # the wall's pixels not usable: floats whole
-    assert not floating_bottom_runs(sid, v, prev, h, unusable, 0.5, ok).any()
-
-
 @pytest.mark.parametrize('compiled', [True, False])
 def test_hanging_runs_follow_a_long_chain_of_mismatched_stretches(monkeypatch, compiled):
     """An edge that alternates all the way down between its own depth and one a period

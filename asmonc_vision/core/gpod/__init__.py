@@ -35,7 +35,6 @@ from .nearest import hidden_corner, hidden_corners, nearest_point, nearest_point
 from .results import GpodFeatures, GpodObstacle, GpodPlane, GpodResult
 from .runs import (
     continuation_alternatives,
-    floating_bottom_runs,
     hanging_runs,
     matched_run_length,
     occluded_matches,
@@ -48,7 +47,7 @@ from .settings import STATUSES, GpodConfig
 __all__ = [
     'GpodConfig', 'GpodDetector', 'GpodFeatures', 'GpodObstacle', 'GpodPlane', 'GpodResult',
     'STATUSES', 'bin_pair', 'cluster_points_2d', 'continuation_alternatives', 'described_by_part',
-    'face_gap_points', 'floating_bottom_runs', 'hanging_runs', 'hidden_corner', 'hidden_corners',
+    'face_gap_points', 'hanging_runs', 'hidden_corner', 'hidden_corners',
     'lone_face_points', 'matched_run_length', 'nearest_point', 'nearest_points',
     'occluded_matches', 'run_links', 'silhouette_owners', 'smooth_along_runs', 'soft_nearest',
     'string_feet', 'string_pieces', 'view_edge_points',

@@ -35,7 +35,6 @@ from .grouping import cluster_points_2d
 from .nearest import nearest_points
 from .runs import (
     continuation_alternatives,
-    floating_bottom_runs,
     hanging_runs,
     occluded_matches,
     string_pieces,
@@ -173,13 +172,6 @@ def _hanging_run(c: GpodConfig, ev: FrameEvidence) -> None:
         ev.obst &= ~hanging_runs(ev.el, ev.m, ev.prev, ev.h, c.detection.max_floating_height_m,
                                  c.detection.string_disparity_tolerance_px, ev.slope, ev.obst,
                                  solid=ev.run >= c.detection.min_matched_run)
-
-
-def _floating_bottom_run(c: GpodConfig, ev: FrameEvidence) -> None:
-    """The lowest run of a string floating above the ground (`floating_bottom_runs`)."""
-    if ev.obst.any():
-        ev.obst &= ~floating_bottom_runs(ev.sid, ev.m.v, ev.prev, ev.h, ev.usable,
-                                         c.detection.max_floating_height_m, ev.obst)
 
 
 def _lower_ground_continuation(c: GpodConfig, ev: FrameEvidence) -> None:
@@ -448,7 +440,6 @@ PIXEL_RULES: dict[str, Rule] = {
     'periodic_pattern': _periodic_pattern,
     'ambiguous_drop': _ambiguous_drop,
     'hanging_run': _hanging_run,
-    'floating_bottom_run': _floating_bottom_run,
     'lower_ground_continuation': _lower_ground_continuation,
     'string_pieces': _string_pieces,
 }

@@ -1,7 +1,7 @@
 """Matched runs along edge strings (figural continuity): the links between a string's
 matched pixels, their run lengths and smoothing along runs, half-occluded matches,
-runs that hang over another depth of their own string or float above the ground, and
-the cut of a string where it runs along the ground.
+runs that hang over another depth of their own string or over its continuation on the
+lower ground beyond a drop, and the cut of a string where it runs along the ground.
 """
 from __future__ import annotations
 
@@ -283,66 +283,6 @@ def _robust_row_slope(u: np.ndarray, v: np.ndarray, d: np.ndarray) -> float:
             break
         coef = np.linalg.lstsq(a[keep], d[keep], rcond=None)[0]
     return float(coef[1])
-
-
-def floating_bottom_runs(sid: np.ndarray, v: np.ndarray, prev: np.ndarray, h: np.ndarray,
-                         ok: np.ndarray, max_height: float, only: np.ndarray) -> np.ndarray:
-    """Matches in the lowest matched run of their edge string when that run floats: its
-    lowest usable pixel more than ``max_height`` metres above the ground, while the
-    string stands on the ground elsewhere (a usable pixel within ``max_height``). The
-    string-wide test (`GpodConfig.detection.max_floating_height_m`) let such a run through: a
-    stretch of a far wall's streak matched 58 px off for 10 rows, at the bottom of a
-    string whose upper pixels lie on the wall 9 m away, made an obstacle "1.5 metres
-    ahead" floating 1 m high. Nothing of its string below it holds it up (that is
-    `hanging_runs`'s case), and what stands on the ground lies above it in the image:
-    farther, another surface.
-
-    Args:
-        sid: (K,) edge string of each match; v: (K,) its image row.
-        prev: :func:`run_links` of the matches (the next pixel up the run, -1 at a top).
-        h: (K,) height above the ground plane, metres.
-        ok: (K,) bool, the usable matches (reliably matched, in range).
-        max_height: metres.
-        only: (K,) bool: only strings with such a match are tested (obstacle pixels).
-    Returns:
-        (K,) bool.
-    """
-    k = sid.shape[0]
-    out = np.zeros(k, bool)
-    cand = only & (h > max_height)
-    if not cand.any():
-        return out
-    # the strings with a floating tested match, and their matches (runs stay within a
-    # string, so the run links stay within the selection)
-    has = np.zeros(int(sid.max()) + 1, bool)
-    has[sid[cand]] = True
-    sel = np.flatnonzero(has[sid])
-    pos = np.full(k, -1, np.int64)
-    pos[sel] = np.arange(sel.size)
-    p = prev[sel]
-    # run label: the top pixel of each run (pointer jumping up the prev links)
-    lab = np.where(p >= 0, pos[np.maximum(p, 0)], np.arange(sel.size))
-    while True:
-        nxt = lab[lab]
-        if np.array_equal(nxt, lab):
-            break
-        lab = nxt
-    s_sid, s_v, s_h, s_ok = sid[sel], v[sel], h[sel], ok[sel]
-    idx = np.flatnonzero(s_ok)
-    if idx.size == 0:
-        return out
-    # each string's lowest usable pixel (largest row) and the run it is in
-    order = idx[np.lexsort((-s_v[idx], s_sid[idx]))]
-    first = np.concatenate((_TRUE, s_sid[order][1:] != s_sid[order][:-1]))
-    bottom_run = np.full(has.size, -1, np.int64)
-    bottom_run[s_sid[order][first]] = lab[order][first]
-    run_low = np.full(sel.size, np.inf)
-    np.minimum.at(run_low, lab[idx], s_h[idx])
-    grounded = np.zeros(has.size, bool)
-    grounded[s_sid[idx][s_h[idx] <= max_height]] = True
-    out[sel] = ((lab == bottom_run[s_sid]) & (run_low[lab] > max_height)
-                & grounded[s_sid])
-    return out
 
 
 def _matches_below(e: np.ndarray, below: np.ndarray, feat_of_edge: np.ndarray,

@@ -617,7 +617,7 @@ class TrackSettings:
 
 
 #: The named rules (core/gpod/rules.py) each list of `RuleSettings` may hold.
-PIXEL_RULE_NAMES = ('periodic_pattern', 'ambiguous_drop', 'hanging_run', 'floating_bottom_run',
+PIXEL_RULE_NAMES = ('periodic_pattern', 'ambiguous_drop', 'hanging_run',
                     'lower_ground_continuation', 'string_pieces')
 STRING_RULE_NAMES = ('floating_string', 'ground_bend', 'repetitive_pattern', 'half_occlusion')
 DROP_RULE_NAMES = ('drop_region', 'ground_bend')
@@ -635,8 +635,7 @@ class RuleSettings:
         'periodic_pattern (a match with detection.periodic_min_rivals strong rivals, one on '
         'the ground, is no evidence), ambiguous_drop (a drop pixel with a strong nearer '
         'rival on the ground is none), hanging_run (a run hanging over another depth of '
-        'its own string), floating_bottom_run (the lowest run of a string floating above '
-        'the ground), lower_ground_continuation (a run that could be its string matched '
+        'its own string), lower_ground_continuation (a run that could be its string matched '
         'on the lower ground beyond a drop), string_pieces (the string rule per piece of '
         'a string between stretches on the ground)')
     strings: tuple[str, ...] = param(
