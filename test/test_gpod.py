@@ -22,7 +22,6 @@ from asmonc_vision.core.gpod import grouping as gpod_grouping
 from asmonc_vision.core.gpod import kernels as gk
 from asmonc_vision.core.gpod import kernels_geometry as gkg
 from asmonc_vision.core.gpod import nearest as gpod_nearest
-from asmonc_vision.core.gpod import support as gpod_support
 
 CAM = StereoCamera(f=300.0, cx=159.5, cy=119.5, baseline=0.35, width=320, height=240)
 HEIGHT = 1.25
@@ -1687,7 +1686,7 @@ def test_a_noisy_camera_makes_no_obstacles_on_clear_pavement():
 #: The gpod kernels checked here, each with a numpy path beside it.
 _NEW_GPOD_KERNELS = ('nb_extremes', 'nb_soft_args', 'nb_arcs', 'nb_contact_bounds',
                      'nb_owners', 'nb_group_quantile', 'nb_extent', 'nb_runs',
-                     'nb_occluded_all', 'nb_hanging_all', 'nb_on_ground', 'nb_still',
+                     'nb_occluded_all', 'nb_hanging_all', 'nb_still',
                      'nb_temporal', 'nb_thin')
 _NEW_MATCHING_KERNELS = ('nb_candidates', 'nb_cells', 'nb_siblings', 'nb_link_rows')
 #: the modules of the gpod kernels
@@ -2029,13 +2028,11 @@ def test_run_and_string_kernels_equal_numpy(box_frame, monkeypatch):
                  gpod.occluded_matches(er, shuffled, 1.0, trusted[perm]),
                  gpod.occluded_matches(er, shuffled, 0.5, trusted[perm], neighbours=1)]
                 + [gpod.hanging_runs(el, m, prev, h, top, 1.0, 0.1, sel)
-                   for top in (0.2, 0.5, 1.0) for sel in (None, only)]
-                + [gpod_support._ground_candidates(cand, el, er, det._abc, thr)
-                   for thr in (0.3, 0.8)])
+                   for top in (0.2, 0.5, 1.0) for sel in (None, only)])
 
     _, slow = _compiled_equals_numpy(monkeypatch, _GPOD,
                                      ('nb_runs', 'nb_occluded_all', 'nb_hanging_all',
-                                      'nb_on_ground', 'nb_occluded', 'nb_hanging'), rest)
+                                      'nb_occluded', 'nb_hanging'), rest)
     assert all(y.any() and not y.all() for y in slow)
     np.testing.assert_array_equal(slow[2], slow[0][perm])
     # (a match's neighbours are its string's matches in row order, whatever their order)

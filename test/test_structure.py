@@ -32,7 +32,7 @@ PRIVATE_IMPORTS_PENDING: dict[str, tuple[str, ...]] = {
                                    '_WEAK_HEIGHT_RATIO', '_face_hides_kernel'),
     'core.gpod.nearest': ('_body_gap', '_ground_inside'),
     'core.gpod.runs': ('_TRUE', '_robust_row_slope'),
-    'core.gpod.support': ('_Pass', '_below_view', '_features', '_ground_candidates',
+    'core.gpod.support': ('_Pass', '_below_view', '_features',
                           '_mad_sigma', '_moved_roi', '_noise_key', '_planes_agree',
                           '_state_metric', '_still_motion'),
 }

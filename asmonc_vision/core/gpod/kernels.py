@@ -451,24 +451,6 @@ def _extent_kernel(label, n_c, g2, mx, my, norm, ex, ul, vv, sid, high):
 nb_extent = _jit(_extent_kernel)
 
 
-def _on_ground_kernel(c_left, c_right, c_d, u_l, v_l, u_r, abc, threshold, n_left):
-    """The left edges of rule repetitive_pattern (`rules.py`) with a candidate match on the ground
-    (for numba): (n_left,) bool, some candidate's disparity within ``threshold`` pixels
-    of the plane ``abc`` at its cyclopean position (``(a u + b v) + c``, as
-    `plane_disparity`)."""
-    out = np.zeros(n_left, np.bool_)
-    a, b, c = abc[0], abc[1], abc[2]
-    for q in range(c_left.shape[0]):
-        e = c_left[q]
-        uc = 0.5 * (np.float64(u_l[e]) + np.float64(u_r[c_right[q]]))
-        if abs(c_d[q] - (a * uc + b * np.float64(v_l[e]) + c)) <= threshold:
-            out[e] = True
-    return out
-
-
-nb_on_ground = _jit(_on_ground_kernel)
-
-
 def _still_kernel(prev, use, v, u_int, h, w):
     """`GpodDetector._stillness` (for numba): the (h, w + 2) bool image of the edge
     pixels (rows ``v``, columns ``u_int`` + 1), and, when ``use``, how many of them were
@@ -584,7 +566,7 @@ def warm_up() -> None:
     """Compile the numba kernels once per process (see `matching.warm_up`), before the
     first frame; falls back to the numpy paths if numba is missing or fails."""
     global _warm, nb_occluded, nb_hanging, nb_link_groups, nb_group_quantile, nb_extent, \
-        nb_runs, nb_occluded_all, nb_hanging_all, nb_on_ground, nb_still, nb_temporal, nb_thin
+        nb_runs, nb_occluded_all, nb_hanging_all, nb_still, nb_temporal, nb_thin
     if _warm:
         return
     _warm = True
@@ -593,7 +575,7 @@ def warm_up() -> None:
     if not matching_warm_up() or nb_occluded is None:
         nb_occluded = nb_hanging = nb_link_groups = None
         nb_group_quantile = nb_extent = nb_runs = nb_occluded_all = None
-        nb_hanging_all = nb_on_ground = nb_still = nb_temporal = nb_thin = None
+        nb_hanging_all = nb_still = nb_temporal = nb_thin = None
         kernels_geometry.warm_up(False)
         return
     kernels_geometry.warm_up(True)
@@ -603,8 +585,6 @@ def warm_up() -> None:
     nb_still = _warmed(nb_still, np.zeros((1, 3), bool), True, v1, v1, 1, 1)
     nb_temporal = _warmed(nb_temporal, v1, u1, f1, f1, True, 0.5, 0.75, 0.8, True,
                           np.zeros((1, 1), np.float32), np.ones((1, 1), np.float32), 1, 1)
-    nb_on_ground = _warmed(nb_on_ground, i1, i1, f1, np.zeros(1, np.float32),
-                           np.zeros(1, np.int32), np.zeros(1, np.float32), np.zeros(3), 1.0, 1)
     nb_runs = _warmed(nb_runs, np.full(1, -1, np.int32), np.zeros(1, np.int32),
                       np.zeros(1, np.float32), 1, np.float32(1.0), 5, f1)
     nb_extent = _warmed(nb_extent, i1, 1, f2, f1, f1, f1 + 1.0, f1,

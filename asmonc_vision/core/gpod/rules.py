@@ -40,11 +40,10 @@ from .runs import (
     string_pieces,
 )
 from .settings import GpodConfig
-from .support import _ground_candidates
 
-#: Obstacle pixels this far above the plane (pixels) or more are checked for a ground
-#: alternative (rule ``repetitive_pattern``): a repetitive pattern matched one period
-#: off; genuine small obstacles are never this far above the plane.
+#: Obstacle pixels this far above the plane (pixels) or more are checked for a match on
+#: the lower ground beyond a drop (rule ``lower_ground_continuation``): a repetitive
+#: pattern matched one period off; genuine small obstacles are never this far above it.
 AMBIGUOUS_EXCESS_PX = 3.0
 
 #: A run hanging over lower ground (rule ``lower_ground_continuation``) is checked only
@@ -265,23 +264,6 @@ def _ground_bend_up(c: GpodConfig, ev: FrameEvidence) -> None:
                              c.detection.cluster_radius_m, 1.0)
 
 
-def _repetitive_pattern(c: GpodConfig, ev: FrameEvidence) -> None:
-    """Edge strings whose obstacle pixels are well above the plane (>
-    `AMBIGUOUS_EXCESS_PX`) but, for at least ``detection.ambiguity_fraction`` of them,
-    the left edge also had a candidate match on the ground (|excess| <= the frame's
-    threshold): a repetitive pattern matched one period off."""
-    s = ev.obst_string
-    assert s is not None
-    if c.detection.ambiguity_fraction <= 0 or not s.any():
-        return
-    m = ev.m
-    on_ground = _ground_candidates(ev.cand, ev.el, ev.er, ev.abc, ev.thr_global)
-    alt = ev.obst & (ev.excess > AMBIGUOUS_EXCESS_PX) & on_ground[m.left_index]
-    n_alt = np.bincount(m.string_id[alt], minlength=ev.n_s)
-    n_obst = np.bincount(m.string_id[ev.obst], minlength=ev.n_s)
-    s &= ~(n_alt >= c.detection.ambiguity_fraction * np.maximum(n_obst, 1))
-
-
 def _half_occlusion(c: GpodConfig, ev: FrameEvidence) -> None:
     """A left edge matched to the silhouette of an obstacle (a nearer surface) in the
     right image is hidden there (`occluded_matches`): a string that is an obstacle or a
@@ -446,7 +428,6 @@ PIXEL_RULES: dict[str, Rule] = {
 STRING_RULES: dict[str, Rule] = {
     'floating_string': _floating_string,
     'ground_bend': _ground_bend_up,
-    'repetitive_pattern': _repetitive_pattern,
     'half_occlusion': _half_occlusion,
 }
 DROP_RULES: dict[str, Rule] = {

@@ -347,11 +347,6 @@ class DetectionSettings:
         "that the left image's pixel noise gives, estimated every few frames): the larger "
         'of min_strength and this times the gradient noise applies, so that on a '
         'noisy camera edges made by the noise count less (0 = off)', range=(0.0, 1000.0))
-    ambiguity_fraction: float = param(
-        0.8, 'An obstacle string whose excess is above 3 px is dropped when at least this '
-        'fraction of its obstacle pixels also had a candidate match on the ground plane (a '
-        'repetitive pattern, e.g. paving joints matched one tile off); 0 = off',
-        range=(0.0, 1.0))
     ambiguous_match_ratio: float = param(
         0.8, 'A matched edge pixel is no evidence of a drop-off when another candidate '
         'match of its left or right edge, at a larger disparity on the ground (within the '
@@ -619,7 +614,7 @@ class TrackSettings:
 #: The named rules (core/gpod/rules.py) each list of `RuleSettings` may hold.
 PIXEL_RULE_NAMES = ('periodic_pattern', 'ambiguous_drop', 'hanging_run',
                     'lower_ground_continuation', 'string_pieces')
-STRING_RULE_NAMES = ('floating_string', 'ground_bend', 'repetitive_pattern', 'half_occlusion')
+STRING_RULE_NAMES = ('floating_string', 'ground_bend', 'half_occlusion')
 DROP_RULE_NAMES = ('drop_region', 'ground_bend')
 PLACEMENT_RULE_NAMES = ('silhouettes', 'view_edge', 'face_gap', 'lone_face')
 
@@ -641,9 +636,8 @@ class RuleSettings:
     strings: tuple[str, ...] = param(
         STRING_RULE_NAMES, 'Rules on the obstacle strings, in order: floating_string (all '
         'its reliable pixels above detection.max_floating_height_m: a mismatch), '
-        'ground_bend (ground rising beyond a dip, bend.*), repetitive_pattern (most of its '
-        'pixels also matched on the ground, detection.ambiguity_fraction), half_occlusion '
-        '(an obstacle only through edges hidden in the right image)')
+        'ground_bend (ground rising beyond a dip, bend.*), half_occlusion (an obstacle only '
+        'through edges hidden in the right image)')
     drops: tuple[str, ...] = param(
         DROP_RULE_NAMES, 'Rules on the drop-off strings, in order: drop_region (a string '
         'in a region of lower ground, drops.region_*), ground_bend (ground falling away '

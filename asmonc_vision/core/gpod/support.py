@@ -9,12 +9,11 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-from ..camera import MetricPlane, StereoCamera, plane_disparity
+from ..camera import MetricPlane, StereoCamera
 from ..edges import EdgeMap
 from ..ground_plane import plane_is_plausible
-from ..matching import Candidates, Matches
+from ..matching import Matches
 from ..motion.geometry import so3_log
-from . import kernels as kn
 from .results import GpodFeatures, GpodObstacle
 
 #: Largest camera translation (m) and rotation (rad) between two frames of a rig seen
@@ -53,21 +52,6 @@ def _still_motion(motion: tuple) -> bool:
     standing still: |t| <= 2 cm and a rotation of at most 1 degree."""
     return (float(np.linalg.norm(np.asarray(motion[1], float))) <= _STILL_MAX_TRANSLATION_M
             and float(np.linalg.norm(so3_log(motion[0]))) <= _STILL_MAX_ROTATION_RAD)
-
-
-def _ground_candidates(cand: Candidates, el: EdgeMap, er: EdgeMap, abc: np.ndarray,
-                       threshold: float) -> np.ndarray:
-    """(N_left,) bool: the left edges with a candidate match on the ground plane ``abc``
-    (its disparity within ``threshold`` pixels of the plane's at the candidate's
-    cyclopean position)."""
-    if kn.nb_on_ground is not None and type(threshold) in (float, int):
-        return kn.nb_on_ground(cand.left, cand.right, cand.d, el.u, el.v, er.u,
-                             np.asarray(abc, np.float64), float(threshold), len(el))
-    uc = 0.5 * (el.u[cand.left].astype(np.float64) + er.u[cand.right])
-    exc_c = cand.d - plane_disparity(abc, uc, el.v[cand.left].astype(np.float64))
-    on_ground = np.zeros(len(el), bool)
-    on_ground[cand.left[np.abs(exc_c) <= threshold]] = True
-    return on_ground
 
 
 def _planes_agree(abc0: np.ndarray, abc1: np.ndarray, cam: StereoCamera,
