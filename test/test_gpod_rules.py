@@ -51,9 +51,9 @@ def _evidence(d, rivals, pd, thr):
                 rival_d=r[:, 1].astype(np.float32), rival_ratio=r[:, 2].astype(np.float32))
     none = None
     return rules.FrameEvidence(
-        m=m, el=none, er=none, cand=none, metric=none, abc=np.zeros(3),  # type: ignore
+        m=m, el=none, er=none, cand=none, metric=none,  # type: ignore
         pd=np.full(k, pd), pts=np.zeros((k, 3)), h=np.zeros(k), excess=np.zeros(k),
-        ex_mean=np.zeros(k), thr=np.full(k, thr), thr_global=thr, prev=np.full(k, -1),
+        ex_mean=np.zeros(k), thr=np.full(k, thr), prev=np.full(k, -1),
         run=np.full(k, 5), usable=np.ones(k, bool), below=np.zeros(k, bool), slope=1.0,
         weight=np.ones(k), min_px=2.0, n_s=1, obst=np.ones(k, bool), drop=np.ones(k, bool))
 

@@ -174,7 +174,7 @@ class Detection(PlaneTracking):
         plane's disparity range d_min .. d_max; ``still``: the rig stood still): (the
         features with their obstacle / drop classes, the detections nearest first)."""
         c = self.config
-        thr, thr_global = self.pixel_thresholds(_noise_key(m), v)
+        thr, _ = self.pixel_thresholds(_noise_key(m), v)
         pd, pts, h, low = self._ground_reference(u, v, d, cam, metric, thr / c.threshold.k)
         excess = d - pd
         feet = pts - h[:, None] * metric.normal_up[None, :]
@@ -201,9 +201,8 @@ class Detection(PlaneTracking):
             drop = below & (pd >= cam.fb / c.detection.max_range_m) & (pd <= d_max) & usable
         sid = m.string_id
         n_s = max(el.num_strings, int(sid.max()) + 1 if sid.size else 0)
-        ev = FrameEvidence(m=m, el=el, er=er, cand=cand, metric=metric,
-                           abc=cast(np.ndarray, self._abc), pd=pd, pts=pts, h=h,
-                           excess=excess, ex_mean=ex_mean, thr=thr, thr_global=thr_global,
+        ev = FrameEvidence(m=m, el=el, er=er, cand=cand, metric=metric, pd=pd, pts=pts, h=h,
+                           excess=excess, ex_mean=ex_mean, thr=thr,
                            prev=prev, run=run, usable=usable, below=below, slope=slope,
                            weight=self._evidence_weight(m.strength),
                            min_px=self.min_obstacle_pixels(cam), n_s=n_s, obst=obst, drop=drop)

@@ -68,14 +68,12 @@ class FrameEvidence:
     er: EdgeMap                 # right edges
     cand: Candidates            # every candidate match of the left edges
     metric: MetricPlane
-    abc: np.ndarray             # (3,) the plane d = a*u + b*v + c
     pd: np.ndarray              # (K,) the ground reference's disparity at each match
     pts: np.ndarray             # (K, 3) each match in the camera frame, m
     h: np.ndarray               # (K,) height above the ground reference, m
     excess: np.ndarray          # (K,) disparity excess over the ground
     ex_mean: np.ndarray         # (K,) the excess averaged along runs (and over frames)
     thr: np.ndarray             # (K,) obstacle threshold per match, px
-    thr_global: float           # the frame's threshold, px
     prev: np.ndarray            # (K,) run links (`run_links`)
     run: np.ndarray             # (K,) matched run length
     usable: np.ndarray          # (K,) bool: reliably matched (long enough run), in range
