@@ -839,13 +839,15 @@ def test_perception_with_the_map_reports_confirmed_obstacles():
 def test_a_tall_report_passes_the_map_unconfirmed(pass_height):
     """A detector report at least pass_height_m tall where the map holds nothing (a
     person walking towards the wearer: new cells every pair) is published; a low one
-    there is not (a mismatch); with pass_height_m 0 neither is."""
+    there is not (a mismatch); with pass_height_m 0 neither is (chains of moving reports
+    off: `test_moving_reports.py`)."""
     import dataclasses
     from asmonc_vision.io.frames import load_frames
     from asmonc_vision.core.perception import Perception
     from conftest import BAGS
 
-    p = Perception(map_config=EvidenceMapConfig(enabled=True, pass_height_m=pass_height))
+    p = Perception(map_config=EvidenceMapConfig(enabled=True, pass_height_m=pass_height,
+                                                moving_min_height_m=0.0))
     real = p.detector.process
 
     def with_two_more(*a, **k):
@@ -907,3 +909,80 @@ def test_detector_node_publishes_the_map(ros_context):
     # the obstacles published are the map's: confident, and ids given
     last = got['obstacles'][-1].obstacles
     assert len(last) >= 3 and all(o.confidence > 0.5 and o.id > 0 for o in last)
+
+
+def test_a_passer_by_reported_pair_after_pair_passes_the_map_a_blinking_one_does_not():
+    """A 0.8 m detector report that comes 0.1 m nearer each pair where the map holds
+    nothing (a passer-by's legs) is published from the third pair of its chain on; one
+    that shows in every other pair only (a mismatch that comes and goes) never is."""
+    import dataclasses
+    from asmonc_vision.io.frames import load_frames
+    from asmonc_vision.core.perception import Perception
+    from conftest import BAGS
+
+    p = Perception(map_config=EvidenceMapConfig(enabled=True))
+    real = p.detector.process
+    n = {'i': 0}
+
+    def with_two_more(*a, **k):
+        r = real(*a, **k)
+        if not r.obstacles:          # the bag's first pairs show nothing to copy
+            return r
+        i = n['i']
+        n['i'] += 1
+        ob = r.obstacles[0]
+        rg = 4.0 - 0.1 * i
+        def at(r, b, tid):           # on the right (b < 0) or left, where no box is
+            return dataclasses.replace(ob, position=np.array([-r * np.sin(b), 0.4,
+                                                              r * np.cos(b)]),
+                                       height=0.8, range=r, bearing=b, track_id=tid)
+        more = [at(rg, -0.8, 903)] + ([at(2.0, 0.9, 904)] if i % 2 == 0 else [])
+        return dataclasses.replace(r, obstacles=r.obstacles + tuple(more))
+
+    p.detector.process = with_two_more
+    seen = []
+    for f in load_frames(BAGS / 'static_obstacles', 26):
+        res = p.process(f.left, f.right, f.cam, stamp_ns=f.stamp_ns)
+        if n['i'] >= 1:
+            seen.append({o.track_id for o in res.obstacles})
+    assert p.map.placed_pairs >= p.map_config.min_placed_pairs
+    assert len(seen) >= 5
+    assert [903 in s for s in seen] == [False, False] + [True] * (len(seen) - 2), seen
+    assert not any(904 in s for s in seen)
+
+
+@pytest.mark.parametrize('coasted', [False, True])
+def test_a_pair_whose_plane_was_carried_over_while_moving_adds_no_evidence(coasted):
+    """A pair whose refit failed (its plane carried over from the pair before) while the
+    rig moved enters nothing into the map unless ``coasted_plane_evidence``; one whose
+    plane was carried while the rig stood still (the plane is still right) does."""
+    import dataclasses
+    from asmonc_vision.io.frames import load_frames
+    from asmonc_vision.core.perception import Perception
+    from conftest import BAGS
+
+    p = Perception(map_config=EvidenceMapConfig(enabled=True, coasted_plane_evidence=coasted))
+    real_process, real_evidence = p.detector.process, p.evidence
+    n, entered = {'i': 0}, []
+
+    def carried(*a, **k):
+        r = real_process(*a, **k)
+        i = n['i']
+        n['i'] += 1
+        if r.status == 'tracking' and i % 3 == 1:        # carried over, moving
+            return dataclasses.replace(r, plane_updated=False, still=False)
+        if r.status == 'tracking' and i % 3 == 2:        # carried over, standing
+            return dataclasses.replace(r, plane_updated=False, still=True)
+        return r
+
+    def evidence(res, cam):
+        entered.append(n['i'] - 1)
+        return real_evidence(res, cam)
+
+    p.detector.process, p.evidence = carried, evidence
+    for f in load_frames(BAGS / 'static_obstacles', 12):
+        p.process(f.left, f.right, f.cam, stamp_ns=f.stamp_ns)
+    tracked = [i for i in range(3, 12)]               # after the calibration pairs
+    assert set(tracked) - set(entered) == (set() if coasted else
+                                           {i for i in tracked if i % 3 == 1})
+    assert {i for i in tracked if i % 3 == 2} <= set(entered)

@@ -130,9 +130,33 @@ class EvidenceMapConfig:
         "map's placement only)", range=(0.0, 5.0))
     pass_height_m: float = param(
         1.0, "a detector report at least this tall is published whether the map confirms "
-        "it or not: a person walking towards the wearer is in new cells every pair and "
-        "is seldom confirmed, while a mismatch (a grate, a marking) is low, m (0: none "
-        "pass)", range=(0.0, 10.0))
+        "it or not (once chained over pass_frames pairs): a person walking towards the "
+        "wearer is in new cells every pair and is seldom confirmed, while a mismatch (a "
+        "grate, a marking) is low, m (0: none pass)", range=(0.0, 10.0))
+    pass_frames: int = param(
+        2, 'a pass_height_m report is published unconfirmed once it is the last of a chain '
+        'of such reports over this many pairs in a row (`core.moving_reports`; 1: at once): '
+        'one pair\'s ghost is not one', range=(1, 100))
+    moving_min_height_m: float = param(
+        0.6, "a detector report at least this tall (less than pass_height_m) is published "
+        "unconfirmed once it is the last of a chain of such reports, one in each of the "
+        "latest moving_frames pairs, each near one of the pair before "
+        "(`core.moving_reports`): a passer-by's legs stand 0.6-0.9 m up in every pair, a "
+        "ground pattern matched wrongly seldom half a metre and not pair after pair, m "
+        "(0: no chains)", range=(0.0, 10.0))
+    moving_frames: int = param(
+        3, 'pairs in a row a chain of moving_min_height_m reports must span', range=(1, 100))
+    moving_gate_m: float = param(
+        0.3, 'a chained report lies at most this plus moving_max_speed_mps times the time '
+        'between the pairs from one of the pair before (feet in each pair\'s ground frame), m',
+        range=(0.0, 5.0))
+    moving_max_speed_mps: float = param(
+        4.0, 'fastest a chained report may move between pairs in the wearer\'s ground frame '
+        '(a passer-by and the wearer walking towards each other), m/s', range=(0.0, 20.0))
+    moving_max_range_m: float = param(
+        4.5, 'chained reports farther than this along the ground do not count, m (the '
+        'ground ahead is less sure farther on; a passer-by coming at 2.5 m/s is chained '
+        'by 4 m, a second before it must be warned of at 2.5 m)', range=(0.0, 50.0))
     min_region_cells: int = param(1, 'least confirmed cells in a reported region',
                                   range=(1, 10000))
     min_drop_cells: int = param(
@@ -153,6 +177,11 @@ class EvidenceMapConfig:
         'it is reported only while its evidence is younger than unseen_report_s, in view '
         'or not (a thing the wearer walks up to covers its ground and is remembered); '
         '0 = off', range=(0.0, 60.0))
+    coasted_plane_evidence: bool = param(
+        False, "enter a pair's evidence when its ground plane was carried over from the pair "
+        "before (the refit failed) while the rig moves: the camera has pitched since by "
+        "the gait's few degrees a pair, and the ground stands off that plane by that times "
+        "the range (a false drop 3 m ahead of the chest rig, clear_walk 1079)")
     motion_gap_frames: int = param(
         2, 'pairs in a row the rig may move with no motion known (the previous pose held) '
         'before the map is cleared', range=(0, 100))

@@ -26,6 +26,7 @@ from asmonc_vision.core.evidence_map import (DROP, GROUND, NONE, RAISED, Evidenc
 from asmonc_vision.core.gpod import GpodConfig, GpodDetector, GpodResult
 from asmonc_vision.core.map_motion import MotionPredictor
 from asmonc_vision.core.map_reports import objects_to_obstacles
+from asmonc_vision.core.moving_reports import TallReports, report_arrays
 
 
 class Perception:
@@ -47,6 +48,7 @@ class Perception:
         self.detector = GpodDetector(self.gpod_config)
         self.map = EvidenceMap(self.map_config) if self.map_config.enabled else None
         self.motion_predictor = motion_predictor
+        self.tall = TallReports.from_config(self.map_config)
 
     @property
     def config(self) -> GpodConfig:
@@ -56,6 +58,7 @@ class Perception:
     def reset(self) -> None:
         """Restart the detector and forget the map (and the predictor's motions)."""
         self.detector.reset()
+        self.tall.reset()
         if self.map is not None:
             self.map.reset()
         if self.motion_predictor is not None:
@@ -95,8 +98,15 @@ class Perception:
         stamp_s = (stamp_ns * 1e-9 if stamp_ns is not None
                    else result.frame_index * self.gpod_config.tracks.frame_period_s)
         plane = result.metric_plane if result.status == 'tracking' else None
-        ev = self.evidence(result, cam) if plane is not None else None
+        # a plane carried over a pair whose refit failed is last pair's ground: while the
+        # rig moves the camera has pitched since (the gait: a few degrees a pair), and
+        # heights against it are off by that times the range; such a pair's evidence is
+        # left out (the map still moves and reports what it holds)
+        measured = (result.plane_updated or bool(result.still)
+                    or self.map_config.coasted_plane_evidence)
+        ev = self.evidence(result, cam) if plane is not None and measured else None
         objects = self.map.update(stamp_s, plane, ev, m, result.still, cam)
+        passing = self.tall.passing(stamp_s, *report_arrays(result.obstacles))
         if self.map.placed_pairs < self.map_config.min_placed_pairs:
             # the map has not seen enough pairs in a row to confirm anything (a start, or
             # no motion while walking): the detector's reports go out as they are
@@ -107,13 +117,12 @@ class Perception:
                 self.map_config.corridor_half_width_m))
                          if plane is not None else ())
             # the detector's unknown ahead (height NaN, `core.unseen_ground`) is no
-            # evidence for the map, and goes out as it is; so does a tall report
-            # (pass_height_m) the map did not confirm
-            tall = self.map_config.pass_height_m
+            # evidence for the map, and goes out as it is; so does a tall report the map
+            # did not confirm (`core.moving_reports`: a passer-by)
             taken = [o.position for o in obstacles]
-            obstacles += tuple(o for o in result.obstacles if np.isnan(o.height) or (
-                0 < tall <= o.height
-                and not any(np.array_equal(o.position, p) for p in taken)))
+            obstacles += tuple(o for o, ok in zip(result.obstacles, passing)
+                               if np.isnan(o.height) or (ok and not any(
+                                   np.array_equal(o.position, p) for p in taken)))
         ms = (time.perf_counter() - t0) * 1e3
         timings = dict(result.timings_ms)
         timings['map'] = ms

@@ -1,0 +1,101 @@
+"""Tall things that move (`core.moving_reports.TallReports`): which detector reports pass
+the evidence map unconfirmed. No ROS."""
+import math
+
+import numpy as np
+import pytest
+
+from asmonc_vision.core.map_settings import EvidenceMapConfig
+from asmonc_vision.core.moving_reports import MAX_GAP_S, TallReports
+
+DT = 0.1
+
+
+def tall(**kw):
+    c = dict(pass_height_m=1.0, pass_frames=2, moving_min_height_m=0.6, moving_frames=3,
+             moving_gate_m=0.3, moving_max_speed_mps=4.0, moving_max_range_m=4.5)
+    c.update(kw)
+    return TallReports(**c)
+
+
+def feed(t, seq):
+    """Each item: list of (height, range, bearing_deg); returns one bool array per pair."""
+    out = []
+    for i, reps in enumerate(seq):
+        h = np.array([r[0] for r in reps], float)
+        rg = np.array([r[1] for r in reps], float)
+        b = np.radians([r[2] for r in reps]) if reps else np.zeros(0)
+        out.append(t.passing(i * DT, h, rg, b))
+    return out
+
+
+def test_a_passer_by_coming_towards_the_wearer_passes_from_the_third_pair():
+    # legs 0.8 m up, 4.4 m ahead, closing at 2.5 m/s (0.25 m a pair), swaying 5 cm
+    seq = [[(0.8, 4.4 - 0.25 * i, 3.0 * (-1) ** i)] for i in range(6)]
+    got = [bool(p[0]) for p in feed(tall(), seq)]
+    assert got == [False, False, True, True, True, True]
+
+
+def test_reports_that_jump_about_never_pass():
+    # 0.8 m "things" 1.2 m or more from the one of the pair before: no walker moves so
+    rng = np.random.default_rng(3)
+    seq = [[(0.8, 2.0 + 1.2 * (i % 2) + rng.uniform(0, 0.2), 40.0 * (i % 3 - 1))]
+           for i in range(8)]
+    assert not any(p.any() for p in feed(tall(), seq))
+
+
+@pytest.mark.parametrize('height,rng_m', [(0.5, 3.0), (0.8, 5.0), (-0.8, 3.0),
+                                          (math.nan, 3.0)])
+def test_low_far_drop_or_unknown_reports_never_chain(height, rng_m):
+    seq = [[(height, rng_m, 0.0)] for _ in range(6)]
+    assert not any(p.any() for p in feed(tall(), seq))
+
+
+def test_a_report_as_tall_as_pass_height_passes_in_its_second_pair_however_far():
+    got = feed(tall(), [[(1.2, 7.0, 0.0)], [(0.3, 2.0, 0.0), (1.0, 6.9, 3.0)],
+                        [(1.9, 1.6, 10.0)]])
+    assert got[0].tolist() == [False]
+    assert got[1].tolist() == [False, True]
+    assert got[2].tolist() == [False]          # one pair's ghost, far from the last
+    got = feed(tall(pass_frames=1), [[(1.2, 7.0, 0.0)]])
+    assert got[0].tolist() == [True]
+
+
+def test_a_gap_in_time_breaks_the_chain():
+    t = tall()
+    h, b = np.array([0.8]), np.zeros(1)
+    assert not t.passing(0.0, h, np.array([3.0]), b).any()
+    assert not t.passing(0.1, h, np.array([2.9]), b).any()
+    assert not t.passing(0.2 + MAX_GAP_S, h, np.array([2.8]), b).any()  # a new chain
+    assert not t.passing(0.3 + MAX_GAP_S, h, np.array([2.7]), b).any()
+    assert t.passing(0.4 + MAX_GAP_S, h, np.array([2.6]), b).all()
+
+
+def test_a_chain_follows_the_nearest_of_several_and_reset_forgets():
+    t = tall()
+    seq = [[(0.8, 3.0, 0.0), (0.7, 3.0, 60.0)], [(0.8, 2.8, 0.0)], [(0.8, 2.6, 0.0)]]
+    got = feed(t, seq)
+    assert got[2].tolist() == [True]
+    t.reset()
+    assert not t.passing(0.3, np.array([0.8]), np.array([2.4]), np.zeros(1)).any()
+
+
+def test_off_switches():
+    seq = [[(0.8, 3.0, 0.0), (1.5, 3.0, 30.0)] for _ in range(5)]
+    got = feed(tall(moving_min_height_m=0.0, pass_height_m=0.0), seq)
+    assert not any(p.any() for p in got)
+    got = feed(tall(moving_frames=1), [[(0.8, 3.0, 0.0)]])
+    assert got[0].all()
+    with pytest.raises(ValueError, match='pass_frames'):
+        EvidenceMapConfig(pass_frames=0)
+
+
+def test_built_from_the_map_settings():
+    c = EvidenceMapConfig()
+    t = TallReports.from_config(c)
+    assert (t.pass_height_m, t.pass_frames, t.moving_min_height_m, t.moving_frames,
+            t.moving_gate_m, t.moving_max_speed_mps, t.moving_max_range_m) == (
+        c.pass_height_m, c.pass_frames, c.moving_min_height_m, c.moving_frames,
+        c.moving_gate_m, c.moving_max_speed_mps, c.moving_max_range_m)
+    with pytest.raises(ValueError, match='moving_frames'):
+        EvidenceMapConfig(moving_frames=0)
