@@ -155,8 +155,8 @@ class EvidenceMapConfig:
         '(a passer-by and the wearer walking towards each other), m/s', range=(0.0, 20.0))
     moving_max_range_m: float = param(
         4.5, 'chained reports farther than this along the ground do not count, m (the '
-        'ground ahead is less sure farther on; a passer-by coming at 2.5 m/s is chained '
-        'by 4 m, a second before it must be warned of at 2.5 m)', range=(0.0, 50.0))
+        'ground ahead is less sure farther on; a passer-by closing at 2.5 m/s is chained '
+        'by about 4 m, 0.6 s before it must be warned of at 2.5 m)', range=(0.0, 50.0))
     min_region_cells: int = param(1, 'least confirmed cells in a reported region',
                                   range=(1, 10000))
     min_drop_cells: int = param(
