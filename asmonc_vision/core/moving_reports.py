@@ -3,9 +3,9 @@
 The evidence map (`core.evidence_map`) reports what stays where it is while the view
 moves: a mismatched pattern moves in the world, a thing does not. A person walking
 towards the wearer moves too. It is in new cells every pair, each seen once, so the map
-seldom confirms it, while the detector finds it in pair after pair (people_towards
-walks: from 5.4 m on, each pair; the map confirmed it at 1.8 m). What tells a passer-by
-from a mismatch is its height and that it goes somewhere. A ground pattern matched
+seldom confirms it, while the detector finds it in pair after pair (tuning walk
+people_towards 1022: from 5.4 m on, each pair; the map confirmed it at 1.8 m). What
+tells a passer-by from a mismatch is its height and that it goes somewhere. A ground pattern matched
 wrongly stands a few centimetres up, rarely half a metre, and comes and goes from pair
 to pair. A person's matched legs stand 0.6-0.9 m up, in every pair, along a path a
 walker can take.
@@ -14,7 +14,7 @@ walker can take.
 
 * a report at least ``pass_height_m`` tall (a thing that tall is no ground mismatch)
   passes once it is the last of a *chain* of ``pass_frames`` pairs (one pair's ghost, a
-  far wall's texture matched 7 m too near, 2 m tall, in one pair, is not one);
+  far wall's texture matched 6 m too near, 2 m tall, in one pair, is not one);
 * a report at least ``moving_min_height_m`` tall, no farther than
   ``moving_max_range_m``, passes once it is the last of a chain of ``moving_frames``
   pairs.
