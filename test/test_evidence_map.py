@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from asmonc_vision.core.camera import MetricPlane, StereoCamera
-from asmonc_vision.core.evidence_map import (DROP, GROUND, RAISED, EvidenceMap,
+from asmonc_vision.core.evidence_map import (DROP, GROUND, NONE, RAISED, EvidenceMap,
                                              EvidenceMapConfig, PairEvidence, pair_evidence)
 from asmonc_vision.core.map_reports import (CORRIDOR_ID_BASE, MAP_ID_BASE,
                                             objects_to_obstacles)
@@ -951,19 +951,21 @@ def test_a_passer_by_reported_pair_after_pair_passes_the_map_a_blinking_one_does
     assert not any(904 in s for s in seen)
 
 
-@pytest.mark.parametrize('coasted', [False, True])
-def test_a_pair_whose_plane_was_carried_over_while_moving_adds_no_evidence(coasted):
+@pytest.mark.parametrize('enter', ['all', 'ground', 'none'])
+def test_a_pair_whose_plane_was_carried_over_while_moving_enters_what_the_setting_names(
+        enter):
     """A pair whose refit failed (its plane carried over from the pair before) while the
-    rig moved enters nothing into the map unless ``coasted_plane_evidence``; one whose
-    plane was carried while the rig stood still (the plane is still right) does."""
+    rig moved enters into the map what ``carried_plane_evidence`` names: all its evidence,
+    its ground pixels alone, or nothing; one whose plane was carried while the rig stood
+    still (the plane is still right) enters all of it."""
     import dataclasses
     from asmonc_vision.io.frames import load_frames
     from asmonc_vision.core.perception import Perception
     from conftest import BAGS
 
-    p = Perception(map_config=EvidenceMapConfig(enabled=True, coasted_plane_evidence=coasted))
-    real_process, real_evidence = p.detector.process, p.evidence
-    n, entered = {'i': 0}, []
+    p = Perception(map_config=EvidenceMapConfig(enabled=True, carried_plane_evidence=enter))
+    real_process, real_update = p.detector.process, p.map.update
+    n, kinds = {'i': 0}, {}
 
     def carried(*a, **k):
         r = real_process(*a, **k)
@@ -975,14 +977,22 @@ def test_a_pair_whose_plane_was_carried_over_while_moving_adds_no_evidence(coast
             return dataclasses.replace(r, plane_updated=False, still=True)
         return r
 
-    def evidence(res, cam):
-        entered.append(n['i'] - 1)
-        return real_evidence(res, cam)
+    def update(stamp_s, plane, ev, *a):
+        if ev is not None:
+            kinds[n['i'] - 1] = set(np.unique(ev.kind).tolist())
+        return real_update(stamp_s, plane, ev, *a)
 
-    p.detector.process, p.evidence = carried, evidence
-    for f in load_frames(BAGS / 'static_obstacles', 12):
+    p.detector.process, p.map.update = carried, update
+    for f in load_frames(BAGS / 'static_obstacles', 27):
         p.process(f.left, f.right, f.cam, stamp_ns=f.stamp_ns)
-    tracked = [i for i in range(3, 12)]               # after the calibration pairs
-    assert set(tracked) - set(entered) == (set() if coasted else
-                                           {i for i in tracked if i % 3 == 1})
-    assert {i for i in tracked if i % 3 == 2} <= set(entered)
+    tracked = range(21, 27)                           # the boxes' tracks counted
+    moving = [i for i in tracked if i % 3 == 1]
+    standing = [i for i in tracked if i % 3 == 2]
+    # the bag's pairs see its boxes raised and the pavement as ground
+    assert all({GROUND, RAISED} <= kinds[i] for i in standing), kinds
+    if enter == 'none':
+        assert not set(moving) & set(kinds)
+    elif enter == 'ground':
+        assert all(kinds[i] <= {GROUND, NONE} and GROUND in kinds[i] for i in moving), kinds
+    else:
+        assert all({GROUND, RAISED} <= kinds[i] for i in moving), kinds

@@ -177,11 +177,14 @@ class EvidenceMapConfig:
         'it is reported only while its evidence is younger than unseen_report_s, in view '
         'or not (a thing the wearer walks up to covers its ground and is remembered); '
         '0 = off', range=(0.0, 60.0))
-    coasted_plane_evidence: bool = param(
-        False, "enter a pair's evidence when its ground plane was carried over from the pair "
-        "before (the refit failed) while the rig moves: the camera has pitched since by "
-        "the gait's few degrees a pair, and the ground stands off that plane by that times "
-        "the range (a false drop 3 m ahead of the chest rig, clear_walk 1079)")
+    carried_plane_evidence: str = param(
+        'ground', "what a pair enters into the map when its ground plane was carried over "
+        "from the pair before (the refit failed) while the rig moves: the camera has "
+        "pitched since by the gait's few degrees a pair, and the ground stands off that "
+        "plane by that times the range; 'all' its evidence, 'ground' only its ground seen "
+        "free (which clears where a passer-by had been), 'none' nothing (its raised and "
+        "drop evidence gave a false drop 3 m ahead of the chest rig, clear_walk 1079)",
+        choices=('all', 'ground', 'none'))
     motion_gap_frames: int = param(
         2, 'pairs in a row the rig may move with no motion known (the previous pose held) '
         'before the map is cleared', range=(0, 100))

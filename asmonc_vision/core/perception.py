@@ -100,11 +100,13 @@ class Perception:
         plane = result.metric_plane if result.status == 'tracking' else None
         # a plane carried over a pair whose refit failed is last pair's ground: while the
         # rig moves the camera has pitched since (the gait: a few degrees a pair), and
-        # heights against it are off by that times the range; such a pair's evidence is
-        # left out (the map still moves and reports what it holds)
-        measured = (result.plane_updated or bool(result.still)
-                    or self.map_config.coasted_plane_evidence)
-        ev = self.evidence(result, cam) if plane is not None and measured else None
+        # heights against it are off by that times the range; of such a pair's evidence
+        # only what `carried_plane_evidence` names is entered (by default its ground seen
+        # free); the map still moves and reports what it holds
+        carried = not (result.plane_updated or bool(result.still))
+        enter = self.map_config.carried_plane_evidence if carried else 'all'
+        ev = (self.evidence(result, cam, ground_only=enter == 'ground')
+              if plane is not None and enter != 'none' else None)
         objects = self.map.update(stamp_s, plane, ev, m, result.still, cam)
         passing = self.tall.passing(stamp_s, *report_arrays(result.obstacles))
         if self.map.placed_pairs < self.map_config.min_placed_pairs:
@@ -129,14 +131,15 @@ class Perception:
         timings['total'] = timings.get('total', 0.0) + ms
         return dataclasses.replace(result, obstacles=obstacles, timings_ms=timings)
 
-    def evidence(self, result: GpodResult, cam: StereoCamera):
+    def evidence(self, result: GpodResult, cam: StereoCamera, ground_only: bool = False):
         """The pair's matched edge pixels as map evidence (`pair_evidence`): the
         detector's counted obstacle pixels raised, its drop pixels drop, the pixels on
         the plane within their threshold (on no obstacle or drop string) ground; σ_d the
         pixel's threshold over ``threshold.k``; each weighed 1 - c, c the share of its
         rivals that say otherwise in its and its rivals' support
         (`GpodFeatures.contrary_rival_share`): the chance that it is not the ground matched
-        wrongly, were the supports likelihoods."""
+        wrongly, were the supports likelihoods. ``ground_only``: the ground pixels alone
+        (the raised and drop ones enter nothing)."""
         f = result.features
         k = len(f)
         thr = (np.asarray(f.threshold, float) if f.threshold is not None
@@ -149,8 +152,8 @@ class Perception:
         kind = np.full(k, NONE, np.int8)
         ground = np.isfinite(ex) & (np.abs(ex) <= thr) & (f.string_class == 0)
         kind[ground] = GROUND
-        kind[f.is_drop] = DROP
-        kind[f.is_obstacle] = RAISED
+        kind[f.is_drop] = NONE if ground_only else DROP
+        kind[f.is_obstacle] = NONE if ground_only else RAISED
         u = 0.5 * (np.asarray(f.u_left, float) + np.asarray(f.u_right, float))
         assert result.metric_plane is not None         # evidence of a tracked ground only
         weight = (1.0 - np.asarray(f.contrary_rival_share, float)
