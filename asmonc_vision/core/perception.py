@@ -26,7 +26,7 @@ from asmonc_vision.core.evidence_map import (DROP, GROUND, NONE, RAISED, Evidenc
 from asmonc_vision.core.gpod import GpodConfig, GpodDetector, GpodResult
 from asmonc_vision.core.map_motion import MotionPredictor
 from asmonc_vision.core.map_reports import objects_to_obstacles
-from asmonc_vision.core.moving_reports import ChainedReports, TallReports, report_arrays
+from asmonc_vision.core.moving_reports import TallReports, report_arrays
 
 
 class Perception:
@@ -49,7 +49,6 @@ class Perception:
         self.map = EvidenceMap(self.map_config) if self.map_config.enabled else None
         self.motion_predictor = motion_predictor
         self.tall = TallReports.from_config(self.map_config)
-        self.unmapped = ChainedReports.from_config(self.map_config)
 
     @property
     def config(self) -> GpodConfig:
@@ -60,7 +59,6 @@ class Perception:
         """Restart the detector and forget the map (and the predictor's motions)."""
         self.detector.reset()
         self.tall.reset()
-        self.unmapped.reset()
         if self.map is not None:
             self.map.reset()
         if self.motion_predictor is not None:
@@ -110,14 +108,11 @@ class Perception:
         ev = (self.evidence(result, cam, ground_only=enter == 'ground')
               if plane is not None and enter != 'none' else None)
         objects = self.map.update(stamp_s, plane, ev, m, result.still, cam)
-        arrays = report_arrays(result.obstacles)
-        passing = self.tall.passing(stamp_s, *arrays)
-        chained = self.unmapped.passing(stamp_s, *arrays)
+        passing = self.tall.passing(stamp_s, *report_arrays(result.obstacles))
         if self.map.placed_pairs < self.map_config.min_placed_pairs:
             # the map has not seen enough pairs in a row to confirm anything (a start, or
-            # no motion while walking): the detector's reports go out as they are once
-            # seen in a chain of pairs (`core.moving_reports.ChainedReports`)
-            obstacles = tuple(o for o, ok in zip(result.obstacles, chained) if ok)
+            # no motion while walking): the detector's reports go out as they are
+            obstacles = result.obstacles
         else:
             obstacles = (tuple(objects_to_obstacles(
                 objects, cam, plane, result.obstacles, self.map_config.attach_m,
