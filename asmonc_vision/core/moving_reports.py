@@ -5,9 +5,9 @@ moves: a mismatched pattern moves in the world, a thing does not. A person walki
 towards the wearer moves too. It is in new cells every pair, each seen once, so the map
 seldom confirms it, while the detector finds it in pair after pair (tuning walk
 people_towards 1022: from 5.4 m on, each pair; the map confirmed it at 1.8 m). What
-tells a passer-by from a mismatch is its height and that it goes somewhere. A ground pattern matched
-wrongly stands a few centimetres up, rarely half a metre, and comes and goes from pair
-to pair. A person's matched legs stand 0.6-0.9 m up, in every pair, along a path a
+tells a passer-by from a mismatch is its height and that it goes somewhere. A ground
+pattern matched wrongly stands a few centimetres up, rarely half a metre, and comes and
+goes from pair to pair. A person's matched legs stand 0.6-0.9 m up, in every pair, along a path a
 walker can take.
 
 `TallReports.passing` says which of a pair's detector reports pass the map:
@@ -116,8 +116,7 @@ class TallReports:
     def from_config(cls, c) -> 'TallReports':
         """From an `EvidenceMapConfig`."""
         return cls(c.pass_height_m, c.pass_frames, c.moving_min_height_m, c.moving_frames,
-                   c.moving_gate_m,
-                   c.moving_max_speed_mps, c.moving_max_range_m)
+                   c.moving_gate_m, c.moving_max_speed_mps, c.moving_max_range_m)
 
 
 def report_arrays(obstacles: Sequence) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
