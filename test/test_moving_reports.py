@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from asmonc_vision.core.map_settings import EvidenceMapConfig
-from asmonc_vision.core.moving_reports import MAX_GAP_S, TallReports
+from asmonc_vision.core.moving_reports import MAX_GAP_S, ChainedReports, TallReports
 
 DT = 0.1
 
@@ -99,3 +99,23 @@ def test_built_from_the_map_settings():
         c.moving_gate_m, c.moving_max_speed_mps, c.moving_max_range_m)
     with pytest.raises(ValueError, match='moving_frames'):
         EvidenceMapConfig(moving_frames=0)
+
+
+def test_while_the_map_is_down_a_report_goes_out_once_chained_over_unmapped_frames():
+    """A box the wearer walks up to (closing 0.12 m a pair) goes out from its third pair,
+    a drop at once (`unmapped_drop_frames` 1); a raised ghost of one pair (a mismatch 3.3
+    m ahead, beside where a drop was) never; unknown ground ahead at once; a time gap
+    breaks the chain; 1 pair = every report."""
+    c = ChainedReports.from_config(EvidenceMapConfig())
+    assert (c.frames, c.drop_frames) == (3, 1)
+    seq = [[(0.12, 4.0 - 0.12 * i, 5.0), (-0.15, 3.0 - 0.12 * i, -20.0)] for i in range(5)]
+    seq[2] = seq[2] + [(0.3, 2.8, -20.0), (math.nan, 4.4, 0.0)]
+    got = feed(c, seq)
+    assert [p[:2].tolist() for p in got] == [[False, True]] * 2 + [[True, True]] * 3
+    assert got[2][2:].tolist() == [False, True]   # a raised ghost does not chain on drops
+    c.reset()
+    h, r, b = np.array([0.12]), np.array([4.0]), np.zeros(1)
+    assert [bool(c.passing(t, h, r, b)[0]) for t in (0.0, 0.1, 0.2)] == [False, False, True]
+    assert not c.passing(0.2 + MAX_GAP_S + 0.1, h, r, b)[0]
+    assert ChainedReports(1, 1, 0.3, 4.0).passing(0.0, h, r, b).all()
+    assert not ChainedReports(3, 2, 0.3, 4.0).passing(0.0, -h, r, b).any()

@@ -189,9 +189,21 @@ class EvidenceMapConfig:
         2, 'pairs in a row the rig may move with no motion known (the previous pose held) '
         'before the map is cleared', range=(0, 100))
     min_placed_pairs: int = param(
-        5, "until the map has placed this many pairs in a row (after a start, or after it "
-        "was cleared for want of a motion) the detector's reports are published unfiltered",
+        5, "until the map has placed this many pairs in a row the detector's reports are "
+        "published instead of the map's: at a start as they are, after the map was "
+        "cleared for want of a motion once chained over unmapped_frames pairs",
         range=(0, 1000))
+    unmapped_frames: int = param(
+        3, "after the map was cleared, until it has placed min_placed_pairs pairs in a "
+        "row again, a raised detector report goes out once it ends a chain of this many "
+        "pairs (core.moving_reports: one in each pair within moving_gate_m + "
+        "moving_max_speed_mps times the time between them, in each pair's ground frame; "
+        "unknown ground ahead always goes out): one pair's ghost, a refit pitched a few "
+        "degrees off, does not reach the wearer; 1 = every report", range=(1, 100))
+    unmapped_drop_frames: int = param(
+        1, "the same for a drop report: the detector finds a drop's edge in a pair here "
+        "and there (its lower ground hidden), and one held back can be the only warning "
+        "(a 21 cm step down on step_down 1011, chest rig)", range=(1, 100))
     default_sigma_px: float = param(0.4, 'σ_d of a match when the detector gives '
                                     'neither a per-pixel threshold nor a sigma, px',
                                     range=(0.01, 10.0))

@@ -10,7 +10,9 @@ pattern matched wrongly stands a few centimetres up, rarely half a metre, and co
 goes from pair to pair. A person's matched legs stand 0.6-0.9 m up, in every pair, along a path a
 walker can take.
 
-`TallReports.passing` says which of a pair's detector reports pass the map:
+`TallReports.passing` says which of a pair's detector reports pass the map (and
+`ChainedReports.passing` which go out after the map was cleared, until it confirms again:
+chained over ``unmapped_frames`` pairs):
 
 * a report at least ``pass_height_m`` tall (a thing that tall is no ground mismatch)
   passes once it is the last of a *chain* of ``pass_frames`` pairs (one pair's ghost, a
@@ -97,14 +99,8 @@ class TallReports:
                       & (r <= self.moving_max_range_m))
         kind = tall | moving
         xy = np.stack([r * np.cos(b), r * np.sin(b)], axis=1)[kind]
-        chain = np.ones(len(xy), np.int64)
-        dt = math.inf if self._stamp_s is None else stamp_s - self._stamp_s
-        if len(xy) and len(self._xy) and 0.0 <= dt <= MAX_GAP_S:
-            gate = self.moving_gate_m + self.moving_max_speed_mps * dt
-            d = np.linalg.norm(xy[:, None, :] - self._xy[None, :, :], axis=2)    # (n, m)
-            near = d <= gate
-            prev = np.where(near, self._chain[None, :], 0).max(axis=1)
-            chain = 1 + prev
+        chain = _chain(xy, self._xy, self._chain, self._stamp_s, stamp_s,
+                       self.moving_gate_m, self.moving_max_speed_mps)
         self._stamp_s = float(stamp_s)
         self._xy, self._chain = xy, chain
         out = np.zeros(len(h), bool)
@@ -117,6 +113,88 @@ class TallReports:
         """From an `EvidenceMapConfig`."""
         return cls(c.pass_height_m, c.pass_frames, c.moving_min_height_m, c.moving_frames,
                    c.moving_gate_m, c.moving_max_speed_mps, c.moving_max_range_m)
+
+
+class ChainedReports:
+    """Which detector reports go out after the evidence map was cleared (it had
+    confirmed, then lost the camera's motion while walking) until it has placed
+    ``EvidenceMapConfig.min_placed_pairs`` pairs in a row again: those that end a chain
+    of ``frames`` pairs (as `TallReports`', of any height; raised reports chain with
+    raised ones, drops with drops), so that one pair's ghost (a refit pitched a few
+    degrees off for a pair, a mismatch) does not reach the wearer. Unknown ground ahead
+    (NaN height) always goes out. (At a start, `core.perception.Perception` publishes the
+    detector's reports as they are.)
+
+    A drop is not held back (``drop_frames`` 1): its lower ground is hidden behind its
+    edge, and the detector finds it in a pair here and there (on tuning walk step_down
+    1011, chest rig, a 21 cm step down in one pair only, 3.6 m ahead: held back, it was
+    never warned).
+
+    Args:
+        frames: pairs in a row a raised report's chain must span (1: every one goes
+            out).
+        drop_frames: the same for a drop.
+        gate_m, max_speed_mps: as `TallReports`' ``moving_gate_m`` and
+            ``moving_max_speed_mps``.
+    """
+
+    def __init__(self, frames: int, drop_frames: int, gate_m: float,
+                 max_speed_mps: float) -> None:
+        self.frames = int(frames)
+        self.drop_frames = int(drop_frames)
+        self.gate_m = float(gate_m)
+        self.max_speed_mps = float(max_speed_mps)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the previous pair."""
+        self._stamp_s: float | None = None
+        #: the previous pair's raised (0) and drop (1) reports' feet and chain lengths
+        self._xy: dict[int, np.ndarray] = {k: np.zeros((0, 2)) for k in (0, 1)}
+        self._chain: dict[int, np.ndarray] = {k: np.zeros(0, np.int64) for k in (0, 1)}
+
+    def passing(self, stamp_s: float, height: np.ndarray, range_m: np.ndarray,
+                bearing: np.ndarray) -> np.ndarray:
+        """Which of a pair's reports go out (arguments as `TallReports.passing`); call
+        once per pair, in stamp order, whether or not the map confirms. (N,) bool."""
+        h = np.asarray(height, float).reshape(-1)
+        r = np.asarray(range_m, float).reshape(-1)
+        b = np.asarray(bearing, float).reshape(-1)
+        known = np.isfinite(h)
+        xy = np.stack([r * np.cos(b), r * np.sin(b)], axis=1)
+        out = ~known
+        chains = {}
+        for k, sel in enumerate((known & (h >= 0), known & (h < 0))):   # raised, drops
+            chains[k] = _chain(xy[sel], self._xy[k], self._chain[k], self._stamp_s,
+                               stamp_s, self.gate_m, self.max_speed_mps)
+            self._xy[k] = xy[sel]
+            out[sel] = chains[k] >= (self.frames if k == 0 else self.drop_frames)
+        self._chain = chains
+        self._stamp_s = float(stamp_s)
+        return out
+
+    @classmethod
+    def from_config(cls, c) -> 'ChainedReports':
+        """From an `EvidenceMapConfig`."""
+        return cls(c.unmapped_frames, c.unmapped_drop_frames, c.moving_gate_m,
+                   c.moving_max_speed_mps)
+
+
+def _chain(xy: np.ndarray, prev_xy: np.ndarray, prev_chain: np.ndarray,
+           prev_stamp_s: float | None, stamp_s: float, gate_m: float,
+           max_speed_mps: float) -> np.ndarray:
+    """(n,) int64 chain lengths of the reports at ``xy`` (n, 2) m: 1 + the longest chain
+    among the previous pair's reports ``prev_xy`` (m, 2) (chains ``prev_chain`` (m,))
+    within ``gate_m`` + ``max_speed_mps`` times the time between the pairs; 1 with none
+    or over a gap of more than MAX_GAP_S."""
+    chain = np.ones(len(xy), np.int64)
+    dt = math.inf if prev_stamp_s is None else stamp_s - prev_stamp_s
+    if len(xy) and len(prev_xy) and 0.0 <= dt <= MAX_GAP_S:
+        gate = gate_m + max_speed_mps * dt
+        d = np.linalg.norm(xy[:, None, :] - prev_xy[None, :, :], axis=2)    # (n, m)
+        prev = np.where(d <= gate, prev_chain[None, :], 0).max(axis=1)
+        chain = 1 + prev
+    return chain
 
 
 def report_arrays(obstacles: Sequence) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -26,7 +26,7 @@ from asmonc_vision.core.evidence_map import (DROP, GROUND, NONE, RAISED, Evidenc
 from asmonc_vision.core.gpod import GpodConfig, GpodDetector, GpodResult
 from asmonc_vision.core.map_motion import MotionPredictor
 from asmonc_vision.core.map_reports import objects_to_obstacles
-from asmonc_vision.core.moving_reports import TallReports, report_arrays
+from asmonc_vision.core.moving_reports import ChainedReports, TallReports, report_arrays
 
 
 class Perception:
@@ -49,6 +49,9 @@ class Perception:
         self.map = EvidenceMap(self.map_config) if self.map_config.enabled else None
         self.motion_predictor = motion_predictor
         self.tall = TallReports.from_config(self.map_config)
+        self.unmapped = ChainedReports.from_config(self.map_config)
+        #: the map has placed min_placed_pairs pairs in a row since the last reset
+        self.confirmed_once = False
 
     @property
     def config(self) -> GpodConfig:
@@ -59,6 +62,8 @@ class Perception:
         """Restart the detector and forget the map (and the predictor's motions)."""
         self.detector.reset()
         self.tall.reset()
+        self.unmapped.reset()
+        self.confirmed_once = False
         if self.map is not None:
             self.map.reset()
         if self.motion_predictor is not None:
@@ -72,7 +77,8 @@ class Perception:
         enabled, the result's ``obstacles`` are those the map confirms
         (`objects_to_obstacles`), or the detector's own while the map has placed fewer
         than ``min_placed_pairs`` pairs in a row (it needs the camera motion while the
-        rig moves: without it the map is cleared and the detector's reports pass), and
+        rig moves: without it the map is cleared): at a start as they are, after a clear
+        those chained over pairs (`core.moving_reports.ChainedReports`); and
         ``timings_ms['map']`` is the map's time, ms (included in 'total'). With a
         ``motion_predictor`` the map's motion is its prediction for ``stamp_ns`` (the
         identity while the detector finds the rig still), whatever ``motion`` is."""
@@ -108,11 +114,16 @@ class Perception:
         ev = (self.evidence(result, cam, ground_only=enter == 'ground')
               if plane is not None and enter != 'none' else None)
         objects = self.map.update(stamp_s, plane, ev, m, result.still, cam)
-        passing = self.tall.passing(stamp_s, *report_arrays(result.obstacles))
+        arrays = report_arrays(result.obstacles)
+        passing = self.tall.passing(stamp_s, *arrays)
+        chained = self.unmapped.passing(stamp_s, *arrays)
         if self.map.placed_pairs < self.map_config.min_placed_pairs:
-            # the map has not seen enough pairs in a row to confirm anything (a start, or
-            # no motion while walking): the detector's reports go out as they are
-            obstacles = result.obstacles
+            # the map has not seen enough pairs in a row to confirm anything: at a start
+            # the detector's reports go out as they are; once the map had confirmed and
+            # was then cleared (the camera's motion unknown while walking), only those
+            # seen in a chain of pairs (`core.moving_reports.ChainedReports`)
+            obstacles = (tuple(o for o, ok in zip(result.obstacles, chained) if ok)
+                         if self.confirmed_once else result.obstacles)
         else:
             obstacles = (tuple(objects_to_obstacles(
                 objects, cam, plane, result.obstacles, self.map_config.attach_m,
@@ -125,6 +136,7 @@ class Perception:
             obstacles += tuple(o for o, ok in zip(result.obstacles, passing)
                                if np.isnan(o.height) or (ok and not any(
                                    np.array_equal(o.position, p) for p in taken)))
+        self.confirmed_once |= self.map.placed_pairs >= self.map_config.min_placed_pairs
         ms = (time.perf_counter() - t0) * 1e3
         timings = dict(result.timings_ms)
         timings['map'] = ms
