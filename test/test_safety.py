@@ -261,6 +261,26 @@ def test_replay_alarms_as_the_node():
     assert al[-1]['level'] == AlarmLevel.CLEAR and al[-1]['stamp_ns'] == S0 + 26 * DT
 
 
+def test_replay_alarms_with_egomotion_levels_by_time_to_contact_as_the_node():
+    """Given the pairs' /egomotion (1.2 m/s straight ahead), the replay gives the logic
+    the walking speed as the alarm node does: an obstacle 3.3 m ahead is 2.75 s away,
+    WARNING by time to contact (by range alone, CAUTION); a motion with no pair before
+    it (the first) or after a gap of a second or more gives no speed."""
+    step = np.array([0.0, 0.0, 0.12])            # optical z forward, 0.1 s
+    ahead = lambda s: reports(s, [(3.3, 0.0, 0.2)])  # noqa: E731
+    outs = [(S0 + k * DT, 'tracking', ahead(S0 + k * DT)) for k in range(12)]
+    levels = {}
+    for name, motions in (('none', None), ('walking', [step] * 12),
+                          ('gaps', [step if k % 11 == 0 else None for k in range(12)])):
+        al = replay_alarms(outs, motions=motions)
+        levels[name] = [AlarmLevel(a['level']).name for a in al if a['level'] < 4]
+    assert set(levels['none']) == {'CAUTION'}
+    assert set(levels['walking']) == {'WARNING'}
+    assert set(levels['gaps']) == {'CAUTION'}
+    with pytest.raises(ValueError, match='motions'):
+        replay_alarms(outs, motions=[step])
+
+
 def test_run_summary_has_the_safety_score():
     """`asmonc run`'s summary scores the recorded /alarms and /obstacles: here the
     static bag's truth reported back as the detections (nothing false), and a WARNING

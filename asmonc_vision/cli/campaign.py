@@ -248,10 +248,11 @@ def score_walk(w: Walk, cache: Path, methods: list[str], version: str) -> dict:
                            egomotion=m != 'gpod',
                            motion_lag=MAP_MOTION_LAG if m == 'gpod_map_lag' else 0,
                            map_waits=m == 'gpod_map_wait')
-                if m.startswith('gpod') else run_method(frames, m))
+                if m.startswith('gpod') else run_method(frames, m, egomotion=True))
         detect_s[m] = time.perf_counter() - t0
         detect_cpu_s[m] = time.process_time() - c0
-        alarms = replay_alarms([(r.stamp_ns, r.status, r.obstacles) for r in runs])
+        alarms = replay_alarms([(r.stamp_ns, r.status, r.obstacles) for r in runs],
+                               motions=[r.ego_t for r in runs])
         scores[m] = score_safety(truth, alarms, {r.stamp_ns: r.obstacles for r in runs})
     return {'walk': w, 'render_s': render_s, 'render_cpu_s': render_cpu_s,
             'frames': len(frames), 'scores': scores, 'detect_s': detect_s,

@@ -7,13 +7,22 @@ status (`ground_status`), in the order the detector node publishes them (/obstac
 then /ground_plane); and the node's timer (`check_timeout`, every `CHECK_PERIOD_S`) between
 pairs, so a run of pairs without an answer gives the FAULT the node would give. Alarms about a pair
 carry its stamp (as the node's do); timer alarms carry the tick's bag time.
+
+Given the pairs' egomotion (``/egomotion``'s translations, as `eval.bench.run_method`
+keeps them), each is turned into the walking speed and direction by
+`core.alarm.WalkingSpeed` and given to the logic (``walk_motion``) before the pair's
+obstacle list, as the node does with each /egomotion message: the levels by time to
+contact and the corridor along the walking direction are then those of the live graph.
+The walk model's walking/standing state (``/gait/state``) is not replayed: the logic
+then knows a walker by the speed alone.
 """
 from __future__ import annotations
 
+import math
 from typing import Sequence
 
 from asmonc_vision.core.alarm import (CHECK_PERIOD_S, AlarmConfig, AlarmLogic, Decision,
-                                      GroundStatus, ObstacleInfo)
+                                      GroundStatus, ObstacleInfo, WalkingSpeed)
 from asmonc_vision.eval.evaluation import FrameObstacles
 
 #: the detector's status words -> GroundPlane status values
@@ -37,7 +46,8 @@ def _alarm(d: Decision, stamp_ns: int) -> dict:
 
 
 def replay_alarms(outputs: Sequence[tuple[int, str | None, FrameObstacles | None]],
-                  config: AlarmConfig | None = None) -> list[dict]:
+                  config: AlarmConfig | None = None,
+                  motions: Sequence | None = None) -> list[dict]:
     """The alarms the alarm node would give for a detector's outputs.
 
     Args:
@@ -45,6 +55,9 @@ def replay_alarms(outputs: Sequence[tuple[int, str | None, FrameObstacles | None
             'initialising' | 'tracking' | 'lost' or None for no /ground_plane, the
             reports or None when the detector gave no answer for that pair).
         config: the alarm settings (default `AlarmConfig()`, the node's defaults).
+        motions: per pair, the /egomotion translation published for it ((3,) m, the
+            left camera's from the pair before, its optical frame) or None; None: no
+            egomotion (levels by range only, as a graph without /egomotion).
     Returns:
         the alarms in announced order: dicts ``stamp_ns``, ``level``, ``text``,
         ``obstacle_id``, ``range`` (m), ``bearing`` (rad), as `asmonc run` logs /alarms.
@@ -55,17 +68,28 @@ def replay_alarms(outputs: Sequence[tuple[int, str | None, FrameObstacles | None
     logic = AlarmLogic(config or AlarmConfig(), t0=0.0)
     alarms = [_alarm(logic.current, s0 - 1)]
     t_tick = 0.0
+    walk, prev_motion_ns = WalkingSpeed(), None
+    if motions is not None and len(motions) != len(outputs):
+        raise ValueError(f'motions: {len(motions)} for {len(outputs)} pairs')
 
     def sec(ns: int) -> float:
         return (int(ns) - s0) / 1e9
 
-    for stamp, status, fo in outputs:
+    for i, (stamp, status, fo) in enumerate(outputs):
         t = sec(stamp)
         while t_tick + TIMER_PERIOD_S <= t:
             t_tick += TIMER_PERIOD_S
             d = logic.check_timeout(t_tick)
             if d is not None:
                 alarms.append(_alarm(d, s0 + int(round(t_tick * 1e9))))
+        tr = motions[i] if motions is not None else None
+        if tr is not None:
+            # as nodes.alarm_node._on_egomotion: the interval from the last motion
+            prev_motion_ns, prev = int(stamp), prev_motion_ns
+            if prev is not None and 0 < int(stamp) - prev < 1e9:
+                speed = walk.update(t, tuple(float(v) for v in tr), (int(stamp) - prev) * 1e-9)
+                if speed is not None and math.isfinite(speed):
+                    logic.walk_motion(t, speed, walk.heading)
         if fo is None:
             continue
         d = logic.update(t, obstacle_infos(fo))

@@ -62,8 +62,10 @@ def render_frames(scenario: str = 'static_obstacles', seed: int = 0, frames=(0,)
 @dataclass
 class FrameRun:
     """One frame's output of a method: status, obstacles (FrameObstacles), ground plane
-    (MetricPlane or None), the wall time of process() and its stage timings (ms), and
-    the CPU time of process() (ms, this thread's)."""
+    (MetricPlane or None), the wall time of process() and its stage timings (ms), the
+    CPU time of process() (ms, this thread's), and the egomotion the graph would publish
+    for the pair (``/egomotion``'s translation, (3,) m, the left camera's from the
+    estimator's reference pair in its optical frame; None: none published or not run)."""
 
     stamp_ns: int
     status: str
@@ -72,6 +74,7 @@ class FrameRun:
     latency_ms: float
     timings: dict
     cpu_ms: float = float('nan')
+    ego_t: object = None
 
 
 def make_method(method: str, threshold_px: float | None = None, map_enabled: bool | None = None):
@@ -107,10 +110,12 @@ def run_method(frames: list[Frame], method: str = 'gpod', threshold_px: float | 
         method: 'gpod' or 'sgbm'; threshold_px: obstacle threshold override.
         progress: optional callback(done, total) after each frame.
         map_enabled: GPOD's evidence map on or off (None: its default).
-        egomotion: GPOD is given each pair's motion from the egomotion estimator
-            (`core.motion.EgomotionEstimator`, default settings, run here as the egomotion
-            node runs it; its time is not counted), as the node graph gives it; without
-            it, no motion (the tracks and the map are carried only while still).
+        egomotion: the egomotion estimator (`core.motion.EgomotionEstimator`, default
+            settings) is run as the egomotion node runs it (its time is not counted),
+            its published translation kept (`FrameRun.ego_t`, which the alarm replay
+            turns into the walking speed, as the alarm node does); GPOD is given each
+            pair's motion, as the node graph gives it; without it, no motion (the
+            tracks and the map are carried only while still).
         motion_lag: with ``egomotion`` and the map, 0 gives each pair its own motion (as
             a graph that waits for it); N >= 1 gives the detector no motion and the map
             the prediction of a `core.map_motion.MotionPredictor` fed the motions of the
@@ -134,20 +139,25 @@ def run_method(frames: list[Frame], method: str = 'gpod', threshold_px: float | 
     det = make_method(method, threshold_px, map_enabled)
     max_age_s = det.gpod_config.plane.gravity_prior_max_age_s if method == 'gpod' else 0.0
     est = None
-    if egomotion and method == 'gpod':
+    if egomotion:
         from asmonc_vision.core.motion import EgomotionEstimator
         est = EgomotionEstimator()
     lagged: list = []            # (frame index, reference stamp, stamp, R, t) not yet known
-    if est is not None and det.map is not None and (motion_lag > 0 or map_waits):
+    if (est is not None and method == 'gpod' and det.map is not None
+            and (motion_lag > 0 or map_waits)):
         from asmonc_vision.core.map_motion import MotionPredictor
         det.motion_predictor = MotionPredictor()
     out = []
     prev_stamp = None
     for i, f in enumerate(frames):
-        motion = None
+        motion = ego_t = None
         if est is not None:
             er = est.process(f.left, f.right, f.cam, f.stamp_ns)
-            if det.motion_predictor is not None:
+            if er.ok and prev_stamp is not None and er.reference_stamp_ns == prev_stamp:
+                ego_t = np.array(er.motion.t, float)   # published: from the pair before
+            if method != 'gpod':
+                pass
+            elif det.motion_predictor is not None:
                 if er.ok and er.reference_stamp_ns is not None:
                     lagged.append((i, er.reference_stamp_ns, f.stamp_ns, er.motion.R,
                                    er.motion.t))
@@ -169,7 +179,7 @@ def run_method(frames: list[Frame], method: str = 'gpod', threshold_px: float | 
         plane = res.plane.metric if res.plane is not None else None
         out.append(FrameRun(f.stamp_ns, res.status, frame_from_detections(f.stamp_ns,
                                                                           res.obstacles),
-                            plane, ms, dict(res.timings), cpu_ms))
+                            plane, ms, dict(res.timings), cpu_ms, ego_t))
         if progress is not None:
             progress(i + 1, len(frames))
     return out

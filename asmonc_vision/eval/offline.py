@@ -130,7 +130,8 @@ def method_safety(truth, runs) -> dict | None:
 
     if truth is None:
         return None
-    alarms = replay_alarms([(r.stamp_ns, r.status, r.obstacles) for r in runs])
+    alarms = replay_alarms([(r.stamp_ns, r.status, r.obstacles) for r in runs],
+                           motions=[r.ego_t for r in runs])
     return score_safety(truth, alarms, {r.stamp_ns: r.obstacles for r in runs}).as_dict()
 
 
