@@ -51,10 +51,23 @@ def test_corridor_follows_the_walking_direction():
     logic.walk_motion(0.2, 1.0, math.radians(20.0))
     d = logic.update(0.2, [ob])
     assert d is not None and d.level == AlarmLevel.WARNING
-    assert abs(d.bearing) < 1e-9 and 'ahead' in d.text
+    # said from the walking direction; the bearing stays the cameras' (as on /obstacles)
+    assert d.bearing == pytest.approx(math.radians(20.0)) and 'ahead' in d.text
     off = started(follow_walking_direction=False)
     off.walk_motion(0.2, 1.0, math.radians(20.0))
     assert off.update(0.2, [ob]) is None
+
+
+def test_an_obstacle_where_the_wearer_faces_counts_too():
+    # walking 20 deg left of the camera's axis: a box 3 m straight ahead of the cameras
+    # (1.03 m right of the walking line) is in the corridor along the axis and counts;
+    # one 40 deg right is in neither and does not
+    logic = started()
+    logic.walk_motion(0.1, 1.0, math.radians(20.0))
+    assert logic.update(0.1, [box(3.0, -40.0)]) is None
+    d = logic.update(0.2, [box(3.0, 0.0)])
+    assert d is not None and d.level == AlarmLevel.WARNING
+    assert d.bearing == pytest.approx(0.0, abs=1e-9) and 'right' in d.text
 
 
 def test_a_drop_comes_first_within_a_level_then_least_time_to_contact():
@@ -120,3 +133,21 @@ def test_walking_speed_from_egomotion_steps():
     # a jump faster than a walker is ignored, as are bad steps
     assert w.update(3.1, (0.0, 0.0, 1.0), 0.1) == pytest.approx(w.speed)
     assert w.update(3.2, (math.nan, 0, 0), 0.1) == pytest.approx(w.speed)
+
+
+@pytest.mark.parametrize('speed, said', [(1.2, 2.0 - 1.2 * 0.5), (5.0, None)])
+def test_a_repeat_describes_the_last_target_where_it_is_now(speed, said):
+    """A level held on the target last seen (2 m ahead) half a second ago, repeated while
+    the wearer walks straight at it: said at its range less the distance walked since;
+    once walked past (at 5 m/s), the announcement is repeated as it was."""
+    logic = started()
+    logic.walk_motion(0.0, speed, 0.0)
+    first = logic.update(0.0, [box(2.2)])
+    assert first.level >= AlarmLevel.WARNING
+    for k in range(1, 16):                           # seen until 1.5 s
+        logic.walk_motion(k * 0.1, speed, 0.0)
+        assert logic.update(k * 0.1, [box(2.0)]) is None
+    logic.walk_motion(2.0, speed, 0.0)
+    d = logic.update(2.0, [])                        # held, and due for a repeat
+    assert d is not None and d.repeat and d.level == first.level and d.obstacle_id == 1
+    assert d.range == pytest.approx(said if said is not None else first.range)

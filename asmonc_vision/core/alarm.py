@@ -24,8 +24,10 @@ number of plain-speech announcements for a blind pedestrian:
   as last seen: the current one, or, when a frame shows none (the ground LOST as the
   wearer walks up to a wall, or a held level), the last one seen since the level was
   announced if it is the one announced (never an older range than the newest measured)
-  or was seen within ``hold_time``; else it repeats the announcement (another target
-  seen once since, longer ago, is no news: a passer-by glimpsed nearer has moved on).
+  or was seen within ``hold_time``, where it is now (moved by the distance walked since
+  it was seen, while the wearer moves); else, or when it has been walked past, it
+  repeats the announcement (another target seen once since, longer ago, is no news: a
+  passer-by glimpsed nearer has moved on).
 * **Faults**: no obstacle list for longer than ``timeout`` seconds (measured on the
   caller's clock, the time messages *arrive*), or the ground plane LOST for longer than
   ``timeout``, or INITIALISING for longer than ``startup_grace``, gives FAULT, repeated
@@ -49,8 +51,11 @@ number of plain-speech announcements for a blind pedestrian:
   ``WalkingSpeed`` over ``/egomotion``) and heading (the walking direction from the
   camera's axis, radians, positive left); ``gait`` the walk model's walking/standing
   verdict. While the wearer *moves* (the gait says walking, or no gait is known, and the
-  speed is at least ``min_walking_speed``), the corridor is laid along the walking
-  direction (an obstacle's bearing is taken from it) and each obstacle's time to contact
+  speed is at least ``min_walking_speed``), a second corridor is laid along the walking
+  direction (an obstacle's bearing is taken from it; an alarm's bearing is still the
+  cameras', as on /obstacles): an obstacle in either counts (the walking direction is
+  measured with a few degrees' noise, and a wearer may step where they face); each
+  obstacle's time to contact
   is its distance along that direction over the speed; its level is the higher of the
   level by range (the floor that also holds for a standing wearer) and the level by time
   to contact (STOP <= ``stop_time``, WARNING <= ``warning_time``, the lead time,
@@ -256,7 +261,9 @@ class Decision:
         text: plain speech for the wearer.
         obstacle_id: the target's track id (0 if none or untracked).
         range: the target's range, metres (0 if none).
-        bearing: the target's bearing, radians, positive left (0 if none).
+        bearing: the target's bearing from the cameras' axis laid on the ground (as on
+            /obstacles), radians, positive left (0 if none); the text speaks from the
+            walking direction.
         t: the caller's time of the decision, seconds.
         repeat: True when this re-announces an unchanged state.
         time_to_contact: the target's time to contact at the walking speed, seconds
@@ -373,6 +380,9 @@ class Contact:
         target: the obstacle, its bearing taken from the walking direction; None if none.
         time_to_contact: seconds at the walking speed; inf while standing or unknown.
         moving: whether the wearer was taken to be walking.
+        heading: the walking frame's direction from the cameras' axis (radians,
+            positive left; 0 while not walking): the target's bearing from the cameras'
+            axis is its bearing plus this.
     """
 
     t: float
@@ -380,6 +390,7 @@ class Contact:
     target: ObstacleInfo | None
     time_to_contact: float
     moving: bool
+    heading: float = 0.0
 
 
 # --- the logic -----------------------------------------------------------------------
@@ -479,12 +490,33 @@ class AlarmLogic:
         """The obstacles with their bearings taken from the walking direction (while the
         wearer moves and ``follow_walking_direction``), else unchanged."""
         obstacles = list(obstacles)
-        if not (self._cfg.follow_walking_direction and self.moving(t)):
+        h = self.walking_heading(t)
+        if h == 0.0:
             return obstacles
-        lim = math.radians(self._cfg.max_heading_deg)
-        h = min(max(self._heading, -lim), lim)
         return [dataclasses.replace(o, bearing=math.remainder(o.bearing - h, math.tau))
                 for o in obstacles]
+
+    def walking_heading(self, t: float) -> float:
+        """The walking frame's direction from the camera's axis (radians, positive left)
+        that `walking_frame` takes the bearings from: the walking direction, clipped to
+        ``max_heading_deg``, while the wearer moves and ``follow_walking_direction``;
+        else 0."""
+        if not (self._cfg.follow_walking_direction and self.moving(t)):
+            return 0.0
+        lim = math.radians(self._cfg.max_heading_deg)
+        return min(max(self._heading, -lim), lim)
+
+    def walked(self, t: float, ob: ObstacleInfo, seen_t: float) -> ObstacleInfo:
+        """An obstacle seen at time ``seen_t`` (in the walking frame), where it is from
+        the wearer at time ``t`` while the wearer moves: its distance along the walking
+        direction less the distance walked since at the walking speed (unchanged while
+        standing or the motion is unknown)."""
+        if not self.moving(t) or self._speed is None:
+            return ob
+        fwd = ob.forward - self._speed * max(t - seen_t, 0.0)
+        lat = ob.lateral
+        return dataclasses.replace(ob, range=math.hypot(fwd, lat),
+                                   bearing=math.atan2(lat, fwd))
 
     def time_to_contact(self, t: float, ob: ObstacleInfo | None) -> float:
         """Seconds until the wearer reaches ob at the walking speed (its distance along
@@ -522,7 +554,7 @@ class AlarmLogic:
         margin = self._cfg.hysteresis if held not in (AlarmLevel.CLEAR, AlarmLevel.FAULT) else 0.0
         best, best_key = None, None
         for ob in obstacles:
-            if not self.in_corridor(ob, margin):
+            if not self.in_path(t, ob, margin):
                 continue
             level = self.obstacle_level(t, ob, held)
             key = (-int(level), not ob.is_drop, self.time_to_contact(t, ob), ob.range)
@@ -535,6 +567,16 @@ class AlarmLogic:
         return None if self._last_obstacles_t is None else t - self._last_obstacles_t
 
     # -- selection
+    def in_path(self, t: float, ob: ObstacleInfo, margin: float = 0.0) -> bool:
+        """Whether an obstacle (in the walking frame) counts (``in_corridor``) in the
+        corridor along the walking direction or in the one along the cameras' axis: the
+        walking direction is measured from the egomotion with a few degrees' noise, and
+        a wearer may step where they face; an obstacle in either is on the path."""
+        h = self.walking_heading(t)
+        return self.in_corridor(ob, margin) or (
+            h != 0.0 and self.in_corridor(dataclasses.replace(ob, bearing=ob.bearing + h),
+                                          margin))
+
     def in_corridor(self, ob: ObstacleInfo, margin: float = 0.0) -> bool:
         """Whether an obstacle counts: in the corridor, near enough, high/deep enough,
         confident enough. ``margin`` (m) extends max_range (hysteresis)."""
@@ -714,9 +756,12 @@ class AlarmLogic:
             return Decision(level, TEXT_CLEAR if level == AlarmLevel.CLEAR else
                             self._current.text, t=t, repeat=repeat)
         c = self._cfg
+        # the text speaks from the walking direction; the bearing is the cameras' (as
+        # on /obstacles)
         return Decision(level, obstacle_text(level, tgt, c.ahead_angle_deg, c.side_angle_deg),
                         obstacle_id=int(tgt.id), range=float(tgt.range),
-                        bearing=float(tgt.bearing), t=t, repeat=repeat,
+                        bearing=math.remainder(tgt.bearing + self.walking_heading(t),
+                                               math.tau), t=t, repeat=repeat,
                         time_to_contact=self.time_to_contact(t, tgt))
 
     def _from_unknown(self, t: float, obstacles: list[ObstacleInfo],
@@ -751,12 +796,15 @@ class AlarmLogic:
         self._below_since = None
         d = self._announce(Decision(AlarmLevel.FAULT, unknown_text(unknown.range),
                                     range=float(unknown.range),
-                                    bearing=float(unknown.bearing), t=t, repeat=repeat))
+                                    bearing=math.remainder(unknown.bearing
+                                                           + self.walking_heading(t),
+                                                           math.tau), t=t, repeat=repeat))
         self._fault = 'unknown_ahead'
         return d
 
     def _set_contact(self, t: float, tgt: ObstacleInfo | None, level: AlarmLevel) -> None:
-        self._contact = Contact(t, level, tgt, self.time_to_contact(t, tgt), self.moving(t))
+        self._contact = Contact(t, level, tgt, self.time_to_contact(t, tgt), self.moving(t),
+                                self.walking_heading(t))
 
     def _maybe_repeat(self, t: float, tgt: ObstacleInfo | None) -> Decision | None:
         cur = self._current
@@ -769,10 +817,13 @@ class AlarmLogic:
             # the newest seen (nearer than when announced) if it is what was announced,
             # or seen within hold_time; an older other one (a passer-by glimpsed after
             # the announcement, now elsewhere) is no news: the announcement is repeated
+            # (where it is now: moved by the walk since it was seen; walked past, it is
+            # no news either)
             last = self._last_target
             if last is not None and (last.id == cur.obstacle_id
                                      or t - self._last_target_t <= self._cfg.hold_time):
-                tgt = last
+                moved = self.walked(t, last, self._last_target_t)
+                tgt = moved if self.in_path(t, moved, self._cfg.hysteresis) else None
         if tgt is None:
             return self._announce(dataclasses.replace(cur, t=t, repeat=True))
         return self._announce(self._decide(t, cur.level, tgt, repeat=True))

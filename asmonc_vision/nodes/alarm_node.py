@@ -12,11 +12,12 @@ Publishes:
     /alarms/contact (diagnostic_msgs/DiagnosticArray, RELIABLE): per obstacle list, the
         most urgent obstacle, what the sound cue tracks between announcements; header =
         the list's header, one status named ``contact`` with the values ``level``
-        (0..3), ``obstacle_id``, ``range`` (m), ``bearing`` (rad from the walking
-        direction, positive left), ``time_to_contact`` (s, ``inf`` while standing or
-        unknown), ``drop`` and ``moving`` (``true``/``false``), ``speed`` (m/s, ``nan``
-        unknown). Level 0: no obstacle on the path. Published after any /alarms
-        message for the same list: it is the node's whole answer to that list.
+        (0..3), ``obstacle_id``, ``range`` (m), ``bearing`` (rad from the cameras'
+        axis, positive left, as on /alarms and /obstacles), ``time_to_contact`` (s,
+        ``inf`` while standing or unknown), ``drop`` and ``moving``
+        (``true``/``false``), ``speed`` (m/s, ``nan`` unknown). Level 0: no obstacle
+        on the path. Published after any /alarms message for the same list: it is the
+        node's whole answer to that list.
     /diagnostics
 
 An /obstacles entry whose height is NaN is ground the detector cannot see from its
@@ -70,7 +71,8 @@ def contact_msg(c: Contact, header: Header, speed: float | None) -> DiagnosticAr
     ob = c.target
     values = dict(level=int(c.level), obstacle_id=ob.id if ob else 0,
                   range=f'{ob.range:.3f}' if ob else 'nan',
-                  bearing=f'{ob.bearing:.4f}' if ob else 'nan',
+                  bearing=(f'{math.remainder(ob.bearing + c.heading, math.tau):.4f}'
+                           if ob else 'nan'),
                   time_to_contact=f'{c.time_to_contact:.3f}',
                   drop=str(bool(ob and ob.is_drop)).lower(), moving=str(c.moving).lower(),
                   speed='nan' if speed is None else f'{speed:.3f}')
