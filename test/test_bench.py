@@ -90,3 +90,20 @@ def test_run_method_gives_gpod_the_inclinometer_up_direction(monkeypatch):
     for f, up in zip(frames[1:], seen[1:]):
         assert np.allclose(up, gravity_up_optical(f.inclinometer[1]))
         assert up[1] < -0.9                       # the rig looks ahead, about level
+
+
+def test_run_method_keeps_the_egomotion_the_node_would_publish():
+    """With the egomotion estimator, each pair keeps the translation the egomotion node
+    publishes (from the pair before; none for the first), for the walking speed of the
+    alarm replay: on the bundled walk about 0.1 m a pair along the optical axis."""
+    from asmonc_vision.eval.bench import run_method
+    from asmonc_vision.io.frames import load_frames
+
+    frames = load_frames(BAGS / 'walk_obstacles')[30:42]      # walking from pair 20
+    runs = run_method(frames, 'sgbm', egomotion=True)
+    assert runs[0].ego_t is None
+    steps = [r.ego_t for r in runs[1:] if r.ego_t is not None]
+    assert len(steps) >= 8
+    z = np.array([s[2] for s in steps])
+    assert np.all((z > 0.02) & (z < 0.3)), z
+    assert all(r.ego_t is None for r in run_method(frames[:3], 'sgbm'))
