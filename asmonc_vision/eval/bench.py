@@ -155,15 +155,13 @@ def run_method(frames: list[Frame], method: str = 'gpod', threshold_px: float | 
             er = est.process(f.left, f.right, f.cam, f.stamp_ns)
             if er.ok and prev_stamp is not None and er.reference_stamp_ns == prev_stamp:
                 ego_t = np.array(er.motion.t, float)   # published: from the pair before
-            if method != 'gpod':
-                pass
-            elif det.motion_predictor is not None:
+            if method == 'gpod' and det.motion_predictor is not None:
                 if er.ok and er.reference_stamp_ns is not None:
                     lagged.append((i, er.reference_stamp_ns, f.stamp_ns, er.motion.R,
                                    er.motion.t))
                 while lagged and lagged[0][0] <= i - motion_lag:
                     det.motion_predictor.add_motion(*lagged.pop(0)[1:])
-            elif er.ok and er.reference_stamp_ns == prev_stamp:
+            elif method == 'gpod' and er.ok and er.reference_stamp_ns == prev_stamp:
                 motion = (er.motion.R, er.motion.t)
             prev_stamp = f.stamp_ns
         c = time.thread_time()
