@@ -2,6 +2,7 @@
 import json
 
 import numpy as np
+import pytest
 
 from asmonc_vision.eval.bench import render_frames, time_detector
 from asmonc_vision.io.frames import load_pairs
@@ -107,3 +108,38 @@ def test_run_method_keeps_the_egomotion_the_node_would_publish():
     z = np.array([s[2] for s in steps])
     assert np.all((z > 0.02) & (z < 0.3)), z
     assert all(r.ego_t is None for r in run_method(frames[:3], 'sgbm'))
+
+
+def test_bench_times_gpod_as_the_graph_runs_it():
+    """bench's GPOD pass is the campaign's gpod_map_lag (the map given the egomotion of the
+    pairs MAP_MOTION_LAG before, through the predictor), fed the estimator's results
+    computed once beforehand: the same outputs as run_method running the estimator."""
+    from asmonc_vision.cli.campaign import MAP_MOTION_LAG
+    from asmonc_vision.eval import bench
+    from asmonc_vision.io.frames import load_frames
+
+    assert bench.MAP_MOTION_LAG == MAP_MOTION_LAG
+    frames = load_frames(BAGS / 'walk_obstacles', 14)
+    ego = bench.egomotion_results(frames)
+    assert len(ego) == 14 and sum(e.ok for e in ego) >= 10
+    timed = bench.bench_runs(frames, 'gpod', ego)
+    ref = bench.run_method(frames, 'gpod', map_enabled=True, egomotion=True,
+                           motion_lag=MAP_MOTION_LAG)
+    assert [r.status for r in timed] == [r.status for r in ref]
+    assert all(_same_obstacles(a.obstacles, b.obstacles) for a, b in zip(timed, ref))
+    assert sum(len(r.obstacles) for r in ref) > 0
+    assert all('map' in r.timings for r in timed)
+    with pytest.raises(ValueError):
+        bench.run_method(frames[:3], 'gpod', egomotion=True, ego_results=ego)
+
+
+def _same_obstacles(a, b) -> bool:
+    """Two FrameObstacles bit for bit (every field, NaN heights too)."""
+    def same(x, y):
+        if x is None or y is None:
+            return x is y
+        x, y = np.asarray(x), np.asarray(y)
+        return x.dtype == y.dtype and x.shape == y.shape and x.tobytes() == y.tobytes()
+    return a.stamp_ns == b.stamp_ns and all(
+        same(getattr(a, k), getattr(b, k))
+        for k in ('ids', 'position', 'height', 'range', 'bearing', 'roi', 'confidence'))

@@ -5,7 +5,12 @@
 
 Both methods run on the same stereo pairs in order (so GPOD's ground plane initialises
 and tracks as it would live), with OpenCV pinned to one thread (cv2.setNumThreads(1));
-the first `--warmup` pairs are processed but not timed. Reported per method: the median
+the first `--warmup` pairs are processed but not timed. GPOD is timed as the node graph
+runs it: the detector, then the evidence map given the motion the graph gives it (the
+egomotion estimator's motions of the pairs two or more before, through
+`core.map_motion.MotionPredictor`: `asmonc campaign`'s gpod_map_lag, the same outputs).
+The egomotion runs in a node of its own, so the estimator is run once over the pairs
+before the timed passes and its time is in none of them. Reported per method: the median
 and 90th percentile of the per-frame time of `process()` in milliseconds, the rate, the
 median per stage, the median CPU time of `process()` (the thread's own time: unlike the
 wall time, it does not count waiting for a core that other processes share -- the load

@@ -66,7 +66,9 @@ METHOD_NAMES = {'gpod': 'ours (GPOD)', 'gpod_ego': 'ours (GPOD + motion)',
                 'gpod_map': 'ours (GPOD + map)', 'gpod_map_lag': 'ours (GPOD + map, no wait)',
                 'gpod_map_wait': 'ours (GPOD + map, map waits)',
                 'sgbm': 'peer (SGBM)'}
-#: gpod_map_lag: the motion of a pair reaches the map this many pairs later
+#: gpod_map_lag: the motion of a pair reaches the map this many pairs later (the same as
+#: `eval.bench.MAP_MOTION_LAG`, with which `asmonc bench` times GPOD; not imported from
+#: there to keep this module's import light)
 MAP_MOTION_LAG = 2
 
 

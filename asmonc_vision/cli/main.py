@@ -1,7 +1,7 @@
 """`asmonc`: the command-line front of asmonc_vision.
 
     asmonc run [BAG] [--out DIR] [--rate R]   replay a bag through the node graph
-    asmonc bench [BAG ...]                     time the detector per frame, one core
+    asmonc bench [BAG ...]                     time the detector and map per frame, one core
     asmonc eval BAG [BAG ...]                  score a detector against ground truth
     asmonc fig5 [--empirical]                  the paper's Fig. 5, model and measured
     asmonc motion {tables,eval,corners}        visual egomotion: Tables 2-3, bag errors
@@ -32,7 +32,7 @@ def build_parser() -> argparse.ArgumentParser:
         'run', help='replay a bag through the detector and alarm nodes',
         description=run.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
     bench.add_arguments(sub.add_parser(
-        'bench', help='time the detector per frame on one core',
+        'bench', help='time the detector and its map per frame on one core',
         description=bench.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter))
     eval_.add_arguments(sub.add_parser(
         'eval', help="score a detector against a bag's ground truth, offline",
