@@ -1080,3 +1080,83 @@ def test_at_a_start_the_detectors_reports_go_out_as_they_are():
            for f in load_frames(BAGS / 'static_obstacles', 30)]
     assert not p.confirmed_once
     assert any(own) and out == own
+
+
+def test_the_compiled_pixel_counts_give_numpys():
+    """`map_kernels.count_kernel` (the compiled `EvidenceMap._count`, into grids kept
+    between pairs) gives numpy's bincounts and cells, pair after pair (the cells of the
+    pair before cleared), and the map entered through either holds the same cells."""
+    from asmonc_vision.core import map_kernels
+    if map_kernels.nb_count is None:
+        pytest.skip('numba is not available')
+    rng = np.random.default_rng(5)
+    emap = EvidenceMap(EvidenceMapConfig(enabled=True))
+    n2 = emap.n * emap.n
+    for size in (0, 1, 50, 3000, 400):
+        flat = rng.integers(0, n2, size).astype(np.int64)
+        flat[: size // 3] = flat[0] if size else 0          # a crowded cell
+        kind = rng.choice(np.array([RAISED, DROP, GROUND, NONE], np.int8), size)
+        sure = (kind == GROUND) & (rng.random(size) < 0.5)     # ground of known height
+        got = emap._count(flat, kind, sure)
+        got_pair = emap._pair_count.copy()
+        want = emap._count(flat, kind, sure, use_kernel=False)
+        for a, b in zip(got, want):
+            assert a.dtype == b.dtype
+            np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(got_pair, emap._pair_count)
+    # a walk's evidence entered with the kernel and without: the same map
+    kernel = map_kernels.nb_count
+    maps = []
+    for use in (kernel, None):
+        map_kernels.nb_count = use
+        try:
+            m = EvidenceMap(EvidenceMapConfig(enabled=True))
+            for i in range(6):
+                box = box_edges(3.0 - 0.1 * i, 0.2, 0.3)
+                ground = ground_grid(1.0, 5.0, step=0.1)
+                m.update(0.1 * i, PLANE, evidence([(box, RAISED, None), (ground, GROUND, None)],
+                                                  0.0), None, True)
+            maps.append(m)
+        finally:
+            map_kernels.nb_count = kernel
+    a, b = maps
+    assert a.objects and len(a.objects) == len(b.objects)
+    for x, y in zip(a.objects, b.objects):
+        assert x.object_id == y.object_id and x.height == y.height
+        assert x.fresh_pixels == y.fresh_pixels and x.confidence == y.confidence
+    for name in ('L_r', 'L_d', 'h_x', 'h_P', 'pt_xy', 'two_views'):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+
+
+@pytest.mark.parametrize('threads', [1, 0])
+def test_grid_operations_on_the_box_give_the_whole_grids(threads):
+    """`map_grid.dilate` and `map_grid.label_regions` worked out on the box of the
+    non-zero cells give what they give over the whole grid: the same cells and the
+    regions in the same order (cv2.connectedComponents' labels), with OpenCV on one
+    thread and on its default."""
+    import cv2
+
+    from asmonc_vision.core import map_grid
+    old = cv2.getNumThreads()
+    cv2.setNumThreads(threads)
+    try:
+        rng = np.random.default_rng(11)
+        for trial in range(60):
+            mask = np.zeros((180, 180), bool)
+            for _ in range(rng.integers(0, 12)):
+                y, x = rng.integers(0, 180, 2)
+                h, w = rng.integers(1, 9, 2)
+                mask[y:y + h, x:x + w] = rng.random((min(h, 180 - y), min(w, 180 - x))) < 0.7
+            if trial % 10 == 0:
+                mask[0, 179] = mask[179, 0] = True               # at the grid's corners
+            for r in (0, 1, 2, 3):
+                np.testing.assert_array_equal(map_grid.dilate(mask, r),
+                                              map_grid.dilate(mask, r, whole=True))
+                got = map_grid.label_regions(mask, r)
+                want = map_grid.label_regions(mask, r, whole=True)
+                assert len(got) == len(want)
+                for a, b in zip(got, want):
+                    assert a.dtype == b.dtype
+                    np.testing.assert_array_equal(a, b)
+    finally:
+        cv2.setNumThreads(old)

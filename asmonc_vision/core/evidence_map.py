@@ -78,10 +78,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
-from asmonc_vision.core import map_kernels
+from asmonc_vision.core import map_grid, map_kernels
 from asmonc_vision.core.camera import MetricPlane, StereoCamera, ground_axes
 from asmonc_vision.core.map_settings import EvidenceMapConfig
 
@@ -242,6 +241,9 @@ class EvidenceMap:
         #: pairs entered since the last reset (the map's evidence is continuous over them)
         self.placed_pairs = 0
         self._pair_count: np.ndarray | None = None
+        #: the cells with raised or drop pixels of the pair (flat indices)
+        self._pair_cells = np.zeros(0, np.int64)
+        self._counts = map_kernels.PixelCounts(n * n)
         #: (n * n,) bool: the confirmed cells in plain view this pair saw nothing at
         self._missed = np.zeros(n * n, bool)
         self.objects: tuple[MapObject, ...] = ()
@@ -265,7 +267,7 @@ class EvidenceMap:
                  (self.two_views, False), (self.last_hit_s, -np.inf), (self.ids, 0),
                  (self.free_s, -np.inf), (self.moved_in, False))
         for a, fill in fills:
-            _shift(a, int(k[1]), int(k[0]), fill)
+            map_grid.shift(a, int(k[1]), int(k[0]), fill)
 
     # ------------------------------------------------------------------ update
     def update(self, stamp_s: float, plane: MetricPlane | None, ev: PairEvidence | None,
@@ -394,16 +396,16 @@ class EvidenceMap:
         flat, w, kind = flat[inside], w[inside], ev.kind[inside]
         h, sh = ev.height[inside], ev.sigma_h[inside]
         hit = c.hit_logodds * (c.still_hit_factor if still else 1.0)
-        f_r, f_d, f_g = flat[kind == RAISED], flat[kind == DROP], flat[kind == GROUND]
-        n_r = np.bincount(f_r, minlength=n2)
-        n_d = np.bincount(f_d, minlength=n2)
-        n_g = np.bincount(f_g, minlength=n2)
-        self._pair_count = n_r + n_d
+        f_r, f_d = flat[kind == RAISED], flat[kind == DROP]
+        # pixels per cell of each kind (n_sure: ground of a finely known height), and the
+        # cells of each kind, ascending
+        sure = (kind == GROUND) & (sh <= c.drop_clear_max_sigma_m)
+        n_r, n_d, n_g, n_sure, u_r, u_d, u_g = self._count(flat, kind, sure)
+        self._pair_cells = np.concatenate((u_r, u_d))
         Lr, Ld = self.L_r.reshape(-1), self.L_d.reshape(-1)
         # a cell seen through by this pair's sight lines takes none of its raised evidence
         seen_through = self._rays(ev.xy[ev.kind == GROUND], n_r)
         n_r[seen_through] = 0
-        u_r, u_d, u_g = np.unique(f_r), np.unique(f_d), np.unique(f_g)
         raised = u_r[n_r[u_r] != 0]
         dropc = u_d[(n_d[u_d] >= c.min_drop_pixels) & (n_r[u_d] == 0)]
         # (ground in a cell with no more raised and drop pixels: in u_g)
@@ -411,16 +413,12 @@ class EvidenceMap:
         if c.clear_guard_cells > 0:
             # ground seen beside a thing seen in this pair (its foot, the ground in front
             # of its face in the same cell) does not clear it
-            k = 2 * c.clear_guard_cells + 1
-            near = cv2.dilate(((n_r + n_d) > 0).astype(np.uint8).reshape(self.n, self.n),
-                              np.ones((k, k), np.uint8))
+            near = map_grid.dilate(self._grid_of(raised, u_d), c.clear_guard_cells)
             free_g &= near.reshape(-1)[u_g] == 0
         free = u_g[free_g]
         # ground that can rule a drop out: pixels of height known to drop_clear_max_sigma_m
         free_d = free
         if c.drop_clear_max_sigma_m > 0:
-            sure = (kind == GROUND) & (sh <= c.drop_clear_max_sigma_m)
-            n_sure = np.bincount(flat[sure], minlength=n2)
             free_d = free[n_sure[free] >= c.min_ground_pixels]
         if c.moved_in_s > 0:
             self._moved_in(stamp_s, raised[Lr[raised] <= 0], free_d)
@@ -444,15 +442,18 @@ class EvidenceMap:
         gone = free[(Lr[free] <= 0) & (Ld[free] <= 0)]
         self._forget(gone)
         # height: per cell, the pair's highest raised point (drop: lowest) is z, R = σ_h²
+        here = np.zeros(n2, bool)              # the cells of the kind (np.isin over the grid)
         for cells, sel, sign in ((raised, kind == RAISED, 1.0), (dropc, kind == DROP, -1.0)):
             if not cells.size:
                 continue
+            here[cells] = True
             fi, hi, si, wi = flat[sel], h[sel] * sign, sh[sel], w[sel]
             o = np.lexsort((-hi, fi))
             head = np.concatenate(([True], fi[o][1:] != fi[o][:-1]))
             top = o[head]
             cell = fi[top]
-            keep = np.isin(cell, cells)
+            keep = here[cell]
+            here[cells] = False
             cell, z, R = cell[keep], sign * hi[top][keep], si[top][keep] ** 2
             x, P = self.h_x.reshape(-1), self.h_P.reshape(-1)
             P0 = P[cell]
@@ -472,6 +473,21 @@ class EvidenceMap:
             pts[cell, 1] = (1 - a) * pts[cell, 1] + a * my
             self.last_hit_s.reshape(-1)[cell] = stamp_s
         self._views(np.concatenate((raised, dropc)), still)
+
+    def _count(self, flat: np.ndarray, kind: np.ndarray, sure: np.ndarray,
+               use_kernel: bool = True) -> tuple[np.ndarray, ...]:
+        """A pair's pixels per cell (`map_kernels.PixelCounts.count`); also kept:
+        ``_pair_count`` = n_r + n_d, (n * n,) int64."""
+        out = self._counts.count(flat, kind, sure, use_kernel)
+        self._pair_count = self._counts.pair
+        return out
+
+    def _grid_of(self, *cells: np.ndarray) -> np.ndarray:
+        """(n, n) uint8: 1 at the given flat cell indices, else 0."""
+        g = np.zeros(self.n * self.n, np.uint8)
+        for cs in cells:
+            g[cs] = 1
+        return g.reshape(self.n, self.n)
 
     def _moved_in(self, stamp_s: float, begins: np.ndarray, free: np.ndarray) -> None:
         """Raised evidence begins in cells ``begins`` (flat indices) where ground was seen
@@ -549,20 +565,8 @@ class EvidenceMap:
 
     def _label(self, mask: np.ndarray) -> list[np.ndarray]:
         """Flat cell indices of each region of ``mask`` (8-connected, gaps of
-        ``join_cells`` bridged)."""
-        m8: np.ndarray = mask.astype(np.uint8)
-        if self.config.join_cells > 0:
-            k = 2 * self.config.join_cells + 1
-            m8 = cv2.dilate(m8, np.ones((k, k), np.uint8))
-        _, lab = cv2.connectedComponents(m8, connectivity=8)
-        flat = np.where(mask, lab, 0).reshape(-1)
-        cells = np.flatnonzero(flat)
-        if not cells.size:
-            return []
-        cells = cells[np.argsort(flat[cells], kind='stable')]
-        labels = flat[cells]
-        starts = np.flatnonzero(np.concatenate(([True], labels[1:] != labels[:-1])))
-        return np.split(cells, starts[1:])
+        ``join_cells`` bridged; `map_grid.label_regions`)."""
+        return map_grid.label_regions(mask, self.config.join_cells)
 
     def _unseen(self, ev: PairEvidence, cam: StereoCamera) -> None:
         """Confirmed cells in plain view that this pair saw nothing at are fading.
@@ -580,9 +584,8 @@ class EvidenceMap:
         if (c.miss_logodds <= 0 and c.unseen_report_s <= 0) or self._pair_count is None:
             return
         conf_r, conf_d = self.confirmed(False).reshape(-1), self.confirmed(True).reshape(-1)
-        k = 2 * c.miss_guard_cells + 1
-        got = cv2.dilate((self._pair_count > 0).astype(np.uint8).reshape(self.n, self.n),
-                         np.ones((k, k), np.uint8)).reshape(-1) > 0
+        got = map_grid.dilate(self._grid_of(self._pair_cells),
+                              c.miss_guard_cells).reshape(-1) > 0
         cells = np.flatnonzero((conf_r | conf_d) & ~got)
         if not cells.size:
             return
@@ -796,18 +799,3 @@ def _bearing_bin(xy: np.ndarray) -> np.ndarray:
     """(N,) int: the 1 degree bearing bin (0 .. _BINS - 1) of ground points (N, 2)."""
     b = np.degrees(np.arctan2(xy[:, 1], xy[:, 0])) + 90.0
     return np.clip(b.astype(np.int64), 0, _BINS - 1)
-
-
-def _shift(a: np.ndarray, dy: int, dx: int, fill) -> None:
-    """Shift array ``a`` (first two axes [y, x]) in place so that new[i, j] = old[i + dy,
-    j + dx] (the grid's origin moved by (dy, dx) cells), filling the
-    cells shifted in with ``fill``."""
-    n0, n1 = a.shape[0], a.shape[1]
-    out = np.full_like(a, fill)
-    ys = slice(max(dy, 0), n0 + min(dy, 0))
-    yd = slice(max(-dy, 0), n0 + min(-dy, 0))
-    xs = slice(max(dx, 0), n1 + min(dx, 0))
-    xd = slice(max(-dx, 0), n1 + min(-dx, 0))
-    if abs(dy) < n0 and abs(dx) < n1:
-        out[yd, xd] = a[ys, xs]
-    a[...] = out
