@@ -740,10 +740,14 @@ class EvidenceMap:
                 lat = g @ across
                 hx = self.h_x.reshape(-1)[cs]
                 height = float(hx.min()) if drop else float(hx.max())
+                # the id of the previous pair's region most of its cells had (the
+                # smallest of equal counts), of those not taken by a nearer region
                 prev = self.ids.reshape(-1)[cs]
-                prev = prev[(prev > 0) & ~np.isin(prev, list(used))] if used else prev[prev > 0]
-                if prev.size:
-                    vals, cnt = np.unique(prev, return_counts=True)
+                vals, cnt = np.unique(prev[prev > 0], return_counts=True)
+                if used and vals.size:
+                    free = np.array([int(x) not in used for x in vals.tolist()], bool)
+                    vals, cnt = vals[free], cnt[free]
+                if vals.size:
                     oid = int(vals[np.argmax(cnt)])
                 else:
                     oid = self._next_id
