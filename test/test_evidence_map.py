@@ -1160,3 +1160,40 @@ def test_grid_operations_on_the_box_give_the_whole_grids(threads):
                     np.testing.assert_array_equal(a, b)
     finally:
         cv2.setNumThreads(old)
+
+
+@pytest.mark.parametrize('cells', [5, 400])
+def test_the_compiled_sight_line_test_at_its_edges(cells):
+    """`map_kernels.rays_kernel`, which tests only the sight lines near a cell's bearing
+    when it has many cells, counts as numpy's path tests every line: cells at the
+    camera's foot, nearer than ``ray_lateral_m``, behind the wearer and beside it (bearings
+    near ±180° and ±90°), sight lines to a ground point at the foot (no direction) and
+    lines exactly along a cell's bearing."""
+    from asmonc_vision.core import map_kernels
+    if map_kernels.nb_rays is None:
+        pytest.skip('numba is not available')
+    rng = np.random.default_rng(17)
+    lat = 0.03
+    r = np.concatenate([[0.0, 0.01, 0.029, 0.031, 0.3, 0.31], rng.uniform(0.0, 8.0, cells)])
+    phi = np.concatenate([[0.0, np.pi, -np.pi, np.pi / 2, -np.pi / 2, 3.1],
+                          rng.uniform(-np.pi, np.pi, cells)])
+    p = np.column_stack([r * np.cos(phi), r * np.sin(phi)])
+    top = rng.uniform(-0.5, 1.5, p.shape[0])
+    ground = np.column_stack([rng.uniform(-2.0, 8.0, 700), rng.uniform(-4.0, 4.0, 700)])
+    k = min(40, cells)
+    ground[:k] = p[6:6 + k] * rng.uniform(1.0, 3.0, (k, 1))    # along the cells' bearings
+    ground[40:44] = 0.0                                         # at the foot
+    ground[44:48] = 1e-7
+    R = np.hypot(ground[:, 0], ground[:, 1])
+    gh = ground / np.maximum(R, 1e-6)[:, None]
+    left, right = map_kernels.nb_rays(p, top, gh, R, 1.4, lat, 0.2)
+    # numpy's path (`EvidenceMap._rays`): each cell against each line
+    along = p[:, 0:1] * gh[None, :, 0] + p[:, 1:2] * gh[None, :, 1]
+    lateral = gh[None, :, 0] * p[:, 1:2] - gh[None, :, 1] * p[:, 0:1]
+    with np.errstate(divide='ignore', invalid='ignore'):
+        h_ray = 1.4 * (1.0 - along / R[None, :])
+        through = ((np.abs(lateral) <= lat) & (along > 0.3) & (along < R[None, :] - 0.2)
+                   & (h_ray < top[:, None]))
+    assert through.sum() > (0 if cells < 10 else 20)
+    np.testing.assert_array_equal(left, np.count_nonzero(through & (lateral > 0), axis=1))
+    np.testing.assert_array_equal(right, np.count_nonzero(through & (lateral <= 0), axis=1))

@@ -379,8 +379,9 @@ class EvidenceMap:
     def _cells(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Flat cell index of W points (N, 2) and a mask of those inside the grid."""
         ij = np.floor((w - self.origin[None, :]) / self.config.cell_m).astype(np.int64)
-        inside = (ij >= 0).all(1) & (ij < self.n).all(1)
-        return ij[:, 1] * self.n + ij[:, 0], inside
+        ix, iy = ij[:, 0], ij[:, 1]
+        inside = (ix >= 0) & (iy >= 0) & (ix < self.n) & (iy < self.n)
+        return iy * self.n + ix, inside
 
     def _enter(self, stamp_s: float, ev: PairEvidence, still: bool) -> None:
         """Enter one pair's evidence into the cells (module docstring, step 4).
@@ -583,10 +584,15 @@ class EvidenceMap:
         c = self.config
         if (c.miss_logodds <= 0 and c.unseen_report_s <= 0) or self._pair_count is None:
             return
-        conf_r, conf_d = self.confirmed(False).reshape(-1), self.confirmed(True).reshape(-1)
+        cells_r, cells_d = self._confirmed_cells(False), self._confirmed_cells(True)
+        cells = np.union1d(cells_r, cells_d)
+        if not cells.size:
+            return
+        conf_r = self._grid_of(cells_r).reshape(-1) > 0
+        conf_d = self._grid_of(cells_d).reshape(-1) > 0
         got = map_grid.dilate(self._grid_of(self._pair_cells),
                               c.miss_guard_cells).reshape(-1) > 0
-        cells = np.flatnonzero((conf_r | conf_d) & ~got)
+        cells = cells[~got[cells]]
         if not cells.size:
             return
         g, feet, up = self._cell_feet(cells)
@@ -657,6 +663,14 @@ class EvidenceMap:
         other = self.L_r if drop else self.L_d
         return (L >= self.config.report_logodds) & self.two_views & (L >= other)
 
+    def _confirmed_cells(self, drop: bool = False) -> np.ndarray:
+        """(K,) int64 the flat indices of the cells `confirmed` reports, ascending (from
+        the cells with two views alone)."""
+        tv = np.flatnonzero(self.two_views)
+        L = (self.L_d if drop else self.L_r).reshape(-1)[tv]
+        other = (self.L_r if drop else self.L_d).reshape(-1)[tv]
+        return tv[(L >= self.config.report_logodds) & (L >= other)]
+
     def probability(self) -> np.ndarray:
         """(n, n) float32 P(raised) = 1 / (1 + exp(-L_r)) of every cell."""
         return 1.0 / (1.0 + np.exp(-self.L_r))
@@ -690,36 +704,32 @@ class EvidenceMap:
         out: list[MapObject] = []
         new_ids = np.zeros_like(self.ids)
         used: set[int] = set()
-        masks = []
+        masks = []                     # (drop, the cells of a mask, flat indices)
         for drop in (False, True):
-            mask = self.confirmed(drop)
-            if not mask.any():
+            cells = self._confirmed_cells(drop)
+            if not cells.size:
                 continue
             if cam is None:
-                masks.append((drop, mask))
+                masks.append((drop, cells))
                 continue
-            cells = np.flatnonzero(mask)
-            vis = np.zeros(mask.size, bool)
-            below = np.zeros(mask.size, bool)
-            vis[cells], below[cells] = self.in_view(cells, cam)
+            vis, below = self.in_view(cells, cam)
             if c.unseen_report_s > 0 and not drop:
                 # in plain view, a raised thing is seen again or is gone (a passer-by
                 # walked on); a drop's evidence is intermittent (its lower ground is
                 # hidden by its edge), so a drop is reported from memory
-                stale = stamp_s - self.last_hit_s.reshape(-1) > c.unseen_report_s
-                vis &= ~(self._missed & stale)
+                stale = stamp_s - self.last_hit_s.reshape(-1)[cells] > c.unseen_report_s
+                vis &= ~(self._missed[cells] & stale)
                 # a thing that moved in is not remembered where it is no longer seen
                 # (hidden, or out of the image): it may have moved on
-                gone = self.moved_in.reshape(-1) & stale
+                gone = self.moved_in.reshape(-1)[cells] & stale
                 vis &= ~gone
                 below &= ~gone
-            masks.extend([(drop, mask & vis.reshape(mask.shape)),
-                          (drop, mask & below.reshape(mask.shape))])
-        for drop, mask in masks:
-            if not mask.any():
+            masks.extend([(drop, cells[vis]), (drop, cells[below])])
+        for drop, cells in masks:
+            if not cells.size:
                 continue
             L = (self.L_d if drop else self.L_r).reshape(-1)
-            for cs in self._label(mask):
+            for cs in self._label(self._grid_of(cells) > 0):
                 if cs.size < (c.min_drop_cells if drop else c.min_region_cells):
                     continue
                 g = self.to_ground(self.pt_xy.reshape(-1, 2)[cs].astype(np.float64))

@@ -4,9 +4,9 @@
 
 * `rays_kernel`, the sight-line test of `EvidenceMap._rays`. Its numpy path builds the
   (cells x sight lines) arrays of the same arithmetic (the same operations in the same
-  order, in float64: both give the same counts). Only the large temporaries and numpy's
-  call overhead are gone: most sight lines pass far beside a cell and are dropped at the
-  first test.
+  order, in float64: both give the same counts). The kernel tests only the sight lines
+  whose bearing is near a cell's: most pass far beside a cell, and those it skips fail
+  the first test.
 * `count_kernel`, the pixel counts per cell of `EvidenceMap._enter`. Its numpy path
   counts with ``np.bincount`` over the whole grid (n x n cells) and finds the cells of
   each kind with ``np.flatnonzero``; the kernel adds each pixel to grids kept between
@@ -36,26 +36,76 @@ def rays_kernel(p, top, gh, R, height, lateral_m, stop_m):
         on their left (lateral offset > 0) and on their right (<= 0): those within
         ``lateral_m`` of it, that reach it (along the line: beyond 0.3 m, before
         ``R - stop_m``) and pass lower than ``top`` there (``height (1 - along / R)``).
+
+    Only the sight lines whose bearing is within ``asin(lateral_m / r)`` (and a margin
+    far above the rounding) of a cell's, r its range, are tested: the others pass more
+    than ``lateral_m`` beside it or behind the camera (a line of bearing θ passes a point
+    at range r and bearing φ at ``r sin(φ - θ)``, ahead of the camera only with
+    ``|φ - θ| < 90°``). The tests are those of every line, so the counts are the same.
+    Directions shorter than 0.5 (a ground point within 1 µm of the camera's foot) are
+    tested against every cell.
     """
     m, n = p.shape[0], gh.shape[0]
     left = np.zeros(m, np.int64)
     right = np.zeros(m, np.int64)
+    if m < _RAYS_SORT_MIN_CELLS:        # few cells: every line (sorting would cost more)
+        for i in range(m):
+            nb_rays_count(p, top, gh, R, height, lateral_m, stop_m, left, right, i,
+                          np.arange(n))
+        return left, right
+    # the sight lines by bearing; the short directions apart
+    ang = np.empty(n)
+    short = np.zeros(n, np.bool_)
+    for j in range(n):
+        ang[j] = np.arctan2(gh[j, 1], gh[j, 0])
+        short[j] = gh[j, 0] * gh[j, 0] + gh[j, 1] * gh[j, 1] < 0.25
+    order = np.argsort(ang)
+    n_long = 0
+    for k in range(n):
+        if not short[order[k]]:
+            order[n_long] = order[k]
+            n_long += 1
+    long_ = order[:n_long]
+    s_ang = ang[long_]
+    shorts = np.flatnonzero(short)
     for i in range(m):
-        px, py, ti = p[i, 0], p[i, 1], top[i]
-        for j in range(n):
-            gx, gy = gh[j, 0], gh[j, 1]
-            lateral = gx * py - gy * px
-            if not abs(lateral) <= lateral_m:
-                continue
-            along = px * gx + py * gy
-            if not (along > 0.3 and along < R[j] - stop_m):
-                continue
-            if height * (1.0 - along / R[j]) < ti:
-                if lateral > 0:
-                    left[i] += 1
-                else:
-                    right[i] += 1
+        px, py = p[i, 0], p[i, 1]
+        r = np.hypot(px, py)
+        sw = (lateral_m + 1e-9) / max(r * (1.0 - 1e-9), 1e-300)
+        lo, hi = 0, n_long
+        if sw < 1.0:
+            phi = np.arctan2(py, px)
+            w = np.arcsin(sw) + 1e-6
+            if phi - w > -np.pi and phi + w < np.pi:
+                lo = np.searchsorted(s_ang, phi - w, 'left')
+                hi = np.searchsorted(s_ang, phi + w, 'right')
+        nb_rays_count(p, top, gh, R, height, lateral_m, stop_m, left, right, i,
+                      long_[lo:hi])
+        nb_rays_count(p, top, gh, R, height, lateral_m, stop_m, left, right, i, shorts)
     return left, right
+
+
+#: `rays_kernel` sorts the sight lines by bearing from this many cells on
+_RAYS_SORT_MIN_CELLS = 24
+
+
+def _rays_count(p, top, gh, R, height, lateral_m, stop_m, left, right, i, lines):
+    """`rays_kernel`'s tests of cell ``i`` against the sight lines ``lines`` (int64
+    indices), counted into ``left[i]`` and ``right[i]``."""
+    px, py, ti = p[i, 0], p[i, 1], top[i]
+    for j in lines:
+        gx, gy = gh[j, 0], gh[j, 1]
+        lateral = gx * py - gy * px
+        if not abs(lateral) <= lateral_m:
+            continue
+        along = px * gx + py * gy
+        if not (along > 0.3 and along < R[j] - stop_m):
+            continue
+        if height * (1.0 - along / R[j]) < ti:
+            if lateral > 0:
+                left[i] += 1
+            else:
+                right[i] += 1
 
 
 def count_kernel(flat, kind, sure, n_r, n_d, n_g, n_sure, pair, prev_r, prev_d, prev_g):
@@ -156,8 +206,11 @@ class PixelCounts:
         return (n_r, n_d, n_g, n_sure,
                 np.flatnonzero(n_r), np.flatnonzero(n_d), np.flatnonzero(n_g))
 
+
+#: ``_rays_count`` compiled, for ``rays_kernel`` to call (None without numba)
+nb_rays_count = jit(_rays_count)
 #: ``rays_kernel`` compiled (None without numba; `warm_up` sets it to None when it fails)
-nb_rays = jit(rays_kernel)
+nb_rays = jit(rays_kernel) if nb_rays_count is not None else None
 _warm = False
 
 

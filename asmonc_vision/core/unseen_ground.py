@@ -224,7 +224,7 @@ class UnseenGroundMonitor:
 
     def _count(self, xy: np.ndarray) -> np.ndarray:
         """(n_r,) number of ground points xy (N, 2) in each cell of the corridor."""
-        ok = (np.isfinite(xy).all(axis=1) & (xy[:, 1] >= -self.half_width)
+        ok = (np.isfinite(xy[:, 0]) & np.isfinite(xy[:, 1]) & (xy[:, 1] >= -self.half_width)
               & (xy[:, 1] <= self.half_width))
         return np.histogram(xy[ok, 0], bins=self.range_edges)[0].astype(float)
 
@@ -399,7 +399,8 @@ class UnseenGroundMonitor:
         # the last ground seen in the band's first cell moves R to it
         thr = np.broadcast_to(np.asarray(threshold, float), excess.shape)
         with np.errstate(invalid='ignore'):
-            on = np.isfinite(excess) & (np.abs(excess) <= thr) & np.isfinite(xy).all(axis=1)
+            on = (np.isfinite(excess) & (np.abs(excess) <= thr) & np.isfinite(xy[:, 0])
+                  & np.isfinite(xy[:, 1]))
         inside = (on & (xy[:, 1] >= -self.half_width) & (xy[:, 1] < self.half_width)
                   & (xy[:, 0] >= r0) & (xy[:, 0] < r0 + CELL_DEPTH_M))
         r_near = float(np.max(xy[inside, 0])) if inside.any() else r0
