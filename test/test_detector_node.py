@@ -368,6 +368,9 @@ def test_the_map_takes_odometry_and_never_waits(ros_context):
     assert max(took) < 1.9
     pred = det.motion_predictor
     assert pred.predictions >= len(frames) - 3 and pred.measured == 0   # all extrapolated
+    # from the pose of the pair before (~0.1 s), as /diagnostics says
+    assert pred.ahead_ns is not None and 0.05e9 < pred.ahead_ns < 0.25e9, pred.ahead_ns
+    assert 50 <= int(det._motion_ahead_ms()) <= 250
     # never cleared while walking: every pair with a ground plane is placed
     tracking = sum(p.status == GroundPlane.TRACKING for p in got['plane'])
     assert tracking >= len(frames) - 3

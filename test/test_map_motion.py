@@ -34,6 +34,7 @@ def test_constant_translation_is_predicted_exactly():
     for k in range(2, 6):
         m = p.predict(k * STEP_NS)
         assert m is not None
+        assert p.ahead_ns == STEP_NS                 # one pair past the newest measurement
         np.testing.assert_allclose(m[1], t, atol=1e-12)
         np.testing.assert_allclose(m[0], np.eye(3), atol=1e-12)
         p.add_motion((k - 1) * STEP_NS, k * STEP_NS, np.eye(3), t)
@@ -78,6 +79,7 @@ def test_the_measured_pose_is_taken_once_it_is_in():
             R, t = relative(poses[k - 1], poses[k])
             np.testing.assert_allclose(m[0], R, atol=1e-9)
             np.testing.assert_allclose(m[1], t, atol=1e-9)
+            assert p.ahead_ns == 0
     assert p.measured == p.predictions == 8
 
 

@@ -7,7 +7,7 @@ Both methods run on the same stereo pairs in order (so GPOD's ground plane initi
 and tracks as it would live), with OpenCV pinned to one thread (cv2.setNumThreads(1));
 the first `--warmup` pairs are processed but not timed. GPOD is timed as the node graph
 runs it: the detector, then the evidence map given the motion the graph gives it (the
-egomotion estimator's motions of the pairs two or more before, through
+egomotion estimator's motions of the pairs before, as late as in the graph, through
 `core.map_motion.MotionPredictor`: `asmonc campaign`'s gpod_map_lag, the same outputs).
 The egomotion runs in a node of its own, so the estimator is run once over the pairs
 before the timed passes and its time is in none of them. Reported per method: the median

@@ -20,7 +20,7 @@ motion from the egomotion estimator (``gpod_ego``), our detector with the eviden
 (``gpod_map``: the map on, with each pair's motion at once, as a graph that waits for it),
 the map as the detector node runs it (``gpod_map_lag``: the detector with no motion, the
 map's motion predicted by `core.map_motion.MotionPredictor` from the motions of the pairs
-``MAP_MOTION_LAG`` (2) or more before, as the graph has them without waiting), the map
+``eval.bench.MAP_MOTION_LAG`` (1) or more before, as the graph has them without waiting), the map
 given each pair's own motion with the detector given none (``gpod_map_wait``: as a graph
 whose map, not its detector, would wait for the pair's motion) and the SGBM
 peer (`core.baseline`, as `asmonc eval --method sgbm`)
@@ -59,6 +59,8 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 
+from asmonc_vision.eval.bench import MAP_MOTION_LAG
+
 #: seed ranges (inclusive start, exclusive end)
 TUNING_SEEDS = (1000, 2000)
 BLIND_SEEDS = (900000, 901000)
@@ -66,10 +68,6 @@ METHOD_NAMES = {'gpod': 'ours (GPOD)', 'gpod_ego': 'ours (GPOD + motion)',
                 'gpod_map': 'ours (GPOD + map)', 'gpod_map_lag': 'ours (GPOD + map, no wait)',
                 'gpod_map_wait': 'ours (GPOD + map, map waits)',
                 'sgbm': 'peer (SGBM)'}
-#: gpod_map_lag: the motion of a pair reaches the map this many pairs later (the same as
-#: `eval.bench.MAP_MOTION_LAG`, with which `asmonc bench` times GPOD; not imported from
-#: there to keep this module's import light)
-MAP_MOTION_LAG = 2
 
 
 def default_cache() -> Path:

@@ -88,6 +88,9 @@ class MotionPredictor:
             #: predictions made, and those whose pose was measured (not extrapolated)
             self.predictions = 0
             self.measured = 0
+            #: how far past the newest measured pose the latest prediction reached, ns
+            #: (0: measured or interpolated; None: no prediction yet)
+            self.ahead_ns: int | None = None
 
     # ------------------------------------------------------------------ measurements
     def add_motion(self, ref_stamp_ns: int, stamp_ns: int, R, t) -> bool:
@@ -191,4 +194,5 @@ class MotionPredictor:
                 return None
             self.predictions += 1
             self.measured += int(stamp_ns in self._poses)
+            self.ahead_ns = max(stamp_ns - self._stamps[-1], 0) if self._stamps else None
             return relative(base, est)

@@ -32,8 +32,10 @@ LARGE_RIG = {'width': 640, 'height': 480, 'focal': 600.0}
 LARGE_FIRST_FULL_FRAME = 40
 #: the graph's map motion (the detector node does not wait for the egomotion): the
 #: motion of a pair reaches the map this many pairs later (`run_method`'s ``motion_lag``;
-#: `asmonc campaign`'s gpod_map_lag, `asmonc bench`'s GPOD)
-MAP_MOTION_LAG = 2
+#: `asmonc campaign`'s gpod_map_lag, `asmonc bench`'s GPOD). Measured in the graph: the
+#: newest /egomotion/odometry pose when the map places a pair is the previous pair's
+#: (the detector's /diagnostics ``map_motion_ahead_ms``, docs/map.md)
+MAP_MOTION_LAG = 1
 
 
 def render_frames(scenario: str = 'static_obstacles', seed: int = 0, frames=(0,),

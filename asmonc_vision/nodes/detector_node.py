@@ -335,11 +335,21 @@ class DetectorNode(StereoInputNode):
                          motions_used=self.motions_used,
                          map_motions=(self.motion_predictor.predictions
                                       if self.motion_predictor is not None else 0),
+                         map_motion_ahead_ms=self._motion_ahead_ms(),
                          image_noise=f'{self.detector.image_noise_sigma:.2f}',
                          edge_threshold=f'{result.edge_threshold:.2f}',
                          misalignment_px=f'{mis:.2f}',
                          misalignment_corrected=result.misalignment_corrected,
                          total_ms=f"{result.timings.get('total', float('nan')):.1f}")
+
+
+    def _motion_ahead_ms(self) -> str:
+        """How far past the newest /egomotion/odometry pose the map's latest motion was
+        extrapolated, ms ('' without a prediction)."""
+        p = self.motion_predictor
+        if p is None or p.ahead_ns is None:
+            return ''
+        return f'{p.ahead_ns / 1e6:.0f}'
 
 
 def obstacles_to_msg(result: GpodResult, header) -> ObstacleArray:
