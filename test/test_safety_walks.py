@@ -3,8 +3,8 @@ few fixed short walks (sim.scenes, the backpack rig, 320x240; tuning seeds): two
 hazards (a step down, a kerb up, both on the path) and two false-alarm traps (a slope
 starting ahead, drainage grates on the path). The detector runs as the campaign's
 `gpod_map_lag` runs it, as the graph does: the evidence map on, the egomotion
-estimator's motions (the map's predicted from those of the pairs before, as late as in the graph; the alarm
-logic's walking speed from each pair's).
+estimator's motions (the map's predicted from those of the pairs before, as late as in
+the graph; the alarm logic's walking speed from each pair's).
 
 Measured (GPOD default settings, AlarmConfig defaults): WALKS below, per walk the
 obstacles on the path warned in time and on the path, the false alarm events and the
