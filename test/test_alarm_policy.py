@@ -4,7 +4,8 @@ import math
 import pytest
 
 from asmonc_vision.core.alarm import (AlarmConfig, AlarmLevel, AlarmLogic, GroundStatus,
-                                      ObstacleInfo, WalkingSpeed)
+                                      ObstacleInfo)
+from asmonc_vision.core.walking import WalkingSpeed
 
 
 def started(**cfg) -> AlarmLogic:

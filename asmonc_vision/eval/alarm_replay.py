@@ -10,7 +10,7 @@ carry its stamp (as the node's do); timer alarms carry the tick's bag time.
 
 Given the pairs' egomotion (``/egomotion``'s translations, as `eval.bench.run_method`
 keeps them), each is turned into the walking speed and direction by
-`core.alarm.WalkingSpeed` and given to the logic (``walk_motion``) before the pair's
+`core.walking.WalkingSpeed` and given to the logic (``walk_motion``) before the pair's
 obstacle list, as the node does with each /egomotion message: the levels by time to
 contact and the corridor along the walking direction are then those of the live graph.
 The walk model's walking/standing state (``/gait/state``) is not replayed: the logic
@@ -22,7 +22,8 @@ import math
 from typing import Sequence
 
 from asmonc_vision.core.alarm import (CHECK_PERIOD_S, AlarmConfig, AlarmLogic, Decision,
-                                      GroundStatus, ObstacleInfo, WalkingSpeed)
+                                      GroundStatus, ObstacleInfo)
+from asmonc_vision.core.walking import WalkingSpeed
 from asmonc_vision.eval.evaluation import FrameObstacles
 
 #: the detector's status words -> GroundPlane status values

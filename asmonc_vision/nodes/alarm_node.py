@@ -4,7 +4,7 @@ Subscribes:
     /obstacles (asmonc_vision_msgs/ObstacleArray, RELIABLE)
     /ground_plane (asmonc_vision_msgs/GroundPlane, RELIABLE)
     /egomotion (geometry_msgs/TransformStamped, best effort): the walking speed and
-        direction (``core.alarm.WalkingSpeed``), for the levels by time to contact
+        direction (``core.walking.WalkingSpeed``), for the levels by time to contact
     /gait/state (asmonc_vision_msgs/GaitState, best effort): walking or standing
 Publishes:
     /alarms (asmonc_vision_msgs/Alarm, RELIABLE + TRANSIENT_LOCAL: a late subscriber
@@ -42,8 +42,9 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from std_msgs.msg import Header
 
-from asmonc_vision.core.alarm import (CHECK_PERIOD_S, AlarmConfig, AlarmLevel, AlarmLogic,
-                                      Contact, Decision, ObstacleInfo, WalkingSpeed)
+from asmonc_vision.core.alarm import (CHECK_PERIOD_S, AlarmConfig, AlarmLevel, AlarmLogic, Contact,
+                                      Decision, ObstacleInfo)
+from asmonc_vision.core.walking import WalkingSpeed
 from asmonc_vision.nodes.common import (ALARM_QOS, RESULT_QOS, SENSOR_QOS, Diagnostics,
                                         declare_config, run_node, watch_input_links)
 from asmonc_vision.nodes.conversions import stamp_to_ns
