@@ -658,10 +658,9 @@ class EvidenceMap:
 
     # ------------------------------------------------------------------ objects
     def confirmed(self, drop: bool = False) -> np.ndarray:
-        """(n, n) bool: the cells reported (log-odds ≥ ``report_logodds``, two views)."""
-        L = self.L_d if drop else self.L_r
-        other = self.L_r if drop else self.L_d
-        return (L >= self.config.report_logodds) & self.two_views & (L >= other)
+        """(n, n) bool: the cells reported (log-odds ≥ ``report_logodds``, two views;
+        `_confirmed_cells` on the grid)."""
+        return self._grid_of(self._confirmed_cells(drop)) > 0
 
     def _confirmed_cells(self, drop: bool = False) -> np.ndarray:
         """(K,) int64 the flat indices of the cells `confirmed` reports, ascending (from

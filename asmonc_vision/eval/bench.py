@@ -148,8 +148,8 @@ def run_method(frames: list[Frame], method: str = 'gpod', threshold_px: float | 
             motion before the pair (as a graph whose map, not its detector, waited for
             the pair's pose; the node's map does not wait, docs/map.md).
         ego_results: with ``egomotion``, the estimator's results for these frames
-            (`egomotion_results`, one per frame), computed before: taken instead of
-            running the estimator again (the same outputs).
+            (`egomotion_results`, one per frame), computed before (None: computed here
+            first).
 
     GPOD is given each pair's up direction from the frame's inclinometer sample
     (`io.frames.Frame.inclinometer`, `core.rotations.up_for_pair` within the detector's
@@ -164,10 +164,8 @@ def run_method(frames: list[Frame], method: str = 'gpod', threshold_px: float | 
     cv2.setNumThreads(1)
     det = make_method(method, threshold_px, map_enabled)
     max_age_s = det.gpod_config.plane.gravity_prior_max_age_s if method == 'gpod' else 0.0
-    est = None
     if egomotion and ego_results is None:
-        from asmonc_vision.core.motion import EgomotionEstimator
-        est = EgomotionEstimator()
+        ego_results = egomotion_results(frames)
     elif egomotion and len(ego_results) != len(frames):
         raise ValueError(f'run_method: {len(ego_results)} egomotion results for '
                          f'{len(frames)} frames')
@@ -181,8 +179,7 @@ def run_method(frames: list[Frame], method: str = 'gpod', threshold_px: float | 
     for i, f in enumerate(frames):
         motion = ego_t = None
         if egomotion:
-            er = (ego_results[i] if ego_results is not None
-                  else est.process(f.left, f.right, f.cam, f.stamp_ns))
+            er = ego_results[i]
             if er.ok and prev_stamp is not None and er.reference_stamp_ns == prev_stamp:
                 ego_t = np.array(er.motion.t, float)   # published: from the pair before
             if method == 'gpod' and det.motion_predictor is not None:
