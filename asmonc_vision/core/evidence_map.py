@@ -656,6 +656,30 @@ class EvidenceMap:
         self.two_views.reshape(-1)[cells] = False
         self.moved_in.reshape(-1)[cells] = False
 
+    def ground_seen_around(self, xy: np.ndarray, stamp_s: float, within_s: float
+                           ) -> np.ndarray:
+        """(N,) bool for points (N, 2) of the current G (m): the point's cell and the
+        eight around it are in the grid and had their ground seen finely (to
+        ``drop_clear_max_sigma_m``) at most ``within_s`` s before ``stamp_s``, and the
+        eight hold no raised evidence (log-odds raised ≤ 0; the point's own cell may
+        hold the latest pair's, which is what is being judged)."""
+        xy = np.asarray(xy, float).reshape(-1, 2)
+        out = np.zeros(len(xy), bool)
+        if not len(xy) or within_s <= 0:
+            return out
+        ij = np.floor((self.to_world(xy) - self.origin[None, :]) / self.config.cell_m
+                      ).astype(np.int64)
+        out[:] = True
+        for di in (-1, 0, 1):
+            for dj in (-1, 0, 1):
+                ix, iy = ij[:, 0] + di, ij[:, 1] + dj
+                inside = (ix >= 0) & (iy >= 0) & (ix < self.n) & (iy < self.n)
+                ix, iy = np.clip(ix, 0, self.n - 1), np.clip(iy, 0, self.n - 1)
+                out &= inside & (stamp_s - self.free_s[iy, ix] <= within_s)
+                if di or dj:
+                    out &= self.L_r[iy, ix] <= 0
+        return out
+
     # ------------------------------------------------------------------ objects
     def confirmed(self, drop: bool = False) -> np.ndarray:
         """(n, n) bool: the cells reported (log-odds ≥ ``report_logodds``, two views;

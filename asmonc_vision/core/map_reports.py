@@ -25,7 +25,8 @@ CORRIDOR_ID_BASE = 2_000_000
 
 def objects_to_obstacles(objects, cam: StereoCamera, plane: MetricPlane,
                          detections=(), attach_m: float = 0.0,
-                         corridor_half_width: float = 0.0) -> list:
+                         corridor_half_width: float = 0.0,
+                         seen_ground: np.ndarray | None = None) -> list:
     """The map's objects as `core.gpod.GpodObstacle` (the detector's output form), in
     the current left optical frame.
 
@@ -38,7 +39,9 @@ def objects_to_obstacles(objects, cam: StereoCamera, plane: MetricPlane,
     ``MAP_ID_BASE``: ``position`` the top above the nearest point (for a drop, the lowest
     point), range and bearing along the ground, the image region of the region's feet
     and tops (clipped to the image), disparity excess at the top. Reports on no
-    confirmed cell are not reported.
+    confirmed cell are not reported, nor those flagged in ``seen_ground`` ((K,) bool
+    over ``detections``: the map saw ground at the report's foot, so no cell nearby
+    confirms it).
 
     The part in the walking corridor (``corridor_half_width`` > 0: cells ahead within
     it of the walking direction): an object with cells there none of whose reports
@@ -60,7 +63,10 @@ def objects_to_obstacles(objects, cam: StereoCamera, plane: MetricPlane,
         if attach_m > 0 and len(dets):
             dist = np.min(np.linalg.norm(det_xy[:, None, :] - ob.far_xy[None, :, :], axis=2),
                           axis=1)
-            cand = np.flatnonzero((dist <= attach_m) & (det_drop == ob.is_drop))
+            ok = det_drop == ob.is_drop
+            if seen_ground is not None:
+                ok &= ~np.asarray(seen_ground, bool)
+            cand = np.flatnonzero((dist <= attach_m) & ok)
         if cand.size:
             for k in cand[~taken[cand]].tolist():
                 taken[k] = True

@@ -128,6 +128,12 @@ class EvidenceMapConfig:
         "is confirmed and reported as the detector placed it (from the whole silhouette); "
         "a region that confirms none is reported at its own nearest point, m (0: the "
         "map's placement only)", range=(0.0, 5.0))
+    attach_seen_ground_s: float = param(
+        3.0, "a detector report is not confirmed by a cell within attach_m when the map "
+        "saw the ground finely (to drop_clear_max_sigma_m) at its foot and in the cells "
+        "around it at most this long before, with no raised evidence there: the map has "
+        "seen ground where the report says a thing stands (a pair's misfit of a slope "
+        "next to a kerb), s (0: off)", range=(0.0, 60.0))
     pass_height_m: float = param(
         1.0, "a detector report at least this tall is published whether the map confirms "
         "it or not (once chained over pass_frames pairs): a person walking towards the "
@@ -190,9 +196,17 @@ class EvidenceMapConfig:
         'before the map is cleared', range=(0, 100))
     min_placed_pairs: int = param(
         5, "until the map has placed this many pairs in a row the detector's reports are "
-        "published instead of the map's: at a start as they are, after the map was "
-        "cleared for want of a motion once chained over unmapped_frames pairs",
+        "published instead of the map's: at a start as they are (for start_raw_s), after "
+        "the map was cleared for want of a motion, or never took over, once chained over "
+        "unmapped_frames pairs",
         range=(0, 1000))
+    start_raw_s: float = param(
+        1.5, "at a start the detector's reports go out as they are for this long after "
+        "the first pair with a ground plane (a thing in view from the first pair is said "
+        "from the first pairs; the map needs min_placed_pairs pairs, about half a second, "
+        "to take over); a map that has not taken over by then lacks the camera's motion "
+        "while the rig moves, and the reports go out chained as after a clear "
+        "(unmapped_frames), s", range=(0.0, 60.0))
     unmapped_frames: int = param(
         3, "after the map was cleared, until it has placed min_placed_pairs pairs in a "
         "row again, a raised detector report goes out once it ends a chain of this many "

@@ -22,7 +22,8 @@ import numpy as np
 
 from asmonc_vision.core.camera import StereoCamera
 from asmonc_vision.core.evidence_map import (DROP, GROUND, NONE, RAISED, EvidenceMap,
-                                             EvidenceMapConfig, pair_evidence)
+                                             EvidenceMapConfig, ground_frame,
+                                             pair_evidence)
 from asmonc_vision.core.gpod import GpodConfig, GpodDetector, GpodResult
 from asmonc_vision.core.map_motion import MotionPredictor
 from asmonc_vision.core.map_reports import objects_to_obstacles
@@ -50,8 +51,12 @@ class Perception:
         self.motion_predictor = motion_predictor
         self.tall = TallReports.from_config(self.map_config)
         self.unmapped = ChainedReports.from_config(self.map_config)
-        #: the map has placed min_placed_pairs pairs in a row since the last reset
-        self.confirmed_once = False
+        #: the map has placed min_placed_pairs pairs in a row since the last reset, or
+        #: start_raw_s has passed since the first pair with a plane: the detector's own
+        #: reports go out only chained
+        self.past_start = False
+        #: stamp of the first pair with a ground plane since the last reset, s
+        self._first_plane_s: float | None = None
 
     @property
     def config(self) -> GpodConfig:
@@ -63,7 +68,8 @@ class Perception:
         self.detector.reset()
         self.tall.reset()
         self.unmapped.reset()
-        self.confirmed_once = False
+        self.past_start = False
+        self._first_plane_s = None
         if self.map is not None:
             self.map.reset()
         if self.motion_predictor is not None:
@@ -77,7 +83,8 @@ class Perception:
         enabled, the result's ``obstacles`` are those the map confirms
         (`objects_to_obstacles`), or the detector's own while the map has placed fewer
         than ``min_placed_pairs`` pairs in a row (it needs the camera motion while the
-        rig moves: without it the map is cleared): at a start as they are, after a clear
+        rig moves: without it the map is cleared): at a start as they are (for
+        ``start_raw_s``), after a clear or a start the map did not take over from
         those chained over pairs (`core.moving_reports.ChainedReports`); and
         ``timings_ms['map']`` is the map's time, ms (included in 'total'). With a
         ``motion_predictor`` the map's motion is its prediction for ``stamp_ns`` (the
@@ -104,6 +111,12 @@ class Perception:
         stamp_s = (stamp_ns * 1e-9 if stamp_ns is not None
                    else result.frame_index * self.gpod_config.tracks.frame_period_s)
         plane = result.metric_plane if result.status == 'tracking' else None
+        # the start: start_raw_s from the first pair with a plane
+        if plane is not None and self._first_plane_s is None:
+            self._first_plane_s = stamp_s
+        if (self._first_plane_s is not None
+                and stamp_s - self._first_plane_s > self.map_config.start_raw_s):
+            self.past_start = True
         # a plane carried over a pair whose refit failed is last pair's ground: while the
         # rig moves the camera has pitched since (the gait: a few degrees a pair), and
         # heights against it are off by that times the range; of such a pair's evidence
@@ -119,15 +132,17 @@ class Perception:
         chained = self.unmapped.passing(stamp_s, *arrays)
         if self.map.placed_pairs < self.map_config.min_placed_pairs:
             # the map has not seen enough pairs in a row to confirm anything: at a start
-            # the detector's reports go out as they are; once the map had confirmed and
-            # was then cleared (the camera's motion unknown while walking), only those
-            # seen in a chain of pairs (`core.moving_reports.ChainedReports`)
+            # the detector's reports go out as they are (for start_raw_s); once the map
+            # had confirmed and was then cleared (the camera's motion unknown while
+            # walking), or never took over, only those seen in a chain of pairs
+            # (`core.moving_reports.ChainedReports`)
             obstacles = (tuple(o for o, ok in zip(result.obstacles, chained) if ok)
-                         if self.confirmed_once else result.obstacles)
+                         if self.past_start else result.obstacles)
         else:
             obstacles = (tuple(objects_to_obstacles(
                 objects, cam, plane, result.obstacles, self.map_config.attach_m,
-                self.map_config.corridor_half_width_m))
+                self.map_config.corridor_half_width_m,
+                self._seen_ground(result.obstacles, plane, stamp_s)))
                          if plane is not None else ())
             # the detector's unknown ahead (height NaN, `core.unseen_ground`) is no
             # evidence for the map, and goes out as it is; so does a tall report the map
@@ -136,12 +151,30 @@ class Perception:
             obstacles += tuple(o for o, ok in zip(result.obstacles, passing)
                                if np.isnan(o.height) or (ok and not any(
                                    np.array_equal(o.position, p) for p in taken)))
-        self.confirmed_once |= self.map.placed_pairs >= self.map_config.min_placed_pairs
+        self.past_start |= self.map.placed_pairs >= self.map_config.min_placed_pairs
         ms = (time.perf_counter() - t0) * 1e3
         timings = dict(result.timings_ms)
         timings['map'] = ms
         timings['total'] = timings.get('total', 0.0) + ms
         return dataclasses.replace(result, obstacles=obstacles, timings_ms=timings)
+
+    def _seen_ground(self, reports, plane, stamp_s: float) -> np.ndarray | None:
+        """(K,) bool over the detector's reports: the map saw ground at the report's foot
+        and around it lately (`EvidenceMap.ground_seen_around`, within
+        ``attach_seen_ground_s``; raised reports only); None when that is off."""
+        within = self.map_config.attach_seen_ground_s
+        if within <= 0 or not len(reports) or self.map is None:
+            return None
+        Rcg, o = ground_frame(plane)
+        n = np.asarray(plane.normal_up, float)
+        raised = np.array([not d.is_drop and bool(np.all(np.isfinite(d.position)))
+                           and np.isfinite(d.height) for d in reports])
+        out = np.zeros(len(reports), bool)
+        if raised.any():
+            feet = np.array([((d.position - d.height * n) - o) @ Rcg[:, :2]
+                             for d, r in zip(reports, raised) if r])
+            out[raised] = self.map.ground_seen_around(feet, stamp_s, within)
+        return out
 
     def evidence(self, result: GpodResult, cam: StereoCamera, ground_only: bool = False):
         """The pair's matched edge pixels as map evidence (`pair_evidence`): the
