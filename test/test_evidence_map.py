@@ -764,14 +764,16 @@ def test_a_report_on_ground_the_map_has_seen_is_not_confirmed_by_a_thing_nearby(
     assert seen.tolist() == [False, True]
     # seen long ago, it no longer counts
     assert not emap.ground_seen_around(feet, 0.1 * (len(xs) - 1) + 3.5, 3.0).any()
-    out = objects_to_obstacles(emap.objects, CAM, PLANE, [misfit], 0.5, 0.0, seen[1:])
+    def judge(xy):
+        return emap.ground_seen_around(xy, 0.1 * (len(xs) - 1), 3.0)
+    out = objects_to_obstacles(emap.objects, CAM, PLANE, [misfit], 0.5, 0.0, judge)
     assert [o.track_id for o in out] != [5]
     assert out[0].range == pytest.approx(3.0 - cam_x, abs=0.1)
     # without the map's ground, the misfit is taken for the box
     assert [o.track_id for o in objects_to_obstacles(emap.objects, CAM, PLANE, [misfit],
                                                       0.5)] == [5]
     assert [o.track_id for o in objects_to_obstacles(emap.objects, CAM, PLANE, [front],
-                                                      0.5, 0.0, seen[:1])] == [5]
+                                                      0.5, 0.0, judge)] == [5]
 
 
 def test_a_thing_beside_the_path_that_reaches_into_it_is_reported_there():

@@ -376,11 +376,16 @@ class EvidenceMap:
         x, y = w[:, 0] - self.pose[0], w[:, 1] - self.pose[1]
         return np.stack([cy * x + sy * y, -sy * x + cy * y], 1)
 
-    def _cells(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Flat cell index of W points (N, 2) and a mask of those inside the grid."""
+    def _cells(self, w: np.ndarray, dx: int = 0, dy: int = 0
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """Flat cell index of W points (N, 2) (or of the cell ``dx``, ``dy`` cells from
+        each) and a mask of those inside the grid (the index of the others is clipped
+        into it)."""
         ij = np.floor((w - self.origin[None, :]) / self.config.cell_m).astype(np.int64)
-        ix, iy = ij[:, 0], ij[:, 1]
+        ix, iy = ij[:, 0] + dx, ij[:, 1] + dy
         inside = (ix >= 0) & (iy >= 0) & (ix < self.n) & (iy < self.n)
+        if dx or dy:
+            ix, iy = np.clip(ix, 0, self.n - 1), np.clip(iy, 0, self.n - 1)
         return iy * self.n + ix, inside
 
     def _enter(self, stamp_s: float, ev: PairEvidence, still: bool) -> None:
@@ -664,20 +669,17 @@ class EvidenceMap:
         eight hold no raised evidence (log-odds raised ≤ 0; the point's own cell may
         hold the latest pair's, which is what is being judged)."""
         xy = np.asarray(xy, float).reshape(-1, 2)
-        out = np.zeros(len(xy), bool)
-        if not len(xy) or within_s <= 0:
+        out = np.full(len(xy), len(xy) > 0 and within_s > 0)
+        if not out.any():
             return out
-        ij = np.floor((self.to_world(xy) - self.origin[None, :]) / self.config.cell_m
-                      ).astype(np.int64)
-        out[:] = True
-        for di in (-1, 0, 1):
-            for dj in (-1, 0, 1):
-                ix, iy = ij[:, 0] + di, ij[:, 1] + dj
-                inside = (ix >= 0) & (iy >= 0) & (ix < self.n) & (iy < self.n)
-                ix, iy = np.clip(ix, 0, self.n - 1), np.clip(iy, 0, self.n - 1)
-                out &= inside & (stamp_s - self.free_s[iy, ix] <= within_s)
-                if di or dj:
-                    out &= self.L_r[iy, ix] <= 0
+        w = self.to_world(xy)
+        free_s, L_r = self.free_s.reshape(-1), self.L_r.reshape(-1)
+        for dx in (-1, 0, 1):
+            for dy in (-1, 0, 1):
+                flat, inside = self._cells(w, dx, dy)
+                out &= inside & (stamp_s - free_s[flat] <= within_s)
+                if dx or dy:
+                    out &= L_r[flat] <= 0
         return out
 
     # ------------------------------------------------------------------ objects

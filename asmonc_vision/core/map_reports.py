@@ -9,6 +9,7 @@ there (docs/map.md, *Objects*).
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 
 import numpy as np
 
@@ -26,7 +27,8 @@ CORRIDOR_ID_BASE = 2_000_000
 def objects_to_obstacles(objects, cam: StereoCamera, plane: MetricPlane,
                          detections=(), attach_m: float = 0.0,
                          corridor_half_width: float = 0.0,
-                         seen_ground: np.ndarray | None = None) -> list:
+                         seen_ground: Callable[[np.ndarray], np.ndarray] | None = None
+                         ) -> list:
     """The map's objects as `core.gpod.GpodObstacle` (the detector's output form), in
     the current left optical frame.
 
@@ -39,9 +41,9 @@ def objects_to_obstacles(objects, cam: StereoCamera, plane: MetricPlane,
     ``MAP_ID_BASE``: ``position`` the top above the nearest point (for a drop, the lowest
     point), range and bearing along the ground, the image region of the region's feet
     and tops (clipped to the image), disparity excess at the top. Reports on no
-    confirmed cell are not reported, nor those flagged in ``seen_ground`` ((K,) bool
-    over ``detections``: the map saw ground at the report's foot, so no cell nearby
-    confirms it).
+    confirmed cell are not reported, nor raised ones whose foot ``seen_ground`` judges
+    seen as ground ((M, 2) feet in G, m -> (M,) bool; `EvidenceMap.ground_seen_around`):
+    no cell nearby confirms a thing where the map saw ground.
 
     The part in the walking corridor (``corridor_half_width`` > 0: cells ahead within
     it of the walking direction): an object with cells there none of whose reports
@@ -55,6 +57,10 @@ def objects_to_obstacles(objects, cam: StereoCamera, plane: MetricPlane,
     det_xy = np.array([((d.position - d.height * n) - o) @ Rcg[:, :2] for d in dets]
                       ).reshape(-1, 2)
     det_drop = np.array([d.is_drop for d in dets], bool)
+    on_ground = np.zeros(len(dets), bool)
+    judge = ~det_drop & np.isfinite(det_xy[:, 0]) & np.isfinite(det_xy[:, 1])
+    if seen_ground is not None and attach_m > 0 and judge.any():
+        on_ground[judge] = seen_ground(det_xy[judge])
     taken = np.zeros(len(dets), bool)
     out = []
     for ob in objects:
@@ -63,10 +69,8 @@ def objects_to_obstacles(objects, cam: StereoCamera, plane: MetricPlane,
         if attach_m > 0 and len(dets):
             dist = np.min(np.linalg.norm(det_xy[:, None, :] - ob.far_xy[None, :, :], axis=2),
                           axis=1)
-            ok = det_drop == ob.is_drop
-            if seen_ground is not None:
-                ok &= ~np.asarray(seen_ground, bool)
-            cand = np.flatnonzero((dist <= attach_m) & ok)
+            cand = np.flatnonzero((dist <= attach_m) & (det_drop == ob.is_drop)
+                                  & ~on_ground)
         if cand.size:
             for k in cand[~taken[cand]].tolist():
                 taken[k] = True

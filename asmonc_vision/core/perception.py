@@ -22,8 +22,7 @@ import numpy as np
 
 from asmonc_vision.core.camera import StereoCamera
 from asmonc_vision.core.evidence_map import (DROP, GROUND, NONE, RAISED, EvidenceMap,
-                                             EvidenceMapConfig, ground_frame,
-                                             pair_evidence)
+                                             EvidenceMapConfig, pair_evidence)
 from asmonc_vision.core.gpod import GpodConfig, GpodDetector, GpodResult
 from asmonc_vision.core.map_motion import MotionPredictor
 from asmonc_vision.core.map_reports import objects_to_obstacles
@@ -141,8 +140,7 @@ class Perception:
         else:
             obstacles = (tuple(objects_to_obstacles(
                 objects, cam, plane, result.obstacles, self.map_config.attach_m,
-                self.map_config.corridor_half_width_m,
-                self._seen_ground(result.obstacles, plane, stamp_s)))
+                self.map_config.corridor_half_width_m, self._seen_ground(stamp_s)))
                          if plane is not None else ())
             # the detector's unknown ahead (height NaN, `core.unseen_ground`) is no
             # evidence for the map, and goes out as it is; so does a tall report the map
@@ -158,23 +156,14 @@ class Perception:
         timings['total'] = timings.get('total', 0.0) + ms
         return dataclasses.replace(result, obstacles=obstacles, timings_ms=timings)
 
-    def _seen_ground(self, reports, plane, stamp_s: float) -> np.ndarray | None:
-        """(K,) bool over the detector's reports: the map saw ground at the report's foot
-        and around it lately (`EvidenceMap.ground_seen_around`, within
-        ``attach_seen_ground_s``; raised reports only); None when that is off."""
-        within = self.map_config.attach_seen_ground_s
-        if within <= 0 or not len(reports) or self.map is None:
+    def _seen_ground(self, stamp_s: float) -> Callable[[np.ndarray], np.ndarray] | None:
+        """Whether the map saw ground at detector reports' feet and around them lately
+        ((M, 2) feet in G -> (M,) bool, `EvidenceMap.ground_seen_around` within
+        ``attach_seen_ground_s``), for `objects_to_obstacles`; None when that is off."""
+        within, emap = self.map_config.attach_seen_ground_s, self.map
+        if within <= 0 or emap is None:
             return None
-        Rcg, o = ground_frame(plane)
-        n = np.asarray(plane.normal_up, float)
-        raised = np.array([not d.is_drop and bool(np.all(np.isfinite(d.position)))
-                           and np.isfinite(d.height) for d in reports])
-        out = np.zeros(len(reports), bool)
-        if raised.any():
-            feet = np.array([((d.position - d.height * n) - o) @ Rcg[:, :2]
-                             for d, r in zip(reports, raised) if r])
-            out[raised] = self.map.ground_seen_around(feet, stamp_s, within)
-        return out
+        return lambda xy: emap.ground_seen_around(xy, stamp_s, within)
 
     def evidence(self, result: GpodResult, cam: StereoCamera, ground_only: bool = False):
         """The pair's matched edge pixels as map evidence (`pair_evidence`): the
