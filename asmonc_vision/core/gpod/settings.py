@@ -519,7 +519,8 @@ class UnseenSettings:
         0.15, 'Unseen ground (a wall with no edges, `core.unseen_ground`): the walking '
         'corridor\'s ground from some range out to its far end, where at most this fraction '
         'of the matched edge pixels the same cells showed in earlier frames are seen, is '
-        'hidden by something, reported as an obstacle at its near edge; 0 = off',
+        'hidden by something, reported as unknown ground at its near edge (height NaN, '
+        'said as "cannot see the way ahead", never as an obstacle); 0 = off',
         range=(0.0, 0.95))
     min_expected: float = param(
         15.0, 'Unseen ground: least number of edge pixels the hidden band must have been '
