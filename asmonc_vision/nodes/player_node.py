@@ -282,9 +282,11 @@ class BagPlayerNode(Node):
         cfg = self.config
         start = time.monotonic()
         deadline = start + cfg.pace_timeout
+        waited = False        # a hold is a wait for answers, not the time to take the lock
         with self._pace_cv:
             while (len(self._pace_owed) > cfg.pace_lead and not self._pace_suspended
                    and not self._stop.is_set()):
+                waited = True
                 left = deadline - time.monotonic()
                 if left <= 0:
                     self.pace_given_up += len(self._pace_owed)
@@ -297,7 +299,7 @@ class BagPlayerNode(Node):
                     break
                 self._pace_cv.wait(min(left, 0.1))
         held = time.monotonic() - start
-        if held > 1e-3:
+        if waited:
             self.pace_holds += 1
             self.pace_held_s += held
             sched.wall_start += held
