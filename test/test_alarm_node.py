@@ -120,3 +120,34 @@ def test_bad_parameter_change_is_refused(ros):
     assert not res.successful and 'stop_range' in res.reason
     res = node.set_parameters([Parameter('hysteresis', value=0.5)])[0]
     assert res.successful and node.config.hysteresis == 0.5
+
+
+def test_the_silence_check_does_not_wait_for_the_executor(ros):
+    """The FAULT for silence comes from the node's own watchdog thread: with the node's
+    executor never spun (as when a publish holds it), a list stopped still gives FAULT
+    "detection has stopped" on /alarms within the timeout and a few check periods."""
+    import time
+
+    from asmonc_vision.nodes.alarm_node import CHECK_PERIOD
+    ctx, add, spin_until = ros.ctx, ros.add, ros.spin_until
+    probe = add(Node('alarm_probe_unspun', context=ctx))
+    alarms: list[tuple[float, Alarm]] = []
+    probe.create_subscription(Alarm, '/alarms', lambda m: alarms.append((time.monotonic(), m)),
+                              ALARM_QOS)
+    node = AlarmNode(context=ctx, parameter_overrides=[
+        Parameter('timeout', value=0.4), Parameter('startup_grace', value=60.0)])
+    try:
+        spin_until(lambda: alarms and alarms[-1][1].text == TEXT_STARTING, 'starting up')
+        # one ground status and one list, handed to the callbacks (never spun)
+        node._on_ground(GroundPlane(status=GroundPlane.TRACKING))
+        node._on_obstacles(_array(10_000_000_000, []))
+        t_list = time.monotonic()
+        spin_until(lambda: alarms[-1][1].text == TEXT_CLEAR, 'all clear')
+        spin_until(lambda: alarms[-1][1].text == TEXT_NO_DATA, 'FAULT on silence')
+        t_fault, fault = alarms[-1]
+        assert fault.level == Alarm.FAULT
+        # a generous bound for a loaded machine; the executor-bound check gave no FAULT
+        assert t_fault - t_list <= 0.4 + 10 * CHECK_PERIOD + 0.5
+    finally:
+        node.destroy_node()
+    assert not node._watchdog.is_alive()

@@ -26,7 +26,10 @@ way ahead" in place of "all clear" (``core.alarm``).
 
 The decisions are made by ``core.alarm.AlarmLogic`` on the node's *steady* clock (time
 of arrival), never on message stamps or sim time, so a stalled pipeline gives FAULT
-even when /clock stops too. A FAULT "starting up" is published at start: silence is
+even when /clock stops too. The silence check runs on a thread of its own, not on the
+executor: a publish can block the executor for a while (0.3 s seen on /diagnostics on a
+loaded machine, and a 1 s stall once a node was killed), and the FAULT that says
+detection has stopped must not wait for it. A FAULT "starting up" is published at start: silence is
 never "all clear". Parameters: the fields of ``core.alarm.AlarmConfig`` (changeable at
 run time).
 """
@@ -148,7 +151,9 @@ class AlarmNode(Node):
         self.create_subscription(GroundPlane, '/ground_plane', self._on_ground, RESULT_QOS)
         self.create_subscription(TransformStamped, '/egomotion', self._on_egomotion, SENSOR_QOS)
         self.create_subscription(GaitState, '/gait/state', self._on_gait, SENSOR_QOS)
-        self._timer = self.create_timer(CHECK_PERIOD, self._on_timer, clock=self._steady)
+        self._stop = threading.Event()
+        self._watchdog = threading.Thread(target=self._watch_silence, name='alarm_watchdog',
+                                          daemon=True)
         watch_input_links(self, ('/obstacles',))
 
         # Silence at start must not mean "all clear".
@@ -157,6 +162,13 @@ class AlarmNode(Node):
             f'alarm node up: corridor +-{self.config.corridor_half_width} m, STOP <= '
             f'{self.config.stop_range} m, WARNING <= {self.config.warning_range} m, CAUTION '
             f'<= {self.config.caution_range} m, FAULT after {self.config.timeout} s of silence')
+        self._watchdog.start()
+
+    def destroy_node(self) -> None:
+        self._stop.set()
+        if self._watchdog.is_alive() and self._watchdog is not threading.current_thread():
+            self._watchdog.join(timeout=2.0)
+        super().destroy_node()
 
     # -- helpers
     def _now(self) -> float:
@@ -233,9 +245,10 @@ class AlarmNode(Node):
             d = self._logic.update(self._now(), obstacles)
             if d is not None:
                 self._publish(d, msg.header)
-            # last: the list's answer is complete once its contact is out
-            self._contact_pub.publish(contact_msg(self._logic.contact, msg.header,
-                                                  self._walk.speed))
+            contact = contact_msg(self._logic.contact, msg.header, self._walk.speed)
+        # last: the list's answer is complete once its contact is out (published outside
+        # the lock: the silence check never waits for this publish)
+        self._contact_pub.publish(contact)
 
     def _on_egomotion(self, msg: TransformStamped) -> None:
         ns = stamp_to_ns(msg.header.stamp)
@@ -267,6 +280,18 @@ class AlarmNode(Node):
             d = self._logic.ground_status(self._now(), msg.status)
             if d is not None:
                 self._publish(d, msg.header)
+
+    def _watch_silence(self) -> None:
+        """Every `CHECK_PERIOD` on the steady clock, until the node is destroyed or its
+        context shut down: the timeout check (`_on_timer`)."""
+        log = self.get_logger()
+        while not self._stop.wait(CHECK_PERIOD) and self.context.ok():
+            try:
+                self._on_timer()
+            except Exception as exc:  # noqa: BLE001 (the check must go on; said, not hidden)
+                if not self.context.ok():
+                    return
+                log.error(f'silence check failed: {exc!r}', throttle_duration_sec=5.0)
 
     def _on_timer(self) -> None:
         with self._lock:

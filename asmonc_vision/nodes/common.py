@@ -172,6 +172,7 @@ class Diagnostics:
         self._pub = node.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._status = DiagnosticStatus(name=name, hardware_id=hardware_id,
                                         level=bytes([self.STALE]), message='starting')
+        self._lock = threading.Lock()       # update and publish may run on two threads
         self._timer = node.create_timer(period, self.publish)
 
     @property
@@ -186,17 +187,20 @@ class Diagnostics:
         `message` or `publish`.
         """
         level = level[0] if isinstance(level, bytes) else int(level)
-        changed = level != self.level or message != self._status.message
-        self._status.level = bytes([level])
-        self._status.message = message
-        self._status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
+        kv = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
+        with self._lock:
+            changed = level != self.level or message != self._status.message
+            self._status = DiagnosticStatus(name=self._status.name,
+                                            hardware_id=self._status.hardware_id,
+                                            level=bytes([level]), message=message, values=kv)
         if publish or changed:
             self.publish()
 
     def publish(self) -> None:
         msg = DiagnosticArray()
         msg.header.stamp = self._node.get_clock().now().to_msg()
-        msg.status = [self._status]
+        with self._lock:
+            msg.status = [self._status]     # replaced whole by `update`, never changed
         self._pub.publish(msg)
 
 
