@@ -764,6 +764,10 @@ def test_a_report_on_ground_the_map_has_seen_is_not_confirmed_by_a_thing_nearby(
     assert seen.tolist() == [False, True]
     # seen long ago, it no longer counts
     assert not emap.ground_seen_around(feet, 0.1 * (len(xs) - 1) + 3.5, 3.0).any()
+    # points off the grid (a far report, a wall at the map's edge) are not seen ground
+    far = np.array([[50.0, 0.0], [2.95 - cam_x, -40.0], [-30.0, 0.0], [2.55 - cam_x, 0.0]])
+    assert emap.ground_seen_around(far, 0.1 * (len(xs) - 1), 3.0).tolist() == [
+        False, False, False, True]
     def judge(xy):
         return emap.ground_seen_around(xy, 0.1 * (len(xs) - 1), 3.0)
     out = objects_to_obstacles(emap.objects, CAM, PLANE, [misfit], 0.5, 0.0, judge)

@@ -384,8 +384,7 @@ class EvidenceMap:
         ij = np.floor((w - self.origin[None, :]) / self.config.cell_m).astype(np.int64)
         ix, iy = ij[:, 0] + dx, ij[:, 1] + dy
         inside = (ix >= 0) & (iy >= 0) & (ix < self.n) & (iy < self.n)
-        if dx or dy:
-            ix, iy = np.clip(ix, 0, self.n - 1), np.clip(iy, 0, self.n - 1)
+        ix, iy = np.clip(ix, 0, self.n - 1), np.clip(iy, 0, self.n - 1)
         return iy * self.n + ix, inside
 
     def _enter(self, stamp_s: float, ev: PairEvidence, still: bool) -> None:
