@@ -29,8 +29,9 @@ of arrival), never on message stamps or sim time, so a stalled pipeline gives FA
 even when /clock stops too. The silence check runs on a thread of its own, not on the
 executor: a publish can block the executor for a while (0.3 s seen on /diagnostics on a
 loaded machine, and a 1 s stall once a node was killed), and the FAULT that says
-detection has stopped must not wait for it. A FAULT "starting up" is published at start: silence is
-never "all clear". Parameters: the fields of ``core.alarm.AlarmConfig`` (changeable at
+detection has stopped must not wait for it; /diagnostics and the contact are published
+outside the lock the check takes. A FAULT "starting up" is published at start: silence
+is never "all clear". Parameters: the fields of ``core.alarm.AlarmConfig`` (changeable at
 run time).
 """
 from __future__ import annotations
@@ -158,6 +159,7 @@ class AlarmNode(Node):
 
         # Silence at start must not mean "all clear".
         self._publish(self._logic.current, None)
+        self._update_diagnostics(self._diagnostic_status())
         self.get_logger().info(
             f'alarm node up: corridor +-{self.config.corridor_half_width} m, STOP <= '
             f'{self.config.stop_range} m, WARNING <= {self.config.warning_range} m, CAUTION '
@@ -202,9 +204,11 @@ class AlarmNode(Node):
             log.warning(line)
         else:
             log.info(line)
-        self._update_diagnostics()
 
-    def _update_diagnostics(self) -> None:
+    def _diagnostic_status(self) -> tuple[int, str, dict]:
+        """(level, message, values) of the node's /diagnostics status now; taken under
+        the lock, published after it (`_update_diagnostics`): a /diagnostics publish
+        that blocks must not hold the silence check."""
         cur = self._logic.current
         age = self._logic.last_obstacles_age(self._now())
         values = dict(alarm_level=AlarmLevel(cur.level).name, alarm_text=cur.text,
@@ -213,18 +217,18 @@ class AlarmNode(Node):
                       out_of_order=self._obstacle_order.rejected + self._ground_order.rejected)
         fault = self._logic.fault
         if fault is None:
-            self._diag.update(Diagnostics.OK, f'alarm {AlarmLevel(cur.level).name}', **values)
-        elif fault == 'starting':
-            self._diag.update(Diagnostics.WARN, 'starting up: no trusted obstacle data yet',
-                              **values)
-        elif fault == 'no_data':
-            self._diag.update(Diagnostics.ERROR, 'no /obstacles within the timeout', **values)
-        elif fault == 'unknown_ahead':
-            self._diag.update(Diagnostics.WARN, 'cannot see the way ahead', **values)
-        elif fault == 'not_started':
-            self._diag.update(Diagnostics.ERROR, 'no /obstacles since the start', **values)
-        else:
-            self._diag.update(Diagnostics.ERROR, 'ground plane lost', **values)
+            return Diagnostics.OK, f'alarm {AlarmLevel(cur.level).name}', values
+        level, message = {
+            'starting': (Diagnostics.WARN, 'starting up: no trusted obstacle data yet'),
+            'no_data': (Diagnostics.ERROR, 'no /obstacles within the timeout'),
+            'unknown_ahead': (Diagnostics.WARN, 'cannot see the way ahead'),
+            'not_started': (Diagnostics.ERROR, 'no /obstacles since the start'),
+        }.get(fault, (Diagnostics.ERROR, 'ground plane lost'))
+        return level, message, values
+
+    def _update_diagnostics(self, status: tuple[int, str, dict]) -> None:
+        level, message, values = status
+        self._diag.update(level, message, **values)
 
     # -- callbacks
     def _on_obstacles(self, msg: ObstacleArray) -> None:
@@ -245,9 +249,12 @@ class AlarmNode(Node):
             d = self._logic.update(self._now(), obstacles)
             if d is not None:
                 self._publish(d, msg.header)
+            status = self._diagnostic_status()
             contact = contact_msg(self._logic.contact, msg.header, self._walk.speed)
-        # last: the list's answer is complete once its contact is out (published outside
-        # the lock: the silence check never waits for this publish)
+        # published outside the lock: the silence check never waits for these publishes;
+        # last, the contact: the list's answer is complete once it is out
+        if d is not None:
+            self._update_diagnostics(status)
         self._contact_pub.publish(contact)
 
     def _on_egomotion(self, msg: TransformStamped) -> None:
@@ -280,26 +287,31 @@ class AlarmNode(Node):
             d = self._logic.ground_status(self._now(), msg.status)
             if d is not None:
                 self._publish(d, msg.header)
+            status = self._diagnostic_status()
+        if d is not None:
+            self._update_diagnostics(status)
 
     def _watch_silence(self) -> None:
         """Every `CHECK_PERIOD` on the steady clock, until the node is destroyed or its
-        context shut down: the timeout check (`_on_timer`)."""
+        context shut down: the timeout check (`_check_silence`)."""
         log = self.get_logger()
         while not self._stop.wait(CHECK_PERIOD) and self.context.ok():
             try:
-                self._on_timer()
+                self._check_silence()
             except Exception as exc:  # noqa: BLE001 (the check must go on; said, not hidden)
                 if not self.context.ok():
                     return
                 log.error(f'silence check failed: {exc!r}', throttle_duration_sec=5.0)
 
-    def _on_timer(self) -> None:
+    def _check_silence(self) -> None:
+        """FAULT when the obstacle lists stopped or the ground is lost; the status's
+        values refreshed for the periodic /diagnostics."""
         with self._lock:
             d = self._logic.check_timeout(self._now())
             if d is not None:
                 self._publish(d, None)
-            else:
-                self._update_diagnostics()  # fresh values for the periodic status
+            status = self._diagnostic_status()
+        self._update_diagnostics(status)
 
 
 def main(args=None):
