@@ -249,11 +249,11 @@ class AlarmNode(Node):
             d = self._logic.update(self._now(), obstacles)
             if d is not None:
                 self._publish(d, msg.header)
-            status = self._diagnostic_status()
+            status = self._diagnostic_status() if d is not None else None
             contact = contact_msg(self._logic.contact, msg.header, self._walk.speed)
         # published outside the lock: the silence check never waits for these publishes;
         # last, the contact: the list's answer is complete once it is out
-        if d is not None:
+        if status is not None:
             self._update_diagnostics(status)
         self._contact_pub.publish(contact)
 
@@ -287,8 +287,8 @@ class AlarmNode(Node):
             d = self._logic.ground_status(self._now(), msg.status)
             if d is not None:
                 self._publish(d, msg.header)
-            status = self._diagnostic_status()
-        if d is not None:
+            status = self._diagnostic_status() if d is not None else None
+        if status is not None:
             self._update_diagnostics(status)
 
     def _watch_silence(self) -> None:
