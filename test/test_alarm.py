@@ -25,7 +25,7 @@ def ob(rng, bearing_deg=0.0, id=1, height=0.5, conf=1.0):
 def started(**cfg) -> AlarmLogic:
     """A logic that has seen a tracked ground and one empty frame at t=0 (so it is
     CLEAR, not starting). Its timeout is 1 s unless given: these tests feed lists up to
-    0.9 s apart (the default 0.45 s timeout has its own tests)."""
+    0.9 s apart (the default 0.4 s timeout has its own tests)."""
     cfg.setdefault('timeout', 1.0)
     logic = AlarmLogic(AlarmConfig(**cfg), t0=0.0)
     logic.ground_status(0.0, GroundStatus.TRACKING)
@@ -336,6 +336,37 @@ def test_after_a_gap_the_ground_status_from_before_it_is_not_trusted(ground_firs
     assert logic.update(3.2, []) is None
     logic.ground_status(3.3, GroundStatus.TRACKING)
     assert logic.update(3.4, [ob(2.0)]).level == L.WARNING
+
+
+def test_a_gap_over_before_the_check_said_it_holds_the_level_unannounced():
+    # A list 0.42 s late (timeout 0.4, the check every 0.05 s missed it): when it comes,
+    # detection has not stopped; its ground status follows it. Nothing is said, and the
+    # level is held, not lowered on the stale status; then lists go on as before.
+    logic = started(timeout=0.4, hold_time=0.5)
+    logic.ground_status(0.0, GroundStatus.TRACKING)
+    assert logic.update(0.1, [ob(2.0)]).level == L.WARNING
+    logic.ground_status(0.11, GroundStatus.TRACKING)
+    assert logic.check_timeout(0.5) is None                   # 0.40 s: not yet over
+    assert logic.update(0.52, []) is None                     # back, status stale: held
+    assert logic.check_timeout(0.53) is None
+    assert logic.current.level == L.WARNING
+    logic.ground_status(0.53, GroundStatus.TRACKING)
+    t, levels = 0.6, []
+    while t < 1.5:
+        d = logic.update(t, []) or logic.check_timeout(t + 0.05)
+        levels += [d.level] if d else []
+        t += 0.1
+    assert levels == [L.CLEAR]                                # stepped down after hold_time
+
+
+def test_lists_after_a_gap_with_no_ground_status_within_the_timeout_are_a_fault():
+    logic = started(timeout=0.4)
+    logic.update(0.1, [])
+    logic.ground_status(0.11, GroundStatus.TRACKING)
+    assert logic.update(0.52, []) is None                     # held, unannounced
+    assert logic.update(0.62, []) is None
+    d = logic.check_timeout(0.95)                              # no ground status since
+    assert d.level == L.FAULT and d.text == TEXT_NO_DATA
 
 
 def test_ground_lost_longer_than_timeout_is_a_fault():

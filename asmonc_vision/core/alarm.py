@@ -35,7 +35,9 @@ number of plain-speech announcements for a blind pedestrian:
   plane, FAULT "starting up, hold still" is announced once. When data return, the real
   level is announced at once (CLEAR as "all clear") -- after a gap in the obstacle
   lists, only once a ground status has come after it (a detector that died and was
-  restarted has no ground plane yet; the status from before the gap is stale).
+  restarted has no ground plane yet; the status from before the gap is stale). A gap
+  that ended before the periodic check said FAULT is not announced: the level is held
+  until that status comes, and FAULT follows if it has not come within ``timeout``.
 
 * **Unknown ahead**: an entry of the obstacle list whose height is NaN is no obstacle
   but ground the detector cannot see from its range on (`core.unseen_ground`: a plain
@@ -102,6 +104,8 @@ class GroundStatus(enum.IntEnum):
 #: period of the alarm node's timeout check (`AlarmLogic.check_timeout`), seconds: with
 #: the default timeout (0.4 s) a FAULT is decided at most 0.45 s after the last list
 CHECK_PERIOD_S = 0.05
+#: `AlarmLogic._fault_reason`'s answer while the level is held unannounced
+_HELD = 'held'
 TEXT_STARTING = 'starting up, hold still'
 TEXT_NO_DATA = 'fault, obstacle detection has stopped, walk with care'
 TEXT_NOT_STARTED = 'fault, obstacle detection has not started, walk with care'
@@ -362,6 +366,8 @@ class AlarmLogic:
         self._ground_since = float(t0)
         #: False from obstacle lists resuming after a gap until the next ground status
         self._ground_fresh = True
+        #: arrival time of the first list after the newest such gap
+        self._stale_since = -math.inf
         #: arrival time of the newest ground status
         self._ground_t = -math.inf
         self._fault: str | None = 'starting'
@@ -580,10 +586,13 @@ class AlarmLogic:
             # may arrive just after its frame's list) is stale: no level is announced
             # until one has come after the silence reached the timeout.
             self._ground_fresh = False
+            self._stale_since = t
         self._last_obstacles_t = t
         if self._first_obstacles_t is None:
             self._first_obstacles_t = t
         fault = self._fault_reason(t)
+        if fault == _HELD:
+            return None
         if fault is not None:
             return self._announce_fault(t, fault)
 
@@ -661,7 +670,7 @@ class AlarmLogic:
         """Call periodically: FAULT when obstacle lists stopped or the ground is lost."""
         t = float(t)
         fault = self._fault_reason(t)
-        if fault is not None:
+        if fault is not None and fault != _HELD:
             return self._announce_fault(t, fault)
         return None
 
@@ -679,7 +688,13 @@ class AlarmLogic:
             since = self._t0 if first is None else max(self._t0, first)
             return 'starting' if t - since <= c.startup_grace else 'ground_lost'
         if not self._ground_fresh and c.require_ground_plane:
-            return 'no_data'      # lists after a gap, no ground status since (`update`)
+            # Lists after a gap, no ground status since (`update`). A FAULT said in the
+            # gap stands. A gap that ended before the periodic check said it (a list
+            # 0.40-0.45 s late) is over: "detection has stopped" would be untrue now, so
+            # the level is held unannounced until the ground status comes, for at most
+            # ``timeout``.
+            said = self._current.level == AlarmLevel.FAULT and self._fault == 'no_data'
+            return 'no_data' if said or t - self._stale_since > c.timeout else _HELD
         if self._ground == GroundStatus.INITIALISING:
             return 'starting' if t - self._ground_since <= c.startup_grace else 'ground_lost'
         if self._ground == GroundStatus.LOST and t - self._ground_since > c.timeout:
