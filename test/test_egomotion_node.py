@@ -133,3 +133,20 @@ def test_blank_pair_publishes_nothing_and_says_why(graph):
                for s in warn)
     assert spin_until(ex, lambda: any(s.level == b'\x00' for a in got['diag'] for s in a.status
                                       if s.name == 'asmonc_vision: egomotion'), timeout=3)
+
+
+def test_values_given_for_no_parameter_are_named(ros_context):
+    """A value in a params file or on the command line under a name the node does not
+    have is named in a warning (run_node), not run as if it were a setting."""
+    from rclpy.parameter import Parameter
+
+    from asmonc_vision.nodes.common import undeclared_overrides
+    from asmonc_vision.nodes.egomotion_node import EgomotionNode
+    node = EgomotionNode(context=ros_context, parameter_overrides=[
+        Parameter('min_inliers', value=12), Parameter('motion.min_inliers', value=12)])
+    try:
+        assert undeclared_overrides(node) == ['min_inliers']
+        assert node.motion_config.min_inliers == 12
+    finally:
+        node.destroy_node()
+

@@ -50,6 +50,12 @@ def test_eval_params_file_and_bad_input(capsys, tmp_path):
     params.write_text('egomotion_node:\n  ros__parameters:\n    motion:\n      nope: 1\n')
     assert _run(['eval', str(BAGS / 'clear_walk'), '--params-file', str(params)]) == 2
     assert 'unknown motion settings' in capsys.readouterr().err
+    # an estimator setting outside motion. is not dropped in silence
+    params.write_text('egomotion_node:\n  ros__parameters:\n    min_inliers: 12\n')
+    assert _run(['eval', str(BAGS / 'clear_walk'), '--params-file', str(params)]) == 2
+    err = capsys.readouterr().err
+    assert "unknown egomotion_node settings" in err and "['min_inliers']" in err
+    assert 'go under motion.' in err
     assert _run(['eval', str(tmp_path / 'missing')]) == 2
     assert 'does not exist' in capsys.readouterr().err
     assert _run(['tables', '--methods', 'bogus']) == 2

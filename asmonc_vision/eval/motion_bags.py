@@ -170,6 +170,15 @@ def config_from_params(path: Path | None, method: str | None = None):
         unknown = set(values) - known
         if unknown:
             raise ValueError(f'unknown motion settings in {path}: {sorted(unknown)}')
+        from asmonc_vision.nodes.egomotion_node import EgomotionNodeConfig
+        node_keys = {f.name for f in dataclasses.fields(EgomotionNodeConfig)} | {
+            'motion', 'use_sim_time'}
+        stray = sorted(str(k) for k in params if not str(k).startswith('motion.')
+                       and str(k) not in node_keys)
+        if stray:
+            hint = (' (estimator settings go under motion.)'
+                    if any(k in known for k in stray) else '')
+            raise ValueError(f'unknown egomotion_node settings in {path}: {stray}{hint}')
         for f in dataclasses.fields(EgomotionConfig):
             v = values.get(f.name)
             if isinstance(f.default, float) and isinstance(v, int) and not isinstance(v, bool):

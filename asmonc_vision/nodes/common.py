@@ -312,6 +312,25 @@ def share_cpu_by_nice() -> bool:
         return False
 
 
+def undeclared_overrides(node: Node) -> list[str]:
+    """The names given a value for the node (params file, ``-p``) that it has not
+    declared, sorted: a misspelt or stale name, whose default runs instead."""
+    given = getattr(node, '_parameter_overrides', {})
+    return sorted(n for n in given if not node.has_parameter(n))
+
+
+def warn_undeclared(node: Node) -> None:
+    """Log one warning naming the values given for no parameter of the node. A warning,
+    not an error: a params file's ``/**`` section gives its values to every node, also to
+    those without such a setting (an error under a settings group's own prefix:
+    `declare_config`)."""
+    names = undeclared_overrides(node)
+    if names:
+        node.get_logger().warning(
+            f'values given for no parameter of this node, ignored: {", ".join(names)} '
+            '(`asmonc params` or docs/parameters.md lists the settings)')
+
+
 def run_node(factory: Callable[..., Node], args: list[str] | None = None, *,
              name: str = 'asmonc_vision', errors: tuple[type[BaseException], ...] = (),
              failed: Callable[[Node], bool] | None = None, **kwargs: Any) -> None:
@@ -337,6 +356,7 @@ def run_node(factory: Callable[..., Node], args: list[str] | None = None, *,
     try:
         if not interrupted.is_set():
             node = factory(**kwargs)
+            warn_undeclared(node)
             spin_until_shutdown(node, interrupted)
     except errors:
         status = 2
