@@ -173,7 +173,9 @@ def config_from_params(path: Path | None, method: str | None = None):
         from asmonc_vision.nodes.egomotion_node import EgomotionNodeConfig
         node_keys = {f.name for f in dataclasses.fields(EgomotionNodeConfig)} | {
             'motion', 'use_sim_time'}
-        stray = sorted(str(k) for k in params if not str(k).startswith('motion.')
+        # in the node's own section (or a bare ros__parameters), not another node's file
+        own = 'egomotion_node' in doc or 'ros__parameters' in doc
+        stray = sorted(str(k) for k in params if own and not str(k).startswith('motion.')
                        and str(k) not in node_keys)
         if stray:
             hint = (' (estimator settings go under motion.)'
