@@ -175,8 +175,8 @@ def config_from_params(path: Path | None, method: str | None = None):
             'motion', 'use_sim_time'}
         # in the node's own section (or a bare ros__parameters), not another node's file
         own = 'egomotion_node' in doc or 'ros__parameters' in doc
-        stray = sorted(str(k) for k in params if own and not str(k).startswith('motion.')
-                       and str(k) not in node_keys)
+        names = [str(k) for k in params] if own else []
+        stray = sorted(k for k in names if not k.startswith('motion.') and k not in node_keys)
         if stray:
             hint = (' (estimator settings go under motion.)'
                     if any(k in known for k in stray) else '')

@@ -116,9 +116,8 @@ def declare_config(node: Node, cls: type[T], prefix: str = '',
     """
     fields = dict(flat_fields(cls, prefix))
     if prefix:
-        # rclpy keeps the values given for the node (YAML, -p) in _parameter_overrides
-        given = getattr(node, '_parameter_overrides', {})
-        unknown = sorted(n for n in given if n.startswith(prefix) and n not in fields)
+        unknown = sorted(n for n in _given_values(node)
+                         if n.startswith(prefix) and n not in fields)
         if unknown:
             raise ValueError(f'no such setting: {", ".join(unknown)} (`asmonc params` or '
                              'docs/parameters.md lists them)')
@@ -312,11 +311,16 @@ def share_cpu_by_nice() -> bool:
         return False
 
 
+def _given_values(node: Node) -> dict:
+    """The values given for the node (params file, ``-p``) by name: rclpy keeps them
+    in ``_parameter_overrides``, declared or not."""
+    return getattr(node, '_parameter_overrides', {})
+
+
 def undeclared_overrides(node: Node) -> list[str]:
     """The names given a value for the node (params file, ``-p``) that it has not
     declared, sorted: a misspelt or stale name, whose default runs instead."""
-    given = getattr(node, '_parameter_overrides', {})
-    return sorted(n for n in given if not node.has_parameter(n))
+    return sorted(n for n in _given_values(node) if not node.has_parameter(n))
 
 
 def warn_undeclared(node: Node) -> None:
