@@ -5,6 +5,7 @@ cameras 1.25 m above flat ground pitched down 20 degrees) walking along the grou
 the matched edge pixels of each pair are made from world points (a box's silhouette
 edges, ground texture) and fed through `pair_evidence`, the map's measurement model.
 """
+import dataclasses
 import math
 
 import numpy as np
@@ -12,7 +13,8 @@ import pytest
 
 from asmonc_vision.core.camera import MetricPlane, StereoCamera
 from asmonc_vision.core.evidence_map import (DROP, GROUND, NONE, RAISED, EvidenceMap,
-                                             EvidenceMapConfig, PairEvidence, pair_evidence)
+                                             EvidenceMapConfig, MapObject, PairEvidence,
+                                             pair_evidence)
 from asmonc_vision.core.map_reports import (CORRIDOR_ID_BASE, MAP_ID_BASE,
                                             objects_to_obstacles)
 
@@ -1257,3 +1259,76 @@ def test_the_compiled_sight_line_test_at_its_edges(cells):
     assert through.sum() > (0 if cells < 10 else 20)
     np.testing.assert_array_equal(left, np.count_nonzero(through & (lateral > 0), axis=1))
     np.testing.assert_array_equal(right, np.count_nonzero(through & (lateral <= 0), axis=1))
+
+
+def _drop(oid: int, cells) -> MapObject:
+    """A confirmed drop region of the map at ``cells`` ((k, 2) points in G, m), 20 cm
+    deep, nearest point its nearest cell."""
+    g = np.asarray(cells, float).reshape(-1, 2)
+    near = g[int(np.argmin(np.hypot(g[:, 0], g[:, 1])))]
+    return MapObject(object_id=oid, is_drop=True, nearest_xy=near, far_xy=g, height=-0.2,
+                     width=0.3, confidence=0.9, cells=len(g), fresh_pixels=5, age_s=0.0)
+
+
+def _joint(x0: float, y: float, length: float = 0.6) -> np.ndarray:
+    """Cells of lower ground along a slab joint running ahead from (x0, y)."""
+    n = int(round(length / 0.1))
+    return np.column_stack([x0 + 0.1 * np.arange(n), np.full(n, y)])
+
+
+def test_a_drop_seen_on_both_sides_of_the_path_is_reported_where_its_edge_crosses_it():
+    """step_down 900011 (chest rig): the lower ground beyond a step down is matched along
+    a slab joint on either side of the path, nothing in the middle; the edge between the
+    two sides' nearest points crosses the walking corridor, and is reported there."""
+    from asmonc_vision.core.map_reports import SPAN_ID_BASE, drop_spans
+    from asmonc_vision.core.map_settings import DropSpanConfig
+
+    left, right = _drop(6, _joint(4.34, 0.95)), _drop(7, _joint(4.23, -1.04))
+    cfg = DropSpanConfig()
+    (ob, xy), = drop_spans([left, right], cfg, 0.5)
+    assert ob is right                       # the nearer side gives its id
+    assert xy[1] == 0.0 and xy[0] == pytest.approx(4.34 - 0.11 * 0.95 / 1.99, abs=1e-6)
+    out = objects_to_obstacles([left, right], CAM, PLANE, span=cfg,
+                               corridor_half_width=0.5)
+    (edge,) = [o for o in out if o.track_id >= SPAN_ID_BASE]
+    assert edge.track_id == 7 + SPAN_ID_BASE and edge.height == pytest.approx(-0.2)
+    assert abs(edge.bearing) < 1e-6 and edge.range == pytest.approx(xy[0], abs=0.05)
+    # off, or without the walking corridor: the two sides alone
+    for kw in ({'span': DropSpanConfig(enabled=False), 'corridor_half_width': 0.5},
+               {'span': cfg, 'corridor_half_width': 0.0}):
+        assert all(o.track_id < SPAN_ID_BASE
+                   for o in objects_to_obstacles([left, right], CAM, PLANE, **kw))
+
+
+def test_drops_that_do_not_make_an_edge_across_the_path_are_not_joined():
+    from asmonc_vision.core.map_reports import drop_spans
+    from asmonc_vision.core.map_settings import DropSpanConfig
+
+    cfg = DropSpanConfig()
+    left, right = _drop(1, _joint(4.3, 0.95)), _drop(2, _joint(4.2, -1.0))
+    # one side only
+    assert drop_spans([left], cfg, 0.5) == []
+    # too far apart across the path, or too skewed to be an edge across it
+    assert drop_spans([left, _drop(2, _joint(4.2, -2.2))], cfg, 0.5) == []
+    assert drop_spans([left, _drop(2, _joint(3.0, -1.0))], cfg, 0.5) == []
+    assert len(drop_spans([left, _drop(2, _joint(3.4, -1.0))], cfg, 0.5)) == 1
+    # a drop already in the corridor is reported as it is
+    assert drop_spans([left, right, _drop(3, _joint(4.5, 0.1))], cfg, 0.5) == []
+    # drops along both sides of a raised walkway: their lower ground goes on towards
+    # the wearer, below the view (a region of its own)
+    below = _drop(4, _joint(1.0, 0.95, 2.5))
+    assert drop_spans([left, right, below], cfg, 0.5) == []
+    assert len(drop_spans([left, right, below], DropSpanConfig(min_lead_m=5.0), 0.5)) == 1
+    # the map saw ground at the crossing (a ramp between two kerbs down)
+    seen = []
+
+    def ramp(xy):
+        seen.append(np.array(xy))
+        return np.array([True, False])
+    assert drop_spans([left, right], cfg, 0.5, ramp) == []
+    assert seen[0][:, 1].tolist() == [0.0, 0.0]
+    assert seen[0][1, 0] - seen[0][0, 0] == pytest.approx(cfg.ground_margin_m)
+    assert len(drop_spans([left, right], cfg, 0.5, lambda xy: np.zeros(len(xy), bool))) == 1
+    # raised regions do not count
+    raised = dataclasses.replace(right, is_drop=False, height=0.2)
+    assert drop_spans([left, raised], cfg, 0.5) == []

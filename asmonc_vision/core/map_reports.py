@@ -9,6 +9,7 @@ there (docs/map.md, *Objects*).
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -16,19 +17,22 @@ import numpy as np
 from asmonc_vision.core.camera import (MetricPlane, StereoCamera, ground_range_bearing,
                                        plane_disparity, plane_from_metric)
 from asmonc_vision.core.evidence_map import MapObject, ground_frame
+from asmonc_vision.core.map_settings import DropSpanConfig
 
 #: ids of the reports placed by the map itself are region ids offset by this (the
 #: detector's track ids of the reports it confirms stay below it)
 MAP_ID_BASE = 1_000_000
 #: ... and those of a region's part in the walking corridor by this
 CORRIDOR_ID_BASE = 2_000_000
+#: ... and those of a drop's edge across the corridor (`drop_spans`) by this
+SPAN_ID_BASE = 3_000_000
 
 
 def objects_to_obstacles(objects, cam: StereoCamera, plane: MetricPlane,
                          detections=(), attach_m: float = 0.0,
                          corridor_half_width: float = 0.0,
-                         seen_ground: Callable[[np.ndarray], np.ndarray] | None = None
-                         ) -> list:
+                         seen_ground: Callable[[np.ndarray], np.ndarray] | None = None,
+                         span: DropSpanConfig | None = None) -> list:
     """The map's objects as `core.gpod.GpodObstacle` (the detector's output form), in
     the current left optical frame.
 
@@ -50,7 +54,10 @@ def objects_to_obstacles(objects, cam: StereoCamera, plane: MetricPlane,
     lies in the corridor (a kerb or a wall beside the path whose nearest point is just
     beside it, while the thing reaches into the path farther on) is reported there too,
     at its nearest cell in the corridor, id its region id + ``CORRIDOR_ID_BASE``: the
-    alarm sees one point of each report."""
+    alarm sees one point of each report.
+
+    A drop's edge across the corridor (``span`` enabled, `drop_spans`): reported at its
+    crossing, id the nearer side's region id + ``SPAN_ID_BASE``."""
     Rcg, o = ground_frame(plane)
     n = np.asarray(plane.normal_up, float)
     dets = list(detections)
@@ -91,8 +98,78 @@ def objects_to_obstacles(objects, cam: StereoCamera, plane: MetricPlane,
                 mine.append(_map_report(ob, near, int(ob.object_id) + CORRIDOR_ID_BASE,
                                         cam, plane))
         out.extend(mine)
+    if span is not None and span.enabled and corridor_half_width > 0:
+        for ob, xy in drop_spans(objects, span, corridor_half_width, seen_ground):
+            out.append(_map_report(ob, xy, int(ob.object_id) + SPAN_ID_BASE, cam, plane))
     out.sort(key=lambda d: d.range)
     return out
+
+
+def drop_spans(objects, config: DropSpanConfig, corridor_half_width: float,
+               seen_ground: Callable[[np.ndarray], np.ndarray] | None = None
+               ) -> list[tuple[MapObject, np.ndarray]]:
+    """rule_drop_span: the edges of drop-offs that cross the walking corridor unseen.
+
+    A step down or a kerb down is a straight edge across the path. Its lower ground is
+    seen only where the ground beyond it shows matched edges; on a plain pavement that
+    can be a slab joint on either side of the path and nothing in the middle (step_down
+    900011, chest rig: the map confirmed the drop 0.6-1.3 m to each side of the path,
+    nothing inside the walking corridor). Two confirmed drop regions (``objects``,
+    MapObject in the current ground frame G, x ahead, y left) ahead on either side of
+    the walking line and none in the corridor: the line through their nearest points
+    crosses the corridor at the edge, reported when
+    - the two lie at most ``max_gap_m`` apart across the path and the line is within
+      ``max_skew_deg`` of the across direction;
+    - neither side's lower ground continues towards the wearer: no confirmed drop cell
+      within ``band_m`` of its nearest point across the path lies more than
+      ``min_lead_m`` nearer (drops along both sides of a raised walkway are nearest at
+      the near edge of the view and go on below it, an edge across the path is nearest
+      at the edge);
+    - ``seen_ground`` ((M, 2) points in G -> (M,) bool, the map's ground seen finely of
+      late) says no ground at the crossing nor ``ground_margin_m`` beyond it (the
+      ground of a ramp between two kerbs).
+
+    Returns:
+        [(the nearer side's MapObject, (2,) float64 the crossing in G, m)], one per
+        left region at most (its best partner: the smallest skew), nearest first.
+    """
+    drops = [o for o in objects if o.is_drop and o.nearest_xy[0] > 0]
+    if len(drops) < 2:
+        return []
+    cells = np.vstack([o.far_xy for o in drops])
+    if ((cells[:, 0] > 0) & (np.abs(cells[:, 1]) <= corridor_half_width)).any():
+        return []               # a drop in the corridor is reported as it is
+
+    def edge_end(o: MapObject) -> bool:
+        x, y = o.nearest_xy
+        beside = np.abs(cells[:, 1] - y) <= config.band_m
+        return not (beside & (cells[:, 0] < x - config.min_lead_m)).any()
+
+    left = [o for o in drops if o.nearest_xy[1] > 0 and edge_end(o)]
+    right = [o for o in drops if o.nearest_xy[1] < 0 and edge_end(o)]
+    tan_skew = math.tan(math.radians(config.max_skew_deg))
+    out = []
+    for a in left:
+        best = None
+        for b in right:
+            (xa, ya), (xb, yb) = a.nearest_xy, b.nearest_xy
+            gap = ya - yb
+            skew = abs(xa - xb)
+            if gap > config.max_gap_m or skew > tan_skew * gap:
+                continue
+            if best is None or skew < best[0]:
+                best = (skew, b, xa + (xb - xa) * ya / gap)
+        if best is None:
+            continue
+        _, b, x = best
+        if seen_ground is not None and seen_ground(
+                np.array([[x, 0.0], [x + config.ground_margin_m, 0.0]])).any():
+            continue
+        near = a if float(np.hypot(*a.nearest_xy)) <= float(np.hypot(*b.nearest_xy)) else b
+        out.append((near, np.array([x, 0.0])))
+    out.sort(key=lambda p: float(p[1][0]))
+    return out
+
 
 
 def _map_report(ob: MapObject, near_xy: np.ndarray, track_id: int, cam: StereoCamera,

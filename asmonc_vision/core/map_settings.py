@@ -6,7 +6,44 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from asmonc_vision.core.config import check_fields, param
+from asmonc_vision.core.config import check_fields, group, param
+
+
+@dataclass(frozen=True)
+class DropSpanConfig:
+    """rule_drop_span (`core.map_reports.drop_spans`): a drop-off seen on both sides of
+    the walking corridor, whose edge crosses the corridor where the map has seen no ground
+    (``map.span.*``)."""
+
+    enabled: bool = param(
+        True, "report the edge of a drop-off (a step down, a kerb) where it crosses the "
+        "walking corridor when the map confirms its lower ground on both sides of the "
+        "corridor and has seen none of the corridor's ground there: a plain pavement "
+        "shows no edge to match in the middle of the path, and the edge of a step down is "
+        "straight across it")
+    max_gap_m: float = param(
+        3.0, 'largest lateral distance between the two sides\' nearest points that the '
+        'edge is carried across, m', range=(0.0, 20.0))
+    max_skew_deg: float = param(
+        30.0, 'largest angle of the line through the two nearest points to the across '
+        'direction, degrees: a step down crosses the path; drops along both sides of it '
+        '(a raised walkway) are seen nearest at the view\'s near edge, and are told apart '
+        'by min_lead_m', range=(0.0, 89.0))
+    min_lead_m: float = param(
+        0.5, "no confirmed drop cell may lie within band_m of a side's nearest point "
+        "across the path and more than this nearer along it: the nearest lower ground of "
+        "an edge across the path is at the edge, that of a drop running along the path "
+        "continues towards the wearer, m", range=(0.0, 10.0))
+    band_m: float = param(
+        0.2, "half width across the path of the band along a side's nearest point that "
+        "min_lead_m looks in, m", range=(0.0, 5.0))
+    ground_margin_m: float = param(
+        0.3, 'the map must not have seen ground finely (map.attach_seen_ground_s) at the '
+        'crossing or this far beyond it: the ground of a ramp between two kerbs, m',
+        range=(0.0, 5.0))
+
+    def __post_init__(self) -> None:
+        check_fields(self)
 
 
 @dataclass(frozen=True)
@@ -218,6 +255,9 @@ class EvidenceMapConfig:
         1, "the same for a drop report: the detector finds a drop's edge in a pair here "
         "and there (its lower ground hidden), and one held back can be the only warning "
         "(a 21 cm step down on step_down 1011, chest rig)", range=(1, 100))
+    span: DropSpanConfig = group(
+        DropSpanConfig, 'rule_drop_span: a drop-off seen on both sides of the walking '
+        'corridor reported where its edge crosses it')
     default_sigma_px: float = param(0.4, 'σ_d of a match when the detector gives '
                                     'neither a per-pixel threshold nor a sigma, px',
                                     range=(0.01, 10.0))

@@ -140,7 +140,8 @@ class Perception:
         else:
             obstacles = (tuple(objects_to_obstacles(
                 objects, cam, plane, result.obstacles, self.map_config.attach_m,
-                self.map_config.corridor_half_width_m, self._seen_ground(stamp_s)))
+                self.map_config.corridor_half_width_m, self._seen_ground(stamp_s),
+                self.map_config.span))
                          if plane is not None else ())
             # the detector's unknown ahead (height NaN, `core.unseen_ground`) is no
             # evidence for the map, and goes out as it is; so does a tall report the map
