@@ -3,8 +3,9 @@
 `objects_to_obstacles` turns the map's objects (`core.evidence_map.MapObject`, in the
 current pair's ground frame) and the pair's detector reports into the reports published:
 the detector's reports the map confirms, the map's own placements of the regions that
-confirm none, and a region's part in the walking corridor when none of its reports is
-there (docs/map.md, *Objects*).
+confirm none, a region's part in the walking corridor when none of its reports is
+there, and the edge of a drop-off seen on both sides of the corridor where it crosses
+it (`drop_spans`, rule_drop_span) (docs/map.md, *Objects*).
 """
 from __future__ import annotations
 
@@ -169,7 +170,6 @@ def drop_spans(objects, config: DropSpanConfig, corridor_half_width: float,
         out.append((near, np.array([x, 0.0])))
     out.sort(key=lambda p: float(p[1][0]))
     return out
-
 
 
 def _map_report(ob: MapObject, near_xy: np.ndarray, track_id: int, cam: StereoCamera,
