@@ -119,3 +119,25 @@ def test_while_the_map_is_down_a_report_goes_out_once_chained_over_unmapped_fram
     assert not c.passing(0.2 + MAX_GAP_S + 0.1, h, r, b)[0]
     assert ChainedReports(1, 1, 0.3, 4.0).passing(0.0, h, r, b).all()
     assert not ChainedReports(3, 2, 0.3, 4.0).passing(0.0, -h, r, b).any()
+
+
+def test_while_the_map_is_down_a_narrow_drop_is_chained_as_a_raised_report():
+    """kerb_ramp 900017 (chest rig): a 35 cm deep patch 0.55 m wide, 4.5 m ahead, in the
+    one pair whose plane rose 9 cm, went out as a drop while the map was down; a step
+    down across the path is reported wide (step_down 1011: 3.9 m) and goes out at once."""
+    c = ChainedReports.from_config(EvidenceMapConfig())
+    assert c.drop_min_width_m == EvidenceMapConfig().unmapped_drop_min_width_m == 1.0
+    h, r, b = np.array([-0.35, -0.21]), np.array([4.5, 3.6]), np.array([0.1, -0.1])
+    w = np.array([0.55, 3.87])
+    assert c.passing(0.0, h, r, b, w).tolist() == [False, True]
+    # the narrow one goes out once it ends a chain of unmapped_frames (3) pairs
+    assert c.passing(0.1, h, r - 0.12, b, w).tolist() == [False, True]
+    assert c.passing(0.2, h, r - 0.24, b, w).tolist() == [True, True]
+    # without widths every drop is wide; 0 m: every drop at once
+    c.reset()
+    assert c.passing(0.0, h, r, b).all()
+    c0 = ChainedReports(3, 1, 0.3, 4.0, 0.0)
+    assert c0.passing(0.0, h, r, b, w).all()
+    # raised reports are not changed by it
+    c.reset()
+    assert not c.passing(0.0, -h, r, b, w).any()

@@ -255,6 +255,12 @@ class EvidenceMapConfig:
         1, "the same for a drop report: the detector finds a drop's edge in a pair here "
         "and there (its lower ground hidden), and one held back can be the only warning "
         "(a 21 cm step down on step_down 1011, chest rig)", range=(1, 100))
+    unmapped_drop_min_width_m: float = param(
+        1.0, "a drop report narrower than this (across the line of sight) chains over "
+        "unmapped_frames pairs instead: a drop the wearer can step off is wide (the 21 cm "
+        "step down of step_down 1011 was reported 3.9 m wide), one pair's narrow patch "
+        "below the plane is a refit off for that pair, m (0: every drop over "
+        "unmapped_drop_frames)", range=(0.0, 10.0))
     span: DropSpanConfig = group(
         DropSpanConfig, 'rule_drop_span: a drop-off seen on both sides of the walking '
         'corridor reported where its edge crosses it')

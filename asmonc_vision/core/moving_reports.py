@@ -125,23 +125,30 @@ class ChainedReports:
     (NaN height) always goes out. (At a start, `core.perception.Perception` publishes the
     detector's reports as they are.)
 
-    A drop is not held back (``drop_frames`` 1): its lower ground is hidden behind its
-    edge, and the detector finds it in a pair here and there (on tuning walk step_down
-    1011, chest rig, a 21 cm step down in one pair only, 3.6 m ahead: held back, it was
-    never warned).
+    A wide drop is not held back (``drop_frames`` 1): its lower ground is hidden behind
+    its edge, and the detector finds it in a pair here and there (on tuning walk
+    step_down 1011, chest rig, a 21 cm step down in one pair only, 3.6 m ahead, 3.9 m
+    wide: held back, it was never warned). A drop narrower than ``drop_min_width_m``
+    chains as a raised report does (``frames``): a drop the wearer can step off is wide,
+    as the map's ``min_drop_cells`` says; one pair's narrow patch below the plane is a
+    refit off for a pair (held-out kerb_ramp 900017, chest rig: 35 cm deep, 0.55 m wide,
+    4.5 m ahead, in the pair whose plane rose 9 cm).
 
     Args:
         frames: pairs in a row a raised report's chain must span (1: every one goes
             out).
-        drop_frames: the same for a drop.
+        drop_frames: the same for a drop at least ``drop_min_width_m`` wide.
         gate_m, max_speed_mps: as `TallReports`' ``moving_gate_m`` and
             ``moving_max_speed_mps``.
+        drop_min_width_m: a narrower drop chains over ``frames`` pairs, m (0: every
+            drop over ``drop_frames``).
     """
 
     def __init__(self, frames: int, drop_frames: int, gate_m: float,
-                 max_speed_mps: float) -> None:
+                 max_speed_mps: float, drop_min_width_m: float = 0.0) -> None:
         self.frames = int(frames)
         self.drop_frames = int(drop_frames)
+        self.drop_min_width_m = float(drop_min_width_m)
         self.gate_m = float(gate_m)
         self.max_speed_mps = float(max_speed_mps)
         self.reset()
@@ -154,9 +161,10 @@ class ChainedReports:
         self._chain: dict[int, np.ndarray] = {k: np.zeros(0, np.int64) for k in (0, 1)}
 
     def passing(self, stamp_s: float, height: np.ndarray, range_m: np.ndarray,
-                bearing: np.ndarray) -> np.ndarray:
-        """Which of a pair's reports go out (arguments as `TallReports.passing`); call
-        once per pair, in stamp order, whether or not the map confirms. (N,) bool."""
+                bearing: np.ndarray, width: np.ndarray | None = None) -> np.ndarray:
+        """Which of a pair's reports go out (arguments as `TallReports.passing`;
+        ``width`` (N,) m across the line of sight, None: every drop wide); call once per
+        pair, in stamp order, whether or not the map confirms. (N,) bool."""
         h = np.asarray(height, float).reshape(-1)
         r = np.asarray(range_m, float).reshape(-1)
         b = np.asarray(bearing, float).reshape(-1)
@@ -168,7 +176,12 @@ class ChainedReports:
             chains[k] = _chain(xy[sel], self._xy[k], self._chain[k], self._stamp_s,
                                stamp_s, self.gate_m, self.max_speed_mps)
             self._xy[k] = xy[sel]
-            out[sel] = chains[k] >= (self.frames if k == 0 else self.drop_frames)
+            if k == 0:
+                out[sel] = chains[k] >= self.frames
+            else:
+                wide = (np.ones(int(sel.sum()), bool) if width is None else
+                        np.asarray(width, float).reshape(-1)[sel] >= self.drop_min_width_m)
+                out[sel] = chains[k] >= np.where(wide, self.drop_frames, self.frames)
         self._chain = chains
         self._stamp_s = float(stamp_s)
         return out
@@ -177,7 +190,7 @@ class ChainedReports:
     def from_config(cls, c) -> 'ChainedReports':
         """From an `EvidenceMapConfig`."""
         return cls(c.unmapped_frames, c.unmapped_drop_frames, c.moving_gate_m,
-                   c.moving_max_speed_mps)
+                   c.moving_max_speed_mps, c.unmapped_drop_min_width_m)
 
 
 def _chain(xy: np.ndarray, prev_xy: np.ndarray, prev_chain: np.ndarray,

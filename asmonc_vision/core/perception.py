@@ -128,7 +128,8 @@ class Perception:
         objects = self.map.update(stamp_s, plane, ev, m, result.still, cam)
         arrays = report_arrays(result.obstacles)
         passing = self.tall.passing(stamp_s, *arrays)
-        chained = self.unmapped.passing(stamp_s, *arrays)
+        chained = self.unmapped.passing(stamp_s, *arrays,
+                                        np.array([o.width for o in result.obstacles], float))
         if self.map.placed_pairs < self.map_config.min_placed_pairs:
             # the map has not seen enough pairs in a row to confirm anything: at a start
             # the detector's reports go out as they are (for start_raw_s); once the map
