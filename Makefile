@@ -29,13 +29,21 @@ $(STAMP): requirements.lock setup.py package.xml msg/CMakeLists.txt msg/package.
 	# setup.cfg puts the console scripts where `ros2 run` looks (lib/asmonc_vision);
 	# link them onto the venv's PATH too, under the same names.
 	for f in $(VENV)/lib/asmonc_vision/*; do ln -sf "$$(realpath $$f)" $(VENV)/bin/; done
+	# Compile the numba kernels into their disk cache once (2-3 minutes), so that no
+	# node's first start and no test pays for it.
+	$(PY) -m asmonc_vision.eval.warm_jit
 	touch $(STAMP)
 
 demo: venv
 	$(VENV)/bin/asmonc run
 
+# The tests that start no ROS node and no process on TEST_WORKERS workers (pytest-xdist);
+# then those that do, one at a time, on an otherwise idle machine (their timing is the
+# graph's: a FAULT within 0.5 s, a replay paced by the detector).
+TEST_WORKERS ?= 2
 test: venv
-	$(PY) -m pytest -q test
+	$(PY) -m pytest -q -n $(TEST_WORKERS) -m "not ros and not e2e" test; core=$$?; \
+	  $(PY) -m pytest -q -m "ros or e2e" test && exit $$core
 
 # The tests marked neither ros, e2e nor slow (markers: setup.cfg, test/conftest.py).
 test-fast: venv

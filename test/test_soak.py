@@ -133,6 +133,7 @@ def test_the_streamed_wav_equals_the_whole_mix(tmp_path):
         assert w.getnframes() == end
 
 
+@pytest.mark.e2e          # (its processes are started by the command, out of conftest's sight)
 def test_a_short_soak_of_the_whole_graph(capsys):
     """18 s of the walking bag looped at twice its rate through every node (the replay
     paced by the detector, as at rate 1): no process dies, every pair played gets its
