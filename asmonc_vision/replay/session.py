@@ -54,6 +54,8 @@ END_WATCHED = {'/alarms/contact': 'alarm', '/gait/state': 'gait'}
 LINK_TIMEOUT = 30.0
 #: seconds the player's ~/resume service has to answer
 RESUME_TIMEOUT = 10.0
+#: an unanswered ~/resume is sent again after this long, seconds
+RESUME_RETRY = 1.0
 #: seconds after the player's last line (and the last result) within which it exits: it
 #: waits at most `player_node.ACK_TIMEOUT` (4 s) for its subscribers' acknowledgements
 PLAYER_EXIT_GRACE = 10.0
@@ -386,18 +388,23 @@ class Replay:
                                           for n, m in sorted(missing.items())), err=True)
         client = self.monitor.node.create_client(Trigger, '/bag_player_node/resume')
         deadline = time.monotonic() + RESUME_TIMEOUT
-        future = None
+        future, sent = None, 0.0
         try:
             # the service offered, then answered; a player that dies has said why in its
-            # log, and the replay ends
+            # log, and the replay ends. A request sent the moment the service is seen can
+            # be served before the player's reply has matched this client, and its answer
+            # is then lost: unanswered, it is sent again (a second ~/resume is harmless).
             while future is None or not future.done():
                 if not player.alive():
                     return
                 if time.monotonic() > deadline:
                     raise RuntimeError('the bag player did not answer ~/resume within '
                                        f'{RESUME_TIMEOUT:g} s')
+                if future is not None and time.monotonic() - sent > RESUME_RETRY:
+                    client.remove_pending_request(future)
+                    future = None
                 if future is None and client.wait_for_service(timeout_sec=0.1):
-                    future = client.call_async(Trigger.Request())
+                    future, sent = client.call_async(Trigger.Request()), time.monotonic()
                 elif future is not None:
                     time.sleep(0.02)
         finally:
