@@ -168,6 +168,7 @@ class ChainedReports:
         h = np.asarray(height, float).reshape(-1)
         r = np.asarray(range_m, float).reshape(-1)
         b = np.asarray(bearing, float).reshape(-1)
+        w = np.full(len(h), np.inf) if width is None else np.asarray(width, float).reshape(-1)
         known = np.isfinite(h)
         xy = np.stack([r * np.cos(b), r * np.sin(b)], axis=1)
         out = ~known
@@ -176,12 +177,9 @@ class ChainedReports:
             chains[k] = _chain(xy[sel], self._xy[k], self._chain[k], self._stamp_s,
                                stamp_s, self.gate_m, self.max_speed_mps)
             self._xy[k] = xy[sel]
-            if k == 0:
-                out[sel] = chains[k] >= self.frames
-            else:
-                wide = (np.ones(int(sel.sum()), bool) if width is None else
-                        np.asarray(width, float).reshape(-1)[sel] >= self.drop_min_width_m)
-                out[sel] = chains[k] >= np.where(wide, self.drop_frames, self.frames)
+            need = (self.frames if k == 0 else
+                    np.where(w[sel] >= self.drop_min_width_m, self.drop_frames, self.frames))
+            out[sel] = chains[k] >= need
         self._chain = chains
         self._stamp_s = float(stamp_s)
         return out
