@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from asmonc_vision.core.camera import MetricPlane, StereoCamera
-from asmonc_vision.core.evidence_map import (DROP, GROUND, NONE, RAISED, EvidenceMap,
-                                             EvidenceMapConfig, MapObject, PairEvidence,
+from asmonc_vision.core.evidence_map import EvidenceMap, EvidenceMapConfig, MapObject
+from asmonc_vision.core.map_evidence import (DROP, GROUND, NONE, RAISED, PairEvidence,
                                              pair_evidence)
 from asmonc_vision.core.map_reports import (CORRIDOR_ID_BASE, MAP_ID_BASE,
                                             objects_to_obstacles)

@@ -17,7 +17,8 @@ import numpy as np
 
 from asmonc_vision.core.camera import (MetricPlane, StereoCamera, ground_range_bearing,
                                        plane_disparity, plane_from_metric)
-from asmonc_vision.core.evidence_map import MapObject, ground_frame
+from asmonc_vision.core.evidence_map import MapObject
+from asmonc_vision.core.map_evidence import ground_frame
 from asmonc_vision.core.map_settings import DropSpanConfig
 
 #: ids of the reports placed by the map itself are region ids offset by this (the

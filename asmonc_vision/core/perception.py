@@ -21,8 +21,8 @@ from collections.abc import Callable
 import numpy as np
 
 from asmonc_vision.core.camera import StereoCamera
-from asmonc_vision.core.evidence_map import (DROP, GROUND, NONE, RAISED, EvidenceMap,
-                                             EvidenceMapConfig, pair_evidence)
+from asmonc_vision.core.evidence_map import EvidenceMap, EvidenceMapConfig
+from asmonc_vision.core.map_evidence import DROP, GROUND, NONE, RAISED, pair_evidence
 from asmonc_vision.core.gpod import GpodConfig, GpodDetector, GpodResult
 from asmonc_vision.core.map_motion import MotionPredictor
 from asmonc_vision.core.map_reports import objects_to_obstacles
