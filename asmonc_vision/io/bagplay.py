@@ -68,10 +68,10 @@ class PlayerConfig:
                                       'anyway with a warning (0: wait without limit)',
                                 range=(0.0, 3600.0))
     start_paused: bool = param(
-        False, 'after the wait for subscribers, hold the first message until the '
-               "~/resume service (std_srvs/Trigger) is called, as 'ros2 bag play "
-               "--start-paused': a starter that sees the readers' own side of each link "
-               '(a best-effort reader drops what comes before it has matched) releases it')
+        False, "hold the first message until the ~/resume service (std_srvs/Trigger) is "
+               "called, as 'ros2 bag play --start-paused', then wait for subscribers: a "
+               "starter that sees the readers' own side of each link (a best-effort reader "
+               'drops what comes before it has matched) releases it')
     publish_clock: bool = param(False, 'publish /clock from the bag time (for use_sim_time)')
     exit_when_done: bool = param(True, 'when the bag has been played (and not looping), '
                                        'shut down the node\'s context so the process exits')

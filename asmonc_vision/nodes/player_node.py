@@ -15,8 +15,10 @@ machine slower than the bag's rate slows the replay instead of dropping pairs
 reported, the player waits (at most ACK_TIMEOUT) until reliable subscribers have
 acknowledged the last messages, so exiting right after does not lose them. With ``start_paused``
 the first message waits for the ``~/resume`` service (std_srvs/Trigger), as with
-``ros2 bag play --start-paused``: ``asmonc run`` calls it once every node has logged its
-own side of each link (a best-effort reader drops what comes before). For the ``asmonc run``
+``ros2 bag play --start-paused``, and the wait for subscribers (``wait_topics``,
+``wait_timeout``) follows the resume: ``asmonc run`` starts the player while the last nodes
+start and calls ~/resume once every node has logged its own side of each link (a
+best-effort reader drops what comes before). For the ``asmonc run``
 orchestrator the node offers `play_done` (an Event), `published_counts` and `error`.
 
 Errors: a missing, unreadable or empty bag is logged (naming the file) and raises
@@ -381,17 +383,19 @@ class BagPlayerNode(Node):
         log = self.get_logger()
         stopped_early = False
         try:
-            targets = cfg.wait_targets(self.camera_topics)
-            if targets:
-                log.info('waiting for subscribers: ' + ', '.join(
-                    f'{t} ({n})' for t, n in sorted(targets.items())))
-                self.wait_for_targets(targets, cfg.wait_timeout)
+            # paused, the wait for subscribers runs from the resume (the caller resumes
+            # once its readers are there; they may start after the player)
             if cfg.start_paused and not self._resumed.is_set():
                 log.info('paused before the first message: waiting for ~/resume')
                 while not self._resumed.wait(0.05):
                     if self._stop.is_set() or not self.context.ok():
                         raise _ContextGone
                 log.info('resumed')
+            targets = cfg.wait_targets(self.camera_topics)
+            if targets:
+                log.info('waiting for subscribers: ' + ', '.join(
+                    f'{t} ({n})' for t, n in sorted(targets.items())))
+                self.wait_for_targets(targets, cfg.wait_timeout)
             while not self._stop.is_set():
                 self._play_pass()
                 if self._stop.is_set():

@@ -285,9 +285,13 @@ class Replay:
         return Child(name, cmd, self.log_dir, lambda s: self.console.line(s, err=True),
                      self.env, echo_warnings=(name != 'alarm'), log_name=log_name)
 
-    def start(self, names: list[str]) -> None:
+    def start(self, names: list[str], then=None) -> None:
+        """Start the nodes `names` and wait until they are connected; `then()`, if given,
+        is called once they are spawned, before the wait."""
         for name in names:
             self.children[name] = self.spawn(name)
+        if then is not None:
+            then()
         # Wait until they are connected, so no frame is lost to discovery: each node
         # publishes its outputs and subscribes its inputs, and the recorder (if any)
         # has subscribed every output.
@@ -307,24 +311,34 @@ class Replay:
 
     def _produced(self, name: str) -> frozenset[str]:
         """The topics published by the running nodes other than `name`."""
-        return frozenset(t for n in self.children if n != name for t in self.nodes[n].outputs)
+        return frozenset(t for n in self.children if n != name and n in self.nodes
+                         for t in self.nodes[n].outputs)
 
     def start_nodes(self) -> None:
-        # The gait and alarm nodes last, in that order: their start-up graces (the
-        # alarm's FAULT "not started", the gait node's "inclinometer silent since the
-        # node started") run from their own start, and the detector may take seconds to
-        # be ready (compiling its kernels on a first run); so may the gait filter (about
-        # 15 s on a first run, before its own grace starts), which would use up the
-        # alarm's if the two started together.
-        self.start([n for n, spec in self.nodes.items() if not spec.start_late])
-        for name, spec in self.nodes.items():
-            if spec.start_late:
-                self.start([name])
+        """The graph's nodes, the player (paused) and the end watch, all connected.
 
-    def start_player(self) -> None:
-        # The player itself must also see every reader of the bag's inputs (images and
-        # their camera_info, the inclinometer) before the first message: a message sent
-        # before its subscriber is matched is lost.
+        The gait and alarm nodes last, in that order: their start-up graces (the alarm's
+        FAULT "not started", the gait node's "inclinometer silent since the node
+        started") run from their own start, and the detector may take seconds to be
+        ready (compiling its kernels on a first run); so may the gait filter (about 15 s
+        on a first run, before its own grace starts), which would use up the alarm's if
+        the two started together. The player starts paused while the late nodes start,
+        and the end watch once they are spawned (it needs their process ids): each
+        takes a second or two to start, and neither sends anything before
+        `release_player`."""
+        self.start([n for n, spec in self.nodes.items() if not spec.start_late])
+        late = [n for n, spec in self.nodes.items() if spec.start_late]
+        self.spawn_player()
+        for i, name in enumerate(late):
+            self.start([name], then=self.start_end_watch if i == len(late) - 1 else None)
+        if not late:
+            self.start_end_watch()
+
+    def spawn_player(self) -> None:
+        """The bag player, paused: `start_player` lets it play. It must also see every
+        reader of the bag's inputs (images and their camera_info, the inclinometer)
+        before the first message: a message sent before its subscriber is matched is
+        lost."""
         plan, args = self.plan, self.args
         # It starts paused: `release_player` lets it play once the readers have matched.
         player_cmd = [sys.executable, '-m', 'asmonc_vision.nodes.player_node', '--ros-args',
@@ -343,6 +357,11 @@ class Replay:
         self.children['player'] = Child('player', player_cmd, self.log_dir,
                                         lambda s: self.console.line(s, err=True), self.env,
                                         done_mark=PLAYED_MARK)
+
+    def start_player(self) -> None:
+        """Once every node is connected: the watchers of the replay, then the player
+        released (`release_player`)."""
+        plan, args = self.plan, self.args
         if 'gait' in self.children:
             self.gait_stopper = GaitStopper(
                 self.children['gait'], self.children['player'], self.monitor, plan.n_imu,
@@ -350,7 +369,6 @@ class Replay:
             self.gait_stopper.start()
         self.injector = FaultSchedule(plan.faults, self.children, self.monitor, self.console,
                                       self.t0)
-        self.start_end_watch()
         self.release_player()
 
     def _fed(self) -> dict[str, set[str]]:
