@@ -70,9 +70,9 @@ def test_one_walk_end_to_end_and_cached(tmp_path, capsys):
     md = (tmp_path / 'c.md').read_text().splitlines()
     assert md[0] == '**TUNING seeds 1000-1999: 1 walks of 1.5 s**'
     assert md[2].startswith('|  | walks | min | ours (GPOD + map, no wait) warned |')
-    assert md[3] == '|---' * 9 + '|'
+    assert md[3] == '|---' * 11 + '|'
     assert md[4].startswith(f'| class {SCENE_CLASSES[0]} | 1 | 0.0 | ')
-    assert md[-1].startswith('| **all** | 1 |') and md[-1].count('|') == 10
+    assert md[-1].startswith('| **all** | 1 |') and md[-1].count('|') == 12
     entries = list((tmp_path / 'cache').iterdir())
     assert len(entries) == 1 and (entries[0] / 'truth.json').is_file()
     assert main(argv) == 0                                    # rendered once, reused

@@ -40,8 +40,9 @@ obstacle was) and each obstacle on the path that was not warned in time (late, n
 under FAULT), per method.
 
 Prints per set a table per scene class and per rig, ours and the peer side by side:
-warned in time (warned/on the path), false alarm events per 10 minutes of walking,
-false reports per frame, recall; then the set's totals; and the time per walk-minute
+warned in time (warned/on the path), cued (at least 3 s before contact, or as they came
+into the corridor; /on the path), false alarm events per 10 minutes of walking, false
+reports per frame, recall; then the set's totals; and the time per walk-minute
 (rendering, each detector). `--markdown FILE` writes the tables as Markdown (a results
 table a document can include). A progress bar goes to stderr. `--workers N` runs N walks
 at once (one process each, one OpenCV thread each). Exit status 0; 2 on bad arguments.
@@ -266,21 +267,24 @@ def _score_walk_job(args):
 # --- report -------------------------------------------------------------------------------
 
 def _cell(s) -> list[str]:
-    """warned x/y, false alarm events per 10 min walking, false reports per frame, recall."""
+    """warned x/y; cued x/y (cued at least `cue_lead_s` before contact, or as they came
+    into the corridor: `eval.safety`); false alarm events per 10 min walking; false
+    reports per frame; recall."""
     fa = (f'{len(s.false_alarm_events) / s.walking_s * 600:.1f}' if s.walking_s > 0 else '-')
     fr = f'{s.false_reports_per_frame:.3f}' if s.false_reports_per_frame is not None else '-'
     rc = f'{s.recall:.0%}' if s.recall is not None else '-'
-    return [f'{s.warned}/{s.on_path}', fa, fr, rc]
+    return [f'{s.warned}/{s.on_path}', f'{s.cued_ahead + s.cued_at_entry}/{s.on_path}', fa, fr,
+            rc]
 
 
 def table(results: list[dict], methods: list[str], title: str) -> list[str]:
     """The printed table of one seed set: per class, per rig, totals."""
     from asmonc_vision.eval.safety import SafetyScore
 
-    heads = ['warned', 'FA/10min', 'FR/frame', 'recall']
+    heads = ['warned', 'cued', 'FA/10min', 'FR/frame', 'recall']
     w0 = 22
     line1 = f'{"":{w0}s} {"walks":>5s} {"min":>5s} ' + ''.join(
-        f'| {METHOD_NAMES[m]:<38s}' for m in methods)
+        f'| {METHOD_NAMES[m]:<47s}' for m in methods)
     line2 = f'{"":{w0}s} {"":5s} {"":5s} ' + ''.join(
         '| ' + ''.join(f'{h:>9s}' for h in heads) + '  ' for _ in methods)
     out = [f'=== {title} ===', line1, line2]
@@ -302,18 +306,19 @@ def table(results: list[dict], methods: list[str], title: str) -> list[str]:
 
 def markdown_table(results: list[dict], methods: list[str], title: str) -> list[str]:
     """The table of one seed set as Markdown: per class, per rig, totals; per method
-    warned x/y, false alarm events per 10 minutes of walking, false reports per frame."""
+    warned x/y, cued x/y, false alarm events per 10 minutes of walking, false reports per
+    frame."""
     from asmonc_vision.eval.safety import SafetyScore
 
     head = ['', 'walks', 'min'] + [f'{METHOD_NAMES[m]} {h}' for m in methods
-                                   for h in ('warned', 'FA/10 min', 'FR/frame')]
+                                   for h in ('warned', 'cued', 'FA/10 min', 'FR/frame')]
     out = [f'**{title}**', '', '| ' + ' | '.join(head) + ' |',
            '|' + '---|' * len(head)]
 
     def row(label: str, rs: list[dict]) -> str:
         cells = [label, str(len(rs)), f"{sum(r['walk'].duration for r in rs) / 60.0:.1f}"]
         for m in methods:
-            cells += _cell(SafetyScore.merge([r['scores'][m] for r in rs]))[:3]
+            cells += _cell(SafetyScore.merge([r['scores'][m] for r in rs]))[:4]
         return '| ' + ' | '.join(cells) + ' |'
 
     for key, name in (('scene_class', 'class'), ('rig', 'rig')):
