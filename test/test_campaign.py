@@ -85,6 +85,20 @@ def test_one_walk_end_to_end_and_cached(tmp_path, capsys):
     out = capsys.readouterr().out
     assert f'1 walks of 1.5 s (tuning seeds), {SCENE_CLASSES[0]}:1000:backpack;' in out
     assert f'tuning {SCENE_CLASSES[0]}' in out and 'render 0 s' in out
+    # --trace: every pair in the window, its status, the alarm in force and its reports
+    assert main(['campaign', '--walk', f'{SCENE_CLASSES[0]}:1000:backpack', '--duration',
+                 '1.5', '--cache', str(tmp_path / 'cache'), '--methods', 'gpod', '--trace',
+                 '0.2', '0.6', '--no-progress']) == 0
+    out = capsys.readouterr().out
+    assert 'gpod: pairs from 0.2 to 0.6 s' in out
+    rows = [ln.split() for ln in out.splitlines() if ln.startswith('         ')
+            and ' s  ' in ln]
+    assert [r[0] for r in rows] == ['0.20', '0.30', '0.40', '0.50', '0.60']
+    assert all(r[2] in ('tracking', 'initialising', 'lost', '-') for r in rows)
+    assert all(r[3] in ('CLEAR', 'CAUTION', 'WARNING', 'STOP', 'FAULT') for r in rows)
+    assert main(['campaign', '--trace', '0', '1', '--no-progress']) == 2       # no --walk
+    assert main(['campaign', '--walk', f'{SCENE_CLASSES[0]}:1000:backpack', '--trace', '2',
+                 '1']) == 2
 
 
 def test_parse_walk():

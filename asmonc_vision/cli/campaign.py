@@ -2,7 +2,7 @@
 
     asmonc campaign [--minutes 20] [--workers 2] [--blind | --tuning]
                     [--classes CLASS ...] [--rigs backpack chest] [--duration 20]
-                    [--walk CLASS:SEED:RIG ...] [--events]
+                    [--walk CLASS:SEED:RIG ... [--trace T0 T1]] [--events]
                     [--methods gpod gpod_ego gpod_map gpod_map_lag gpod_map_wait sgbm]
                     [--cache DIR]
                     [--json FILE]
@@ -43,7 +43,9 @@ Prints per set a table per scene class and per rig, ours and the peer side by si
 warned in time (warned/on the path), cued (at least 3 s before contact, or as they came
 into the corridor; /on the path), false alarm events per 10 minutes of walking, false
 reports per frame, recall; then the set's totals; and the time per walk-minute
-(rendering, each detector). `--markdown FILE` writes the tables as Markdown (a results
+(rendering, each detector). `--trace T0 T1` (with `--walk`) prints under each walk, per
+method, every pair from T0 to T1 s into it: the ground status, the alarm in force and each
+report. `--markdown FILE` writes the tables as Markdown (a results
 table a document can include). A progress bar goes to stderr. `--workers N` runs N walks
 at once (one process each, one OpenCV thread each). Exit status 0; 2 on bad arguments.
 """
@@ -102,6 +104,10 @@ def add_arguments(p) -> None:
                    help='under each walk, its false alarm events (time, level, range, '
                         'bearing, the nearest true obstacle) and the obstacles on the path '
                         'not warned in time, per method')
+    p.add_argument('--trace', nargs=2, type=float, default=None, metavar=('T0', 'T1'),
+                   help='with --walk: under each walk, per method, every pair from T0 to T1 '
+                        's into the walk: the ground status, the alarm in force and each '
+                        'report (id, height, range, bearing)')
     p.add_argument('--methods', nargs='+', choices=tuple(METHOD_NAMES),
                    default=['gpod_map_lag', 'sgbm'],
                    help='detectors to run: gpod (no map, no motion), gpod_ego (no map, '
@@ -223,13 +229,18 @@ def render_walk(w: Walk, entry: Path) -> tuple[float, float]:
     return time.perf_counter() - t0, time.process_time() - c0
 
 
-def score_walk(w: Walk, cache: Path, methods: list[str], version: str) -> dict:
+def score_walk(w: Walk, cache: Path, methods: list[str], version: str,
+               trace: tuple[float, float] | None = None) -> dict:
     """Render (or reuse) a walk, run each method with the alarm logic, score it.
 
+    Args:
+        trace: (t0, t1) s into the walk: also the pairs between, per method
+            (`trace_lines`).
     Returns:
         {'walk': Walk, 'render_s', 'render_cpu_s': wall and CPU seconds of rendering (0
          when cached), 'frames': int, 'scores': {method: SafetyScore},
-         'detect_s', 'detect_cpu_s': {method: wall and CPU seconds}}.
+         'detect_s', 'detect_cpu_s': {method: wall and CPU seconds},
+         'trace': {method: [str]} (empty without `trace`)}.
     """
     from asmonc_vision.eval.bench import run_method
     from asmonc_vision.io.frames import load_frames
@@ -242,7 +253,7 @@ def score_walk(w: Walk, cache: Path, methods: list[str], version: str) -> dict:
     frames = load_frames(entry / 'bag')
     vis = json.loads((entry / 'truth.json').read_text())['visible']
     truth = truth_from_bag(entry / 'bag', frames, {int(k): v for k, v in vis.items()})
-    scores, detect_s, detect_cpu_s = {}, {}, {}
+    scores, detect_s, detect_cpu_s, traced = {}, {}, {}, {}
     for m in methods:
         t0, c0 = time.perf_counter(), time.process_time()
         runs = (run_method(frames, 'gpod', map_enabled=m.startswith('gpod_map'),
@@ -255,13 +266,45 @@ def score_walk(w: Walk, cache: Path, methods: list[str], version: str) -> dict:
         alarms = replay_alarms([(r.stamp_ns, r.status, r.obstacles) for r in runs],
                                motions=[r.ego_t for r in runs])
         scores[m] = score_safety(truth, alarms, {r.stamp_ns: r.obstacles for r in runs})
+        if trace is not None:
+            traced[m] = trace_lines(runs, alarms, trace)
     return {'walk': w, 'render_s': render_s, 'render_cpu_s': render_cpu_s,
             'frames': len(frames), 'scores': scores, 'detect_s': detect_s,
-            'detect_cpu_s': detect_cpu_s}
+            'detect_cpu_s': detect_cpu_s, 'trace': traced}
 
 
 def _score_walk_job(args):
     return score_walk(*args)
+
+
+def trace_lines(runs, alarms: list[dict], window: tuple[float, float]) -> list[str]:
+    """`--trace`: per pair whose time into the walk (from the first pair) lies in
+    `window` (s): the time, the ground status, the alarm in force (the last stamped at
+    or before the pair) and each report: id, height (cm; a drop negative, '?' for ground
+    that cannot be seen), range (m), bearing (degrees, left +)."""
+    from asmonc_vision.core.alarm import AlarmLevel
+
+    if not runs:
+        return []
+    t_first = runs[0].stamp_ns
+    order = sorted(alarms, key=lambda a: a['stamp_ns'])
+    out, k, now = [], 0, None
+    for r in runs:
+        while k < len(order) and order[k]['stamp_ns'] <= r.stamp_ns:
+            now, k = order[k], k + 1
+        t = (r.stamp_ns - t_first) / 1e9
+        if not window[0] <= t <= window[1]:
+            continue
+        said = ('-' if now is None else f"{AlarmLevel(int(now['level'])).name} "
+                f"\"{now['text']}\"")
+        o = r.obstacles
+        reports = ('no answer' if o is None else '; '.join(
+            f'id {int(o.ids[i])} '
+            + ('?' if not math.isfinite(o.height[i]) else f'{o.height[i] * 100:+.0f} cm')
+            + f' {o.range[i]:.2f} m {math.degrees(o.bearing[i]):+.0f} deg'
+            for i in range(len(o.ids))) or 'none')
+        out.append(f'{t:6.2f} s  {r.status or "-":12s} {said}  |  {reports}')
+    return out
 
 
 # --- report -------------------------------------------------------------------------------
@@ -427,6 +470,9 @@ def run(args) -> int:
     if not args.minutes > 0 or args.workers < 1 or not 1.0 <= args.duration <= 600.0:
         err('--minutes must be > 0, --workers >= 1, --duration in [1, 600] s')
         return 2
+    if args.trace is not None and (not args.walk or args.trace[0] > args.trace[1]):
+        err('--trace T0 T1 needs --walk and T0 <= T1')
+        return 2
     sets = ['blind'] if args.blind else ['tuning'] if args.tuning else ['tuning', 'blind']
     try:
         if args.walk:
@@ -450,10 +496,11 @@ def run(args) -> int:
     bar = _Bar(len(walks), not args.no_progress)
     bar.show(0)
     results = []
-    jobs = [(w, cache, list(args.methods), version) for w in walks]
+    trace = tuple(args.trace) if args.trace is not None else None
+    jobs = [(w, cache, list(args.methods), version, trace) for w in walks]
     t0 = time.monotonic()
-    print('per walk: warned, false alarm events per 10 min walking, false reports per frame, '
-          'recall', flush=True)
+    print('per walk: warned, cued, false alarm events per 10 min walking, false reports per '
+          'frame, recall', flush=True)
 
     def done(r: dict) -> None:
         results.append(r)
@@ -463,6 +510,10 @@ def run(args) -> int:
         if args.events:
             for line in event_lines(r, list(args.methods)):
                 print(line, flush=True)
+        for m, lines in r['trace'].items():
+            print(f'      {m}: pairs from {args.trace[0]:g} to {args.trace[1]:g} s', flush=True)
+            for line in lines:
+                print(f'        {line}', flush=True)
         bar.show(len(results), f'{w.scene_class} {w.seed} {w.rig}')
 
     if args.workers == 1:
@@ -476,9 +527,10 @@ def run(args) -> int:
     bar.end()
     order = {w: i for i, w in enumerate(walks)}
     results.sort(key=lambda r: order[r['walk']])
-    print('warned = obstacles on the path warned in time / on the path; FA/10min = false '
-          'alarm events per 10 minutes of walking; FR/frame = false reports per frame; '
-          'recall = (obstacle, frame) pairs found (EVALUATION.md)')
+    print('warned = obstacles on the path warned in time / on the path; cued = cued 3 s '
+          'before contact, standing or as they came into the corridor / on the path; '
+          'FA/10min = false alarm events per 10 minutes of walking; FR/frame = false '
+          'reports per frame; recall = (obstacle, frame) pairs found (EVALUATION.md)')
     for s in sets:
         rs = [r for r in results if r['walk'].seed_set == s]
         lo, hi = TUNING_SEEDS if s == 'tuning' else BLIND_SEEDS
