@@ -279,22 +279,22 @@ def _score_walk_job(args):
 
 def trace_lines(runs, alarms: list[dict], window: tuple[float, float]) -> list[str]:
     """`--trace`: per pair whose time into the walk (from the first pair) lies in
-    `window` (s): the time, the ground status, the alarm in force (the last stamped at
-    or before the pair) and each report: id, height (cm; a drop negative, '?' for ground
-    that cannot be seen), range (m), bearing (degrees, left +)."""
+    `window` (s): the time, the ground status, the alarm in force
+    (`eval.evaluation.alarm_in_force`) and each report: id, height (cm; a drop negative,
+    '?' for ground that cannot be seen), range (m), bearing (degrees, left +)."""
     from asmonc_vision.core.alarm import AlarmLevel
+    from asmonc_vision.eval.evaluation import alarm_in_force
 
     if not runs:
         return []
     t_first = runs[0].stamp_ns
-    order = sorted(alarms, key=lambda a: a['stamp_ns'])
-    out, k, now = [], 0, None
-    for r in runs:
-        while k < len(order) and order[k]['stamp_ns'] <= r.stamp_ns:
-            now, k = order[k], k + 1
+    in_force = alarm_in_force([r.stamp_ns for r in runs], alarms)
+    out = []
+    for r, k in zip(runs, in_force):
         t = (r.stamp_ns - t_first) / 1e9
         if not window[0] <= t <= window[1]:
             continue
+        now = alarms[k] if k >= 0 else None
         said = ('-' if now is None else f"{AlarmLevel(int(now['level'])).name} "
                 f"\"{now['text']}\"")
         o = r.obstacles

@@ -374,38 +374,44 @@ class PathObstacle:
         return self.warned_at_m is not None and self.warned_at_m >= self.first_on_path_m - 1e-9
 
 
-def alarm_levels_at(stamps: Sequence[int], alarms: Sequence[dict]) -> np.ndarray:
-    """The alarm level in force at each frame stamp: that of the last alarm announced at
-    or before it (-1 before the first).
+def alarm_in_force(stamps: Sequence[int], alarms: Sequence[dict]) -> np.ndarray:
+    """The index into `alarms` of the alarm in force at each frame stamp: the last
+    announced at or before it (-1 before the first).
 
     Args:
         stamps: frame stamps, ns, ascending.
         alarms: the alarms in the order they were announced, each a dict with ``stamp_ns``
-            and ``level`` (as `asmonc run` logs /alarms). Alarms about a frame carry that
-            frame's stamp; those made by the alarm node's own timer (a FAULT for silence)
-            carry its clock's time, which need not be the recording's: an alarm stamped
-            more than a minute outside the frames' span is placed right after the alarm
-            announced before it.
+            (as `asmonc run` logs /alarms). Alarms about a frame carry that frame's stamp;
+            those made by the alarm node's own timer (a FAULT for silence) carry its
+            clock's time, which need not be the recording's: an alarm stamped more than a
+            minute outside the frames' span is placed right after the alarm announced
+            before it.
     Returns:
-        (len(stamps),) int64 levels.
+        (len(stamps),) int64 indices.
     """
     st = np.asarray(stamps, np.int64)
-    out = np.full(st.shape, -1, np.int64)
     if not len(alarms) or not st.size:
-        return out
+        return np.full(st.shape, -1, np.int64)
     lo, hi = int(st.min()) - 60_000_000_000, int(st.max()) + 60_000_000_000
-    eff, lev, prev = [], [], None
+    eff, prev = [], None
     for a in alarms:
         t = int(a['stamp_ns'])
         if not lo <= t <= hi:
             t = prev if prev is not None else lo
         t = t if prev is None else max(t, prev)
         eff.append(t)
-        lev.append(int(a['level']))
         prev = t
-    idx = np.searchsorted(np.asarray(eff, np.int64), st, side='right') - 1
+    return np.searchsorted(np.asarray(eff, np.int64), st, side='right') - 1
+
+
+def alarm_levels_at(stamps: Sequence[int], alarms: Sequence[dict]) -> np.ndarray:
+    """The alarm level in force at each frame stamp (`alarm_in_force`; -1 before the
+    first alarm), as (len(stamps),) int64 levels."""
+    idx = alarm_in_force(stamps, alarms)
+    out = np.full(idx.shape, -1, np.int64)
     ok = idx >= 0
-    out[ok] = np.asarray(lev, np.int64)[idx[ok]]
+    if ok.any():
+        out[ok] = np.asarray([int(a['level']) for a in alarms], np.int64)[idx[ok]]
     return out
 
 
