@@ -168,6 +168,9 @@ class GroundSurface:
         tail_grade: the grade (rise per metre) of the surface beyond the last known knot:
             that of the last known segment (the ground is taken to go on as it was seen
             to go; 0 when no segment was taken or the profile is the plane itself).
+        knots_sd: (K,) float64 standard deviation of each known knot's height from its
+            features (`knot_sd`), metres (0 at the first knot, NaN beyond the known
+            ground), or None (not taken).
     """
 
     plane: MetricPlane
@@ -176,6 +179,7 @@ class GroundSurface:
     known_until_m: float
     checks: tuple[SegmentCheck, ...] = ()
     tail_grade: float = 0.0
+    knots_sd: np.ndarray | None = None
 
     @classmethod
     def flat(cls, plane: MetricPlane, near_m: float = 0.0) -> 'GroundSurface':
@@ -437,7 +441,8 @@ def _first_knot(s: np.ndarray, h: np.ndarray, c: GroundSurfaceConfig) -> float:
 
 def fit_ground_surface(points: np.ndarray, plane: MetricPlane,
                        config: GroundSurfaceConfig | None = None,
-                       depth_sd: np.ndarray | None = None) -> GroundSurface:
+                       depth_sd: np.ndarray | None = None, flatten: bool = True
+                       ) -> GroundSurface:
     """Fit the surface ahead to matched features.
 
     Args:
@@ -449,6 +454,9 @@ def fit_ground_surface(points: np.ndarray, plane: MetricPlane,
         depth_sd: (N,) the standard deviation of each point's depth from its disparity
             noise, metres (`depth_noise`), or None (none): a segment's residual spread
             is judged beyond what this noise explains (``rule_spread``).
+        flatten: a profile within ``min_bend_m`` of the plane is the plane itself
+            (`flattened`); False: the profile as fitted (for `core.surface_tracking`,
+            which flattens what it fuses).
     Returns:
         The GroundSurface; with no feature support ahead, the plane alone with
         ``known_until_m = near_m`` (a return value, never an exception).
@@ -484,7 +492,7 @@ def fit_ground_surface(points: np.ndarray, plane: MetricPlane,
                                                int(np.count_nonzero(anchor)), math.nan,
                                                math.nan, offset, math.nan),))
     ks, kz = [first], [0.0]
-    grade = before = 0.0              # the grades of the last two segments (the plane: 0)
+    grade = 0.0                       # the grade of the last segment (the plane: 0)
     checks: list[SegmentCheck] = []
     while ks[-1] < c.far_m - 1e-6:
         s_a, z_a = ks[-1], kz[-1]
@@ -494,19 +502,66 @@ def fit_ground_surface(points: np.ndarray, plane: MetricPlane,
             break
         ks.append(s_a + length)
         kz.append(z_b)
-        before, grade = grade, (z_b - z_a) / length
+        grade = (z_b - z_a) / length
     known = ks[-1]
     rest = _nominal_knots(known, ks[-1], c)[1:]
     knots_s = np.concatenate([np.array(ks), rest])
     knots_z = np.concatenate([np.array(kz), np.zeros(rest.size)])
-    # Beyond the known ground the surface goes on at the grade the last two segments
-    # agree on (the smaller of theirs if they rise or fall alike, else level): a slope
-    # seen over two segments goes on; one segment bent towards a kerb does not carry.
-    tail = float(min(grade, before, key=abs)) if grade * before > 0.0 else 0.0
-    if np.max(np.abs(knots_z)) <= c.min_bend_m:
-        knots_z[:] = 0.0                 # flat within the noise: the plane itself
-        tail = 0.0
-    return GroundSurface(plane, knots_s, knots_z, float(known), tuple(checks), tail)
+    knots_sd = np.concatenate([knot_sd(s, h, np.array(ks), np.array(kz), checks, c),
+                               np.full(rest.size, np.nan)])
+    out = GroundSurface(plane, knots_s, knots_z, float(known), tuple(checks),
+                        tail_grade(knots_s, knots_z, known), knots_sd)
+    return flattened(out, c.min_bend_m) if flatten else out
+
+
+def tail_grade(knots_s: np.ndarray, knots_z: np.ndarray, known_until_m: float) -> float:
+    """The grade (rise per metre) of the surface beyond its known ground: the one the
+    last two known segments agree on (the smaller of theirs if they rise or fall alike,
+    else level; the plane's, 0, before the first): a slope seen over two segments goes
+    on; one segment bent towards a kerb does not carry. Knots (K,) m along the ground
+    and above the plane."""
+    keep = knots_s <= known_until_m + 1e-9
+    ks, kz = knots_s[keep], knots_z[keep]
+    grades = np.diff(kz) / np.maximum(np.diff(ks), 1e-9)
+    grade = float(grades[-1]) if grades.size else 0.0
+    before = float(grades[-2]) if grades.size > 1 else 0.0
+    return float(min(grade, before, key=abs)) if grade * before > 0.0 else 0.0
+
+
+def flattened(surface: GroundSurface, min_bend_m: float) -> GroundSurface:
+    """The surface, or the plane itself (knots at 0, level tail) when its known knots
+    are all within ``min_bend_m`` (m) of it: a profile fitted to flat ground wanders by
+    a few cm, which would shift the obstacle test."""
+    kz = surface.knots_z[surface.knots_s <= surface.known_until_m + 1e-9]
+    if kz.size and np.max(np.abs(kz)) > min_bend_m:
+        return surface
+    return replace(surface, knots_z=np.zeros_like(surface.knots_z), tail_grade=0.0)
+
+
+def knot_sd(s: np.ndarray, h: np.ndarray, ks: np.ndarray, kz: np.ndarray,
+            checks: list, c: GroundSurfaceConfig) -> np.ndarray:
+    """(K,) standard deviation (m) of the known knots' heights (ks, kz: (K,) m), from
+    the features (s, h: (N,) m along the ground, above the plane) of each segment taken
+    (its check's robust spread as their noise). The far knot of the line z_a (1 - t) +
+    z_b t fitted by least squares to heights h_i at t_i has
+    ``var z_b = sigma^2 / sum t_i^2 + (sum t_i (1 - t_i) / sum t_i^2)^2 var z_a``
+    (the near knot's error carried through the line; the prior ignored: an upper
+    bound). The first knot is the plane's (0)."""
+    out = np.zeros(ks.size)
+    for k in range(1, ks.size):
+        s_a, length = ks[k - 1], ks[k] - ks[k - 1]
+        t = (s - s_a) / length
+        line = kz[k - 1] * (1.0 - t) + kz[k] * t
+        on = (t >= 0.0) & (t < 1.0) & (np.abs(h - line) <= c.gate_m)
+        tt = t[on]
+        stt = float(np.sum(tt * tt))
+        sigma = checks[k - 1].spread_m
+        if stt <= 0.0 or not math.isfinite(sigma):
+            out[k:] = np.nan
+            break
+        carry = float(np.sum(tt * (1.0 - tt))) / stt
+        out[k] = math.sqrt(max(sigma, 1e-3) ** 2 / stt + carry * carry * out[k - 1] ** 2)
+    return out
 
 
 def _nominal_knots(first: float, last: float, c: GroundSurfaceConfig) -> np.ndarray:

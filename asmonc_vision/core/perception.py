@@ -7,7 +7,9 @@ detector's detections and tracks. The map's camera motion is the one given with 
 pair, or, with a `core.map_motion.MotionPredictor` (``motion_predictor``), the
 predictor's for the pair: from the motions measured before it, so that nobody waits for
 the pair's own (the detector node feeds the predictor the egomotion's odometry as it
-arrives). The detector node and the offline evaluation
+arrives); the detector carries its ground surface ahead through the same motion
+(`core.surface_tracking`), the predictor asked once per pair. The detector node and the
+offline evaluation
 (`asmonc eval`, `asmonc bench`'s runs) both drive the detector through this class, so
 the offline numbers are what the graph publishes.
 """
@@ -98,15 +100,27 @@ class Perception:
                 return m
         else:
             got.append(motion)
+        predicted: list = []
+        predictor = self.motion_predictor if self.map is not None else None
+
+        def predict(still: bool):
+            # the predictor's motion for this pair, asked once (it keeps the pose given)
+            if not predicted:
+                predicted.append(predictor.predict(stamp_ns, still=bool(still))
+                                 if predictor is not None and stamp_ns is not None
+                                 else None)
+            return predicted[0]
+
+        # the ground surface is carried by the map's motion (`core.surface_tracking`)
+        self.detector.surface_motion = predict if predictor is not None else None
         result = self.detector.process(left, right, cam, stamp_ns=stamp_ns, motion=motion,
                                        up=up)
         if self.map is None:
             return result
         t0 = time.perf_counter()
         m = got[-1] if got else None
-        if self.motion_predictor is not None:
-            m = (self.motion_predictor.predict(stamp_ns, still=bool(result.still))
-                 if stamp_ns is not None else None)
+        if predictor is not None:
+            m = predict(bool(result.still))
         stamp_s = (stamp_ns * 1e-9 if stamp_ns is not None
                    else result.frame_index * self.gpod_config.tracks.frame_period_s)
         plane = result.metric_plane if result.status == 'tracking' else None

@@ -175,7 +175,8 @@ class Detection(PlaneTracking):
         features with their obstacle / drop classes, the detections nearest first)."""
         c = self.config
         thr, _ = self.pixel_thresholds(_noise_key(m), v)
-        pd, pts, h, low = self._ground_reference(u, v, d, cam, metric, thr / c.threshold.k)
+        pd, pts, h, low = self._ground_reference(u, v, d, cam, metric, thr / c.threshold.k,
+                                                 still)
         excess = d - pd
         feet = pts - h[:, None] * metric.normal_up[None, :]
         ground_range = np.linalg.norm(feet + metric.height * metric.normal_up[None, :], axis=1)
@@ -247,7 +248,7 @@ class Detection(PlaneTracking):
         return features, tuple(found)
 
     def _ground_reference(self, u, v, d, cam: StereoCamera, metric: MetricPlane,
-                          sigma_px: np.ndarray
+                          sigma_px: np.ndarray, still: bool = False
                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | float]:
         """The ground the features are judged against: (its disparity at each feature,
         the features' 3-D points, their heights above it, how far (px, >= 0; 0.0 where
@@ -257,7 +258,10 @@ class Detection(PlaneTracking):
         ``self._surface``), fitted knowing each feature's disparity noise ``sigma_px``
         (K,) px (the obstacle threshold over ``threshold.k``) as a depth noise. Beyond
         the known ground a rise seen to go on is the obstacle test's ground, but it may
-        end there (`GroundSurface.lowest`): a drop is below the level ground too."""
+        end there (`GroundSurface.lowest`): a drop is below the level ground too. With
+        ``surface_tracking.enabled`` the profile is fused with the one carried through
+        the camera's motion (`core.surface_tracking`; the motion from
+        ``self.surface_motion(still)``, the identity while ``still`` without one)."""
         c = self.config
         pd = plane_disparity(self._abc, u, v)
         pts = cam.triangulate(u, v, d)
@@ -267,8 +271,12 @@ class Detection(PlaneTracking):
         if c.surface.enabled:
             # The reference of the obstacle test: the plane continued by the profile
             # ahead where features support it (core/ground_surface.py).
+            tracking = c.surface_tracking.enabled
             surf = fit_ground_surface(pts, metric, c.surface,
-                                      depth_noise(cam, d, sigma_px))
+                                      depth_noise(cam, d, sigma_px), flatten=not tracking)
+            if tracking:
+                surf = self._surface_tracker.update(surf, self._ground_motion(still),
+                                                    c.surface.min_bend_m)
             self._surface = surf
             if surf.bends:
                 pd_surf = surf.disparity(cam, u, v)
@@ -278,6 +286,15 @@ class Detection(PlaneTracking):
                     pd_low = surf.lowest().disparity(cam, u, v)
                     low = np.where(np.isfinite(pd_low), np.maximum(pd - pd_low, 0.0), 0.0)
         return pd, pts, h, low
+
+    def _ground_motion(self, still: bool) -> tuple | None:
+        """The camera's motion since the previous pair for the surface carried
+        (``surface_motion``, a callable of ``still`` a caller such as
+        `core.perception.Perception` sets; without one the identity while ``still``,
+        else the motion given with the pair, or None)."""
+        if self.surface_motion is not None:
+            return self.surface_motion(still)
+        return (np.eye(3), np.zeros(3)) if still else self._pair_motion
 
     def _runs(self, m: Matches, el: EdgeMap, excess: np.ndarray) -> tuple:
         """The matched runs: (`run_links`, `matched_run_length`, the excess smoothed along

@@ -129,6 +129,7 @@ class GpodDetector(Tracking):
                 obstacles = tuple(sorted(obstacles + unseen, key=lambda o: o.range))
         else:
             self._tracker.reset()
+            self._surface_tracker.reset()
             self._last_motion = None
             if self._unseen is not None:
                 self._unseen.reset()
@@ -203,6 +204,7 @@ class GpodDetector(Tracking):
         still = self._stillness(el)
         if callable(motion) and self._calib is not None:     # not while calibrating
             motion = motion()
+        self._pair_motion = None if callable(motion) else motion
         s = _noise_key(m)
         status, updated = self._update_plane(u, v, d, s, cam, still,
                                              None if callable(motion) else motion)

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from ..config import check_fields, group, param
 from ..ground_plane import PlausiblePlaneConfig
 from ..ground_surface import GroundSurfaceConfig
+from ..surface_tracking import SurfaceTrackingConfig
 
 #: Detector statuses (GroundPlane.msg: INITIALISING = 0, TRACKING = 1, LOST = 2).
 STATUSES = ('initialising', 'tracking', 'lost')
@@ -678,6 +679,9 @@ class GpodConfig:
     threshold: ThresholdSettings = group(ThresholdSettings, 'stage 4: the obstacle threshold')
     surface: GroundSurfaceConfig = group(GroundSurfaceConfig,
                                          'stage 5: the ground surface ahead')
+    surface_tracking: SurfaceTrackingConfig = group(
+        SurfaceTrackingConfig, "stage 5: the ground surface carried through the camera's "
+        'motion')
     temporal: TemporalSettings = group(TemporalSettings,
                                        'stage 5: the excess averaged while standing still')
     detection: DetectionSettings = group(DetectionSettings,

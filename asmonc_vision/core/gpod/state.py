@@ -14,6 +14,7 @@ from ..camera import MetricPlane, StereoCamera
 from ..edges import gradient_noise_gain
 from ..ground_plane import PlaneFit
 from ..ground_surface import GroundSurface
+from ..surface_tracking import SurfaceTracker
 from ..obstacle_tracks import ObstacleTracker
 from ..unseen_ground import UnseenGroundMonitor
 from .footing import _FrameContext
@@ -80,6 +81,13 @@ class DetectorState:
         self._ctx: _FrameContext | None = None
         #: the ground surface ahead of the latest pair (surface.enabled), or None
         self._surface: GroundSurface | None = None
+        #: the ground surface carried through the motion (surface_tracking.enabled)
+        self._surface_tracker = SurfaceTracker(self.config.surface_tracking)
+        #: a callable of the pair's stillness giving the camera's motion since the
+        #: previous pair for the surface carried (None: the identity while still only)
+        self.surface_motion = getattr(self, 'surface_motion', None)
+        #: the motion given with the current pair (None: none, or not yet known)
+        self._pair_motion: tuple | None = None
         c = self.config
         self._tracker = ObstacleTracker(coast_s=c.tracks.coast_s, gate_chi2=c.tracks.gate_chi2,
                                         process_noise_m=c.tracks.process_noise_m,
