@@ -545,8 +545,9 @@ def knot_sd(s: np.ndarray, h: np.ndarray, ks: np.ndarray, kz: np.ndarray,
     (its check's robust spread as their noise). The far knot of the line z_a (1 - t) +
     z_b t fitted by least squares to heights h_i at t_i has
     ``var z_b = sigma^2 / sum t_i^2 + (sum t_i (1 - t_i) / sum t_i^2)^2 var z_a``
-    (the near knot's error carried through the line; the prior ignored: an upper
-    bound). The first knot is the plane's (0)."""
+    (the near knot's error carried through the line; the prior, which would lower it,
+    ignored). The first knot is the plane's (0); NaN from a segment without features
+    or spread on."""
     out = np.zeros(ks.size)
     for k in range(1, ks.size):
         s_a, length = ks[k - 1], ks[k] - ks[k - 1]

@@ -21,6 +21,11 @@ map. Per pair:
   ``(s_j, 0) <- Rot(-dyaw) ((s_j, 0) - (dx, dy))`` and ``z_j`` kept (F: the motion),
   ``P_j <- P_j + Q``, ``Q = q_pair^2 + (q_per_m * travel)^2`` (the ground carried is
   trusted less the farther the wearer went);
+* re-level (`SurfaceTracker._relevelled`): both profiles start on their own plane at
+  the first knot, and a plane that tilted between the pairs shows as a difference
+  growing along the ground; its grade, fitted to the knots both know, corrects the
+  carried heights (and raises their variances by its own); with no knot both know,
+  nothing is carried into the pair;
 * update, at each of the new profile's knots that its features support: the carried
   height interpolated there, ``x^-`` with ``P^-``, and the measured knot ``z`` with
   ``R = knot_sd^2`` (`ground_surface.knot_sd`), ``H = 1``:
@@ -34,9 +39,9 @@ map. Per pair:
   A segment refused for what its features show (a step, a bend, a scatter) is not
   overruled: the ground there is unknown.
 
-A pair without a motion (unknown while the rig moves) restarts the filter from the
-pair's own profile. Each knot is its own scalar filter (their covariances are not
-kept), batched in numpy.
+A pair without a motion (unknown while the rig moves), or whose profile was refused
+whole (``rule_anchor``), restarts the filter from the pair's own profile. Each knot is
+its own scalar filter (their covariances are not kept), batched in numpy.
 
 Frames: the left optical frame (REP 103), metres. No ROS here.
 """
