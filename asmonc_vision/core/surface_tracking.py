@@ -126,12 +126,12 @@ class SurfaceTracker:
         ext_s: np.ndarray = np.zeros(0)
         ext_z: np.ndarray = np.zeros(0)
         ext_P: np.ndarray = np.zeros(0)
-        cs: np.ndarray = np.zeros(0)
         carried = (self._predict(self._state, surface, motion)
                    if motion is not None and self._state is not None else None)
         if carried is not None:
-            cs, ch, cP = self._relevelled(carried, ks, kz, R_meas, known)
-        if carried is not None and cs.size:
+            carried = self._relevelled(carried, ks, kz, R_meas, known)
+        if carried is not None:
+            cs, ch, cP = carried
             # H = 1: the carried height interpolated at each measured knot
             inside = (ks >= cs[0] - 1e-9) & (ks <= cs[-1] + 1e-9)
             x_pred = np.interp(ks, cs, ch)
@@ -154,12 +154,14 @@ class SurfaceTracker:
                 ext_s, ext_z, ext_P = cs[beyond][:n], ch[beyond][:n], cP[beyond][:n]
         m_s, m_z, m_P = ks[known], kz[known], P_out[known]
         known_until = float(ext_s[-1]) if ext_s.size else float(m_s[-1])
+        known_s = np.concatenate([m_s, ext_s])
+        known_z = np.concatenate([m_z, ext_z])
+        known_P = np.concatenate([m_P, ext_P])
+        self._store(surface, known_s, known_z, known_P)
         rest = ks[ks > known_until + 1e-9]
-        new_s = np.concatenate([m_s, ext_s, rest])
-        new_z = np.concatenate([m_z, ext_z, np.zeros(rest.size)])
-        new_P = np.concatenate([m_P, ext_P, np.full(rest.size, np.nan)])
-        self._store(surface, new_s[:new_s.size - rest.size], new_z[:new_s.size - rest.size],
-                    new_P[:new_s.size - rest.size])
+        new_s = np.concatenate([known_s, rest])
+        new_z = np.concatenate([known_z, np.zeros(rest.size)])
+        new_P = np.concatenate([known_P, np.full(rest.size, np.nan)])
         fused = replace(surface, knots_s=new_s, knots_z=new_z, known_until_m=known_until,
                         knots_sd=np.sqrt(new_P),
                         tail_grade=tail_grade(new_s, new_z, known_until))
@@ -167,7 +169,7 @@ class SurfaceTracker:
 
     @staticmethod
     def _relevelled(carried: tuple, ks: np.ndarray, kz: np.ndarray, R_meas: np.ndarray,
-                    known: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                    known: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """The carried knots (s, z, P) re-read against this pair's plane: both profiles
         start on their own plane at the first knot s0, and a plane that tilted between
         the pairs (its refit's noise, the wearer's sway) shows as a difference growing
@@ -175,14 +177,14 @@ class SurfaceTracker:
         fraction of a degree). b is fitted by weighted least squares to the knots both
         know, ``b = sum w u d / sum w u^2``, ``var b = 1 / sum w u^2`` (u = s - s0,
         d the difference, w = 1 / (P + R)), and the carried heights corrected by it,
-        their variances raised by ``u^2 var b``. With no knot both know, none
-        (empty arrays): the carried ground cannot be placed on this pair's plane."""
+        their variances raised by ``u^2 var b``. With no knot both know, None: the
+        carried ground cannot be placed on this pair's plane."""
         cs, ch, cP = carried
         s0 = float(ks[0])
         inside = known & (ks >= cs[0] - 1e-9) & (ks <= cs[-1] + 1e-9)
         inside[0] = False
         if not inside.any():
-            return np.zeros(0), np.zeros(0), np.zeros(0)
+            return None
         u = ks[inside] - s0
         d = kz[inside] - np.interp(ks[inside], cs, ch)
         w = 1.0 / np.maximum(np.interp(ks[inside], cs, cP) + R_meas[inside], 1e-12)

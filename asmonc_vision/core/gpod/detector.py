@@ -47,6 +47,10 @@ class GpodDetector(Tracking):
         self.alignment = VerticalAlignment(AlignmentConfig(
             enabled=c.image.align_vertical, every_frames=c.image.align_every_frames,
             apply_min_px=c.image.align_apply_px))
+        #: a callable of the pair's stillness giving the camera's motion since the
+        #: previous pair for the surface carried (None: the identity while still only;
+        #: set by a caller such as `core.perception.Perception`, kept over resets)
+        self.surface_motion: Callable[[bool], tuple | None] | None = None
         self.reset()
 
     # ------------------------------------------------------------------ helpers

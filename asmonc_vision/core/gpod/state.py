@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
@@ -29,6 +29,8 @@ class DetectorState:
 
     config: GpodConfig
     alignment: VerticalAlignment
+    #: the surface carried's motion source (`GpodDetector.__init__`)
+    surface_motion: Callable[[bool], tuple | None] | None
 
     def reset(self) -> None:
         """Forget the ground plane and the calibration frames (status 'initialising')."""
@@ -83,9 +85,6 @@ class DetectorState:
         self._surface: GroundSurface | None = None
         #: the ground surface carried through the motion (surface_tracking.enabled)
         self._surface_tracker = SurfaceTracker(self.config.surface_tracking)
-        #: a callable of the pair's stillness giving the camera's motion since the
-        #: previous pair for the surface carried (None: the identity while still only)
-        self.surface_motion = getattr(self, 'surface_motion', None)
         #: the motion given with the current pair (None: none, or not yet known)
         self._pair_motion: tuple | None = None
         c = self.config
