@@ -470,6 +470,11 @@ class PlaneTracking(DetectorState):
                 fit, uu, vv, dd, ss = last, u, v, d, s
         if fit.num_features < c.plane.init_min_inlier_fraction * uu.shape[0]:
             return 'initialising', False
+        if 0.0 < c.plane.init_max_height_sd_m < _height_sd(cam, fit):
+            # features in one band of the image (a kerb's joints across a plain
+            # pavement, the only edges at full size) fix no plane: any plane through
+            # them fits (the chest rig's took the camera 0.75 m too high, 8 degrees off)
+            return 'initialising', False
         self._calib = self._last_fit = fit
         self._heights.clear()
         self._heights.append(cyclopean_height(cam, fit.abc))

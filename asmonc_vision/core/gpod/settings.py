@@ -137,6 +137,12 @@ class PlaneSettings(PlausiblePlaneConfig):
         'calibration features lie on it (the ground is a large part of any view the rig '
         'starts in; a plane through a few per cent of them is a chance consensus of '
         'mismatches, as on ground with no clear edges); 0 = any', range=(0.0, 1.0))
+    init_max_height_sd_m: float = param(
+        0.03, 'The initial ground plane is taken only if its features fix the camera '
+        'height to this standard deviation (first order, from the fit\'s covariance), '
+        'metres: features in one band across the image (the joints of a kerb across a '
+        'plain pavement) leave the plane free to turn about them, and a plane through '
+        'them is any plane; 0 = any', range=(0.0, 10.0))
     update: str = param(
         'refit', "'fixed': keep the calibrated plane (the paper's GPOD); 'refit': robust "
         'refit every frame from features near the predicted plane, smoothed',
