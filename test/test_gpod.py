@@ -2387,7 +2387,7 @@ def test_the_initial_plane_must_be_fixed_by_its_features(bound, want):
     """On the chest rig over a plain pavement the full-size images' only edges were the
     joints of a kerb across the view and a few ground matches just before it (tuning
     kerb_ramp 1023): a plane through that band fits any tilt, and the calibration took
-    one 2.1 m below the camera (1.38 m) and 8 degrees off. Here: a kerb's joints 5 m
+    a plane 2.13 m below the camera (truly 1.38 m) and 8 degrees off. Here: a kerb's joints 5 m
     ahead of the paper's rig and 30 ground features 4.0-4.9 m ahead. Without the bound
     on the camera height's standard deviation the plane is metres off; with it the
     detector waits for features that fix the ground. Ground seen 2-8 m ahead
