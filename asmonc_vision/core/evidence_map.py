@@ -377,9 +377,14 @@ class EvidenceMap:
             here[cells] = True
             fi, hi, si, wi = flat[sel], h[sel] * sign, sh[sel], w[sel]
             o = np.lexsort((-hi, fi))
-            head = np.concatenate(([True], fi[o][1:] != fi[o][:-1]))
+            fo = fi[o]
+            head = np.concatenate((_HEAD, fo[1:] != fo[:-1]))
             top = o[head]
             cell = fi[top]
+            # each pixel's cell as its rank among the pair's cells of the kind (the sums
+            # per cell below over those, in the pixels' order, as over the grid)
+            rank = np.empty(fi.size, np.int64)
+            rank[o] = np.cumsum(head) - 1
             keep = here[cell]
             here[cells] = False
             cell, z, R = cell[keep], sign * hi[top][keep], si[top][keep] ** 2
@@ -392,9 +397,9 @@ class EvidenceMap:
             x[cell] = np.where(new, z, x[cell] + Kg * (z - x[cell]))
             P[cell] = np.where(new, R, (1.0 - Kg) * np.where(new, 0.0, P0))
             # the cell's evidence point: mean of the pair's points there, smoothed
-            cnt = np.bincount(fi, minlength=n2)[cell]
-            mx = np.bincount(fi, weights=wi[:, 0], minlength=n2)[cell] / cnt
-            my = np.bincount(fi, weights=wi[:, 1], minlength=n2)[cell] / cnt
+            cnt = np.bincount(rank)[keep]
+            mx = np.bincount(rank, weights=wi[:, 0])[keep] / cnt
+            my = np.bincount(rank, weights=wi[:, 1])[keep] / cnt
             pts = self.pt_xy.reshape(-1, 2)
             a = np.where(new, 1.0, 0.3)
             pts[cell, 0] = (1 - a) * pts[cell, 0] + a * mx
@@ -596,13 +601,15 @@ class EvidenceMap:
             return out
         w = self.to_world(xy)
         free_s, L_r = self.free_s.reshape(-1), self.L_r.reshape(-1)
-        for dx in (-1, 0, 1):
-            for dy in (-1, 0, 1):
-                flat, inside = self._cells(w, dx, dy)
-                out &= inside & (stamp_s - free_s[flat] <= within_s)
-                if dx or dy:
-                    out &= L_r[flat] <= 0
-        return out
+        # the nine cells of each point at once, (N, 9) (`_cells` of each offset)
+        ij = np.floor((w - self.origin[None, :]) / self.config.cell_m).astype(np.int64)
+        ix, iy = ij[:, 0:1] + _AROUND_DX, ij[:, 1:2] + _AROUND_DY
+        n = self.n
+        inside = (ix >= 0) & (iy >= 0) & (ix < n) & (iy < n)
+        flat = np.clip(iy, 0, n - 1) * n + np.clip(ix, 0, n - 1)
+        ok = inside & (stamp_s - free_s[flat] <= within_s)
+        ok[:, _AROUND_RING] &= L_r[flat[:, _AROUND_RING]] <= 0
+        return out & ok.all(axis=1)
 
     # ------------------------------------------------------------------ objects
     def confirmed(self, drop: bool = False) -> np.ndarray:
@@ -672,14 +679,18 @@ class EvidenceMap:
                 vis &= ~gone
                 below &= ~gone
             masks.extend([(drop, cells[vis]), (drop, cells[below])])
+        pt_xy, h_x = self.pt_xy.reshape(-1, 2), self.h_x.reshape(-1)
+        ids, last_hit = self.ids.reshape(-1), self.last_hit_s.reshape(-1)
         for drop, cells in masks:
             if not cells.size:
                 continue
             L = (self.L_d if drop else self.L_r).reshape(-1)
+            # the cells' points in G, all at once (elementwise: each region's the same)
+            g_cells = self.to_ground(pt_xy[cells].astype(np.float64))
             for cs in self._label(self._grid_of(cells) > 0):
                 if cs.size < (c.min_drop_cells if drop else c.min_region_cells):
                     continue
-                g = self.to_ground(self.pt_xy.reshape(-1, 2)[cs].astype(np.float64))
+                g = g_cells[np.searchsorted(cells, cs)]
                 ahead = g[:, 0] > 0
                 if not ahead.any():
                     continue            # passed: behind the wearer
@@ -695,12 +706,12 @@ class EvidenceMap:
                 near = r0 * np.array([math.cos(b_med), math.sin(b_med)])
                 across = np.array([-near[1], near[0]]) / max(r0, 1e-6)
                 lat = g @ across
-                hx = self.h_x.reshape(-1)[cs]
+                hx = h_x[cs]
                 height = float(hx.min()) if drop else float(hx.max())
                 # the id of the previous pair's region most of its cells had (the
                 # smallest of equal counts), of those not taken by a nearer region
-                prev = self.ids.reshape(-1)[cs]
-                vals, cnt = np.unique(prev[prev > 0], return_counts=True)
+                prev = ids[cs]
+                vals, cnt = _counted(prev[prev > 0])
                 if used and vals.size:
                     free = np.array([int(x) not in used for x in vals.tolist()], bool)
                     vals, cnt = vals[free], cnt[free]
@@ -712,7 +723,7 @@ class EvidenceMap:
                 used.add(oid)
                 new_ids.reshape(-1)[cs] = oid
                 conf = float(1.0 / (1.0 + math.exp(-float(L[cs].max()))))
-                last = float(self.last_hit_s.reshape(-1)[cs].max())
+                last = float(last_hit[cs].max())
                 out.append(MapObject(
                     object_id=oid, is_drop=drop, nearest_xy=near, far_xy=g,
                     height=height, width=float(lat.max() - lat.min()) + c.cell_m,
@@ -748,12 +759,30 @@ class EvidenceMap:
         return R, Rcg @ corner_g + o
 
 
+#: `EvidenceMap.ground_seen_around`: the offsets (x, y) of a cell and the eight around
+#: it, and which of them are the eight
+_AROUND_DX = np.repeat(np.arange(-1, 2), 3)[None, :]
+_AROUND_DY = np.tile(np.arange(-1, 2), 3)[None, :]
+_AROUND_RING = np.flatnonzero((_AROUND_DX[0] != 0) | (_AROUND_DY[0] != 0))
 #: bearings from -90 to 90 degrees in 1 degree bins (`EvidenceMap._unseen`)
 _BINS = 180
 #: `EvidenceMap._unseen`: a raised cell is in plain view when the point at this share of
 #: its height is (the part of a tall thing a level camera sees near the wearer, below
 #: its top, whose edge may be level and unmatched)
 _SEEN_SHARE = 0.75
+
+
+def _counted(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(x, return_counts=True)`` of a 1-D integer array (its distinct values
+    ascending and how often each occurs), without np.unique's overhead."""
+    if x.size == 0:
+        return x[:0], np.zeros(0, np.int64)
+    s = np.sort(x)
+    head = np.flatnonzero(np.concatenate((_HEAD, s[1:] != s[:-1])))
+    return s[head], np.diff(np.append(head, s.size))
+
+
+_HEAD = np.ones(1, bool)
 
 
 def _bearing_bin(xy: np.ndarray) -> np.ndarray:
