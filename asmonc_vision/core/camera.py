@@ -18,6 +18,7 @@ Conventions (used by every module of asmonc_vision):
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -128,6 +129,13 @@ class MetricPlane:
         return np.asarray(points_left, float).reshape(-1, 3) @ self.normal_up + self.height
 
 
+def vector_norm(x: np.ndarray) -> float:
+    """``np.linalg.norm`` of a 1-D float64 vector, with its arithmetic (the square root
+    of ``x @ x``, x contiguous) without its overhead."""
+    x = x.ravel()
+    return math.sqrt(x.dot(x))
+
+
 def plane_from_metric(cam: StereoCamera, plane: MetricPlane) -> np.ndarray:
     """Disparity-space plane (a, b, c) of a metric ground plane.
 
@@ -154,7 +162,7 @@ def metric_from_plane(cam: StereoCamera, abc) -> MetricPlane | None:
     a, b, c = (float(x) for x in abc)
     # d = (B/h)(n.(u-cx, v-cy, f))  =>  n/h = (a, b, (c + a cx + b cy)/f) / B
     w = np.array([a, b, (c + a * cam.cx + b * cam.cy) / cam.f]) / cam.baseline
-    norm = float(np.linalg.norm(w))
+    norm = vector_norm(w)
     if not np.isfinite(norm) or norm <= 1e-12:
         return None
     n_down = w / norm
@@ -180,7 +188,7 @@ def ground_axes(plane: MetricPlane) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     """
     n = np.asarray(plane.normal_up, float)
     fwd = np.array([0.0, 0.0, 1.0]) - n[2] * n
-    fwd /= np.linalg.norm(fwd)
+    fwd /= vector_norm(fwd)
     # n x fwd, written out (np.cross costs tens of microseconds per call)
     left = np.array([n[1] * fwd[2] - n[2] * fwd[1], n[2] * fwd[0] - n[0] * fwd[2],
                      n[0] * fwd[1] - n[1] * fwd[0]])

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .camera import MetricPlane, StereoCamera, metric_from_plane
+from .camera import MetricPlane, StereoCamera, metric_from_plane, vector_norm
 from .config import check_fields, param
 
 #: Fitting methods accepted by :func:`fit_ground_plane`.
@@ -174,7 +174,7 @@ class _Prior:
         ``x = M abc = n_down / h`` projected on two axes across ``up``, over ``|x|``."""
         m = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0],
                       [cam.cx / cam.f, cam.cy / cam.f, 1.0 / cam.f]])
-        norm = float(np.linalg.norm(m @ abc))
+        norm = vector_norm(m @ abc)
         if not (math.isfinite(norm) and norm > 0.0):
             return None
         helper = np.eye(3)[int(np.argmin(np.abs(self.up)))]
@@ -415,7 +415,7 @@ def _prior(cam: StereoCamera | None, up, scale_deg: float, cost: float) -> _Prio
     if cam is None or up is None or not (scale_deg > 0.0 and cost > 0.0):
         return None
     up = np.asarray(up, np.float64).reshape(3)
-    norm = float(np.linalg.norm(up))
+    norm = vector_norm(up)
     if not (math.isfinite(norm) and norm > 1e-9):
         return None
     return _Prior(up=up / norm, scale=math.radians(scale_deg), cost=float(cost))

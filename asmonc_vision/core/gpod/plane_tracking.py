@@ -10,7 +10,7 @@ from typing import Any, cast
 
 import numpy as np
 
-from ..camera import MetricPlane, StereoCamera, plane_disparity
+from ..camera import MetricPlane, StereoCamera, plane_disparity, vector_norm
 from ..ground_plane import (PlaneFit, cyclopean_height, fast_median, fit_ground_plane,
                             lsq_plane, lsq_plane_at_height, plane_is_plausible, predict_plane)
 from .runs import _robust_row_slope
@@ -594,7 +594,7 @@ def _height_sd(cam: StereoCamera, fit: PlaneFit) -> float:
     M = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0],
                   [cam.cx / cam.f, cam.cy / cam.f, 1.0 / cam.f]]) / cam.baseline
     x = M @ fit.abc
-    n = float(np.linalg.norm(x))
+    n = vector_norm(x)
     if not n > 0.0:
         return math.inf
     grad = -(x @ M) / n ** 3          # d (1 / |M abc|) / d abc
