@@ -346,17 +346,33 @@ def lone_face_points(ctx: _FrameContext, xy: np.ndarray, group: np.ndarray, n_gr
     g_all = None
     cam_h = ctx.metric.height
     hides = kg.nb_face_hides if kg.nb_face_hides is not None else _face_hides_kernel
-    for k in range(n_groups):
-        mine = group == k
+    # the obstacles to search, all at once: low, with feet none at the image's border,
+    # within _LONE_SPREAD_M in x and in y (more than one silhouette: the corner searches
+    # place it), one within _LONE_SPREAD_M of the nearest point so far (else it was
+    # placed elsewhere already: a face out of the view, a gap)
+    group = np.asarray(group, np.int64)
+    low = (height > 0.0) & (height <= _LONE_MAX_HEIGHT_M)
+    fq = q[group]
+    dist = np.hypot(xy[:, 0] - fq[:, 0], xy[:, 1] - fq[:, 1])
+    mine = low[group]
+    lo_x = np.full(n_groups, np.inf)
+    hi_x = np.full(n_groups, -np.inf)
+    lo_y, hi_y, closest = lo_x.copy(), hi_x.copy(), lo_x.copy()
+    g = group[mine]
+    np.minimum.at(lo_x, g, xy[mine, 0])
+    np.maximum.at(hi_x, g, xy[mine, 0])
+    np.minimum.at(lo_y, g, xy[mine, 1])
+    np.maximum.at(hi_y, g, xy[mine, 1])
+    np.minimum.at(closest, g, dist[mine])
+    border = np.zeros(n_groups, bool)
+    border[group[at_border]] = True
+    # (NaN spreads and distances search, as np.ptp and np.min of NaN compare false)
+    search = (low & ~border & (np.bincount(group, minlength=n_groups) > 0)
+              & ~(hi_x - lo_x > _LONE_SPREAD_M) & ~(hi_y - lo_y > _LONE_SPREAD_M)
+              & ~(closest > _LONE_SPREAD_M))
+    for k in np.flatnonzero(search).tolist():
         h = float(height[k])
-        if not (0.0 < h <= _LONE_MAX_HEIGHT_M) or not mine.any() or at_border[mine].any():
-            continue
-        f = xy[mine]
-        if np.ptp(f[:, 0]) > _LONE_SPREAD_M or np.ptp(f[:, 1]) > _LONE_SPREAD_M:
-            continue        # more than one silhouette: the corner searches place it
         foot = q[k]
-        if np.min(np.hypot(f[:, 0] - foot[0], f[:, 1] - foot[1])) > _LONE_SPREAD_M:
-            continue        # placed elsewhere already (a face out of the view, a gap)
         # Only a face that runs towards the camera's side can bring the point nearer.
         phi = _LONE_PHI[_LONE_COS * foot[0] + _LONE_SIN * foot[1] < 0.0]
         if phi.size == 0:

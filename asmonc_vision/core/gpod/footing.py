@@ -9,7 +9,7 @@ from typing import cast
 import cv2
 import numpy as np
 
-from ..camera import MetricPlane, StereoCamera, plane_disparity
+from ..camera import MetricPlane, StereoCamera, plane_disparity, vector_norm
 from . import kernels_geometry as kg
 
 #: An obstacle string's foot is where its matched run, followed down the image from its
@@ -22,6 +22,12 @@ _FOOT_MIN_ROWS = 0.5
 _LONE_STEP_M = 0.02
 _LONE_MAX_M = 0.7
 _LONE_STEPS = np.arange(1, int(round(_LONE_MAX_M / _LONE_STEP_M)) + 1) * _LONE_STEP_M
+
+
+def _clip_int(x, lo: int, hi: int) -> int:
+    """``int(np.clip(x, lo, hi))`` of a float (NaN: ValueError, as int(NaN)), without
+    np.clip's overhead on a scalar."""
+    return int(min(max(float(x), lo), hi))
 
 
 def _cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -52,7 +58,7 @@ class _FrameContext:
         self.excess_mean, self.sigma, self.prev = excess_mean, sigma, prev
         n = metric.normal_up
         fwd = np.array([0.0, 0.0, 1.0]) - n[2] * n
-        self.fwd = fwd / np.linalg.norm(fwd)
+        self.fwd = fwd / vector_norm(fwd)
         self.lft = _cross3(n, self.fwd)
         self.origin = -metric.height * n
         self._ground_points = ground_points
@@ -115,20 +121,26 @@ class _FrameContext:
                 image, pixels (the separation is its part across the line).
         """
         img_h, img_w = self._left.shape
-        dirs = np.stack([np.cos(phi), np.sin(phi)], axis=-1)
+        n_d = phi.shape[0]
+        dirs = np.empty((n_d, 2))
+        dirs[:, 0] = np.cos(phi)
+        dirs[:, 1] = np.sin(phi)
         points = foot[None, None, :] + _LONE_STEPS[None, :, None] * dirs[:, None, :]
         # The gradient on the patch that holds every sample (the lines' ends and the
         # foot bound them, raised or not), two pixels wider than the samples one pixel
         # across the lines reach: the full image's values there.
-        ends = np.concatenate((foot[None], points[:, -1]))
-        e3 = self.origin[None, :] + ends[:, :1] * self.fwd + ends[:, 1:] * self.lft
-        e3 = np.concatenate((e3, e3 + height * self.metric.normal_up))
+        ends = np.empty((n_d + 1, 2))
+        ends[0] = foot
+        ends[1:] = points[:, -1]
+        e3 = np.empty((2 * n_d + 2, 3))
+        e3[:n_d + 1] = self.origin[None, :] + ends[:, :1] * self.fwd + ends[:, 1:] * self.lft
+        e3[n_d + 1:] = e3[:n_d + 1] + height * self.metric.normal_up
         e3[:, 2] = np.maximum(e3[:, 2], 1e-6)
         ue, ve = self.cam.project_left(e3)
-        x0 = int(np.clip(np.floor(ue.min()) - 3, 0, img_w - 1))
-        x1 = int(np.clip(np.ceil(ue.max()) + 4, x0 + 1, img_w))
-        y0 = int(np.clip(np.floor(ve.min()) - 3, 0, img_h - 1))
-        y1 = int(np.clip(np.ceil(ve.max()) + 4, y0 + 1, img_h))
+        x0 = _clip_int(np.floor(ue.min()) - 3, 0, img_w - 1)
+        x1 = _clip_int(np.ceil(ue.max()) + 4, x0 + 1, img_w)
+        y0 = _clip_int(np.floor(ve.min()) - 3, 0, img_h - 1)
+        y1 = _clip_int(np.ceil(ve.max()) + 4, y0 + 1, img_h)
         patch = self._left[y0:y1, x0:x1].astype(np.float32)
         gx = cv2.Sobel(patch, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
         gy = cv2.Sobel(patch, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
@@ -301,7 +313,7 @@ def ground_coords(p: np.ndarray, hh: np.ndarray, metric: MetricPlane, axes: bool
     n_up = metric.normal_up
     feet = p - hh[:, None] * n_up[None, :]
     fwd = np.array([0.0, 0.0, 1.0]) - n_up[2] * n_up
-    fwd /= np.linalg.norm(fwd)
+    fwd /= vector_norm(fwd)
     lft = _cross3(n_up, fwd)
     g = feet + metric.height * n_up[None, :]
     g2 = np.stack([g @ fwd, g @ lft], axis=1)

@@ -227,17 +227,19 @@ def bending_ground(c: GpodConfig, px: np.ndarray, pts: np.ndarray, h: np.ndarray
     idx = np.flatnonzero(px)
     if idx.size < 8 or c.bend.min_grade <= 0:
         return out
-    g2 = ground_coords(pts[idx], h[idx], metric)
-    label = cluster_points_2d(g2, sid[idx], radius)
-    for k in range(int(label.max()) + 1):
+    h_i, sid_i = h[idx], sid[idx]
+    g2 = ground_coords(pts[idx], h_i, metric)
+    label = cluster_points_2d(g2, sid_i, radius)
+    # (clusters of fewer than 8 pixels are none)
+    for k in np.flatnonzero(np.bincount(label) >= 8).tolist():
         sel = label == k
-        s_k, h_k = g2[sel, 0], sign * h[idx][sel]
-        if sel.sum() < 8 or float(s_k.max() - s_k.min()) < c.bend.min_span_m:
+        s_k, h_k = g2[sel, 0], sign * h_i[sel]
+        if float(s_k.max() - s_k.min()) < c.bend.min_span_m:
             continue
         grade, at0 = (float(x) for x in np.polyfit(s_k, h_k, 1))
         near = grade * float(s_k.min()) + at0
         if grade >= c.bend.min_grade and near < BEND_MAX_START_M:
-            out[sid[idx][sel]] = True
+            out[sid_i[sel]] = True
     return out
 
 
