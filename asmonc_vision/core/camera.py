@@ -94,7 +94,7 @@ class StereoCamera:
         # Cyclopean frame origin is at +B/2 along x in the left frame.
         x = (u - self.cx) * z / self.f + self.baseline / 2.0
         y = (v - self.cy) * z / self.f
-        return np.stack([x, y, z], axis=-1)
+        return columns(x, y, z)
 
     def project_left(self, points_left: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Left optical-frame points (N, 3), metres (z > 0), to their left-image (u, v),
@@ -127,6 +127,19 @@ class MetricPlane:
     def signed_height(self, points_left: np.ndarray) -> np.ndarray:
         """Height (m) of points (N, 3) above the plane; negative below it."""
         return np.asarray(points_left, float).reshape(-1, 3) @ self.normal_up + self.height
+
+
+def columns(*cols: np.ndarray) -> np.ndarray:
+    """``np.stack(cols, axis=-1)`` of arrays of one shape (S) and dtype: (S + (C,)), the
+    same values without np.stack's overhead (arrays of different shapes: np.stack's
+    answer)."""
+    shape = cols[0].shape
+    if any(c.shape != shape for c in cols):
+        return np.stack(cols, axis=-1)
+    out = np.empty(shape + (len(cols),), np.result_type(*cols))
+    for i, c in enumerate(cols):
+        out[..., i] = c
+    return out
 
 
 def vector_norm(x: np.ndarray) -> float:

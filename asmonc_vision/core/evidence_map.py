@@ -82,7 +82,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from asmonc_vision.core import map_grid, map_kernels
-from asmonc_vision.core.camera import MetricPlane, StereoCamera
+from asmonc_vision.core.camera import MetricPlane, StereoCamera, columns
 from asmonc_vision.core.map_evidence import (DROP, GROUND, RAISED, PairEvidence, ground_frame,
                                              ground_motion)
 from asmonc_vision.core.map_settings import EvidenceMapConfig
@@ -291,13 +291,13 @@ class EvidenceMap:
         """(N, 2) points of the current G to W, m."""
         cy, sy = math.cos(self.pose[2]), math.sin(self.pose[2])
         x, y = xy[:, 0], xy[:, 1]
-        return np.stack([self.pose[0] + cy * x - sy * y, self.pose[1] + sy * x + cy * y], 1)
+        return columns(self.pose[0] + cy * x - sy * y, self.pose[1] + sy * x + cy * y)
 
     def to_ground(self, w: np.ndarray) -> np.ndarray:
         """(N, 2) points of W to the current G, m."""
         cy, sy = math.cos(self.pose[2]), math.sin(self.pose[2])
         x, y = w[:, 0] - self.pose[0], w[:, 1] - self.pose[1]
-        return np.stack([cy * x + sy * y, -sy * x + cy * y], 1)
+        return columns(cy * x + sy * y, -sy * x + cy * y)
 
     def _cells(self, w: np.ndarray, dx: int = 0, dy: int = 0
                ) -> tuple[np.ndarray, np.ndarray]:

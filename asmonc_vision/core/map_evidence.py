@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from asmonc_vision.core.camera import MetricPlane, StereoCamera, ground_axes
+from asmonc_vision.core.camera import MetricPlane, StereoCamera, columns, ground_axes
 
 @dataclass(frozen=True)
 class PairEvidence:
@@ -71,7 +71,7 @@ def pair_evidence(cam: StereoCamera, plane: MetricPlane, u: np.ndarray, v: np.nd
     h2 = plane.signed_height(cam.triangulate(u, v, d + sd))
     sigma_h = np.abs(h2 - h) + 1e-4
     g = pts - origin[None, :]
-    xy = np.stack([g @ fwd, g @ left], axis=1)
+    xy = columns(g @ fwd, g @ left)
     keep = (xy[:, 0] > 0) & (np.hypot(xy[:, 0], xy[:, 1]) <= max_range_m)
     return PairEvidence(xy=xy[keep], height=h[keep], sigma_h=sigma_h[keep], kind=kind[keep],
                         weight=wt[keep] if wt is not None else None)

@@ -76,8 +76,11 @@ def objects_to_obstacles(objects, cam: StereoCamera, plane: MetricPlane,
         mine = []
         cand: np.ndarray = np.zeros(0, np.int64)
         if attach_m > 0 and len(dets):
-            dist = np.min(np.linalg.norm(det_xy[:, None, :] - ob.far_xy[None, :, :], axis=2),
-                          axis=1)
+            # (np.linalg.norm's arithmetic over the last axis: the root of the sum of
+            # the two squares)
+            dx = det_xy[:, None, 0] - ob.far_xy[None, :, 0]
+            dy = det_xy[:, None, 1] - ob.far_xy[None, :, 1]
+            dist = np.sqrt(dx * dx + dy * dy).min(axis=1)
             cand = np.flatnonzero((dist <= attach_m) & (det_drop == ob.is_drop)
                                   & ~on_ground)
         if cand.size:

@@ -9,7 +9,7 @@ from typing import cast
 import cv2
 import numpy as np
 
-from ..camera import MetricPlane, StereoCamera, plane_disparity, vector_norm
+from ..camera import MetricPlane, StereoCamera, columns, plane_disparity, vector_norm
 from . import kernels_geometry as kg
 
 #: An obstacle string's foot is where its matched run, followed down the image from its
@@ -86,7 +86,7 @@ class _FrameContext:
         points of the left optical frame."""
         n = self.metric.normal_up
         g = points - self.metric.signed_height(points)[:, None] * n[None, :] - self.origin
-        return np.stack([g @ self.fwd, g @ self.lft], axis=1)
+        return columns(g @ self.fwd, g @ self.lft)
 
     def to_image(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Left-image (u, v) of ground points (N, 2)."""
@@ -316,5 +316,5 @@ def ground_coords(p: np.ndarray, hh: np.ndarray, metric: MetricPlane, axes: bool
     fwd /= vector_norm(fwd)
     lft = _cross3(n_up, fwd)
     g = feet + metric.height * n_up[None, :]
-    g2 = np.stack([g @ fwd, g @ lft], axis=1)
+    g2 = columns(g @ fwd, g @ lft)
     return (g2, fwd, lft) if axes else g2
