@@ -75,3 +75,26 @@ def test_the_compiled_segment_test_is_the_numpy_one(kind):
         verdicts.add(a[0].refused_by)
     # the cases reach the rules, not only the support test
     assert len(verdicts) >= 2, verdicts
+
+
+@needs_numba
+@pytest.mark.parametrize('kind', ['flat', 'slope', 'step', 'clutter'])
+def test_the_compiled_knot_sums_give_numpys_knot_sd(monkeypatch, kind):
+    """`ground_surface.knot_sd` with `knot_sums_kernel` and with its numpy path: the same
+    values, bit for bit (including a segment without features: NaN from there on)."""
+    c = gs.GroundSurfaceConfig()
+    for seed in range(30):
+        rng = np.random.default_rng(seed)
+        s, _, h, _, _ = _features(rng, kind, int(rng.integers(5, 1500)))
+        n_k = int(rng.integers(2, 9))
+        ks = 2.0 + np.cumsum(np.concatenate([[0.0], rng.uniform(0.3, 1.2, n_k - 1)]))
+        kz = np.concatenate([[0.0], rng.normal(0.0, 0.03, n_k - 1)])
+        if seed % 5 == 4:
+            ks[-1] = 20.0                   # a segment beyond every feature
+        checks = [gs.SegmentCheck('', 10, 1.0, 0.0, 0.0, float(x))
+                  for x in rng.uniform(0.0, 0.05, n_k - 1)]
+        compiled = gs.knot_sd(s, h, ks, kz, checks, c)
+        monkeypatch.setattr(sk, 'nb_knot_sums', None)
+        plain = gs.knot_sd(s, h, ks, kz, checks, c)
+        monkeypatch.undo()
+        assert compiled.tobytes() == plain.tobytes(), (seed, compiled, plain)

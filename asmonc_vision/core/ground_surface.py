@@ -549,18 +549,28 @@ def knot_sd(s: np.ndarray, h: np.ndarray, ks: np.ndarray, kz: np.ndarray,
     ignored). The first knot is the plane's (0); NaN from a segment without features
     or spread on."""
     out = np.zeros(ks.size)
+    kernel = surface_kernels.nb_knot_sums
+    sums = None
+    if kernel is not None and ks.size > 1:
+        # the same sums of every segment, compiled (`surface_kernels.knot_sums_kernel`)
+        sums = kernel(np.ascontiguousarray(s, np.float64), np.ascontiguousarray(h, np.float64),
+                      np.asarray(ks, np.float64), np.asarray(kz, np.float64), float(c.gate_m))
     for k in range(1, ks.size):
-        s_a, length = ks[k - 1], ks[k] - ks[k - 1]
-        t = (s - s_a) / length
-        line = kz[k - 1] * (1.0 - t) + kz[k] * t
-        on = (t >= 0.0) & (t < 1.0) & (np.abs(h - line) <= c.gate_m)
-        tt = t[on]
-        stt = float(np.sum(tt * tt))
+        if sums is not None:
+            stt, stc = float(sums[0][k]), float(sums[1][k])
+        else:
+            s_a, length = ks[k - 1], ks[k] - ks[k - 1]
+            t = (s - s_a) / length
+            line = kz[k - 1] * (1.0 - t) + kz[k] * t
+            on = (t >= 0.0) & (t < 1.0) & (np.abs(h - line) <= c.gate_m)
+            tt = t[on]
+            stt = float(np.sum(tt * tt))
+            stc = float(np.sum(tt * (1.0 - tt)))
         sigma = checks[k - 1].spread_m
         if stt <= 0.0 or not math.isfinite(sigma):
             out[k:] = np.nan
             break
-        carry = float(np.sum(tt * (1.0 - tt))) / stt
+        carry = stc / stt
         out[k] = math.sqrt(max(sigma, 1e-3) ** 2 / stt + carry * carry * out[k - 1] ** 2)
     return out
 

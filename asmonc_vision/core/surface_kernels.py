@@ -305,6 +305,33 @@ def segment_kernel(s, lat, h, e_s, e_h, s_a, z_a, grade, length, gate, max_rise,
     return rule, n_in, width, change, step, spread, z_b
 
 
+def knot_sums_kernel(s, h, ks, kz, gate):
+    """The sums of `ground_surface.knot_sd` (for numba): for each knot k >= 1 of the
+    known profile (ks, kz: (K,) m), over the features (s, h: (N,) float64 m) on the
+    segment before it (t = (s - ks[k-1]) / its length in [0, 1), within ``gate`` m of
+    its line), (K,) float64 each: sum t^2 and sum t (1 - t), in numpy's order (its
+    pairwise summation of the features in their order); 0 at k = 0."""
+    n_k, n = ks.shape[0], s.shape[0]
+    stt = np.zeros(n_k)
+    stc = np.zeros(n_k)
+    t2 = np.empty(n)
+    tc = np.empty(n)
+    for k in range(1, n_k):
+        s_a, length = ks[k - 1], ks[k] - ks[k - 1]
+        z_a, z_b = kz[k - 1], kz[k]
+        m = 0
+        for i in range(n):
+            t = (s[i] - s_a) / length
+            line = z_a * (1.0 - t) + z_b * t
+            if t >= 0.0 and t < 1.0 and abs(h[i] - line) <= gate:
+                t2[m] = t * t
+                tc[m] = t * (1.0 - t)
+                m += 1
+        stt[k] = nb_pairwise_sum(t2, 0, m)
+        stc[k] = nb_pairwise_sum(tc, 0, m)
+    return stt, stc
+
+
 nb_pairwise_sum = _jit(pairwise_sum)
 nb_total = _jit(_total)
 nb_percentile = _jit(_percentile)
@@ -315,13 +342,14 @@ nb_best_step = _jit(_best_step)
 nb_boundary_step = _jit(_boundary_step)
 nb_path_step = _jit(_path_step)
 nb_segment = _jit(segment_kernel)
+nb_knot_sums = _jit(knot_sums_kernel)
 _warm = False
 
 
 def warm_up() -> None:
-    """Compile (or load from numba's cache) `segment_kernel` before the first frame;
-    without numba, or if it fails, the numpy path is used."""
-    global _warm, nb_segment
+    """Compile (or load from numba's cache) `segment_kernel` and `knot_sums_kernel`
+    before the first frame; without numba, or if it fails, the numpy path is used."""
+    global _warm, nb_segment, nb_knot_sums
     if _warm:
         return
     _warm = True
@@ -329,3 +357,4 @@ def warm_up() -> None:
     z = np.zeros(8)
     nb_segment = _warmed(nb_segment, x, x - 1.75, z, z, z, 0.0, 0.0, 0.0, 1.0, 0.05, 0.1,
                          0.05, 4, 0.5, 0.05, 0.6, 0.06, 0.02, 4.0, 0.07)
+    nb_knot_sums = _warmed(nb_knot_sums, x, z, np.array([0.0, 1.0]), np.zeros(2), 0.05)
