@@ -1332,3 +1332,35 @@ def test_drops_that_do_not_make_an_edge_across_the_path_are_not_joined():
     # raised regions do not count
     raised = dataclasses.replace(right, is_drop=False, height=0.2)
     assert drop_spans([left, raised], cfg, 0.5) == []
+
+
+def test_the_compiled_height_update_gives_numpys():
+    """`map_kernels.heights_kernel` (the compiled `enter_heights` of `EvidenceMap._enter`)
+    leaves the cells' heights, variances, evidence points and last hits exactly as its
+    numpy path does: crowded cells, ties and NaN heights, new and known cells, cells of
+    a kind not entered."""
+    from asmonc_vision.core import map_kernels
+    if map_kernels.nb_heights is None:
+        pytest.skip('numba is not available')
+    rng = np.random.default_rng(11)
+    n2 = 400
+    for size in (0, 1, 7, 300, 3000):
+        flat = rng.integers(0, n2, size).astype(np.int64)
+        flat[: size // 3] = flat[0] if size else 0          # a crowded cell
+        kind = rng.choice(np.array([RAISED, DROP, GROUND, NONE], np.int8), size)
+        h = np.round(rng.normal(0.0, 0.3, size), 2)          # ties
+        h[rng.random(size) < 0.05] = np.nan
+        sh = rng.uniform(0.0, 0.1, size)
+        w = rng.normal(0.0, 3.0, (size, 2))
+        cells = [np.unique(flat[kind == k]) for k in (RAISED, DROP)]
+        raised, dropc = (c[rng.random(c.size) < 0.8] for c in cells)
+        state = (rng.normal(0, 1, n2).astype(np.float32),
+                 np.where(rng.random(n2) < 0.5, np.inf, rng.uniform(0, 0.1, n2)).astype(np.float32),
+                 rng.normal(0, 3, (n2, 2)).astype(np.float32), rng.uniform(0, 9, n2))
+        got = [a.copy() for a in state]
+        want = [a.copy() for a in state]
+        map_kernels.enter_heights(flat, kind, h, sh, w, raised, dropc, *got, 12.5)
+        map_kernels.enter_heights(flat, kind, h, sh, w, raised, dropc, *want, 12.5,
+                                  use_kernel=False)
+        for a, b in zip(got, want):
+            assert a.dtype == b.dtype and a.tobytes() == b.tobytes()

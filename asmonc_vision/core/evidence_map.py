@@ -318,7 +318,6 @@ class EvidenceMap:
         within [min_logodds, max_logodds] already (the decay towards 0 keeps them so).
         """
         c = self.config
-        n2 = self.n * self.n
         w = self.to_world(ev.xy)
         flat, inside = self._cells(w)
         flat, w, kind = flat[inside], w[inside], ev.kind[inside]
@@ -370,41 +369,10 @@ class EvidenceMap:
         gone = free[(Lr[free] <= 0) & (Ld[free] <= 0)]
         self._forget(gone)
         # height: per cell, the pair's highest raised point (drop: lowest) is z, R = σ_h²
-        here = np.zeros(n2, bool)              # the cells of the kind (np.isin over the grid)
-        for cells, sel, sign in ((raised, kind == RAISED, 1.0), (dropc, kind == DROP, -1.0)):
-            if not cells.size:
-                continue
-            here[cells] = True
-            fi, hi, si, wi = flat[sel], h[sel] * sign, sh[sel], w[sel]
-            o = np.lexsort((-hi, fi))
-            fo = fi[o]
-            head = np.concatenate((_HEAD, fo[1:] != fo[:-1]))
-            top = o[head]
-            cell = fi[top]
-            # each pixel's cell as its rank among the pair's cells of the kind (the sums
-            # per cell below over those, in the pixels' order, as over the grid)
-            rank = np.empty(fi.size, np.int64)
-            rank[o] = np.cumsum(head) - 1
-            keep = here[cell]
-            here[cells] = False
-            cell, z, R = cell[keep], sign * hi[top][keep], si[top][keep] ** 2
-            x, P = self.h_x.reshape(-1), self.h_P.reshape(-1)
-            P0 = P[cell]
-            new = ~np.isfinite(P0)
-            # y = z - H x; S = H P Hᵀ + R; K = P Hᵀ S⁻¹; x = x + K y; P = (1 - K H) P
-            with np.errstate(invalid='ignore'):
-                Kg = np.where(new, 1.0, P0 / (P0 + R))
-            x[cell] = np.where(new, z, x[cell] + Kg * (z - x[cell]))
-            P[cell] = np.where(new, R, (1.0 - Kg) * np.where(new, 0.0, P0))
-            # the cell's evidence point: mean of the pair's points there, smoothed
-            cnt = np.bincount(rank)[keep]
-            mx = np.bincount(rank, weights=wi[:, 0])[keep] / cnt
-            my = np.bincount(rank, weights=wi[:, 1])[keep] / cnt
-            pts = self.pt_xy.reshape(-1, 2)
-            a = np.where(new, 1.0, 0.3)
-            pts[cell, 0] = (1 - a) * pts[cell, 0] + a * mx
-            pts[cell, 1] = (1 - a) * pts[cell, 1] + a * my
-            self.last_hit_s.reshape(-1)[cell] = stamp_s
+        # (a Kalman update); the cells' evidence points and last hits
+        map_kernels.enter_heights(flat, kind, h, sh, w, raised, dropc, self.h_x.reshape(-1),
+                                  self.h_P.reshape(-1), self.pt_xy.reshape(-1, 2),
+                                  self.last_hit_s.reshape(-1), stamp_s)
         self._views(np.concatenate((raised, dropc)), still)
 
     def _count(self, flat: np.ndarray, kind: np.ndarray, sure: np.ndarray,

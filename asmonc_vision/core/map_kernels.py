@@ -7,6 +7,10 @@
   order, in float64: both give the same counts). The kernel tests only the sight lines
   whose bearing is near a cell's: most pass far beside a cell, and those it skips fail
   the first test.
+* `heights_kernel`, the cells' height filter and evidence points of
+  `EvidenceMap._enter` (`enter_heights`): the same per-cell arithmetic in the same
+  precisions and the same sums in the pixels' order as its numpy path, without numpy's
+  sorts and selections.
 * `count_kernel`, the pixel counts per cell of `EvidenceMap._enter`. Its numpy path
   counts with ``np.bincount`` over the whole grid (n x n cells) and finds the cells of
   each kind with ``np.flatnonzero``; the kernel adds each pixel to grids kept between
@@ -18,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from asmonc_vision.core.jit import jit, warmed
+from asmonc_vision.core.map_evidence import DROP, RAISED
 
 
 def rays_kernel(p, top, gh, R, height, lateral_m, stop_m):
@@ -207,6 +212,149 @@ class PixelCounts:
                 np.flatnonzero(n_r), np.flatnonzero(n_d), np.flatnonzero(n_g))
 
 
+def enter_heights(flat: np.ndarray, kind: np.ndarray, h: np.ndarray, sh: np.ndarray,
+                  w: np.ndarray, raised: np.ndarray, dropc: np.ndarray, x: np.ndarray,
+                  P: np.ndarray, pts: np.ndarray, last_hit: np.ndarray, stamp_s: float,
+                  use_kernel: bool = True) -> None:
+    """The height and evidence point of each cell a pair's raised (drop) evidence enters
+    (`EvidenceMap._enter`), in place: per cell, the pair's highest raised point (drop:
+    lowest) is z, R = sigma_h^2, a Kalman update of the cell's height x and variance P
+    (a cell of P = inf takes z and R); its evidence point moves to the mean of the
+    pair's points there (all the way for a new cell, else 0.3 of the way); its last hit
+    is ``stamp_s``.
+
+    Args:
+        flat: (S,) int64 the pixels' cells (flat indices into the grid).
+        kind: (S,) int8 each pixel's kind (RAISED, DROP, ...).
+        h, sh: (S,) float64 the pixels' heights and their standard deviations, m.
+        w: (S, 2) float64 the pixels' points in W, m.
+        raised, dropc: (K,) int64 the cells (ascending) whose raised (drop) evidence
+            enters.
+        x, P: (n * n,) float32 the cells' heights (m) and variances (m^2), updated.
+        pts: (n * n, 2) float32 the cells' evidence points in W (m), updated.
+        last_hit: (n * n,) float64 each cell's last evidence, s, updated.
+    """
+    if nb_heights is not None and use_kernel:
+        # the same arithmetic, compiled (`heights_kernel`)
+        nb_heights(flat, kind, h, sh, w, raised, dropc, x, P, pts, last_hit, float(stamp_s))
+        return
+    here = np.zeros(x.shape[0], bool)       # the cells of the kind (np.isin over the grid)
+    for cells, sel, sign in ((raised, kind == RAISED, 1.0), (dropc, kind == DROP, -1.0)):
+        if not cells.size:
+            continue
+        here[cells] = True
+        fi, hi, si, wi = flat[sel], h[sel] * sign, sh[sel], w[sel]
+        o = np.lexsort((-hi, fi))
+        fo = fi[o]
+        head = np.concatenate((_HEAD, fo[1:] != fo[:-1]))
+        top = o[head]
+        cell = fi[top]
+        # each pixel's cell as its rank among the pair's cells of the kind (the sums
+        # per cell below over those, in the pixels' order, as over the grid)
+        rank = np.empty(fi.size, np.int64)
+        rank[o] = np.cumsum(head) - 1
+        keep = here[cell]
+        here[cells] = False
+        cell, z, R = cell[keep], sign * hi[top][keep], si[top][keep] ** 2
+        P0 = P[cell]
+        new = ~np.isfinite(P0)
+        # y = z - H x; S = H P Hᵀ + R; K = P Hᵀ S⁻¹; x = x + K y; P = (1 - K H) P
+        with np.errstate(invalid='ignore'):
+            Kg = np.where(new, 1.0, P0 / (P0 + R))
+        x[cell] = np.where(new, z, x[cell] + Kg * (z - x[cell]))
+        P[cell] = np.where(new, R, (1.0 - Kg) * np.where(new, 0.0, P0))
+        # the cell's evidence point: mean of the pair's points there, smoothed
+        cnt = np.bincount(rank)[keep]
+        mx = np.bincount(rank, weights=wi[:, 0])[keep] / cnt
+        my = np.bincount(rank, weights=wi[:, 1])[keep] / cnt
+        a = np.where(new, 1.0, 0.3)
+        pts[cell, 0] = (1 - a) * pts[cell, 0] + a * mx
+        pts[cell, 1] = (1 - a) * pts[cell, 1] + a * my
+        last_hit[cell] = stamp_s
+
+
+_HEAD = np.ones(1, bool)
+
+
+def heights_kernel(flat, kind, h, sh, w, raised, dropc, x, P, pts, last_hit, stamp_s):
+    """`enter_heights` (for numba): per kind, the pixels of each cell (a stable sort by
+    cell), its top pixel (the first of the highest, as numpy's lexsort orders them: a
+    NaN height after every number), the sums of its points in the pixels' order, and
+    the cell's update in numpy's precisions (float64 arithmetic, float32 storage)."""
+    for kk in range(2):
+        cells = raised if kk == 0 else dropc
+        code = RAISED if kk == 0 else DROP
+        sign = 1.0 if kk == 0 else -1.0
+        if cells.shape[0] == 0:
+            continue
+        m = 0
+        for i in range(kind.shape[0]):
+            if kind[i] == code:
+                m += 1
+        idx = np.empty(m, np.int64)
+        m = 0
+        for i in range(kind.shape[0]):
+            if kind[i] == code:
+                idx[m] = i
+                m += 1
+        fi = np.empty(m, np.int64)
+        for j in range(m):
+            fi[j] = flat[idx[j]]
+        o = np.argsort(fi, kind='mergesort')
+        slot = np.empty(m, np.int64)       # each pixel's cell, as its rank
+        n_c = 0
+        for j in range(m):
+            if j == 0 or fi[o[j]] != fi[o[j - 1]]:
+                n_c += 1
+            slot[o[j]] = n_c - 1
+        top = np.full(n_c, -1, np.int64)
+        cnt = np.zeros(n_c, np.int64)
+        sx = np.zeros(n_c)
+        sy = np.zeros(n_c)
+        for j in range(m):              # the pixels' order
+            i = idx[j]
+            c = slot[j]
+            cnt[c] += 1
+            sx[c] += w[i, 0]
+            sy[c] += w[i, 1]
+            t = top[c]
+            if t < 0:
+                top[c] = j
+            else:
+                hj, ht = h[i] * sign, h[idx[t]] * sign
+                if hj > ht or (ht != ht and hj == hj):
+                    top[c] = j
+        for c in range(n_c):
+            j = top[c]
+            i = idx[j]
+            cell = fi[j]
+            k = np.searchsorted(cells, cell)
+            if k >= cells.shape[0] or cells[k] != cell:
+                continue
+            z = sign * (h[i] * sign)
+            R = sh[i] * sh[i]
+            P0 = np.float64(P[cell])
+            mx = sx[c] / cnt[c]
+            my = sy[c] / cnt[c]
+            if not np.isfinite(P0):
+                x[cell] = np.float32(z)
+                P[cell] = np.float32(R)
+                a = 1.0
+            else:
+                Kg = P0 / (P0 + R)
+                xc = np.float64(x[cell])
+                x[cell] = np.float32(xc + Kg * (z - xc))
+                P[cell] = np.float32((1.0 - Kg) * P0)
+                a = 0.3
+            pts[cell, 0] = np.float32((1 - a) * np.float64(pts[cell, 0]) + a * mx)
+            pts[cell, 1] = np.float32((1 - a) * np.float64(pts[cell, 1]) + a * my)
+            last_hit[cell] = stamp_s
+
+
+#: ``heights_kernel`` compiled (None without numba; `warm_up` sets it to None when it fails)
+nb_heights = jit(heights_kernel)
+
+
 #: ``_rays_count`` compiled, for ``rays_kernel`` to call (None without numba)
 nb_rays_count = jit(_rays_count)
 #: ``rays_kernel`` compiled (None without numba; `warm_up` sets it to None when it fails)
@@ -217,7 +365,7 @@ _warm = False
 def warm_up() -> None:
     """Compile the kernels once per process (or load them from numba's disk cache), before
     the first pair: an `EvidenceMap` calls this when it is made."""
-    global _warm, nb_rays, nb_count
+    global _warm, nb_rays, nb_count, nb_heights
     if _warm:
         return
     _warm = True
@@ -227,3 +375,8 @@ def warm_up() -> None:
     nb_count = warmed(nb_count, np.array([1, 2]), np.array([1, 0], np.int8),
                       np.array([False, True]), z.copy(), z.copy(), z.copy(), z.copy(),
                       z.copy(), np.array([3]), np.array([3]), np.array([3]))
+    f4 = np.zeros(4, np.float32)
+    nb_heights = warmed(nb_heights, np.array([1, 2]), np.array([1, -1], np.int8), np.ones(2),
+                        np.ones(2), np.ones((2, 2)), np.array([1]), np.array([2]), f4.copy(),
+                        np.full(4, np.inf, np.float32), np.zeros((4, 2), np.float32),
+                        np.zeros(4), 1.0)
