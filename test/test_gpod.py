@@ -1892,6 +1892,62 @@ def test_outline_evidence_compiled_equals_numpy(box_frame, monkeypatch):
     assert all(np.all(sep <= shift + 1e-9) for sep, shift in zip(fast[1::3], fast[2::3]))
 
 
+def test_lone_face_test_compiled_equals_numpy(box_frame, monkeypatch):
+    """The lone-face search's bar, running sums, ends and tests compiled
+    (`kernels_geometry.nb_lone_support`) give the numpy path's, on a real frame's
+    evidence and on random evidence with ties, zeros and NaNs; and `lone_face_points`
+    the same points either way."""
+    gpod, _ = _need_numba()
+    det, _, _ = box_frame
+    ctx = det._ctx
+    consts = (gpod_faces._LONE_BAR, gpod_faces._LONE_STEP_M, gpod_faces._LONE_MIN_M,
+              gpod_faces._LONE_MIN_SEP_PX, gpod_faces._LONE_MIN_SEP_FRACTION)
+
+    def numpy_test(ev, sep, shift, floor):
+        bar_k, step, min_m, min_px, min_frac = consts
+        bar = max(bar_k * float(gpod_faces._row_median(ev.mean(axis=1))), floor)
+        gain = np.cumsum(ev - bar, axis=1)
+        end = np.argmax(gain, axis=1)
+        support = gain[np.arange(ev.shape[0]), end]
+        ok = ((support > 0.0) & ((end + 1) * step >= min_m)
+              & (gpod_faces._row_median(sep) >= min_px)
+              & (gpod_faces._row_median(sep / np.maximum(shift, 1e-9)) >= min_frac))
+        return ok, end, support
+
+    cases = []
+    for foot in (np.array([3.0, 0.3]), np.array([4.6, -0.8]), np.array([2.2, 1.1])):
+        for h in (0.04, 0.3, 1.5):
+            _, ev, sep, shift = ctx.outline_evidence(foot, h, gpod_faces._LONE_PHI)
+            cases += [(ev, sep, shift, 0.0), (ev, sep, shift, 6.0),
+                      (ev[:1], sep[:1], shift[:1], 0.0), (ev[:2], sep[:2], shift[:2], 1.0)]
+    rng = np.random.default_rng(3)
+    for n_d in (1, 2, 5, 36):
+        ev = np.round(rng.exponential(5.0, (n_d, 35)), 1)
+        sep = rng.uniform(0.0, 6.0, (n_d, 35))
+        shift = np.where(rng.random((n_d, 35)) < 0.1, 0.0, sep / rng.uniform(0.3, 1.0))
+        cases.append((ev, sep, shift, 0.0))
+        for arr in (ev, sep, shift):
+            bad = arr.copy()
+            bad[rng.random(bad.shape) < 0.05] = np.nan
+            cases.append((bad if arr is ev else ev, bad if arr is sep else sep,
+                          bad if arr is shift else shift, 0.5))
+    n_ok = 0
+    for ev, sep, shift, floor in cases:
+        want = numpy_test(ev, sep, shift, floor)
+        got = gkg.nb_lone_support(np.ascontiguousarray(ev), np.ascontiguousarray(sep),
+                                  np.ascontiguousarray(shift), consts[0], floor, *consts[1:])
+        for a, b in zip(got, want):
+            assert a.dtype == b.dtype and a.tobytes() == b.tobytes()
+        n_ok += int(want[0].sum())
+    assert n_ok > 0
+
+    xy = np.array([[3.0, 0.3], [4.6, -0.8], [2.2, 1.1], [2.25, 1.12]])
+    group = np.array([0, 1, 2, 2])
+    args = (xy, group, 3, xy[[0, 1, 3]], np.array([0.1, 0.25, 0.05]), np.zeros(4, bool))
+    _compiled_equals_numpy(monkeypatch, _GPOD, ('nb_lone_support',),
+                           lambda: [gpod.lone_face_points(ctx, *args, f) for f in (0.0, 5.0)])
+
+
 def _face_image(ctx, foot, phi, height, face_band):
     """A flat grey left image (100) with one bright (160) region in the frame's view:
     with ``face_band``, the band between the ground line from ``foot`` along ``phi``

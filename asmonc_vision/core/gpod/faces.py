@@ -378,15 +378,22 @@ def lone_face_points(ctx: _FrameContext, xy: np.ndarray, group: np.ndarray, n_gr
         if phi.size == 0:
             continue
         points, ev, sep, shift = ctx.outline_evidence(foot, h, phi)
-        bar = max(_LONE_BAR * float(_row_median(ev.mean(axis=1))), noise_floor)
-        gain = np.cumsum(ev - bar, axis=1)
-        end = np.argmax(gain, axis=1)
         rows = np.arange(ev.shape[0])
-        support = gain[rows, end]
-        ok = ((support > 0.0) & ((end + 1) * _LONE_STEP_M >= _LONE_MIN_M)
-              & (_row_median(sep) >= _LONE_MIN_SEP_PX)
-              & (_row_median(sep / np.maximum(shift, 1e-9))
-                 >= _LONE_MIN_SEP_FRACTION))
+        if kg.nb_lone_support is not None:
+            # the same bar, sums, ends and tests, compiled
+            ok, end, support = kg.nb_lone_support(
+                np.ascontiguousarray(ev, np.float64), np.ascontiguousarray(sep, np.float64),
+                np.ascontiguousarray(shift, np.float64), _LONE_BAR, float(noise_floor),
+                _LONE_STEP_M, _LONE_MIN_M, _LONE_MIN_SEP_PX, _LONE_MIN_SEP_FRACTION)
+        else:
+            bar = max(_LONE_BAR * float(_row_median(ev.mean(axis=1))), noise_floor)
+            gain = np.cumsum(ev - bar, axis=1)
+            end = np.argmax(gain, axis=1)
+            support = gain[rows, end]
+            ok = ((support > 0.0) & ((end + 1) * _LONE_STEP_M >= _LONE_MIN_M)
+                  & (_row_median(sep) >= _LONE_MIN_SEP_PX)
+                  & (_row_median(sep / np.maximum(shift, 1e-9))
+                     >= _LONE_MIN_SEP_FRACTION))
         # each face's nearest point to the camera (the foot, its end, or between)
         ends = points[rows, end]
         d = ends - foot

@@ -97,6 +97,69 @@ def _outline_kernel(points, origin, fwd, lft, nup, height, f, cx, cy, gx, gy, x0
 nb_outline = _jit(_outline_kernel)
 
 
+def _sorted_median_kernel(x):
+    """``faces._row_median`` of a 1-D float array (for numba; numpy's sort: NaN last,
+    NaN if any)."""
+    s = np.sort(x)
+    n = s.shape[0]
+    if s[n - 1] != s[n - 1]:
+        return np.nan
+    if n % 2:
+        return s[n // 2]
+    return (s[n // 2 - 1] + s[n // 2]) / 2.0
+
+
+def _lone_support_kernel(ev, sep, shift, bar_factor, noise_floor, step_m, min_m,
+                         min_sep_px, min_sep_fraction):
+    """`faces.lone_face_points`' test of one foot's faces after `_outline_kernel` (for
+    numba): ev, sep, shift (D, S) float64 C-contiguous. The bar: ``bar_factor`` times
+    the median of the rows' means (numpy's pairwise sums over S), at least
+    ``noise_floor``; each row's running sum of (ev - bar) (numpy's cumsum), its first
+    largest (numpy's argmax, NaN first) ``end`` and that sum ``support``; returns
+    ((D,) bool ok, (D,) int64 end, (D,) float64 support), ok where the support is
+    positive, the face (end + 1) * step_m >= min_m long, its row medians of sep and of
+    sep / max(shift, 1e-9) at least min_sep_px and min_sep_fraction."""
+    n_d, n_s = ev.shape[0], ev.shape[1]
+    flat = ev.reshape(n_d * n_s)
+    means = np.empty(n_d)
+    for d in range(n_d):
+        means[d] = _nb_pairwise_sum(flat, d * n_s, (d + 1) * n_s) / n_s
+    bar = bar_factor * nb_sorted_median(means)
+    if noise_floor > bar:
+        bar = noise_floor
+    ok = np.zeros(n_d, np.bool_)
+    end = np.zeros(n_d, np.int64)
+    support = np.empty(n_d)
+    row = np.empty(n_s)
+    for d in range(n_d):
+        # np.cumsum's running sum, np.argmax's first largest (the first NaN)
+        g = ev[d, 0] - bar
+        mp = g
+        best = 0
+        for k in range(1, n_s):
+            if mp != mp:
+                break
+            g = g + (ev[d, k] - bar)
+            if not g <= mp:
+                mp = g
+                best = k
+        end[d] = best
+        support[d] = mp
+        if not (mp > 0.0 and (best + 1) * step_m >= min_m):
+            continue
+        if not nb_sorted_median(sep[d]) >= min_sep_px:
+            continue
+        for k in range(n_s):
+            sh = shift[d, k]
+            row[k] = sep[d, k] / (sh if (sh >= 1e-9 or sh != sh) else 1e-9)
+        ok[d] = nb_sorted_median(row) >= min_sep_fraction
+    return ok, end, support
+
+
+nb_sorted_median = _jit(_sorted_median_kernel)
+nb_lone_support = _jit(_lone_support_kernel)
+
+
 def _contact_bounds_kernel(ua, va, ub, vb, un, vn, ok, img_w, img_h):
     """The patch of each search of `_FrameContext.contact_edge_scores` (for numba): the
     bounding box of its feet (ua, va), (ub, vb) (T,) and candidates ``ok`` (un, vn)
@@ -675,10 +738,11 @@ def warm_up(compiled: bool) -> None:
     """Compile these kernels (called by `kernels.warm_up`); ``compiled`` False: numba is
     missing or failed, and the numpy paths are used."""
     global nb_corner_free, nb_contact, nb_walk_down, nb_extremes, nb_soft_args, nb_arcs, \
-        nb_contact_bounds, nb_owners, nb_outline, nb_face_hides
+        nb_contact_bounds, nb_owners, nb_outline, nb_face_hides, nb_lone_support
     if not compiled:
         nb_corner_free = nb_contact = nb_walk_down = nb_extremes = nb_soft_args = None
         nb_arcs = nb_contact_bounds = nb_owners = nb_outline = nb_face_hides = None
+        nb_lone_support = None
         return
     f2, f1, i1 = np.zeros((1, 2)), np.zeros(1), np.zeros(1, np.int64)
     nb_corner_free = _warmed(nb_corner_free, f2, f2, f2, f2, f1 + 1.0, np.zeros((1, 1, 2)),
@@ -698,6 +762,8 @@ def warm_up(compiled: bool) -> None:
     g32 = np.zeros((2, 2), np.float32)
     nb_outline = _warmed(nb_outline, np.ones((1, 2, 2)), np.zeros(3), np.zeros(3),
                          np.zeros(3), np.zeros(3), 0.1, 300.0, 1.0, 1.0, g32, g32, 0, 0, 2, 2)
+    nb_lone_support = _warmed(nb_lone_support, np.ones((2, 3)), np.ones((2, 3)),
+                              np.ones((2, 3)), 2.0, 0.0, 0.02, 0.1, 2.5, 0.8)
     # The soft nearest points (four kernels, one switch) and the per-obstacle extremes.
     one = np.ones(1, bool)
     soft = _warmed(nb_soft_args, f2, f1 + 1.0, i1, one, 1, 2.0)
