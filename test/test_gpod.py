@@ -2630,3 +2630,34 @@ def _plane_height(det: GpodDetector) -> float:
     """The camera height above the detector's current plane, m."""
     from asmonc_vision.core.gpod.support import _state_metric
     return _state_metric(CAM, det._abc).height
+
+
+@pytest.mark.parametrize('tilt_deg, bound, want', [(0.0, 20.0, 'tracking'),
+                                                   (40.0, 20.0, 'initialising'),
+                                                   (40.0, 0.0, 'tracking')])
+def test_the_initial_plane_must_be_near_the_inclinometers_up(tilt_deg, bound, want):
+    """A pedestrian starts on ground no steeper than a ramp; a calibration through a
+    wall's or a kerb's edges can lie at any angle (tuning slope_ahead 1007, chest rig:
+    the binned pass took a plane 76 degrees off the ground, 73 degrees off the
+    inclinometer's up, and never recovered from it). Here: the paper's rig over ground
+    2-8 m ahead, the pair's up direction the true one, or turned 40 degrees about the
+    optical axis (the plane is then 40 degrees from it): refused with the 20 degree
+    bound, taken without one."""
+    th, h = math.radians(20.0), 1.25
+    rng = np.random.default_rng(4)
+    fwd, left = rng.uniform(2.0, 8.0, 400), rng.uniform(-3.0, 3.0, 400)
+    pts = np.stack([-left, h * math.cos(th) - fwd * math.sin(th),
+                    h * math.sin(th) + fwd * math.cos(th)], -1)
+    u, v, d = CAM.project(pts)
+    up = np.array([0.0, -math.cos(th), -math.sin(th)])
+    a = math.radians(tilt_deg)
+    turn = np.array([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0],
+                     [0.0, 0.0, 1.0]])
+    det = GpodDetector(override(GpodConfig(), {'plane.init_frames': 1,
+                                               'plane.init_max_tilt_deg': bound}))
+    det._up = turn @ up
+    status, _ = det._update_plane(u, v, d + rng.normal(0.0, 0.1, 400), np.full(400, 10.0),
+                                  CAM)
+    assert status == want
+    if status == 'tracking':
+        assert abs(det.calibrated_plane.metric.height - h) < 0.01

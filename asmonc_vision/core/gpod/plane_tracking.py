@@ -123,6 +123,16 @@ class PlaneTracking(DetectorState):
         cosang = float(np.clip(np.dot(fit.metric.normal_up, cal.normal_up), -1.0, 1.0))
         return math.degrees(math.acos(cosang)) <= c.plane.recover_max_angle_deg
 
+    def _upright(self, fit: PlaneFit, max_deg: float) -> bool:
+        """Whether the fit's upward normal lies within ``max_deg`` degrees of the pair's
+        up direction (``_up``, the inclinometer's, left optical frame); True without an
+        up direction, a metric plane or a bound (``max_deg`` 0)."""
+        if max_deg <= 0.0 or self._up is None or fit.metric is None:
+            return True
+        up = self._up / max(float(np.linalg.norm(self._up)), 1e-12)
+        cosang = float(np.clip(np.dot(fit.metric.normal_up, up), -1.0, 1.0))
+        return math.degrees(math.acos(cosang)) <= max_deg
+
     def _predict_plane(self, cam: StereoCamera, motion: tuple) -> bool:
         """Carry the plane state (and the plane the rig stopped with) through the camera's
         motion (R, t, ...) since the previous frame: x = f(x), P = F P F^T
@@ -479,6 +489,10 @@ class PlaneTracking(DetectorState):
             # features in one band of the image (a kerb's joints across a plain
             # pavement, the only edges at full size) fix no plane: any plane through
             # them fits (the chest rig's took the camera 0.75 m too high, 8 degrees off)
+            return 'initialising', False
+        if not self._upright(fit, c.plane.init_max_tilt_deg):
+            # a plane far from gravity's up is no ground a pedestrian starts on (the
+            # chest rig's binned pass took one 76 degrees off through a few edges)
             return 'initialising', False
         self._calib = self._last_fit = fit
         self._heights.clear()

@@ -143,6 +143,12 @@ class PlaneSettings(PlausiblePlaneConfig):
         'metres: features in one band across the image (the joints of a kerb across a '
         'plain pavement) leave the plane free to turn about them, and a plane through '
         'them is any plane; 0 = any', range=(0.0, 10.0))
+    init_max_tilt_deg: float = param(
+        20.0, "The initial ground plane is taken only if its upward normal lies within this "
+        "angle of the pair's up direction from the inclinometer (when one is given): the "
+        'ground a pedestrian starts on is no steeper than a ramp, while a plane through '
+        "the edges of a wall or a kerb can lie at any angle (the chest rig's binned pass "
+        'took one 76 degrees off the ground), degrees; 0 = no test', range=(0.0, 90.0))
     update: str = param(
         'refit', "'fixed': keep the calibrated plane (the paper's GPOD); 'refit': robust "
         'refit every frame from features near the predicted plane, smoothed',
