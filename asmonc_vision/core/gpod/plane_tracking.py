@@ -107,16 +107,31 @@ class PlaneTracking(DetectorState):
             return math.nan
         return float(np.median(np.asarray(self._heights)))
 
-    def _near_calibration(self, fit: PlaneFit) -> bool:
-        """Whether an ungated refit is close enough to the calibrated plane to trust."""
+    def _near_calibration(self, fit: PlaneFit, cam: StereoCamera) -> bool:
+        """Whether an ungated refit is close enough to the calibrated plane to trust: its
+        camera height within ``plane.recover_max_height_change_m`` of the anchor height
+        (`_anchor_height`), its normal within ``plane.recover_max_angle_deg`` of the
+        calibrated one."""
         c = self.config
         cal = self._calib.metric if self._calib is not None else None
         if cal is None or fit.metric is None:
             return False
-        if abs(fit.metric.height - cal.height) > c.plane.recover_height_tolerance * cal.height:
+        anchor = self._anchor_height()
+        if not (abs(cyclopean_height(cam, fit.abc) - anchor)
+                <= c.plane.recover_max_height_change_m):
             return False
         cosang = float(np.clip(np.dot(fit.metric.normal_up, cal.normal_up), -1.0, 1.0))
         return math.degrees(math.acos(cosang)) <= c.plane.recover_max_angle_deg
+
+    def _upright(self, fit: PlaneFit, max_deg: float) -> bool:
+        """Whether the fit's upward normal lies within ``max_deg`` degrees of the pair's
+        up direction (``_up``, the inclinometer's, left optical frame); True without an
+        up direction, a metric plane or a bound (``max_deg`` 0)."""
+        if max_deg <= 0.0 or self._up is None or fit.metric is None:
+            return True
+        up = self._up / max(float(np.linalg.norm(self._up)), 1e-12)
+        cosang = float(np.clip(np.dot(fit.metric.normal_up, up), -1.0, 1.0))
+        return math.degrees(math.acos(cosang)) <= max_deg
 
     def _predict_plane(self, cam: StereoCamera, motion: tuple) -> bool:
         """Carry the plane state (and the plane the rig stopped with) through the camera's
@@ -475,6 +490,10 @@ class PlaneTracking(DetectorState):
             # pavement, the only edges at full size) fix no plane: any plane through
             # them fits (the chest rig's took the camera 0.75 m too high, 8 degrees off)
             return 'initialising', False
+        if not self._upright(fit, c.plane.init_max_tilt_deg):
+            # a plane far from gravity's up is no ground a pedestrian starts on (the
+            # chest rig's binned pass took one 76 degrees off through a few edges)
+            return 'initialising', False
         self._calib = self._last_fit = fit
         self._heights.clear()
         self._heights.append(cyclopean_height(cam, fit.abc))
@@ -531,7 +550,7 @@ class PlaneTracking(DetectorState):
         else None."""
         near = d >= np.median(d)
         ungated = self._refit(u[near], v[near], d[near], cam)
-        if ungated is not None and self._near_calibration(ungated):
+        if ungated is not None and self._near_calibration(ungated, cam):
             return ungated
         return None
 

@@ -143,6 +143,12 @@ class PlaneSettings(PlausiblePlaneConfig):
         'metres: features in one band across the image (the joints of a kerb across a '
         'plain pavement) leave the plane free to turn about them, and a plane through '
         'them is any plane; 0 = any', range=(0.0, 10.0))
+    init_max_tilt_deg: float = param(
+        20.0, "The initial ground plane is taken only if its upward normal lies within this "
+        "angle of the pair's up direction from the inclinometer (when one is given): the "
+        'ground a pedestrian starts on is no steeper than a ramp, while a plane through '
+        "the edges of a wall or a kerb can lie at any angle (the chest rig's binned pass "
+        'took one 76 degrees off the ground), degrees; 0 = no test', range=(0.0, 90.0))
     update: str = param(
         'refit', "'fixed': keep the calibrated plane (the paper's GPOD); 'refit': robust "
         'refit every frame from features near the predicted plane, smoothed',
@@ -208,11 +214,13 @@ class PlaneSettings(PlausiblePlaneConfig):
         50, "'refit', refit_hold_height: the free heights (least squares on the held "
         "refit's inliers) of this many latest refits taken join the calibrated height in "
         'the anchor', range=(0, 100000))
-    recover_height_tolerance: float = param(
-        0.3, "'refit': when lost (gated refits failed for longer than max_coast_frames), "
-        'an ungated refit is accepted if its camera height is within this fraction of the '
-        'calibrated one',
-        range=(0.0, 10.0))
+    recover_max_height_change_m: float = param(
+        0.1, "'refit': when lost (gated refits failed for longer than max_coast_frames), "
+        'an ungated refit is accepted only if its camera height is within this of the '
+        'anchor height (the median of the calibrated height and the free heights of the '
+        'latest refits): the wearer carries the rig at a steady height above the ground '
+        'underfoot, and a plane at another height is the ground beyond a kerb, a drop or a '
+        'bend, metres', range=(0.001, 100.0))
     recover_max_angle_deg: float = param(
         25.0, "'refit': ... and its normal within this angle of the calibrated normal, "
         'degrees', range=(0.0, 90.0))
