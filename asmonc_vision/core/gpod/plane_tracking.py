@@ -129,7 +129,7 @@ class PlaneTracking(DetectorState):
         up direction, a metric plane or a bound (``max_deg`` 0)."""
         if max_deg <= 0.0 or self._up is None or fit.metric is None:
             return True
-        up = self._up / max(float(np.linalg.norm(self._up)), 1e-12)
+        up = self._up / max(vector_norm(self._up), 1e-12)
         cosang = float(np.clip(np.dot(fit.metric.normal_up, up), -1.0, 1.0))
         return math.degrees(math.acos(cosang)) <= max_deg
 
@@ -546,8 +546,8 @@ class PlaneTracking(DetectorState):
 
     def _recover(self, u, v, d, cam: StereoCamera) -> PlaneFit | None:
         """Lost: a plane from the nearer half of the features (the ground the wearer
-        stands on, rather than the ground beyond a step) if it is near the calibration,
-        else None."""
+        stands on, rather than the ground beyond a step) if it lies at the anchor height
+        and near the calibrated orientation (`_near_calibration`), else None."""
         near = d >= np.median(d)
         ungated = self._refit(u[near], v[near], d[near], cam)
         if ungated is not None and self._near_calibration(ungated, cam):
