@@ -107,18 +107,13 @@ class PlaneTracking(DetectorState):
             return math.nan
         return float(np.median(np.asarray(self._heights)))
 
-    def _near_calibration(self, fit: PlaneFit, cam: StereoCamera) -> bool:
-        """Whether an ungated refit is close enough to the calibrated plane to trust: its
-        camera height within ``plane.recover_max_height_change_m`` of the anchor height
-        (`_anchor_height`), its normal within ``plane.recover_max_angle_deg`` of the
-        calibrated one."""
+    def _near_calibration(self, fit: PlaneFit) -> bool:
+        """Whether an ungated refit is close enough to the calibrated plane to trust."""
         c = self.config
         cal = self._calib.metric if self._calib is not None else None
         if cal is None or fit.metric is None:
             return False
-        anchor = self._anchor_height()
-        if not (abs(cyclopean_height(cam, fit.abc) - anchor)
-                <= c.plane.recover_max_height_change_m):
+        if abs(fit.metric.height - cal.height) > c.plane.recover_height_tolerance * cal.height:
             return False
         cosang = float(np.clip(np.dot(fit.metric.normal_up, cal.normal_up), -1.0, 1.0))
         return math.degrees(math.acos(cosang)) <= c.plane.recover_max_angle_deg
@@ -546,11 +541,11 @@ class PlaneTracking(DetectorState):
 
     def _recover(self, u, v, d, cam: StereoCamera) -> PlaneFit | None:
         """Lost: a plane from the nearer half of the features (the ground the wearer
-        stands on, rather than the ground beyond a step) if it lies at the anchor height
-        and near the calibrated orientation (`_near_calibration`), else None."""
+        stands on, rather than the ground beyond a step) if it is near the calibration
+        (`_near_calibration`), else None."""
         near = d >= np.median(d)
         ungated = self._refit(u[near], v[near], d[near], cam)
-        if ungated is not None and self._near_calibration(ungated, cam):
+        if ungated is not None and self._near_calibration(ungated):
             return ungated
         return None
 
