@@ -9,7 +9,7 @@ from typing import cast
 import cv2
 import numpy as np
 
-from ..camera import MetricPlane, StereoCamera, columns, plane_disparity, vector_norm
+from ..camera import MetricPlane, StereoCamera, columns, ground_axes, plane_disparity
 from . import kernels_geometry as kg
 
 #: An obstacle string's foot is where its matched run, followed down the image from its
@@ -30,14 +30,6 @@ def _clip_int(x, lo: int, hi: int) -> int:
     return int(min(max(float(x), lo), hi))
 
 
-def _cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``np.cross(a, b)`` of two (3,) float64 vectors, with its arithmetic
-    (a1 b2 - a2 b1, a2 b0 - a0 b2, a0 b1 - a1 b0), without its overhead."""
-    a0, a1, a2 = float(a[0]), float(a[1]), float(a[2])
-    b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])
-    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
-
-
 class _FrameContext:
     """What describing one frame's obstacles needs: the matches' smoothed excess, noise
     and run links, the plane, the visible ground and the left image (internal).
@@ -56,11 +48,7 @@ class _FrameContext:
         # the matches' left-image columns and whether each is reliably matched in range
         self.u_left, self.usable = u_left, usable
         self.excess_mean, self.sigma, self.prev = excess_mean, sigma, prev
-        n = metric.normal_up
-        fwd = np.array([0.0, 0.0, 1.0]) - n[2] * n
-        self.fwd = fwd / vector_norm(fwd)
-        self.lft = _cross3(n, self.fwd)
-        self.origin = -metric.height * n
+        self.origin, self.fwd, self.lft = ground_axes(metric)
         self._ground_points = ground_points
         # Placement-only silhouette candidates (`silhouette_owners`): the lowest
         # candidate pixel of each and the height of its top, metres.
@@ -312,9 +300,7 @@ def ground_coords(p: np.ndarray, hh: np.ndarray, metric: MetricPlane, axes: bool
     the forward and left unit vectors (3,)."""
     n_up = metric.normal_up
     feet = p - hh[:, None] * n_up[None, :]
-    fwd = np.array([0.0, 0.0, 1.0]) - n_up[2] * n_up
-    fwd /= vector_norm(fwd)
-    lft = _cross3(n_up, fwd)
-    g = feet + metric.height * n_up[None, :]
+    origin, fwd, lft = ground_axes(metric)
+    g = feet - origin[None, :]
     g2 = columns(g @ fwd, g @ lft)
     return (g2, fwd, lft) if axes else g2

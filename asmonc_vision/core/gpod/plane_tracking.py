@@ -113,10 +113,8 @@ class PlaneTracking(DetectorState):
         cal = self._calib.metric if self._calib is not None else None
         if cal is None or fit.metric is None:
             return False
-        if abs(fit.metric.height - cal.height) > c.plane.recover_height_tolerance * cal.height:
-            return False
-        cosang = float(np.clip(np.dot(fit.metric.normal_up, cal.normal_up), -1.0, 1.0))
-        return math.degrees(math.acos(cosang)) <= c.plane.recover_max_angle_deg
+        return self._within(fit.metric, cal, c.plane.recover_height_tolerance * cal.height,
+                            c.plane.recover_max_angle_deg)
 
     def _upright(self, fit: PlaneFit, max_deg: float) -> bool:
         """Whether the fit's upward normal lies within ``max_deg`` degrees of the pair's
@@ -125,8 +123,7 @@ class PlaneTracking(DetectorState):
         if max_deg <= 0.0 or self._up is None or fit.metric is None:
             return True
         up = self._up / max(vector_norm(self._up), 1e-12)
-        cosang = float(np.clip(np.dot(fit.metric.normal_up, up), -1.0, 1.0))
-        return math.degrees(math.acos(cosang)) <= max_deg
+        return _angle_deg(fit.metric.normal_up, up) <= max_deg
 
     def _predict_plane(self, cam: StereoCamera, motion: tuple) -> bool:
         """Carry the plane state (and the plane the rig stopped with) through the camera's
@@ -176,8 +173,7 @@ class PlaneTracking(DetectorState):
         degrees of normal of ``ref``."""
         if abs(plane.height - ref.height) > max_h:
             return False
-        cosang = float(np.clip(np.dot(plane.normal_up, ref.normal_up), -1.0, 1.0))
-        return math.degrees(math.acos(cosang)) <= max_a
+        return _angle_deg(plane.normal_up, ref.normal_up) <= max_a
 
     @property
     def sigma_px(self) -> float:
@@ -600,6 +596,11 @@ class PlaneTracking(DetectorState):
         d_min = cam.fb / self.config.matching.search_max_range_m
         d_max = min(cam.fb / self.config.matching.min_range_m, float(cam.width - 1))
         return d_min, max(d_max, d_min)
+
+
+def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    """The angle between two (3,) unit vectors, degrees (0..180)."""
+    return math.degrees(math.acos(float(np.clip(np.dot(a, b), -1.0, 1.0))))
 
 
 def _height_sd(cam: StereoCamera, fit: PlaneFit) -> float:
