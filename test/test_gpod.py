@@ -2672,3 +2672,76 @@ def test_the_initial_plane_must_be_near_the_inclinometers_up(tilt_deg, bound, wa
     assert status == want
     if status == 'tracking':
         assert abs(det.calibrated_plane.metric.height - h) < 0.01
+
+
+def _kerb_frame(rng, up: float, n: int = 400, h: float = 1.25):
+    """Features of a level ground ``up`` metres above the ground the paper's rig (1.25 m
+    high, pitched 20 degrees down) stands on, 2-8 m ahead, +-3 m across: the arguments
+    of `_update_plane`."""
+    th = math.radians(20.0)
+    fwd, left = rng.uniform(2.0, 8.0, n), rng.uniform(-3.0, 3.0, n)
+    y = h - up
+    pts = np.stack([-left, y * math.cos(th) - fwd * math.sin(th),
+                    y * math.sin(th) + fwd * math.cos(th)], -1)
+    u, v, d = CAM.project(pts)
+    return u, v, d + rng.normal(0.0, 0.1, n), np.full(n, 10.0), CAM
+
+
+def _lost_detector(rng, max_change: float) -> GpodDetector:
+    """The paper's rig calibrated 1.25 m above the ground, then lost on frames with a
+    few features."""
+    det = GpodDetector(override(GpodConfig(), {
+        'plane.init_frames': 1, 'plane.recover_max_height_change_m': max_change}))
+    assert det._update_plane(*_kerb_frame(rng, 0.0))[0] == 'tracking'
+    for _ in range(4):
+        status, _ = det._update_plane(*_kerb_frame(rng, 0.0, n=10))
+    assert status == 'lost'
+    return det
+
+
+@pytest.mark.parametrize('max_change', [0.1, 1.0])
+def test_a_lost_plane_recovers_only_at_the_height_the_rig_is_carried(max_change):
+    """Lost, the plane is recovered from the nearer half of the features with no gate;
+    before a kerb up (tuning kerb_up 1005 and 1019, chest rig: the raised footway filled
+    it) or at the edge of a drop (the lower ground) that half can be another level, and
+    every feature of the ground underfoot then stands off it. The wearer carries the rig
+    at a steady height above the ground underfoot: a recovered plane whose camera height
+    is more than ``plane.recover_max_height_change_m`` from both the anchor height and
+    the calibrated one is refused. Here a level 0.15 m lower 2-8 m ahead: refused at
+    0.1 m (still lost, and the ground it stands on is taken next), taken at 1.0 m."""
+    rng = np.random.default_rng(5)
+    det = _lost_detector(rng, max_change)
+    status, _ = det._update_plane(*_kerb_frame(rng, -0.15))
+    assert status == ('lost' if max_change < 0.15 else 'tracking')
+    if status == 'tracking':            # the lower level taken as the ground underfoot
+        assert abs(_plane_height(det) - 1.40) < 0.02
+        return
+    status, _ = det._update_plane(*_kerb_frame(rng, 0.0))
+    assert status == 'tracking'
+    assert abs(_plane_height(det) - 1.25) < 0.02
+
+
+def test_a_lost_plane_recovers_at_the_calibrated_height_when_the_anchor_went_off():
+    """The anchor height (the calibrated height and the latest held refits' free
+    heights) can go off with the plane: on tuning stop_turn 1001 (chest rig, a wall
+    after the turn) the free heights stood 0.5-0.9 m above the true one, and a recovery
+    bound at the anchor alone refused every later recovery, 0-3 cm off the truth, and
+    left the pass lost. A recovery within ``plane.recover_max_height_change_m`` of the
+    calibrated height is taken too: here the anchor pushed 0.45 m high, the ground the
+    wearer stands on is recovered; a level 0.2 m lower than that ground (0.25 m from the
+    anchor) is not."""
+    rng = np.random.default_rng(7)
+    det = _lost_detector(rng, 0.1)
+    det._heights.extend([1.70] * 10)                 # free heights gone 0.45 m high
+    assert det._anchor_height() > 1.6
+    status, _ = det._update_plane(*_kerb_frame(rng, -0.2))
+    assert status == 'lost'
+    status, _ = det._update_plane(*_kerb_frame(rng, 0.0))
+    assert status == 'tracking'
+    assert abs(_plane_height(det) - 1.25) < 0.02
+
+
+def _plane_height(det: GpodDetector) -> float:
+    """The camera height above the detector's current plane, m."""
+    from asmonc_vision.core.gpod.support import _state_metric
+    return _state_metric(CAM, det._abc).height

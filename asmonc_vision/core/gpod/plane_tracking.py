@@ -107,14 +107,21 @@ class PlaneTracking(DetectorState):
             return math.nan
         return float(np.median(np.asarray(self._heights)))
 
-    def _near_calibration(self, fit: PlaneFit) -> bool:
-        """Whether an ungated refit is close enough to the calibrated plane to trust."""
+    def _near_calibration(self, fit: PlaneFit, cam: StereoCamera) -> bool:
+        """Whether an ungated refit is close enough to the calibrated plane to trust: its
+        camera height within ``plane.recover_max_height_change_m`` of the anchor height
+        (`_anchor_height`) or of the calibrated one (either can be off: the anchor with
+        refits of another surface, the calibrated one with the calibration), its normal
+        within ``plane.recover_max_angle_deg`` of the calibrated one."""
         c = self.config
         cal = self._calib.metric if self._calib is not None else None
         if cal is None or fit.metric is None:
             return False
-        return self._within(fit.metric, cal, c.plane.recover_height_tolerance * cal.height,
-                            c.plane.recover_max_angle_deg)
+        max_h = c.plane.recover_max_height_change_m
+        if not (abs(cyclopean_height(cam, fit.abc) - self._anchor_height()) <= max_h
+                or abs(fit.metric.height - cal.height) <= max_h):
+            return False
+        return _angle_deg(fit.metric.normal_up, cal.normal_up) <= c.plane.recover_max_angle_deg
 
     def _upright(self, fit: PlaneFit, max_deg: float) -> bool:
         """Whether the fit's upward normal lies within ``max_deg`` degrees of the pair's
@@ -541,7 +548,7 @@ class PlaneTracking(DetectorState):
         (`_near_calibration`), else None."""
         near = d >= np.median(d)
         ungated = self._refit(u[near], v[near], d[near], cam)
-        if ungated is not None and self._near_calibration(ungated):
+        if ungated is not None and self._near_calibration(ungated, cam):
             return ungated
         return None
 

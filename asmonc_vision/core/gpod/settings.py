@@ -214,11 +214,13 @@ class PlaneSettings(PlausiblePlaneConfig):
         50, "'refit', refit_hold_height: the free heights (least squares on the held "
         "refit's inliers) of this many latest refits taken join the calibrated height in "
         'the anchor', range=(0, 100000))
-    recover_height_tolerance: float = param(
-        0.3, "'refit': when lost (gated refits failed for longer than max_coast_frames), "
-        'an ungated refit is accepted if its camera height is within this fraction of the '
-        'calibrated one',
-        range=(0.0, 10.0))
+    recover_max_height_change_m: float = param(
+        0.1, "'refit': when lost (gated refits failed for longer than max_coast_frames), "
+        'an ungated refit is accepted only if its camera height is within this of the '
+        'calibrated height or of the anchor height (the median of the calibrated height '
+        'and the free heights of the latest refits): the wearer carries the rig at a '
+        'steady height above the ground underfoot, and a plane at another height is the '
+        'ground beyond a kerb, a drop or a bend, metres', range=(0.001, 100.0))
     recover_max_angle_deg: float = param(
         25.0, "'refit': ... and its normal within this angle of the calibrated normal, "
         'degrees', range=(0.0, 90.0))
