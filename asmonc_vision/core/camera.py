@@ -149,6 +149,14 @@ def vector_norm(x: np.ndarray) -> float:
     return math.sqrt(x.dot(x))
 
 
+def row_norms(x: np.ndarray) -> np.ndarray:
+    """``np.linalg.norm(x, axis=1)`` of a float64 (N, 3) array, with its arithmetic (the
+    square root of the squares added in order along the row) without its overhead:
+    (N,) float64."""
+    s = x * x
+    return np.sqrt(s[:, 0] + s[:, 1] + s[:, 2])
+
+
 def plane_from_metric(cam: StereoCamera, plane: MetricPlane) -> np.ndarray:
     """Disparity-space plane (a, b, c) of a metric ground plane.
 
@@ -191,21 +199,40 @@ def plane_disparity(abc, u, v) -> np.ndarray:
     return a * np.asarray(u, float) + b * np.asarray(v, float) + c
 
 
+#: `ground_axes` of the last few planes, by the bytes of their normal and height (a
+#: frame asks for the axes of one or two planes some twenty times)
+_AXES: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+_AXES_KEPT = 8
+
+
 def ground_axes(plane: MetricPlane) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The ground's own axes in the left optical frame.
 
     Returns:
         (origin, fwd, left), (3,) float64 each: the point of the plane below the left
         camera (metres), the walking direction (the optical axis projected onto the
-        plane) and the direction to the left (REP 103), unit vectors.
+        plane) and the direction to the left (REP 103), unit vectors. The arrays of a
+        plane asked for before (the same normal and height) are returned again: they
+        are read, never written.
     """
     n = np.asarray(plane.normal_up, float)
+    key = n.tobytes() + np.float64(plane.height).tobytes()
+    axes = _AXES.get(key)
+    if axes is None:
+        if len(_AXES) >= _AXES_KEPT:
+            _AXES.clear()
+        axes = _AXES[key] = _ground_axes(n, plane.height)
+    return axes
+
+
+def _ground_axes(n: np.ndarray, height: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`ground_axes` of the plane of up normal ``n`` (3,) and ``height`` (m)."""
     fwd = np.array([0.0, 0.0, 1.0]) - n[2] * n
     fwd /= vector_norm(fwd)
     # n x fwd, written out (np.cross costs tens of microseconds per call)
     left = np.array([n[1] * fwd[2] - n[2] * fwd[1], n[2] * fwd[0] - n[0] * fwd[2],
                      n[0] * fwd[1] - n[1] * fwd[0]])
-    return -plane.height * n, fwd, left
+    return -height * n, fwd, left
 
 
 def ground_range_bearing(plane: MetricPlane, points_left) -> tuple[np.ndarray, np.ndarray]:
@@ -227,6 +254,6 @@ def ground_range_bearing(plane: MetricPlane, points_left) -> tuple[np.ndarray, n
     foot = p - (p @ n + plane.height)[:, None] * n[None, :]
     origin_foot, fwd, left = ground_axes(plane)
     g = foot - origin_foot[None, :]
-    rng_ = np.linalg.norm(g, axis=1)
+    rng_ = row_norms(g)
     bearing = np.arctan2(g @ left, g @ fwd)
     return rng_, bearing

@@ -81,7 +81,7 @@ def ground_frame(plane: MetricPlane) -> tuple[np.ndarray, np.ndarray]:
     """(R_cam_G (3, 3), o (3,)): the ground frame G in the left optical frame,
     ``X_cam = R_cam_G g + o`` (columns: forward, left, up)."""
     origin, fwd, left = ground_axes(plane)
-    return np.stack([fwd, left, np.asarray(plane.normal_up, float)], axis=1), origin
+    return columns(fwd, left, np.asarray(plane.normal_up, float)), origin
 
 
 def ground_motion(prev: MetricPlane, curr: MetricPlane, R: np.ndarray, t: np.ndarray

@@ -10,7 +10,7 @@ from typing import cast
 
 import numpy as np
 
-from ..camera import MetricPlane, StereoCamera, plane_disparity
+from ..camera import MetricPlane, StereoCamera, plane_disparity, row_norms
 from ..edges import EdgeMap, gradient_noise_gain
 from ..ground_surface import depth_noise, fit_ground_surface
 from ..matching import Candidates, Matches
@@ -179,7 +179,7 @@ class Detection(PlaneTracking):
                                                  still)
         excess = d - pd
         feet = pts - h[:, None] * metric.normal_up[None, :]
-        ground_range = np.linalg.norm(feet + metric.height * metric.normal_up[None, :], axis=1)
+        ground_range = row_norms(feet + metric.height * metric.normal_up[None, :])
         prev, run, smooth, nxt = self._runs(m, el, excess)
         in_range = ground_range <= c.detection.max_range_m
         ex_mean = self._temporal_excess(m, smooth, still, el.shape, thr)
