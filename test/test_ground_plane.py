@@ -4,7 +4,8 @@ import pytest
 
 from asmonc_vision.core.camera import MetricPlane, StereoCamera, plane_from_metric
 from asmonc_vision.core.rotations import rotvec_to_matrix
-from asmonc_vision.core.ground_plane import (PlaneFit, fast_median, fit_ground_plane, lsq_plane,
+from asmonc_vision.core.ground_plane import (PlaneFit, fast_median, fast_percentile,
+                                             fit_ground_plane, lsq_plane,
                                              plane_is_plausible, predict_plane)
 
 CAM = StereoCamera(f=300.0, cx=159.5, cy=119.5, baseline=0.35, width=320, height=240)
@@ -158,6 +159,14 @@ def test_weights_prefer_the_near_surface():
 def test_median_is_numpy_median(n):
     x = np.random.default_rng(n).normal(0.0, 1.0, n)
     assert fast_median(x) == float(np.median(x))
+
+
+@pytest.mark.parametrize('n', [1, 2, 3, 7, 10, 101, 1000, 2345])
+def test_percentile_is_numpy_percentile(n):
+    x = np.random.default_rng(n).normal(0.0, 3.0, n)
+    for q in (0.0, 5.0, 10.0, 37.5, 50.0, 90.0, 95.0, 100.0):
+        assert (np.float64(fast_percentile(x, q)).tobytes()
+                == np.float64(np.percentile(x, q)).tobytes())
 
 
 @pytest.mark.parametrize('seed', range(5))

@@ -274,6 +274,21 @@ def fast_median(x: np.ndarray) -> float:
     return float((p[k - 1] + p[k]) / 2.0)
 
 
+def fast_percentile(x: np.ndarray, q: float) -> float:
+    """``np.percentile(x, q)`` of a non-empty 1-D array of finite values, q in [0, 100]
+    (numpy's 'linear' method and arithmetic: the order statistics around (n - 1) q / 100
+    and its interpolation between them), without its overhead."""
+    n = x.shape[0]
+    virtual = (n - 1) * (q / 100.0)
+    lo = math.floor(virtual)
+    gamma = virtual - lo
+    lo, hi = min(lo, n - 1), min(lo + 1, n - 1)
+    p = np.partition(x, (lo, hi))
+    a, b = p[lo], p[hi]
+    diff = b - a
+    return float(b - diff * (1.0 - gamma) if gamma >= 0.5 else a + diff * gamma)
+
+
 def plane_is_plausible(cam: StereoCamera, abc: np.ndarray, *, min_height_m: float = 0.1,
                        max_height_m: float = 10.0, max_tilt_deg: float = 75.0,
                        ) -> MetricPlane | None:

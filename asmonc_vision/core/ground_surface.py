@@ -66,6 +66,7 @@ import numpy as np
 from . import surface_kernels
 from .camera import MetricPlane, StereoCamera, ground_axes
 from .config import check_fields, param
+from .ground_plane import fast_percentile
 
 
 @dataclass(frozen=True)
@@ -435,7 +436,7 @@ def _first_knot(s: np.ndarray, h: np.ndarray, c: GroundSurfaceConfig) -> float:
     distances of the features on the plane."""
     on_plane = np.abs(h) <= c.gate_m
     if np.count_nonzero(on_plane) >= c.min_features:
-        return max(c.near_m, float(np.percentile(s[on_plane], 5)))
+        return max(c.near_m, fast_percentile(s[on_plane], 5.0))   # (finite s)
     return c.near_m
 
 
