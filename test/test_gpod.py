@@ -1892,6 +1892,28 @@ def test_outline_evidence_compiled_equals_numpy(box_frame, monkeypatch):
     assert all(np.all(sep <= shift + 1e-9) for sep, shift in zip(fast[1::3], fast[2::3]))
 
 
+def test_the_compiled_outline_patch_gives_numpys_samples_and_patch(box_frame, monkeypatch):
+    """The lone-face search's samples and gradient patch compiled
+    (`kernels_geometry.nb_outline_patch`) give the numpy path's, byte for byte, and so
+    its evidence: feet near, far and beside the view, faces low and high (raised lines
+    partly out of the image), all directions and some."""
+    gpod, _ = _need_numba()
+    if gkg.nb_outline_patch is None:
+        pytest.skip('numba not installed')
+    det, _, _ = box_frame
+    ctx = det._ctx
+    feet = [np.array([3.0, 0.3]), np.array([4.6, -0.8]), np.array([2.2, 1.1]),
+            np.array([0.6, 2.5]), np.array([7.5, -3.0])]
+    phis = [gpod_faces._LONE_PHI, gpod_faces._LONE_PHI[5:23], gpod_faces._LONE_PHI[:1]]
+
+    def run():
+        return [x for foot in feet for h in (0.04, 0.3, 1.5) for phi in phis
+                for x in ctx.outline_evidence(foot, h, phi)]
+
+    fast, slow = _compiled_equals_numpy(monkeypatch, _GPOD, ('nb_outline_patch',), run)
+    assert all(x.tobytes() == y.tobytes() and x.dtype == y.dtype for x, y in zip(fast, slow))
+
+
 def test_lone_face_test_compiled_equals_numpy(box_frame, monkeypatch):
     """The lone-face search's bar, running sums, ends and tests compiled
     (`kernels_geometry.nb_lone_support`) give the numpy path's, on a real frame's

@@ -110,25 +110,35 @@ class _FrameContext:
         """
         img_h, img_w = self._left.shape
         n_d = phi.shape[0]
-        dirs = np.empty((n_d, 2))
-        dirs[:, 0] = np.cos(phi)
-        dirs[:, 1] = np.sin(phi)
-        points = foot[None, None, :] + _LONE_STEPS[None, :, None] * dirs[:, None, :]
-        # The gradient on the patch that holds every sample (the lines' ends and the
-        # foot bound them, raised or not), two pixels wider than the samples one pixel
-        # across the lines reach: the full image's values there.
-        ends = np.empty((n_d + 1, 2))
-        ends[0] = foot
-        ends[1:] = points[:, -1]
-        e3 = np.empty((2 * n_d + 2, 3))
-        e3[:n_d + 1] = self.origin[None, :] + ends[:, :1] * self.fwd + ends[:, 1:] * self.lft
-        e3[n_d + 1:] = e3[:n_d + 1] + height * self.metric.normal_up
-        e3[:, 2] = np.maximum(e3[:, 2], 1e-6)
-        ue, ve = self.cam.project_left(e3)
-        x0 = _clip_int(np.floor(ue.min()) - 3, 0, img_w - 1)
-        x1 = _clip_int(np.ceil(ue.max()) + 4, x0 + 1, img_w)
-        y0 = _clip_int(np.floor(ve.min()) - 3, 0, img_h - 1)
-        y1 = _clip_int(np.ceil(ve.max()) + 4, y0 + 1, img_h)
+        cos_d, sin_d = np.cos(phi), np.sin(phi)
+        ok = False
+        if kg.nb_outline_patch is not None:
+            # The same samples and patch, compiled.
+            points, x0, x1, y0, y1, ok = kg.nb_outline_patch(
+                np.ascontiguousarray(foot, np.float64), cos_d, sin_d, _LONE_STEPS,
+                self.origin, self.fwd, self.lft, self.metric.normal_up, float(height),
+                float(self.cam.f), float(self.cam.cx), float(self.cam.cy), img_w, img_h)
+        if not ok:
+            dirs = np.empty((n_d, 2))
+            dirs[:, 0] = cos_d
+            dirs[:, 1] = sin_d
+            points = foot[None, None, :] + _LONE_STEPS[None, :, None] * dirs[:, None, :]
+            # The gradient on the patch that holds every sample (the lines' ends and the
+            # foot bound them, raised or not), two pixels wider than the samples one
+            # pixel across the lines reach: the full image's values there.
+            ends = np.empty((n_d + 1, 2))
+            ends[0] = foot
+            ends[1:] = points[:, -1]
+            e3 = np.empty((2 * n_d + 2, 3))
+            e3[:n_d + 1] = (self.origin[None, :] + ends[:, :1] * self.fwd
+                            + ends[:, 1:] * self.lft)
+            e3[n_d + 1:] = e3[:n_d + 1] + height * self.metric.normal_up
+            e3[:, 2] = np.maximum(e3[:, 2], 1e-6)
+            ue, ve = self.cam.project_left(e3)
+            x0 = _clip_int(np.floor(ue.min()) - 3, 0, img_w - 1)
+            x1 = _clip_int(np.ceil(ue.max()) + 4, x0 + 1, img_w)
+            y0 = _clip_int(np.floor(ve.min()) - 3, 0, img_h - 1)
+            y1 = _clip_int(np.ceil(ve.max()) + 4, y0 + 1, img_h)
         patch = self._left[y0:y1, x0:x1].astype(np.float32)
         gx = cv2.Sobel(patch, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
         gy = cv2.Sobel(patch, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)

@@ -97,6 +97,44 @@ def _outline_kernel(points, origin, fwd, lft, nup, height, f, cx, cy, gx, gy, x0
 nb_outline = _jit(_outline_kernel)
 
 
+def _outline_patch_kernel(foot, cos_d, sin_d, steps, origin, fwd, lft, nup, height, f, cx,
+                          cy, img_w, img_h):
+    """`_FrameContext.outline_evidence` up to its gradient patch (for numba): the same
+    arithmetic in the same order. Returns (the samples (D, S, 2), x0, x1, y0, y1, ok);
+    not ok (a bound not finite: the numpy path raises) leaves the bounds 0."""
+    n_d, n_s = cos_d.shape[0], steps.shape[0]
+    points = np.empty((n_d, n_s, 2))
+    u_lo = v_lo = math.inf
+    u_hi = v_hi = -math.inf
+    for i in range(n_d + 1):           # the foot, then each direction's far end
+        ex, ey = foot[0], foot[1]
+        if i:
+            for k in range(n_s):
+                points[i - 1, k, 0] = foot[0] + steps[k] * cos_d[i - 1]
+                points[i - 1, k, 1] = foot[1] + steps[k] * sin_d[i - 1]
+            ex, ey = points[i - 1, n_s - 1, 0], points[i - 1, n_s - 1, 1]
+        e0 = origin[0] + ex * fwd[0] + ey * lft[0]
+        e1 = origin[1] + ex * fwd[1] + ey * lft[1]
+        e2 = origin[2] + ex * fwd[2] + ey * lft[2]
+        for lift in range(2):
+            q0, q1, q2 = e0, e1, e2
+            if lift:
+                q0, q1, q2 = e0 + height * nup[0], e1 + height * nup[1], e2 + height * nup[2]
+            q2 = q2 if (q2 >= 1e-6 or q2 != q2) else 1e-6
+            u, v = f * q0 / q2 + cx, f * q1 / q2 + cy
+            u_lo, u_hi, v_lo, v_hi = min(u_lo, u), max(u_hi, u), min(v_lo, v), max(v_hi, v)
+            if not (math.isfinite(u) and math.isfinite(v)):
+                return points, 0, 0, 0, 0, False
+    x0 = int(min(max(math.floor(u_lo) - 3.0, 0.0), img_w - 1.0))
+    x1 = int(min(max(math.ceil(u_hi) + 4.0, x0 + 1.0), float(img_w)))
+    y0 = int(min(max(math.floor(v_lo) - 3.0, 0.0), img_h - 1.0))
+    y1 = int(min(max(math.ceil(v_hi) + 4.0, y0 + 1.0), float(img_h)))
+    return points, x0, x1, y0, y1, True
+
+
+nb_outline_patch = _jit(_outline_patch_kernel)
+
+
 def _sorted_median_kernel(x):
     """``faces._row_median`` of a 1-D float array (for numba; numpy's sort: NaN last,
     NaN if any)."""
@@ -738,11 +776,12 @@ def warm_up(compiled: bool) -> None:
     """Compile these kernels (called by `kernels.warm_up`); ``compiled`` False: numba is
     missing or failed, and the numpy paths are used."""
     global nb_corner_free, nb_contact, nb_walk_down, nb_extremes, nb_soft_args, nb_arcs, \
-        nb_contact_bounds, nb_owners, nb_outline, nb_face_hides, nb_lone_support
+        nb_contact_bounds, nb_owners, nb_outline, nb_face_hides, nb_lone_support, \
+        nb_outline_patch
     if not compiled:
         nb_corner_free = nb_contact = nb_walk_down = nb_extremes = nb_soft_args = None
         nb_arcs = nb_contact_bounds = nb_owners = nb_outline = nb_face_hides = None
-        nb_lone_support = None
+        nb_lone_support = nb_outline_patch = None
         return
     f2, f1, i1 = np.zeros((1, 2)), np.zeros(1), np.zeros(1, np.int64)
     nb_corner_free = _warmed(nb_corner_free, f2, f2, f2, f2, f1 + 1.0, np.zeros((1, 1, 2)),
@@ -762,6 +801,9 @@ def warm_up(compiled: bool) -> None:
     g32 = np.zeros((2, 2), np.float32)
     nb_outline = _warmed(nb_outline, np.ones((1, 2, 2)), np.zeros(3), np.zeros(3),
                          np.zeros(3), np.zeros(3), 0.1, 300.0, 1.0, 1.0, g32, g32, 0, 0, 2, 2)
+    nb_outline_patch = _warmed(nb_outline_patch, f2[0], f1, f1, f1 + 0.02, np.zeros(3),
+                               np.zeros(3), np.zeros(3), np.zeros(3), 0.1, 300.0, 1.0, 1.0,
+                               2, 2)
     nb_lone_support = _warmed(nb_lone_support, np.ones((2, 3)), np.ones((2, 3)),
                               np.ones((2, 3)), 2.0, 0.0, 0.02, 0.1, 2.5, 0.8)
     # The soft nearest points (four kernels, one switch) and the per-obstacle extremes.
