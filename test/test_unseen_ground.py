@@ -350,3 +350,22 @@ def test_only_a_confident_report_explains_the_unseen_ground(monkeypatch, confide
     monkeypatch.setattr(GpodDetector, '_track', with_blip)
     hits = _wall_hits(det, cam, frames)
     assert (hits <= 1) if explains else (hits >= 9), hits
+
+
+def test_the_corridor_counts_are_numpys_histogram():
+    """`UnseenGroundMonitor._count` gives np.histogram's counts over the corridor's range
+    cells (lower edges in, the last cell's upper edge too; outside, NaN and off the
+    corridor out), byte for byte."""
+    mon = _monitor()
+    edges, half = mon.range_edges, mon.half_width
+    rng = np.random.default_rng(5)
+    for n in (0, 1, 7, 500):
+        x = rng.uniform(edges[0] - 1.0, edges[-1] + 1.0, n)
+        on_edge = rng.random(n) < 0.2
+        x[on_edge] = rng.choice(edges, int(on_edge.sum()))
+        y = rng.uniform(-2.0 * half, 2.0 * half, n)
+        y[rng.random(n) < 0.05] = np.nan
+        xy = np.stack([x, y], axis=1)
+        ok = np.isfinite(y) & (np.abs(y) <= half)
+        want = np.histogram(x[ok], bins=edges)[0].astype(float)
+        assert mon._count(xy).tobytes() == want.tobytes()

@@ -67,7 +67,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .camera import MetricPlane, StereoCamera, ground_axes
+from .camera import MetricPlane, StereoCamera, columns, ground_axes
 
 #: Depth of a corridor cell along the walking direction, metres.
 CELL_DEPTH_M = 0.25
@@ -196,15 +196,14 @@ class UnseenGroundMonitor:
         left; metres) where the left-image pixels (u, v) (N,) look at the plane; NaN for
         pixels at or above the horizon."""
         n = np.asarray(metric.normal_up, float)
-        r = np.stack([(np.asarray(u, float) - cam.cx) / cam.f,
-                      (np.asarray(v, float) - cam.cy) / cam.f,
-                      np.ones(np.shape(u))], axis=1)
+        r = columns((np.asarray(u, float) - cam.cx) / cam.f,
+                    (np.asarray(v, float) - cam.cy) / cam.f, np.ones(np.shape(u)))
         nr = r @ n
         with np.errstate(divide='ignore', invalid='ignore'):
             t = np.where(nr < -1e-9, -metric.height / nr, np.nan)
         origin, fwd, lft = ground_axes(metric)
         g = r * t[:, None] - origin
-        return np.stack([g @ fwd, g @ lft], axis=1)
+        return columns(g @ fwd, g @ lft)
 
     def cells_in_view(self, cam: StereoCamera, metric: MetricPlane) -> np.ndarray:
         """(n_r,) bool: the cell's four ground corners project inside the left image, at
@@ -226,7 +225,14 @@ class UnseenGroundMonitor:
         """(n_r,) number of ground points xy (N, 2) in each cell of the corridor."""
         ok = (np.isfinite(xy[:, 0]) & np.isfinite(xy[:, 1]) & (xy[:, 1] >= -self.half_width)
               & (xy[:, 1] <= self.half_width))
-        return np.histogram(xy[ok, 0], bins=self.range_edges)[0].astype(float)
+        # np.histogram's counts over the edges (a bin holds its lower edge, the last
+        # also its upper one), without its sort
+        edges = self.range_edges
+        n_r = edges.shape[0] - 1
+        x = xy[ok, 0]
+        b = np.searchsorted(edges, x, side='right') - 1
+        b[x == edges[-1]] = n_r - 1
+        return np.bincount(b[(b >= 0) & (b < n_r)], minlength=n_r).astype(float)
 
     def _foot_and_face(self, energy: np.ndarray, cam: StereoCamera, metric: MetricPlane,
                        r_near: float, far: float) -> tuple[float, bool | None]:

@@ -15,6 +15,7 @@ from ..alignment import AlignmentConfig, VerticalAlignment, brightness_gain_offs
 from ..camera import MetricPlane, StereoCamera
 from ..config import override
 from ..edges import detect_vertical_edges, image_noise_sigma, textured_edge_threshold
+from ..ground_plane import fast_median
 from ..matching import pmf_match
 from ..unseen_ground import UNKNOWN_HEIGHT
 from . import kernels as kn
@@ -348,7 +349,10 @@ class GpodDetector(Tracking):
             self._log_gains.append(math.log(min(max(go[0], 0.25), 4.0)))
         if not self._log_gains:
             return 1.0
-        return math.exp(float(np.median(np.asarray(self._log_gains))))
+        logs = np.asarray(self._log_gains)
+        if not np.isfinite(logs).all():
+            return math.exp(float(np.median(logs)))
+        return math.exp(fast_median(logs))       # (np.median's arithmetic)
 
     @property
     def image_noise_sigma(self) -> float:
