@@ -307,7 +307,7 @@ class EvidenceMap:
         ij = np.floor((w - self.origin[None, :]) / self.config.cell_m).astype(np.int64)
         ix, iy = ij[:, 0] + dx, ij[:, 1] + dy
         inside = (ix >= 0) & (iy >= 0) & (ix < self.n) & (iy < self.n)
-        ix, iy = np.clip(ix, 0, self.n - 1), np.clip(iy, 0, self.n - 1)
+        ix, iy = ix.clip(0, self.n - 1), iy.clip(0, self.n - 1)
         return iy * self.n + ix, inside
 
     def _enter(self, stamp_s: float, ev: PairEvidence, still: bool) -> None:
@@ -360,10 +360,10 @@ class EvidenceMap:
         Ld[free_d] -= c.free_logodds
         for L, cells in ((Lr, np.concatenate((raised, free))),
                          (Ld, np.concatenate((dropc, free_d)))):
-            L[cells] = np.clip(L[cells], c.min_logodds, c.max_logodds)
+            L[cells] = L[cells].clip(c.min_logodds, c.max_logodds)
         if seen_through.size:
             Lr[seen_through] -= c.ray_logodds
-            Lr[seen_through] = np.clip(Lr[seen_through], c.min_logodds, c.max_logodds)
+            Lr[seen_through] = Lr[seen_through].clip(c.min_logodds, c.max_logodds)
             free = np.union1d(free, seen_through)
         # cells whose evidence is gone forget their height and views
         gone = free[(Lr[free] <= 0) & (Ld[free] <= 0)]
@@ -525,8 +525,8 @@ class EvidenceMap:
         cells = cells[unhidden & (far[b] >= r + c.cell_m)]
         self.L_r.reshape(-1)[cells[conf_r[cells]]] -= c.miss_logodds
         self.L_d.reshape(-1)[cells[conf_d[cells]]] -= c.miss_logodds
-        np.clip(self.L_r, c.min_logodds, c.max_logodds, out=self.L_r)
-        np.clip(self.L_d, c.min_logodds, c.max_logodds, out=self.L_d)
+        self.L_r.clip(c.min_logodds, c.max_logodds, out=self.L_r)
+        self.L_d.clip(c.min_logodds, c.max_logodds, out=self.L_d)
 
     def _in_both_images(self, p: np.ndarray, cam: StereoCamera) -> np.ndarray:
         """(M,) bool: points ``p`` (M, 3) of the left optical frame (m) that project
@@ -574,7 +574,7 @@ class EvidenceMap:
         ix, iy = ij[:, 0:1] + _AROUND_DX, ij[:, 1:2] + _AROUND_DY
         n = self.n
         inside = (ix >= 0) & (iy >= 0) & (ix < n) & (iy < n)
-        flat = np.clip(iy, 0, n - 1) * n + np.clip(ix, 0, n - 1)
+        flat = iy.clip(0, n - 1) * n + ix.clip(0, n - 1)
         ok = inside & (stamp_s - free_s[flat] <= within_s)
         ok[:, _AROUND_RING] &= L_r[flat[:, _AROUND_RING]] <= 0
         return out & ok.all(axis=1)
@@ -756,4 +756,4 @@ _HEAD = np.ones(1, bool)
 def _bearing_bin(xy: np.ndarray) -> np.ndarray:
     """(N,) int: the 1 degree bearing bin (0 .. _BINS - 1) of ground points (N, 2)."""
     b = np.degrees(np.arctan2(xy[:, 1], xy[:, 0])) + 90.0
-    return np.clip(b.astype(np.int64), 0, _BINS - 1)
+    return b.astype(np.int64).clip(0, _BINS - 1)

@@ -189,8 +189,8 @@ class Detection(PlaneTracking):
         # detection.max_required_run, must be matched in one run).
         slope = max(abs(float(cast(np.ndarray, self._abc)[1])), 1e-3)   # (tracking: set)
         det = c.detection
-        need = np.clip(np.ceil(det.obstacle_run_fraction * np.abs(ex_mean) / slope),
-                       det.min_matched_run, max(det.max_required_run, det.min_matched_run))
+        need = np.ceil(det.obstacle_run_fraction * np.abs(ex_mean) / slope).clip(
+            det.min_matched_run, max(det.max_required_run, det.min_matched_run))
         usable = (run >= need) & in_range
         # The paper's test: obstacle pixels above the threshold, drop pixels as far below
         # the lowest ground the surface allows (``low`` px under its disparity) where the
@@ -542,13 +542,13 @@ class Detection(PlaneTracking):
             sid_u, lab_u = sid_s[uniq], lab_s[uniq]
             sid_start = np.searchsorted(lab_u, np.arange(n_c + 1))
         z = (np.abs(ex) - self._frame_thr[idx]) / c.detection.disparity_sigma_px
-        p_i = np.clip(_normal_cdf(z), 0.0, 1.0 - 1e-12)
+        p_i = _normal_cdf(z).clip(0.0, 1.0 - 1e-12)
         p_any = 1.0 - np.exp(np.bincount(label, weights=np.log1p(-p_i), minlength=n_c))
         # Small evidence lowers the confidence: the pixels counted as the edge-string rule
         # counts them, a weak edge as (strength / detection.min_strength)^2 of a pixel.
         n_ev = np.bincount(label, weights=self._evidence_weight(m.strength[idx]),
                            minlength=n_c)
-        conf = np.clip(p_any * np.minimum(1.0, n_ev / c.detection.confidence_full_pixels), 0.0, 1.0)
+        conf = (p_any * np.minimum(1.0, n_ev / c.detection.confidence_full_pixels)).clip(0.0, 1.0)
         out = []
         for k in range(n_c):
             if count[k] < min_pixels:

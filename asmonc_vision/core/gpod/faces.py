@@ -397,7 +397,7 @@ def lone_face_points(ctx: _FrameContext, xy: np.ndarray, group: np.ndarray, n_gr
         # each face's nearest point to the camera (the foot, its end, or between)
         ends = points[rows, end]
         d = ends - foot
-        t = np.clip(-(d @ foot) / np.maximum(np.einsum('ij,ij->i', d, d), 1e-12), 0.0, 1.0)
+        t = (-(d @ foot) / np.maximum(np.einsum('ij,ij->i', d, d), 1e-12)).clip(0.0, 1.0)
         near = foot + t[:, None] * d
         ok &= np.hypot(near[:, 0], near[:, 1]) <= math.hypot(*foot) - _LONE_MIN_GAIN_M
         best = None

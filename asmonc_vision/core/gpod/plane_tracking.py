@@ -278,7 +278,7 @@ class PlaneTracking(DetectorState):
         sig *= np.exp(np.maximum(log_s[0] - log_p, 0.0))
         if v is not None:
             sig = sig * np.interp(v, v_b, f_b)
-        thr = np.clip(c.threshold.k * sig, c.threshold.floor_px, ceiling)
+        thr = (c.threshold.k * sig).clip(c.threshold.floor_px, ceiling)
         return thr, glob
 
     def min_obstacle_pixels(self, cam: StereoCamera) -> float:

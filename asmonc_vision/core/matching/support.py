@@ -115,7 +115,7 @@ def _neighbour_pairs(left: EdgeMap, right: EdgeMap, cand: Candidates, rad: float
     r_int = int(np.floor(rad))
     uc = 0.5 * (left.u[cand.left].astype(np.float64) + right.u[cand.right])
     vc = left.v[cand.left].astype(np.int64)
-    col = np.clip(np.floor(uc).astype(np.int64), 0, w - 1)
+    col = np.floor(uc).astype(np.int64).clip(0, w - 1)
     order = np.argsort((vc * w + col) * 2.0 + (uc - col))
     s_uc64 = uc[order]
     s_d64 = cand.d[order].astype(np.float64)
