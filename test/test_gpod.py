@@ -2767,3 +2767,20 @@ def _plane_height(det: GpodDetector) -> float:
     """The camera height above the detector's current plane, m."""
     from asmonc_vision.core.gpod.support import _state_metric
     return _state_metric(CAM, det._abc).height
+
+
+def test_replaced_is_dataclasses_replace():
+    """`results.replaced` gives dataclasses.replace's obstacle (every field the same
+    object), and refuses an unknown field alike."""
+    from asmonc_vision.core.gpod import GpodObstacle
+    from asmonc_vision.core.gpod.results import replaced
+    ob = GpodObstacle(position=np.array([0.1, 0.2, 3.0]), height=0.3, range=3.0, bearing=0.1,
+                      width=0.2, disparity_excess=4.0, confidence=0.5, roi=(1, 2, 3, 4),
+                      num_edge_pixels=9, string_ids=np.array([1, 2], np.int32))
+    changes = dict(track_id=7, confidence=0.9, position=np.array([0.0, 0.0, 2.0]))
+    a, b = replaced(ob, **changes), dataclasses.replace(ob, **changes)
+    assert type(a) is type(b)
+    assert all(getattr(a, f.name) is getattr(b, f.name) for f in dataclasses.fields(b))
+    assert ob.track_id == 0 and ob.confidence == 0.5
+    with pytest.raises(TypeError):
+        replaced(ob, colour=1)

@@ -9,7 +9,6 @@ it (`drop_spans`, rule_drop_span) (docs/map.md, *Objects*).
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Callable
 
@@ -18,6 +17,7 @@ import numpy as np
 from asmonc_vision.core.camera import (MetricPlane, StereoCamera, ground_range_bearing,
                                        plane_disparity, plane_from_metric)
 from asmonc_vision.core.evidence_map import MapObject
+from asmonc_vision.core.gpod.results import replaced
 from asmonc_vision.core.map_evidence import ground_frame
 from asmonc_vision.core.map_settings import DropSpanConfig
 
@@ -87,8 +87,8 @@ def objects_to_obstacles(objects, cam: StereoCamera, plane: MetricPlane,
             for k in cand[~taken[cand]].tolist():
                 taken[k] = True
                 tid = dets[k].track_id or (int(ob.object_id) + MAP_ID_BASE)
-                mine.append(dataclasses.replace(dets[k], track_id=int(tid),
-                                                confidence=float(ob.confidence)))
+                mine.append(replaced(dets[k], track_id=int(tid),
+                                     confidence=float(ob.confidence)))
             reported = det_xy[cand]
         else:
             mine.append(_map_report(ob, ob.nearest_xy, int(ob.object_id) + MAP_ID_BASE,

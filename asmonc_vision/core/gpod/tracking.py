@@ -4,7 +4,6 @@ frames unless their place is seen free, and the confidences over views.
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections import deque
 from typing import cast
@@ -16,7 +15,7 @@ from ..camera import MetricPlane, StereoCamera, ground_range_bearing
 from .detection import Detection
 from .footing import _FrameContext
 from .grouping import _same_object
-from .results import GpodObstacle
+from .results import GpodObstacle, replaced
 from .support import _below_view, _moved_roi
 
 #: How far the wearer may walk per second while the camera motion is unknown, m/s: the
@@ -93,7 +92,7 @@ class Tracking(Detection):
             # (without require_in_view _moved_roi always gives a region)
             roi = (ob.roi if (seen or not moved)
                    else cast('tuple[int, int, int, int]', _moved_roi(ob, tr.foot, n, cam)))
-            out.append(dataclasses.replace(
+            out.append(replaced(
                 ob, position=tr.foot + ob.height * n, range=rng_k, roi=roi, confidence=conf,
                 bearing=brg_k, track_id=tr.track_id, age_s=tr.age_s,
                 string_ids=ob.string_ids if seen else np.zeros(0, np.int32),
