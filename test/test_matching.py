@@ -287,3 +287,24 @@ def test_numba_kernels_equal_the_numpy_path(plane_pair, monkeypatch, shuffle):
     slow = select_matches(c, links, el, er, iterations=3)
     np.testing.assert_array_equal(fast[0], slow[0])
     np.testing.assert_array_equal(fast[1], slow[1])
+
+
+def test_the_candidates_sort_is_numpys_argsort():
+    """`support._argsort` gives np.argsort's permutation: distinct keys nearly in order
+    (as a frame's candidates), and keys with ties, -0.0 and 0.0, or NaN."""
+    from asmonc_vision.core.matching.support import _argsort
+    rng = np.random.default_rng(2)
+    cases = []
+    for n in (0, 1, 2, 9, 1000, 20000):
+        k = np.sort(rng.uniform(0.0, 1e5, n)) + rng.normal(0.0, 30.0, n)
+        cases.append(k)
+        if n >= 2:
+            tie = k.copy()
+            tie[rng.integers(0, n, max(n // 10, 1))] = k[0]
+            zeros = k.copy()
+            zeros[:2] = (-0.0, 0.0)
+            nan = k.copy()
+            nan[n // 2] = np.nan
+            cases += [tie, zeros, nan, np.round(k)]
+    for k in cases:
+        assert _argsort(k).tobytes() == np.argsort(k).tobytes()

@@ -19,6 +19,17 @@ def _empty_links(m: int) -> SupportLinks:
                         pair_edge=zi, pair_right=zi, weight=np.zeros(0))
 
 
+def _argsort(keys: np.ndarray) -> np.ndarray:
+    """``np.argsort(keys)`` of a 1-D float64 array: its permutation, found by the stable
+    sort when the keys are distinct (then every sort gives it; a frame's candidates,
+    nearly in order, sort several times faster so), else (ties, NaN) by np.argsort."""
+    order = np.argsort(keys, kind='stable')
+    s = keys[order]
+    if s.size and (np.isnan(s[-1]) or bool((s[1:] == s[:-1]).any())):
+        return np.argsort(keys)
+    return order
+
+
 def _cell_table(s_cell: np.ndarray, size: int) -> np.ndarray:
     """(size + 1,) int: ``table[k]`` = number of the sorted cells ``s_cell`` below k."""
     m = s_cell.shape[0]
@@ -116,7 +127,7 @@ def _neighbour_pairs(left: EdgeMap, right: EdgeMap, cand: Candidates, rad: float
     uc = 0.5 * (left.u[cand.left].astype(np.float64) + right.u[cand.right])
     vc = left.v[cand.left].astype(np.int64)
     col = np.floor(uc).astype(np.int64).clip(0, w - 1)
-    order = np.argsort((vc * w + col) * 2.0 + (uc - col))
+    order = _argsort(np.asarray((vc * w + col) * 2.0 + (uc - col)))
     s_uc64 = uc[order]
     s_d64 = cand.d[order].astype(np.float64)
     s_d = s_d64.astype(np.float32)
