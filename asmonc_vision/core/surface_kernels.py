@@ -73,7 +73,11 @@ def _total(a):
 def _percentile(x, q):
     """``np.percentile(x, 100 q)`` for q in [0, 1] (numpy's 'linear' method: the order
     statistics around (n - 1) q and numpy's interpolation between them)."""
-    xs = np.sort(x)
+    return nb_sorted_percentile(np.sort(x), q)
+
+
+def _sorted_percentile(xs, q):
+    """`_percentile` of the sorted array ``xs``."""
     n = xs.shape[0]
     virtual = (n - 1) * q
     lo = int(math.floor(virtual))
@@ -90,7 +94,26 @@ def _percentile(x, q):
 
 def _median(x):
     """``np.median(x)`` of a non-empty array (the middle order statistic, or the mean of
-    the two middle ones as numpy takes it: their sum halved)."""
+    the two middle ones as numpy takes it: their sum halved). The order statistics by
+    selection (np.partition; the largest below the middle by a scan); a zero or NaN
+    among them by the sort (`_sorted_median`), whose choice between -0.0 and 0.0 it is."""
+    n = x.shape[0]
+    k = n // 2
+    p = np.partition(x, k)
+    hi = p[k]
+    lo = hi
+    if n % 2 == 0:
+        lo = p[0]
+        for i in range(1, k):
+            if p[i] > lo:
+                lo = p[i]
+    if lo == 0.0 or hi == 0.0 or lo != lo or hi != hi:
+        return nb_sorted_median(x)
+    return hi if n % 2 else (lo + hi) / 2.0
+
+
+def _sorted_median(x):
+    """`_median` by a full sort."""
     xs = np.sort(x)
     k = xs.shape[0] // 2
     if xs.shape[0] % 2:
@@ -270,7 +293,10 @@ def segment_kernel(s, lat, h, e_s, e_h, s_a, z_a, grade, length, gate, max_rise,
             n_in += 1
     sel = sel[:n_in]
     ss, ll, hh = s[sel], lat[sel], h[sel]
-    width = nb_percentile(ll, 0.9) - nb_percentile(ll, 0.1) if n_in else 0.0
+    width = 0.0
+    if n_in:
+        ls = np.sort(ll)
+        width = nb_sorted_percentile(ls, 0.9) - nb_sorted_percentile(ls, 0.1)
     first = 0
     for i in range(n_in):
         if ss[i] < s_a + 0.5 * length:
@@ -334,7 +360,9 @@ def knot_sums_kernel(s, h, ks, kz, gate):
 
 nb_pairwise_sum = _jit(pairwise_sum)
 nb_total = _jit(_total)
+nb_sorted_percentile = _jit(_sorted_percentile)
 nb_percentile = _jit(_percentile)
+nb_sorted_median = _jit(_sorted_median)
 nb_median = _jit(_median)
 nb_fit_line_knot = _jit(_fit_line_knot)
 nb_solve3 = _jit(_solve3)
