@@ -82,3 +82,33 @@ def test_from_projection_and_validation():
         StereoCamera.from_projection(pr, pl, 320, 240)
     with pytest.raises(ValueError, match='f must be'):
         StereoCamera(f=-1, cx=0, cy=0, baseline=0.3, width=10, height=10)
+
+
+def test_the_column_helpers_are_numpys_broadcasts():
+    """`row_norms`, `sub_rows`, `add_rows` and `sub_scaled` give numpy's
+    np.linalg.norm(x, axis=1), p - v, p + v and p - s[:, None] * n[None, :] byte for byte."""
+    from asmonc_vision.core.camera import add_rows, row_norms, sub_rows, sub_scaled
+    rng = np.random.default_rng(11)
+    for n_rows in (0, 1, 2, 7, 300, 4001):
+        p = rng.normal(size=(n_rows, 3)) * 10.0 ** rng.uniform(-3, 3, (n_rows, 1))
+        s, n, v = rng.normal(size=n_rows), rng.normal(size=3), rng.normal(size=3)
+        assert row_norms(p).tobytes() == np.linalg.norm(p, axis=1).tobytes()
+        assert sub_rows(p, v).tobytes() == (p - v[None, :]).tobytes()
+        assert add_rows(p, v).tobytes() == (p + v[None, :]).tobytes()
+        assert sub_scaled(p, s, n).tobytes() == (p - s[:, None] * n[None, :]).tobytes()
+        assert sub_rows(p[:, :2], v[:2]).tobytes() == (p[:, :2] - v[None, :2]).tobytes()
+
+
+def test_the_ground_axes_of_a_plane_asked_again_are_its_own():
+    """`ground_axes` gives a plane's axes as computed afresh, for planes asked for again
+    (kept), new ones and more planes than it keeps."""
+    from asmonc_vision.core import camera
+    rng = np.random.default_rng(12)
+    planes = []
+    for _ in range(12):
+        n = np.array([0.0, -1.0, 0.0]) + rng.normal(0.0, 0.2, 3)
+        planes.append(MetricPlane(normal_up=n / np.linalg.norm(n), height=rng.uniform(0.5, 2)))
+    for plane in planes + planes[::-1] + planes:
+        got = camera.ground_axes(plane)
+        want = camera._ground_axes(np.asarray(plane.normal_up, float), plane.height)
+        assert all(a.tobytes() == b.tobytes() for a, b in zip(got, want))

@@ -82,7 +82,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from asmonc_vision.core import map_grid, map_kernels
-from asmonc_vision.core.camera import MetricPlane, StereoCamera, columns
+from asmonc_vision.core.camera import MetricPlane, StereoCamera, columns, sub_rows
 from asmonc_vision.core.map_evidence import (DROP, GROUND, RAISED, PairEvidence, ground_frame,
                                              ground_motion)
 from asmonc_vision.core.map_settings import EvidenceMapConfig
@@ -304,7 +304,7 @@ class EvidenceMap:
         """Flat cell index of W points (N, 2) (or of the cell ``dx``, ``dy`` cells from
         each) and a mask of those inside the grid (the index of the others is clipped
         into it)."""
-        ij = np.floor((w - self.origin[None, :]) / self.config.cell_m).astype(np.int64)
+        ij = np.floor(sub_rows(w, self.origin) / self.config.cell_m).astype(np.int64)
         ix, iy = ij[:, 0] + dx, ij[:, 1] + dy
         inside = (ix >= 0) & (iy >= 0) & (ix < self.n) & (iy < self.n)
         ix, iy = ix.clip(0, self.n - 1), iy.clip(0, self.n - 1)

@@ -64,7 +64,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from . import surface_kernels
-from .camera import MetricPlane, StereoCamera, ground_axes
+from .camera import MetricPlane, StereoCamera, ground_axes, sub_rows
 from .config import check_fields, param
 from .ground_plane import fast_percentile
 
@@ -218,7 +218,7 @@ class GroundSurface:
         """Points (N, 3) in the left optical frame, metres -> (s, l, h): distance along
         the ground ahead, to the left, and height above the plane, metres, (N,) each."""
         origin, fwd, left = ground_axes(self.plane)
-        p = np.asarray(points, float).reshape(-1, 3) - origin
+        p = sub_rows(np.asarray(points, float).reshape(-1, 3), origin)
         return p @ fwd, p @ left, p @ self.plane.normal_up
 
     def height_above(self, points: np.ndarray) -> np.ndarray:

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from asmonc_vision.core.camera import MetricPlane, StereoCamera, columns, ground_axes
+from asmonc_vision.core.camera import MetricPlane, StereoCamera, columns, ground_axes, sub_rows
 
 @dataclass(frozen=True)
 class PairEvidence:
@@ -70,7 +70,7 @@ def pair_evidence(cam: StereoCamera, plane: MetricPlane, u: np.ndarray, v: np.nd
     # σ_h: the height's change over one σ_d of disparity (first order)
     h2 = plane.signed_height(cam.triangulate(u, v, d + sd))
     sigma_h = np.abs(h2 - h) + 1e-4
-    g = pts - origin[None, :]
+    g = sub_rows(pts, origin)
     xy = columns(g @ fwd, g @ left)
     keep = (xy[:, 0] > 0) & (np.hypot(xy[:, 0], xy[:, 1]) <= max_range_m)
     return PairEvidence(xy=xy[keep], height=h[keep], sigma_h=sigma_h[keep], kind=kind[keep],

@@ -10,7 +10,8 @@ from typing import cast
 
 import numpy as np
 
-from ..camera import MetricPlane, StereoCamera, plane_disparity, row_norms
+from ..camera import (MetricPlane, StereoCamera, add_rows, plane_disparity, row_norms,
+                      sub_scaled)
 from ..edges import EdgeMap, gradient_noise_gain
 from ..ground_surface import depth_noise, fit_ground_surface
 from ..matching import Candidates, Matches
@@ -178,8 +179,8 @@ class Detection(PlaneTracking):
         pd, pts, h, low = self._ground_reference(u, v, d, cam, metric, thr / c.threshold.k,
                                                  still)
         excess = d - pd
-        feet = pts - h[:, None] * metric.normal_up[None, :]
-        ground_range = row_norms(feet + metric.height * metric.normal_up[None, :])
+        feet = sub_scaled(pts, h, metric.normal_up)            # (pts - h n, by column)
+        ground_range = row_norms(add_rows(feet, metric.height * metric.normal_up))
         prev, run, smooth, nxt = self._runs(m, el, excess)
         in_range = ground_range <= c.detection.max_range_m
         ex_mean = self._temporal_excess(m, smooth, still, el.shape, thr)

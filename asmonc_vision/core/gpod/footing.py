@@ -9,7 +9,8 @@ from typing import cast
 import cv2
 import numpy as np
 
-from ..camera import MetricPlane, StereoCamera, columns, ground_axes, plane_disparity
+from ..camera import (MetricPlane, StereoCamera, columns, ground_axes, plane_disparity,
+                      sub_rows, sub_scaled)
 from . import kernels_geometry as kg
 
 #: An obstacle string's foot is where its matched run, followed down the image from its
@@ -73,7 +74,7 @@ class _FrameContext:
         """(N, 2) ground coordinates of the feet (projections on the plane) of (N, 3)
         points of the left optical frame."""
         n = self.metric.normal_up
-        g = points - self.metric.signed_height(points)[:, None] * n[None, :] - self.origin
+        g = sub_rows(sub_scaled(points, self.metric.signed_height(points), n), self.origin)
         return columns(g @ self.fwd, g @ self.lft)
 
     def to_image(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
