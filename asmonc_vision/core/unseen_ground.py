@@ -196,13 +196,15 @@ class UnseenGroundMonitor:
         left; metres) where the left-image pixels (u, v) (N,) look at the plane; NaN for
         pixels at or above the horizon."""
         n = np.asarray(metric.normal_up, float)
-        r = columns((np.asarray(u, float) - cam.cx) / cam.f,
-                    (np.asarray(v, float) - cam.cy) / cam.f, np.ones(np.shape(u)))
-        nr = r @ n
+        a = (np.asarray(u, float) - cam.cx) / cam.f
+        b = (np.asarray(v, float) - cam.cy) / cam.f
+        one = np.ones(np.shape(u))
+        nr = columns(a, b, one) @ n
         with np.errstate(divide='ignore', invalid='ignore'):
             t = np.where(nr < -1e-9, -metric.height / nr, np.nan)
         origin, fwd, lft = ground_axes(metric)
-        g = r * t[:, None] - origin
+        # r t - origin (r = (a, b, 1)), column by column: the same products and differences
+        g = columns(a * t - origin[0], b * t - origin[1], one * t - origin[2])
         return columns(g @ fwd, g @ lft)
 
     def cells_in_view(self, cam: StereoCamera, metric: MetricPlane) -> np.ndarray:
