@@ -153,6 +153,7 @@ def contrary_rival_share(m: Matches, pd: np.ndarray, thr: np.ndarray,
     r = m.rival_ratio.astype(np.float64)
     rd = m.rival_d.astype(np.float64)
     total = 1.0 + np.bincount(j, weights=r, minlength=k)
-    contrary = np.where(raised[j], rd <= pd[j] + thr[j], rd >= pd[j] - thr[j])
+    pd_j, thr_j = pd[j], thr[j]
+    contrary = np.where(raised[j], rd <= pd_j + thr_j, rd >= pd_j - thr_j)
     return (np.bincount(j[contrary], weights=r[contrary], minlength=k) / total
             ).astype(np.float32)
