@@ -55,6 +55,11 @@ _FACE_SEEN_THROUGH = 0.5
 #: ... and so within the widest gap between a face's successive feet, if at least this
 #: wide (metres: a gap one could walk through, `GpodConfig.detection.part_radius_m`'s default).
 _FACE_GAP_SEEN_M = 0.35
+#: `view_edge_points` samples the extension at these multiples of span / 64 (as
+#: np.linspace(0, span, 65)[1:] does, the last at the span itself), and refines between
+#: two samples at these fractions.
+_SPAN_STEPS = np.arange(1, 65, dtype=np.float64)
+_FINE_STEPS = np.linspace(0.0, 1.0, 33)
 #: Least span (metres) of the feet of two obstacles taken for one face (`face_gap_points`).
 _GAP_MIN_SPAN_M = 1.0
 #: A lone silhouette's face (`lone_face_points`): a low obstacle (at most
@@ -190,7 +195,8 @@ def view_edge_points(xy: np.ndarray, group: np.ndarray, n_groups: int, to_image,
         u0, v0 = (w[0] for w in to_image(e[None]))
         if not (0.0 <= u0 <= width - 1 and 0.0 <= v0 <= height - 1):
             continue
-        t = np.linspace(0.0, span, 65)[1:]
+        t = _SPAN_STEPS * (span / 64.0)     # np.linspace(0.0, span, 65)[1:] (span > 0)
+        t[-1] = span
         pts = e[None] + t[:, None] * step[None]
         # Stay in front of the camera (ground points behind it have no image).
         pts = pts[pts[:, 0] > 0.05]
@@ -204,7 +210,7 @@ def view_edge_points(xy: np.ndarray, group: np.ndarray, n_groups: int, to_image,
         q = e
         if j > 0:
             # Refine between the last sample inside and the first outside.
-            fine = pts[j - 1][None] + np.linspace(0.0, 1.0, 33)[:, None] * (pts[j] - pts[j - 1])
+            fine = pts[j - 1][None] + _FINE_STEPS[:, None] * (pts[j] - pts[j - 1])
             uf, vf = to_image(fine)
             inside = (uf >= 0.0) & (uf <= width - 1) & (vf <= height - 1)
             q = fine[max(int(np.argmin(inside)) - 1, 0)]
