@@ -278,7 +278,8 @@ class EvidenceMap:
                 flat: np.ndarray, cells: np.ndarray) -> np.ndarray | float:
         """How much a pair's evidence counts in each of ``cells`` (K,): the weight of the
         surest of its pixels there (``sel`` (M,) bool over the pixels ``inside`` the grid,
-        ``flat`` (S,) the cells of the selected ones), with ``weigh_by_rivals``; else 1.
+        (M,) indices of ev's, ``flat`` (S,) the cells of the selected ones), with
+        ``weigh_by_rivals``; else 1.
         The pixels of one pair share their errors (a grate's bars are all a period off
         alike): the cell's evidence is as sure as its surest match."""
         if ev.weight is None or not self.config.weigh_by_rivals:
@@ -320,6 +321,7 @@ class EvidenceMap:
         c = self.config
         w = self.to_world(ev.xy)
         flat, inside = self._cells(w)
+        inside = np.flatnonzero(inside)         # (one selection for the arrays below)
         flat, w, kind = flat[inside], w[inside], ev.kind[inside]
         h, sh = ev.height[inside], ev.sigma_h[inside]
         hit = c.hit_logodds * (c.still_hit_factor if still else 1.0)
@@ -745,6 +747,8 @@ def _counted(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     ascending and how often each occurs), without np.unique's overhead."""
     if x.size == 0:
         return x[:0], np.zeros(0, np.int64)
+    if x.min() == x.max():                  # one value (a region's cells mostly are)
+        return x[:1], np.array([x.size], np.int64)
     s = np.sort(x)
     head = np.flatnonzero(np.concatenate((_HEAD, s[1:] != s[:-1])))
     return s[head], np.diff(np.append(head, s.size))
