@@ -474,7 +474,7 @@ def fit_ground_surface(points: np.ndarray, plane: MetricPlane,
         sz = np.broadcast_to(np.asarray(depth_sd, float), s.shape)
         z = np.where(np.abs(pts[:, 2]) > 1e-9, pts[:, 2], 1e-9)
         e_s, e_h = sz * (pts @ fwd) / z, sz * (pts @ plane.normal_up) / z
-    use = np.abs(lat) <= c.half_width_m
+    use = np.flatnonzero(np.abs(lat) <= c.half_width_m)    # (one selection for five)
     feats = (s[use], lat[use], h[use], e_s[use], e_h[use])
     s, lat, h = feats[:3]
     first = _first_knot(s, h, c)
