@@ -511,7 +511,8 @@ class EvidenceMap:
         # widened by one bin either side)
         r, b = np.hypot(g[:, 0], g[:, 1]), _bearing_bin(g)
         seen = (ev.kind == GROUND) | (ev.kind == RAISED)
-        er, eb = np.hypot(ev.xy[seen, 0], ev.xy[seen, 1]), _bearing_bin(ev.xy[seen])
+        xy_seen = ev.xy[seen]
+        er, eb = np.hypot(xy_seen[:, 0], xy_seen[:, 1]), _bearing_bin(xy_seen)
         far = np.full(_BINS + 2, -np.inf)
         np.maximum.at(far, eb + 1, er)
         near = np.full(_BINS + 2, np.inf)
