@@ -243,8 +243,8 @@ def ground_axes(plane: MetricPlane) -> tuple[np.ndarray, np.ndarray, np.ndarray]
         (origin, fwd, left), (3,) float64 each: the point of the plane below the left
         camera (metres), the walking direction (the optical axis projected onto the
         plane) and the direction to the left (REP 103), unit vectors. The arrays of a
-        plane asked for before (the same normal and height) are returned again: they
-        are read, never written.
+        plane asked for before (the same normal and height) are returned again,
+        read-only.
     """
     n = np.asarray(plane.normal_up, float)
     key = n.tobytes() + np.float64(plane.height).tobytes()
@@ -252,7 +252,10 @@ def ground_axes(plane: MetricPlane) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     if axes is None:
         if len(_AXES) >= _AXES_KEPT:
             _AXES.clear()
-        axes = _AXES[key] = _ground_axes(n, plane.height)
+        axes = _ground_axes(n, plane.height)
+        for a in axes:
+            a.setflags(write=False)     # shared between callers: read-only
+        _AXES[key] = axes
     return axes
 
 
