@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import surface_kernels
 from .camera import MetricPlane, StereoCamera, metric_from_plane, vector_norm
 from .config import check_fields, param
 
@@ -276,17 +277,12 @@ def fast_median(x: np.ndarray) -> float:
 
 def fast_percentile(x: np.ndarray, q: float) -> float:
     """``np.percentile(x, q)`` of a non-empty 1-D array of finite values, q in [0, 100]
-    (numpy's 'linear' method and arithmetic: the order statistics around (n - 1) q / 100
-    and its interpolation between them), without its overhead."""
+    (numpy's 'linear' method and arithmetic, `surface_kernels.sorted_percentile`, on the
+    array partitioned around the two order statistics it reads), without a sort."""
     n = x.shape[0]
-    virtual = (n - 1) * (q / 100.0)
-    lo = math.floor(virtual)
-    gamma = virtual - lo
-    lo, hi = min(lo, n - 1), min(lo + 1, n - 1)
-    p = np.partition(x, (lo, hi))
-    a, b = p[lo], p[hi]
-    diff = b - a
-    return float(b - diff * (1.0 - gamma) if gamma >= 0.5 else a + diff * gamma)
+    lo = min(math.floor((n - 1) * (q / 100.0)), n - 1)
+    p = np.partition(x, (lo, min(lo + 1, n - 1)))
+    return float(surface_kernels.sorted_percentile(p, q / 100.0))
 
 
 def plane_is_plausible(cam: StereoCamera, abc: np.ndarray, *, min_height_m: float = 0.1,

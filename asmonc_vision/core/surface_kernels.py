@@ -76,8 +76,9 @@ def _percentile(x, q):
     return nb_sorted_percentile(np.sort(x), q)
 
 
-def _sorted_percentile(xs, q):
-    """`_percentile` of the sorted array ``xs``."""
+def sorted_percentile(xs, q):
+    """`_percentile` of the array ``xs``, sorted (or partitioned so that the two order
+    statistics around (n - 1) q are in place)."""
     n = xs.shape[0]
     virtual = (n - 1) * q
     lo = int(math.floor(virtual))
@@ -360,7 +361,7 @@ def knot_sums_kernel(s, h, ks, kz, gate):
 
 nb_pairwise_sum = _jit(pairwise_sum)
 nb_total = _jit(_total)
-nb_sorted_percentile = _jit(_sorted_percentile)
+nb_sorted_percentile = _jit(sorted_percentile)
 nb_percentile = _jit(_percentile)
 nb_sorted_median = _jit(_sorted_median)
 nb_median = _jit(_median)
