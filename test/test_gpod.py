@@ -2784,3 +2784,103 @@ def test_replaced_is_dataclasses_replace():
     assert ob.track_id == 0 and ob.confidence == 0.5
     with pytest.raises(TypeError):
         replaced(ob, colour=1)
+
+
+def test_face_gap_points_with_a_split_are_each_sets_own():
+    """`face_gap_points` of two sets of obstacles at once (``split``) gives each set's
+    points of a call on that set alone, byte for byte: no pair across the sets."""
+    from asmonc_vision.core.gpod import face_gap_points
+    rng = np.random.default_rng(5)
+    front = np.array([[x, y] for x in (1.6, 2.0, 2.4, 2.8) for y in (-0.6, -0.3, 0.0, 0.3, 0.6)])
+    for trial in range(40):
+        n_a, n_b = int(rng.integers(1, 5)), int(rng.integers(1, 5))
+        sets = []
+        for n in (n_a, n_b):
+            # walls across the path in parts, blank middles, some noise
+            sizes = rng.integers(1, 5, n)
+            group = np.repeat(np.arange(n), sizes)
+            y = np.concatenate([rng.uniform(-1.5, 1.5) + 0.3 * np.arange(k) for k in sizes])
+            x = 3.0 + rng.normal(0.0, 0.01 if trial % 2 else 0.2, y.size)
+            xy = np.column_stack([x, y])
+            q = np.array([xy[group == k][np.argmin(np.hypot(*xy[group == k].T))]
+                          for k in range(n)])
+            sets.append((xy, group, q))
+        (xa, ga, qa), (xb, gb, qb) = sets
+        both = face_gap_points(np.vstack([xa, xb]), np.concatenate([ga, gb + n_a]),
+                               n_a + n_b, np.vstack([qa, qb]), front, split=n_a)
+        alone = np.vstack([face_gap_points(xa, ga, n_a, qa, front),
+                           face_gap_points(xb, gb, n_b, qb, front)])
+        assert both.tobytes() == alone.tobytes(), trial
+        # without a split, the same sets as one may join across them
+        assert face_gap_points(np.vstack([xa, xb]), np.concatenate([ga, gb + n_a]),
+                               n_a + n_b, np.vstack([qa, qb]), front).shape == both.shape
+
+
+def _parts_apart(det, whole, idx, label, radius, sign, min_pixels, hh, g2, m, excess, cam,
+                 metric, fwd, lft):
+    """The wholes and parts described by two `_describe` calls (the former `_parts`):
+    the reference of the one call with a split."""
+    from asmonc_vision.core.gpod.faces import _ground_points, described_by_part
+    fine = cluster_points_2d(g2, m.string_id[idx], radius)
+    pairs = np.unique(label * (int(fine.max()) + 1) + fine)
+    n_parts = np.bincount(pairs // (int(fine.max()) + 1), minlength=int(label.max()) + 1)
+    sel = n_parts[label] > 1
+    if not sel.any():
+        return whole, []
+    _, part = np.unique(fine[sel], return_inverse=True)
+    parts = det._describe(idx[sel], part.astype(np.int64), sign, min_pixels, hh[sel],
+                          g2[sel], m, excess, cam, metric, fwd, lft)
+    owner = np.zeros(len(parts), np.int64)
+    owner[part] = label[sel]
+    ctx = det._ctx
+    whole = described_by_part(whole, parts, owner, radius, metric.normal_up,
+                              lambda: ctx.ground_xy)
+    at, p_at = _ground_points(whole), _ground_points(parts)
+    far = np.hypot(p_at[:, None, 0] - at[None, :, 0],
+                   p_at[:, None, 1] - at[None, :, 1]).min(axis=1) > radius
+    return whole, [p for p, f in zip(parts, far.tolist()) if f]
+
+
+def test_wholes_and_parts_described_at_once_equal_two_descriptions(monkeypatch):
+    """`Detection._parts` describes the wholes and their parts in one `_describe` (the
+    clusters split in two sets for the placement rules): the obstacles are those of a
+    description of the wholes and one of the parts, field for field and byte for byte,
+    on the walk_obstacles bag's frames (boxes and poles in several parts)."""
+    from conftest import BAGS
+    from asmonc_vision.core.gpod import detection as gdet
+    from asmonc_vision.eval import bench
+    from asmonc_vision.io.frames import load_frames
+    frames = load_frames(BAGS / 'walk_obstacles', 40)
+    ego = bench.egomotion_results(frames)
+    seen = {'frames': 0, 'split': 0, 'obstacles': 0}
+    merged = gdet.Detection._parts
+
+    def check(self, idx, label, radius, sign, min_pixels, hh, g2, m, excess, cam, metric,
+              fwd, lft):
+        got = merged(self, idx, label, radius, sign, min_pixels, hh, g2, m, excess, cam,
+                     metric, fwd, lft)
+        whole = self._describe(idx, label, sign, min_pixels, hh, g2, m, excess, cam, metric,
+                               fwd, lft)
+        want = whole
+        if whole:
+            w, parts = _parts_apart(self, whole, idx, label, radius, sign, min_pixels, hh,
+                                    g2, m, excess, cam, metric, fwd, lft)
+            want = w + parts
+            seen['split'] += bool(parts) or len(w) != len(whole)
+        seen['frames'] += 1
+        seen['obstacles'] += len(got)
+        assert len(got) == len(want)
+        for a, b in zip(got, want):
+            for f in dataclasses.fields(a):
+                x, y = getattr(a, f.name), getattr(b, f.name)
+                if isinstance(x, np.ndarray):
+                    assert x.dtype == y.dtype and x.tobytes() == y.tobytes(), f.name
+                elif isinstance(x, float):
+                    assert np.float64(x).tobytes() == np.float64(y).tobytes(), f.name
+                else:
+                    assert x == y, f.name
+        return got
+
+    monkeypatch.setattr(gdet.Detection, '_parts', check)
+    bench.run_method(frames, 'gpod', map_enabled=False, egomotion=True, ego_results=ego)
+    assert seen['frames'] >= 20 and seen['split'] >= 5 and seen['obstacles'] >= 40, seen

@@ -355,31 +355,50 @@ class Detection(PlaneTracking):
         hh = h[idx]
         g2, fwd, lft = ground_coords(pts[idx], hh, metric, axes=True)
         label = cluster_points_2d(g2, m.string_id[idx], radius)
-        out = self._describe(idx, label, sign, min_pixels, hh, g2, m, excess, cam, metric,
-                             fwd, lft)
         pr = self.config.detection.part_radius_m
-        if sign > 0 and 0.0 < pr < radius and out:
-            out, parts = self._parts(out, idx, label, pr, sign, min_pixels, hh, g2, m,
-                                     excess, cam, metric, fwd, lft)
-            out.extend(parts)
-        return out
+        if sign > 0 and 0.0 < pr < radius:
+            return self._parts(idx, label, pr, sign, min_pixels, hh, g2, m, excess, cam,
+                               metric, fwd, lft)
+        return self._describe(idx, label, sign, min_pixels, hh, g2, m, excess, cam, metric,
+                              fwd, lft)
 
-    def _parts(self, whole: list[GpodObstacle], idx, label, radius: float, sign: float,
-               min_pixels: int, hh, g2, m: Matches, excess, cam, metric, fwd, lft
-               ) -> tuple[list[GpodObstacle], list[GpodObstacle]]:
-        """The whole obstacles as their parts describe them (`described_by_part`), and
-        the parts (clustered at ``radius``) of the obstacles made of several, as
-        obstacles of their own: those whose nearest point lies more than ``radius`` from
-        every whole obstacle's (the nearest part is the whole's report already)."""
+    def _parts(self, idx, label, radius: float, sign: float, min_pixels: int, hh, g2,
+               m: Matches, excess, cam, metric, fwd, lft) -> list[GpodObstacle]:
+        """The whole obstacles (the clusters ``label`` of the pixels ``idx``) as their
+        parts describe them (`described_by_part`), followed by the parts (clustered at
+        ``radius``) of the obstacles made of several, as obstacles of their own: those
+        whose nearest point lies more than ``radius`` from every whole obstacle's (the
+        nearest part is the whole's report already). None of either when no whole is
+        kept (``min_pixels``).
+
+        The wholes and the parts are described in one `_describe` of both pixel sets
+        (the parts' pixels again, their clusters numbered after the wholes'): each
+        description is its cluster's own, and the placement rules that weigh clusters
+        against each other (`Placement.split`) do so within the wholes and within the
+        parts only, so both are those of a description of each set on its own."""
         fine = cluster_points_2d(g2, m.string_id[idx], radius)
-        pairs = np.unique(label * (int(fine.max()) + 1) + fine)
-        n_parts = np.bincount(pairs // (int(fine.max()) + 1), minlength=int(label.max()) + 1)
+        n_fine = int(fine.max()) + 1
+        n_c = int(label.max()) + 1
+        # parts per whole: the distinct (whole, part) pairs, counted without a sort
+        pair_seen = np.zeros(n_c * n_fine, bool)
+        pair_seen[label * n_fine + fine] = True
+        n_parts = np.count_nonzero(pair_seen.reshape(n_c, n_fine), axis=1)
         sel = n_parts[label] > 1
         if not sel.any():
-            return whole, []
-        _, part = np.unique(fine[sel], return_inverse=True)
-        parts = self._describe(idx[sel], part.astype(np.int64), sign, min_pixels, hh[sel],
-                               g2[sel], m, excess, cam, metric, fwd, lft)
+            return self._describe(idx, label, sign, min_pixels, hh, g2, m, excess, cam,
+                                  metric, fwd, lft)
+        # the parts numbered 0.. in the order of their fine cluster (np.unique's inverse)
+        used = np.zeros(n_fine, np.int64)
+        used[fine[sel]] = 1
+        part = (np.cumsum(used) - 1)[fine[sel]]
+        both = self._describe(np.concatenate((idx, idx[sel])),
+                              np.concatenate((label, part + n_c)), sign, min_pixels,
+                              np.concatenate((hh, hh[sel])), np.concatenate((g2, g2[sel])),
+                              m, excess, cam, metric, fwd, lft, split=n_c)
+        n_whole = int(np.count_nonzero(np.bincount(label, minlength=n_c) >= min_pixels))
+        whole, parts = both[:n_whole], both[n_whole:]
+        if not whole:
+            return whole
         owner = np.zeros(len(parts), np.int64)
         owner[part] = label[sel]
         ctx = cast(_FrameContext, self._ctx)          # (set by this frame's _detect)
@@ -388,10 +407,10 @@ class Detection(PlaneTracking):
         at, p_at = _ground_points(whole), _ground_points(parts)
         far = np.hypot(p_at[:, None, 0] - at[None, :, 0],
                        p_at[:, None, 1] - at[None, :, 1]).min(axis=1) > radius
-        return whole, [p for p, f in zip(parts, far.tolist()) if f]
+        return whole + [p for p, f in zip(parts, far.tolist()) if f]
 
     def _obstacle_feet(self, idx: np.ndarray, label: np.ndarray, sid: np.ndarray, n_c: int,
-                       m: Matches, height: np.ndarray
+                       m: Matches, height: np.ndarray, split: int | None = None
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Range and bearing (n_c,) of the nearest point of each obstacle cluster, and
         (n_c, 2) its ground coordinates from the obstacle's own strings alone (the ROI's
@@ -410,6 +429,9 @@ class Detection(PlaneTracking):
         its search; the result is kept only where it is nearer than without them (a
         silhouette can reveal a hidden near corner, not move the obstacle away). They
         never change which obstacles exist, their pixels, ROI, height or confidence.
+
+        ``split``: the clusters below it and those from it on are two sets placed as each
+        would be on its own (`Placement.split`; None: one set).
         """
         ctx = cast(_FrameContext, self._ctx)          # (set by this frame's _detect)
         # The lowest obstacle pixel of each (cluster, string): where its foot search starts.
@@ -433,7 +455,7 @@ class Detection(PlaneTracking):
             weak = (xw, sw, ctx.weak_top, (uw < _BORDER_PX) | (uw > ctx.cam.width - 1 - _BORDER_PX))
         noise = self._image_noise
         pl = Placement(ctx=ctx, xy=xy, sr=sr, group=g_lab, n=n_c, height=height,
-                       at_border=at_border, weak=weak,
+                       at_border=at_border, weak=weak, split=split,
                        lone_floor=(_LONE_FLOOR_SIGMAS * _SOBEL_NOISE_GAIN * noise
                                    if math.isfinite(noise) else 0.0))
         q = q0
@@ -476,7 +498,7 @@ class Detection(PlaneTracking):
         return r_near, bearing, g2
 
     def _describe(self, idx, label, sign, min_pixels, hh, g2, m: Matches, excess, cam,
-                  metric, fwd, lft) -> list[GpodObstacle]:
+                  metric, fwd, lft, split: int | None = None) -> list[GpodObstacle]:
         """GpodObstacles of the clusters ``label`` (0..C-1) of the pixels ``idx``, all at
         once (per-cluster quantiles from one sort by (cluster, value)).
 
@@ -487,6 +509,10 @@ class Detection(PlaneTracking):
         ray continued down to the drop's depth; the second nearest), in the median
         direction of the nearest feet of its edge strings (one vote per string) within
         ``max(_NEAR_ZONE_M, _NEAR_ZONE_FRACTION * range)`` of that range.
+
+        ``split`` (obstacles): the clusters below it and those from it on are two sets
+        (`_parts`' wholes and parts) whose obstacles are placed as each set's own would be
+        (`_obstacle_feet`); None: one set.
         """
         c = self.config
         n_c = int(label.max()) + 1
@@ -495,7 +521,7 @@ class Detection(PlaneTracking):
         sid_all = m.string_id[idx]
         if sign > 0:
             r_near, bearing, q_roi = self._obstacle_feet(idx, label, sid_all, n_c, m,
-                                                              height)
+                                                         height, split)
         else:
             r_near, bearing, g2 = self._drop_feet(idx, label, hh, count, sid_all, cam, metric)
         foot = (-metric.height * metric.normal_up[None, :]

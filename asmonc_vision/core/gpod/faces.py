@@ -421,7 +421,7 @@ def lone_face_points(ctx: _FrameContext, xy: np.ndarray, group: np.ndarray, n_gr
 
 
 def face_gap_points(xy: np.ndarray, group: np.ndarray, n_groups: int, q: np.ndarray,
-                    ground_xy) -> np.ndarray:
+                    ground_xy, split: int | None = None) -> np.ndarray:
     """The nearest point of a straight face seen as two obstacles: a wall across the
     path whose middle has no edges to match (plain paint, a blank door) is found at its
     textured parts on either side, each placed at its own nearest foot, while the face's
@@ -442,6 +442,9 @@ def face_gap_points(xy: np.ndarray, group: np.ndarray, n_groups: int, q: np.ndar
         group: (S,) obstacle of each foot, 0..n_groups-1.
         q: (n_groups, 2) each obstacle's nearest point so far.
         ground_xy: (G, 2) visible ground, or a callable returning it.
+        split: None, or the first obstacle of a second set: only pairs within a set
+            (both below ``split``, or neither) are faces (each set's points as its own
+            call would give them).
     Returns:
         (n_groups, 2) the face's nearest point for the obstacles to move there, NaN for
         the others.
@@ -463,6 +466,8 @@ def face_gap_points(xy: np.ndarray, group: np.ndarray, n_groups: int, q: np.ndar
     na, nb = counts[ia], counts[ib]
     ok = (na > 0) & (nb > 0) & (na + nb >= _FACE_MIN_FEET + 1) & np.isfinite(r_q[ia]) \
         & np.isfinite(r_q[ib])
+    if split is not None:
+        ok &= (ia < split) == (ib < split)
     n = np.maximum(na + nb, 1.0)
     c = (na[:, None] * mean[ia] + nb[:, None] * mean[ib]) / n[:, None]
     da, db = mean[ia] - c, mean[ib] - c

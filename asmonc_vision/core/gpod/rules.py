@@ -349,6 +349,17 @@ class Placement:
     #: (feet (W, 2), standard errors (W,), top heights (W,), at the border (W,))
     weak: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None
     lone_floor: float           # the lone-face search's least edge evidence
+    #: the first cluster of a second set (None: one set): clusters 0 .. split-1 and
+    #: split .. n-1 are placed as each set would be on its own (the rules that weigh
+    #: clusters against each other, ``silhouettes`` and ``face_gap``, do so within a set)
+    split: int | None = None
+
+    def sets(self) -> tuple[tuple[int, int], ...]:
+        """The sets of clusters as (first, end) ranges: (0, n), or (0, split) and
+        (split, n)."""
+        if self.split is None:
+            return ((0, self.n),)
+        return ((0, self.split), (self.split, self.n))
 
 
 PlacementRule = Callable[[GpodConfig, Placement, np.ndarray], np.ndarray]
@@ -375,12 +386,27 @@ def _silhouettes(c: GpodConfig, pl: Placement, q: np.ndarray) -> np.ndarray:
         return q
     xw, sw, top, bd = pl.weak
     ctx = pl.ctx
-    lw = silhouette_owners(xw, top, pl.xy, pl.group, pl.height, c.detection.cluster_radius_m,
-                           lambda: ctx.ground_xy, ctx.metric.height, sw, pl.sr)
-    keep = lw >= 0
-    if not keep.any():
-        return q
-    xy_w, sr_w, lab_w, bd_w = xw[keep], sw[keep], lw[keep], bd[keep]
+    if pl.split is None:
+        lw = silhouette_owners(xw, top, pl.xy, pl.group, pl.height,
+                               c.detection.cluster_radius_m, lambda: ctx.ground_xy,
+                               ctx.metric.height, sw, pl.sr)
+        keep = lw >= 0
+        if not keep.any():
+            return q
+        xy_w, sr_w, lab_w, bd_w = xw[keep], sw[keep], lw[keep], bd[keep]
+    else:
+        # each set's owners among its own clusters: a candidate may be one of each
+        got = []
+        for lo, hi in pl.sets():
+            own = (pl.group >= lo) & (pl.group < hi)
+            lw = silhouette_owners(xw, top, pl.xy[own], pl.group[own] - lo, pl.height[lo:hi],
+                                   c.detection.cluster_radius_m, lambda: ctx.ground_xy,
+                                   ctx.metric.height, sw, pl.sr[own])
+            keep = lw >= 0
+            got.append((xw[keep], sw[keep], lw[keep] + lo, bd[keep]))
+        if not any(g[2].size for g in got):
+            return q
+        xy_w, sr_w, lab_w, bd_w = (np.concatenate([g[i] for g in got]) for i in range(4))
     # only the obstacles with candidates are searched again
     ks = np.unique(lab_w)
     sub = np.full(pl.n, -1, np.int64)
@@ -406,8 +432,8 @@ def _view_edge(c: GpodConfig, pl: Placement, q: np.ndarray) -> np.ndarray:
 def _face_gap(c: GpodConfig, pl: Placement, q: np.ndarray) -> np.ndarray:
     """A face seen as two obstacles (its middle has no edges): its nearest point
     (`face_gap_points`)."""
-    return _nearer(q, face_gap_points(pl.xy, pl.group, pl.n, q, lambda: pl.ctx.ground_xy),
-                   False)
+    return _nearer(q, face_gap_points(pl.xy, pl.group, pl.n, q, lambda: pl.ctx.ground_xy,
+                                      pl.split), False)
 
 
 def _lone_face(c: GpodConfig, pl: Placement, q: np.ndarray) -> np.ndarray:
