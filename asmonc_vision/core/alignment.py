@@ -53,6 +53,7 @@ import cv2
 import numpy as np
 
 from asmonc_vision.core.config import check_fields, param
+from .npfast import flat_nonzero
 
 #: chi-squared (2 degrees of freedom) at 0.999: a measurement farther than this from the
 #: tracked misalignment is an outlier, or the rig has changed (`VerticalAlignment.update`).
@@ -266,7 +267,7 @@ def corner_displacement_steps(left: np.ndarray, right: np.ndarray, max_corners: 
         yield
         d2, ok2 = _lk_both_ways(left, right, p[i:i + chunk], guess[i:i + chunk], 2,
                                 match_error_px, max_px)
-        sel = np.flatnonzero(ok2) + i
+        sel = flat_nonzero(ok2) + i
         disp[sel], ok[i:i + chunk] = d2[ok2], ok[i:i + chunk] | ok2
     return pts[ok], disp[ok]
 

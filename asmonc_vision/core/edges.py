@@ -24,6 +24,7 @@ import cv2
 import numpy as np
 
 from .jit import jit, warmed
+from .npfast import flat_nonzero
 
 #: Sobel 3x3 normalisation: the kernel sums |weights| to 8 on each side, so that
 #: ``sobel / 8`` is the intensity derivative in grey levels per pixel.
@@ -343,7 +344,7 @@ def _edges_numpy(c, left, right, thr_c, thr: float, h: int, w: int, scale, gx_fl
                  mag_flat, cos_max: float, min_string_length: int) -> EdgeMap:
     """`detect_vertical_edges`'s numpy path from the row maxima on: the edges, their
     sub-pixel positions, strength and strings (``scale``: the integer Sobel path's)."""
-    k = np.flatnonzero((c > left) & (c >= right) & (c >= thr_c))
+    k = flat_nonzero((c > left) & (c >= right) & (c >= thr_c))
     vv = (k // (w - 4) + 1).astype(np.int32)
     uu = (k % (w - 4) + 2).astype(np.int32)
     flat = vv.astype(np.intp) * w + uu
@@ -359,7 +360,7 @@ def _edges_numpy(c, left, right, thr_c, thr: float, h: int, w: int, scale, gx_fl
         mr = mag_flat[flat + 1]
     keep = gxe * gxe >= (cos_max * cos_max) * (gxe * gxe + gye * gye)
     if not keep.all():
-        sel = np.flatnonzero(keep)
+        sel = flat_nonzero(keep)
         vv, uu, gxe, gye, ml, mr = (a[sel] for a in (vv, uu, gxe, gye, ml, mr))
     mc = np.abs(gxe)
     denom = ml - 2.0 * mc + mr          # < 0 at a strict maximum
@@ -372,7 +373,7 @@ def _edges_numpy(c, left, right, thr_c, thr: float, h: int, w: int, scale, gx_fl
     if min_string_length > 1 and sid.size:
         keep = slen[sid] >= min_string_length
         if not keep.all():
-            sel = np.flatnonzero(keep)
+            sel = flat_nonzero(keep)
             kept_strings = np.zeros(slen.shape[0], bool)
             kept_strings[sid[sel]] = True
             new_id = np.cumsum(kept_strings, dtype=np.int32) - 1

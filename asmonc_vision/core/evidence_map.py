@@ -86,6 +86,7 @@ from asmonc_vision.core.camera import MetricPlane, StereoCamera, columns, sub_ro
 from asmonc_vision.core.map_evidence import (DROP, GROUND, RAISED, PairEvidence, ground_frame,
                                              ground_motion)
 from asmonc_vision.core.map_settings import EvidenceMapConfig
+from .npfast import flat_nonzero
 
 
 @dataclass(frozen=True)
@@ -321,7 +322,7 @@ class EvidenceMap:
         c = self.config
         w = self.to_world(ev.xy)
         flat, inside = self._cells(w)
-        inside = np.flatnonzero(inside)         # (one selection for the arrays below)
+        inside = flat_nonzero(inside)         # (one selection for the arrays below)
         flat, w, kind = flat[inside], w[inside], ev.kind[inside]
         h, sh = ev.height[inside], ev.sigma_h[inside]
         hit = c.hit_logodds * (c.still_hit_factor if still else 1.0)
@@ -439,7 +440,7 @@ class EvidenceMap:
         if c.ray_logodds <= 0 or ground_xy.shape[0] == 0 or self._plane is None:
             return none
         Lr, hx, hP = self.L_r.reshape(-1), self.h_x.reshape(-1), self.h_P.reshape(-1)
-        cells = np.flatnonzero((Lr > 0) & np.isfinite(hP))
+        cells = flat_nonzero((Lr > 0) & np.isfinite(hP))
         if not cells.size:
             return none
         if ground_xy.shape[0] > c.ray_max_points:
@@ -591,7 +592,7 @@ class EvidenceMap:
     def _confirmed_cells(self, drop: bool = False) -> np.ndarray:
         """(K,) int64 the flat indices of the cells `confirmed` reports, ascending (from
         the cells with two views alone)."""
-        tv = np.flatnonzero(self.two_views)
+        tv = flat_nonzero(self.two_views)
         L = (self.L_d if drop else self.L_r).reshape(-1)[tv]
         other = (self.L_r if drop else self.L_d).reshape(-1)[tv]
         return tv[(L >= self.config.report_logodds) & (L >= other)]
@@ -670,7 +671,7 @@ class EvidenceMap:
                 # the nearest point: of the cells within near_tolerance_m of the nearest
                 # range, the one at their median bearing (a face square to the line of
                 # sight is nearest where the sight line meets it, not at its noisiest cell)
-                near_set = np.flatnonzero(r <= float(r.min()) + c.near_tolerance_m)
+                near_set = flat_nonzero(r <= float(r.min()) + c.near_tolerance_m)
                 b = np.arctan2(g[near_set, 1], g[near_set, 0])
                 b_med = float(b[np.argsort(b)[(near_set.size - 1) // 2]])
                 r0 = float(r.min())
@@ -734,7 +735,7 @@ class EvidenceMap:
 #: it, and which of them are the eight
 _AROUND_DX = np.repeat(np.arange(-1, 2), 3)[None, :]
 _AROUND_DY = np.tile(np.arange(-1, 2), 3)[None, :]
-_AROUND_RING = np.flatnonzero((_AROUND_DX[0] != 0) | (_AROUND_DY[0] != 0))
+_AROUND_RING = flat_nonzero((_AROUND_DX[0] != 0) | (_AROUND_DY[0] != 0))
 #: bearings from -90 to 90 degrees in 1 degree bins (`EvidenceMap._unseen`)
 _BINS = 180
 #: `EvidenceMap._unseen`: a raised cell is in plain view when the point at this share of
@@ -751,7 +752,7 @@ def _counted(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if x.min() == x.max():                  # one value (a region's cells mostly are)
         return x[:1], np.array([x.size], np.int64)
     s = np.sort(x)
-    head = np.flatnonzero(np.concatenate((_HEAD, s[1:] != s[:-1])))
+    head = flat_nonzero(np.concatenate((_HEAD, s[1:] != s[:-1])))
     return s[head], np.diff(np.append(head, s.size))
 
 

@@ -16,6 +16,7 @@ import numpy as np
 from . import surface_kernels
 from .camera import MetricPlane, StereoCamera, metric_from_plane, vector_norm
 from .config import check_fields, param
+from .npfast import flat_nonzero
 
 #: Fitting methods accepted by :func:`fit_ground_plane`.
 METHODS = ('ransac', 'trimmed')
@@ -401,8 +402,8 @@ def fit_ground_plane(u, v, d, *, cam: StereoCamera | None = None, method: str = 
         if metric is None:
             return None
     mask = np.zeros(n, bool)
-    sel = np.flatnonzero(inl)
-    mask[np.flatnonzero(finite)[sel]] = True
+    sel = flat_nonzero(inl)
+    mask[flat_nonzero(finite)[sel]] = True
     res = df[sel] - (abc[0] * uf[sel] + abc[1] * vf[sel] + abc[2])
     sigma = float(1.4826 * fast_median(np.abs(res - fast_median(res))))
     return PlaneFit(abc=np.asarray(abc, np.float64), cov=np.asarray(cov, np.float64),
@@ -471,7 +472,7 @@ def _fit_ransac(uf, vf, df, wf, thr: float, iterations: int, refine_iterations: 
     inl = np.abs(df - (abc[0] * uf + abc[1] * vf + abc[2])) <= thr
     rounds = max(int(refine_iterations), 0) + 1
     for it in range(rounds):
-        sel = np.flatnonzero(inl)
+        sel = flat_nonzero(inl)
         if sel.size < min_features:
             return None
         fit = lsq_plane(uf[sel], vf[sel], df[sel], None if wf is None else wf[sel])

@@ -67,6 +67,7 @@ from . import surface_kernels
 from .camera import MetricPlane, StereoCamera, ground_axes, sub_rows
 from .config import check_fields, param
 from .ground_plane import fast_percentile
+from .npfast import flat_nonzero
 
 
 @dataclass(frozen=True)
@@ -474,7 +475,7 @@ def fit_ground_surface(points: np.ndarray, plane: MetricPlane,
         sz = np.broadcast_to(np.asarray(depth_sd, float), s.shape)
         z = np.where(np.abs(pts[:, 2]) > 1e-9, pts[:, 2], 1e-9)
         e_s, e_h = sz * (pts @ fwd) / z, sz * (pts @ plane.normal_up) / z
-    use = np.flatnonzero(np.abs(lat) <= c.half_width_m)    # (one selection for five)
+    use = flat_nonzero(np.abs(lat) <= c.half_width_m)    # (one selection for five)
     feats = (s[use], lat[use], h[use], e_s[use], e_h[use])
     s, lat, h = feats[:3]
     first = _first_knot(s, h, c)

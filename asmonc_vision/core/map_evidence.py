@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from asmonc_vision.core.camera import MetricPlane, StereoCamera, columns, ground_axes, sub_rows
+from .npfast import flat_nonzero
 
 @dataclass(frozen=True)
 class PairEvidence:
@@ -60,7 +61,7 @@ def pair_evidence(cam: StereoCamera, plane: MetricPlane, u: np.ndarray, v: np.nd
     v = np.asarray(v, float)
     d = np.asarray(d, float)
     # (the pixels kept, as indices: one selection for the six arrays)
-    ok = np.flatnonzero(np.isfinite(d) & (d > 0.05) & np.isfinite(u) & np.isfinite(v))
+    ok = flat_nonzero(np.isfinite(d) & (d > 0.05) & np.isfinite(u) & np.isfinite(v))
     u, v, d = u[ok], v[ok], d[ok]
     sd = np.asarray(sigma_d, float)[ok]
     kind = np.asarray(kind, np.int8)[ok]
@@ -73,7 +74,7 @@ def pair_evidence(cam: StereoCamera, plane: MetricPlane, u: np.ndarray, v: np.nd
     sigma_h = np.abs(h2 - h) + 1e-4
     g = sub_rows(pts, origin)
     xy = columns(g @ fwd, g @ left)
-    keep = np.flatnonzero((xy[:, 0] > 0) & (np.hypot(xy[:, 0], xy[:, 1]) <= max_range_m))
+    keep = flat_nonzero((xy[:, 0] > 0) & (np.hypot(xy[:, 0], xy[:, 1]) <= max_range_m))
     return PairEvidence(xy=xy[keep], height=h[keep], sigma_h=sigma_h[keep], kind=kind[keep],
                         weight=wt[keep] if wt is not None else None)
 

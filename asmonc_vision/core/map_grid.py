@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+from .npfast import flat_nonzero
 
 
 def nonzero_box(mask: np.ndarray, pad: int = 0, align: int = 1
@@ -19,10 +20,10 @@ def nonzero_box(mask: np.ndarray, pad: int = 0, align: int = 1
     each side and clipped to the grid: (y0, y1, x0, x1), rows ``y0:y1`` and columns
     ``x0:x1``; ``y0`` and ``x0`` rounded down to a multiple of ``align``. None when the
     mask is all zero."""
-    rows = np.flatnonzero(mask.any(axis=1))
+    rows = flat_nonzero(mask.any(axis=1))
     if not rows.size:
         return None
-    cols = np.flatnonzero(mask.any(axis=0))
+    cols = flat_nonzero(mask.any(axis=0))
     y0, x0 = max(int(rows[0]) - pad, 0), max(int(cols[0]) - pad, 0)
     y0 -= y0 % align
     x0 -= x0 % align
@@ -68,7 +69,7 @@ def label_regions(mask: np.ndarray, join_cells: int, whole: bool = False
         m8 = cv2.dilate(m8, np.ones((k, k), np.uint8))
     _, lab = cv2.connectedComponents(m8, connectivity=8)
     flat = np.where(sub, lab, 0).reshape(-1)
-    local = np.flatnonzero(flat)
+    local = flat_nonzero(flat)
     if not local.size:
         return []
     order = np.argsort(flat[local], kind='stable')
@@ -76,7 +77,7 @@ def label_regions(mask: np.ndarray, join_cells: int, whole: bool = False
     w = x1 - x0
     cells = (local // w + y0) * n1 + (local % w + x0)
     cells = cells[order]
-    starts = np.flatnonzero(np.concatenate(([True], labels[1:] != labels[:-1])))
+    starts = flat_nonzero(np.concatenate(([True], labels[1:] != labels[:-1])))
     return np.split(cells, starts[1:])
 
 

@@ -23,6 +23,7 @@ import numpy as np
 
 from asmonc_vision.core.jit import jit, warmed
 from asmonc_vision.core.map_evidence import DROP, RAISED
+from asmonc_vision.core.npfast import flat_nonzero
 
 
 def rays_kernel(p, top, gh, R, height, lateral_m, stop_m):
@@ -209,7 +210,7 @@ class PixelCounts:
         n_sure = np.bincount(flat[sure], minlength=n2)
         self.pair = n_r + n_d
         return (n_r, n_d, n_g, n_sure,
-                np.flatnonzero(n_r), np.flatnonzero(n_d), np.flatnonzero(n_g))
+                flat_nonzero(n_r), flat_nonzero(n_d), flat_nonzero(n_g))
 
 
 def enter_heights(flat: np.ndarray, kind: np.ndarray, h: np.ndarray, sh: np.ndarray,

@@ -20,6 +20,7 @@ from asmonc_vision.core.evidence_map import MapObject
 from asmonc_vision.core.gpod.results import replaced
 from asmonc_vision.core.map_evidence import ground_frame
 from asmonc_vision.core.map_settings import DropSpanConfig
+from .npfast import flat_nonzero
 
 #: ids of the reports placed by the map itself are region ids offset by this (the
 #: detector's track ids of the reports it confirms stay below it)
@@ -81,7 +82,7 @@ def objects_to_obstacles(objects, cam: StereoCamera, plane: MetricPlane,
             dx = det_xy[:, None, 0] - ob.far_xy[None, :, 0]
             dy = det_xy[:, None, 1] - ob.far_xy[None, :, 1]
             dist = np.sqrt(dx * dx + dy * dy).min(axis=1)
-            cand = np.flatnonzero((dist <= attach_m) & (det_drop == ob.is_drop)
+            cand = flat_nonzero((dist <= attach_m) & (det_drop == ob.is_drop)
                                   & ~on_ground)
         if cand.size:
             for k in cand[~taken[cand]].tolist():

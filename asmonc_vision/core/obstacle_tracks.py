@@ -54,6 +54,7 @@ from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
+from .npfast import flat_nonzero
 
 #: χ²(3) 0.99 quantile: the default association gate.
 CHI2_3_99 = 11.344866730144373
@@ -256,11 +257,11 @@ class ObstacleTracker:
         self._frames += 1
         keep = self._survivors(seen, payloads, stamp, is_free, same_object, unseen)
         # Births: detections left over.
-        new = np.flatnonzero(det_track < 0)
+        new = flat_nonzero(det_track < 0)
         ids = np.arange(self._next_id, self._next_id + new.size, dtype=np.int64)
         self._next_id += int(new.size)
         index_of = np.full(t + new.size, -1, np.int64)
-        index_of[det_track[det_track >= 0]] = np.flatnonzero(det_track >= 0)
+        index_of[det_track[det_track >= 0]] = flat_nonzero(det_track >= 0)
         index_of[t:] = new
         self._x = np.concatenate([self._x, z[new]])
         self._P = np.concatenate([self._P, Rz[new]])
@@ -306,7 +307,7 @@ class ObstacleTracker:
                  payloads: Sequence[object], stamp: float) -> None:
         """The Kalman update of the detected tracks with their detections."""
         ti = det_track[det_track >= 0]
-        dj = np.flatnonzero(det_track >= 0)
+        dj = flat_nonzero(det_track >= 0)
         if not ti.size:
             return
         P = self._P[ti]
@@ -329,7 +330,7 @@ class ObstacleTracker:
         """Which tracks live on (the undetected ones coast or end; `update`'s rules)."""
         keep = np.ones(len(seen), bool)
         n = len(payloads)
-        for i in np.flatnonzero(~seen).tolist():
+        for i in flat_nonzero(~seen).tolist():
             if same_object is not None and any(same_object(self._payload[i], payloads[j])
                                                for j in range(n)):
                 self._hits[i] += 1

@@ -68,6 +68,7 @@ import cv2
 import numpy as np
 
 from .camera import MetricPlane, StereoCamera, columns, ground_axes
+from .npfast import flat_nonzero
 
 #: Depth of a corridor cell along the walking direction, metres.
 CELL_DEPTH_M = 0.25
@@ -269,7 +270,7 @@ class UnseenGroundMonitor:
             where that row is not in the image)."""
             p = origin + r[:, None, None] * fwd + lat[None, :, None] * lft   # (R, 3, 3)
             out = np.full(len(r), np.nan)
-            for j in np.flatnonzero((p[:, :, 2] > 1e-3).all(axis=1)):
+            for j in flat_nonzero((p[:, :, 2] > 1e-3).all(axis=1)):
                 u = cam.f * p[j, :, 0] / p[j, :, 2] + cam.cx
                 vi = int(round(cam.f * p[j, 1, 1] / p[j, 1, 2] + cam.cy))
                 u0 = int(max(0, np.floor(min(u[0], u[2]))))
@@ -309,14 +310,14 @@ class UnseenGroundMonitor:
         lam = np.where(trusted, self.expected, 0.0)[::-1].cumsum()[::-1]
         k = np.where(trusted, k_all, 0.0)[::-1].cumsum()[::-1]
         cells = trusted[::-1].cumsum()[::-1]
-        starts = np.flatnonzero(trusted & (cells >= MIN_CELLS) & (lam >= self.min_expected)
+        starts = flat_nonzero(trusted & (cells >= MIN_CELLS) & (lam >= self.min_expected)
                                 & (k <= self.max_ratio * lam + SLACK))
         if not len(starts):
             return None
         i = int(starts[0])
         # the band's far end must be hidden too: a plain patch of ground ends, a wall
         # hides all behind it
-        tail = np.flatnonzero(trusted & (np.arange(n_r) >= i))[-TAIL_CELLS:]
+        tail = flat_nonzero(trusted & (np.arange(n_r) >= i))[-TAIL_CELLS:]
         if k_all[tail].sum() > self.max_ratio * self.expected[tail].sum() + SLACK:
             return None
         return i
@@ -412,7 +413,7 @@ class UnseenGroundMonitor:
         inside = (on & (xy[:, 1] >= -self.half_width) & (xy[:, 1] < self.half_width)
                   & (xy[:, 0] >= r0) & (xy[:, 0] < r0 + CELL_DEPTH_M))
         r_near = float(np.max(xy[inside, 0])) if inside.any() else r0
-        far = float(self.range_edges[np.flatnonzero(band)[-1] + 1])
+        far = float(self.range_edges[flat_nonzero(band)[-1] + 1])
         if left is not None:
             r_near, plain = self._foot_and_face(_texture_energy(left), cam, metric, r_near,
                                                 far)

@@ -41,6 +41,7 @@ from .runs import (
     smooth_along_runs,
 )
 from .support import _features, _noise_key, contrary_rival_share
+from ..npfast import flat_nonzero
 
 #: A drop-off's reported foot is at its nearest range, in the median direction of the
 #: nearest feet of its edge strings (one per string) that lie within this distance
@@ -241,7 +242,7 @@ class Detection(PlaneTracking):
         for sel, sign, radius, min_px in (
                 (obst, 1.0, c.detection.cluster_radius_m, 1),
                 (drop, -1.0, c.drops.cluster_radius_m, c.drops.min_cluster_pixels)):
-            idx = np.flatnonzero(sel)
+            idx = flat_nonzero(sel)
             if idx.size:
                 found.extend(self._clusters(idx, sign, radius, min_px, m, pts, h, excess,
                                             cam, metric))
@@ -331,7 +332,7 @@ class Detection(PlaneTracking):
         # the plane (sum of z > K sqrt(n _WEAK_CORR)).
         weak = (usable & (ex_mean > _WEAK_FRACTION * thr) & (h <= c.detection.max_obstacle_height_m)
                 & ~taken[sid])
-        wi = np.flatnonzero(weak)
+        wi = flat_nonzero(weak)
         if wi.size:
             z = ex_mean[wi] * (c.threshold.k / thr[wi])
             n_w = np.bincount(sid[wi], minlength=n_s)
@@ -343,7 +344,7 @@ class Detection(PlaneTracking):
             o = np.lexsort((-m.v[wi], sid[wi]))
             wi = wi[o]
             head = np.concatenate((_TRUE, sid[wi][1:] != sid[wi][:-1]))
-            top = np.maximum.reduceat(h[wi], np.flatnonzero(head))
+            top = np.maximum.reduceat(h[wi], flat_nonzero(head))
             return wi[head], top
         return None
 
@@ -549,7 +550,7 @@ class Detection(PlaneTracking):
         else:
             lat = (g2[:, 1] * mx[label] - g2[:, 0] * my[label]) / norm[label]
             order = np.argsort(label, kind='stable')
-            starts = np.flatnonzero(np.concatenate((_TRUE, np.diff(label[order]) != 0)))
+            starts = flat_nonzero(np.concatenate((_TRUE, np.diff(label[order]) != 0)))
             lo_lat = np.minimum.reduceat(lat[order], starts)
             hi_lat = np.maximum.reduceat(lat[order], starts)
             ex_o = ex[order]

@@ -22,6 +22,7 @@ from .kernels_geometry import (
 )
 from .nearest import _body_gap, _ground_inside
 from .results import GpodObstacle
+from ..npfast import flat_nonzero
 
 #: A straight face of an obstacle (a wall beside the path) whose feet come nearer towards
 #: the left or right edge of the view continues out of it: its nearest visible point is
@@ -178,7 +179,7 @@ def view_edge_points(xy: np.ndarray, group: np.ndarray, n_groups: int, to_image,
         return out
     counts = np.bincount(group, minlength=n_groups)
     ground = None
-    for k in np.flatnonzero(counts >= _FACE_MIN_FEET):
+    for k in flat_nonzero(counts >= _FACE_MIN_FEET):
         c, d, along, rms = _fit_line(xy[group == k])
         span = float(along.max() - along.min())
         if span < _FACE_MIN_SPAN_M or rms > _FACE_MAX_RMS_M:
@@ -283,7 +284,7 @@ def described_by_part(whole: list[GpodObstacle], parts: list[GpodObstacle],
     here_all = _ground_points(whole)
     out = list(whole)
     for k, ob in enumerate(whole):
-        mine = np.flatnonzero(owner == k)
+        mine = flat_nonzero(owner == k)
         if mine.size < 2:
             continue
         dist = np.hypot(*(at[mine] - here_all[k]).T)
@@ -376,7 +377,7 @@ def lone_face_points(ctx: _FrameContext, xy: np.ndarray, group: np.ndarray, n_gr
     search = (low & ~border & (np.bincount(group, minlength=n_groups) > 0)
               & ~(hi_x - lo_x > _LONE_SPREAD_M) & ~(hi_y - lo_y > _LONE_SPREAD_M)
               & ~(closest > _LONE_SPREAD_M))
-    for k in np.flatnonzero(search).tolist():
+    for k in flat_nonzero(search).tolist():
         h = float(height[k])
         foot = q[k]
         # Only a face that runs towards the camera's side can bring the point nearer.
@@ -407,7 +408,7 @@ def lone_face_points(ctx: _FrameContext, xy: np.ndarray, group: np.ndarray, n_gr
         near = foot + t[:, None] * d
         ok &= np.hypot(near[:, 0], near[:, 1]) <= math.hypot(*foot) - _LONE_MIN_GAIN_M
         best = None
-        for j in np.flatnonzero(ok)[np.argsort(-support[ok], kind='stable')]:
+        for j in flat_nonzero(ok)[np.argsort(-support[ok], kind='stable')]:
             if g_all is None:
                 g_all = np.ascontiguousarray(ctx.ground_xy, np.float64).reshape(-1, 2)
             if not hides(float(ends[j, 0]), float(ends[j, 1]), 0.0,
@@ -478,7 +479,7 @@ def face_gap_points(xy: np.ndarray, group: np.ndarray, n_groups: int, q: np.ndar
     disc = np.sqrt(np.maximum(half_tr ** 2 - (mxx * myy - mxy ** 2), 0.0))
     ok &= (half_tr - disc) / n <= _FACE_MAX_RMS_M ** 2
     ground = None
-    for t in np.flatnonzero(ok):
+    for t in flat_nonzero(ok):
         a, b = int(ia[t]), int(ib[t])
         lam = half_tr[t] + disc[t]              # the line's direction: the larger eigenvalue
         d = np.array([mxy[t], lam - mxx[t]]) if abs(mxy[t]) > 1e-12 else (
@@ -581,7 +582,7 @@ def silhouette_owners(xw: np.ndarray, top: np.ndarray, xy: np.ndarray, g_lab: np
     bf = np.arctan2(xy[:, 1], xy[:, 0])
     out = np.full(w_n, -1, np.int64)
     for k in np.unique(lab[lab >= 0]):
-        mine = np.flatnonzero(lab == k)
+        mine = flat_nonzero(lab == k)
         f = xy[g_lab == k]
         sf_k = sf[g_lab == k]
         bk = bf[g_lab == k]

@@ -12,6 +12,7 @@ import numpy as np
 from ..camera import (MetricPlane, StereoCamera, columns, ground_axes, plane_disparity,
                       sub_rows, sub_scaled)
 from . import kernels_geometry as kg
+from ..npfast import flat_nonzero
 
 #: An obstacle string's foot is where its matched run, followed down the image from its
 #: lowest obstacle pixel, comes within this many noise sigmas of the ground plane.
@@ -66,7 +67,7 @@ class _FrameContext:
             k = self.prev.shape[0]
             nxt = np.full(k, -1, np.int64)
             has = self.prev >= 0
-            nxt[self.prev[has]] = np.flatnonzero(has)
+            nxt[self.prev[has]] = flat_nonzero(has)
             self._nxt = nxt
         return self._nxt
 

@@ -10,6 +10,7 @@ import numpy as np
 
 from . import kernels as kn
 from .results import GpodObstacle
+from ..npfast import flat_nonzero
 
 #: A drop's brink taken for a straight line (`_brink_bearings`): at least this many edge
 #: strings' nearest lower ground, spanning this many metres, within this orthogonal RMS.
@@ -187,7 +188,7 @@ def _brink_bearings(xy: np.ndarray, group: np.ndarray, bearing: np.ndarray) -> n
     """
     out = bearing.copy()
     counts = np.bincount(group, minlength=bearing.shape[0])
-    for k in np.flatnonzero(counts >= _BRINK_MIN_POINTS):
+    for k in flat_nonzero(counts >= _BRINK_MIN_POINTS):
         p = xy[group == k]
         n_all = p.shape[0]
         # The brink is the near boundary of the lower ground: a string that starts

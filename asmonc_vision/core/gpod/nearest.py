@@ -18,6 +18,7 @@ from .kernels_geometry import (
     _FACE_BEHIND_MIN,
     _FREE_SPACE_MARGIN_M,
 )
+from ..npfast import flat_nonzero
 
 
 def soft_nearest(xy: np.ndarray, sr: np.ndarray, ground_xy=None) -> np.ndarray:
@@ -38,7 +39,7 @@ def soft_nearest(xy: np.ndarray, sr: np.ndarray, ground_xy=None) -> np.ndarray:
     j = int(np.argmin(r))
     w = np.exp(-0.5 * (r - r[j]) ** 2 / np.maximum(sr ** 2 + sr[j] ** 2, 1e-12))
     if ground_xy is not None:
-        far = np.flatnonzero((w > 0.01) & (np.hypot(*(xy - xy[j]).T) > _BODY_GAP_SPAN_M))
+        far = flat_nonzero((w > 0.01) & (np.hypot(*(xy - xy[j]).T) > _BODY_GAP_SPAN_M))
         if far.size:
             g = ground_xy() if callable(ground_xy) else ground_xy
             for i in far.tolist():
@@ -87,7 +88,7 @@ def _soft_nearest_groups(xy: np.ndarray, sr: np.ndarray, group: np.ndarray, n_gr
         order = np.argsort(group, kind='stable')
         first = np.searchsorted(group[order], np.arange(n_groups), side='left')
         last = np.searchsorted(group[order], np.arange(n_groups), side='right')
-        for k in np.flatnonzero(want).tolist():
+        for k in flat_nonzero(want).tolist():
             sel = order[first[k]:last[k]]
             out[k] = soft_nearest(xy[sel], sr[sel], ground_xy)
         return out
@@ -106,7 +107,7 @@ def _soft_nearest_groups(xy: np.ndarray, sr: np.ndarray, group: np.ndarray, n_gr
             g = np.ascontiguousarray(g, np.float64)
     q, undecided = kg.nb_soft_finish(xy, idx, start, near, w, far, g)
     out[want] = q[want]
-    for k in np.flatnonzero(undecided).tolist():       # left to numpy
+    for k in flat_nonzero(undecided).tolist():       # left to numpy
         sel = idx[start[k]:start[k + 1]]
         out[k] = soft_nearest(xy[sel], sr[sel], g)
     return out
@@ -168,7 +169,7 @@ def hidden_corners(a: np.ndarray, b: np.ndarray, sigma: np.ndarray, ground_xy,
         ok_t, c_all, rho_all, a0_all, span_all = kg.nb_arcs(
             np.ascontiguousarray(a, np.float64), np.ascontiguousarray(b, np.float64),
             np.ascontiguousarray(sigma, np.float64))
-        jobs = np.flatnonzero(ok_t)
+        jobs = flat_nonzero(ok_t)
         if not jobs.size:
             return out
         cj, rj, a0j, spanj = c_all[jobs], rho_all[jobs], a0_all[jobs], span_all[jobs]
@@ -350,7 +351,7 @@ def _nearest_points_compiled(xy: np.ndarray, sr: np.ndarray, group: np.ndarray,
     # A foot between the outermost ones and clearly nearer than both is the near corner
     # (a foot on a frontal face, e.g. of a texture stripe, is not clearly nearer).
     seen = np.zeros(n_groups, bool)
-    for k in np.flatnonzero(multi & (kk != i) & (kk != j)).tolist():
+    for k in flat_nonzero(multi & (kk != i) & (kk != j)).tolist():
         ri, rj, rk = r_all[i[k]], r_all[j[k]], r_all[kk[k]]
         si, sj, sk = sr[i[k]], sr[j[k]], sr[kk[k]]
         seen[k] = min(ri, rj) - rk > _CORNER_SIGMAS * math.hypot(sk, max(si, sj))
@@ -361,7 +362,7 @@ def _nearest_points_compiled(xy: np.ndarray, sr: np.ndarray, group: np.ndarray,
         search[:] = False
     soft = multi & ~search
     found = np.zeros(n_groups, bool)
-    ks = np.flatnonzero(search)
+    ks = flat_nonzero(search)
     if ks.size:
         ii, jj = i[ks], j[ks]
         si, sj = sr[ii], sr[jj]
@@ -377,7 +378,7 @@ def _nearest_points_compiled(xy: np.ndarray, sr: np.ndarray, group: np.ndarray,
     if found.any():
         # A corner beyond the nearest foot is not the nearest point (two bodies in one
         # cluster: the corner of the far one, the near one's foot nearer).
-        f = np.flatnonzero(found)
+        f = flat_nonzero(found)
         nearer = np.hypot(qk[f, 0], qk[f, 1]) <= np.hypot(qs[f, 0], qs[f, 1])
         out[f] = np.where(nearer[:, None], qk[f], qs[f])
     return out

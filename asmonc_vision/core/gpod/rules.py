@@ -40,6 +40,7 @@ from .runs import (
     string_pieces,
 )
 from .settings import GpodConfig
+from ..npfast import flat_nonzero
 
 #: Obstacle pixels this far above the plane (pixels) or more are checked for a match on
 #: the lower ground beyond a drop (rule ``lower_ground_continuation``): a repetitive
@@ -144,7 +145,7 @@ def ambiguous_drops(c: GpodConfig, m: Matches, pd: np.ndarray, thr: np.ndarray
         return no_drop
     j = m.rival_match
     rd = m.rival_d.astype(np.float64)
-    sel = np.flatnonzero((m.rival_ratio >= r) & (np.abs(rd - pd[j]) <= thr[j]))
+    sel = flat_nonzero((m.rival_ratio >= r) & (np.abs(rd - pd[j]) <= thr[j]))
     if sel.size:
         nearer = rd[sel] > m.d[j[sel]]
         no_drop[j[sel[nearer]]] = True
@@ -200,7 +201,7 @@ def _string_pieces(c: GpodConfig, ev: FrameEvidence) -> None:
     sid = ev.sid
     has = np.zeros(ev.n_s, bool)
     has[sid[ev.obst]] = True
-    sel = np.flatnonzero(has[sid])
+    sel = flat_nonzero(has[sid])
     piece = string_pieces(sid[sel], ev.m.v[sel],
                           (np.abs(ev.ex_mean[sel]) <= ev.thr[sel]) & ev.usable[sel])
     o_sel = ev.obst[sel]
@@ -224,14 +225,14 @@ def bending_ground(c: GpodConfig, px: np.ndarray, pts: np.ndarray, h: np.ndarray
     off; the lower ground beyond a drop and the top of a kerb are level, as far off near
     as far, and start a step away."""
     out = np.zeros(n_s, bool)
-    idx = np.flatnonzero(px)
+    idx = flat_nonzero(px)
     if idx.size < 8 or c.bend.min_grade <= 0:
         return out
     h_i, sid_i = h[idx], sid[idx]
     g2 = ground_coords(pts[idx], h_i, metric)
     label = cluster_points_2d(g2, sid_i, radius)
     # (clusters of fewer than 8 pixels are none)
-    for k in np.flatnonzero(np.bincount(label) >= 8).tolist():
+    for k in flat_nonzero(np.bincount(label) >= 8).tolist():
         sel = label == k
         s_k, h_k = g2[sel, 0], sign * h_i[sel]
         if float(s_k.max() - s_k.min()) < c.bend.min_span_m:
@@ -296,13 +297,13 @@ def drop_regions(c: GpodConfig, drop: np.ndarray, weight: np.ndarray, pts: np.nd
     below the plane (``h`` (K,): the median absolute deviation of their heights at most
     ``drops.region_max_spread`` times their median)."""
     out = np.zeros(n_s, bool)
-    idx = np.flatnonzero(drop)
+    idx = flat_nonzero(drop)
     if idx.size == 0 or c.drops.region_pixels <= 0.0:
         return out
     g2 = ground_coords(pts[idx], h[idx], metric)
     label = cluster_points_2d(g2, sid[idx], c.drops.cluster_radius_m)
     total = np.bincount(label, weights=weight[idx])
-    for k in np.flatnonzero(total >= c.drops.region_pixels * c.drops.min_pixels):
+    for k in flat_nonzero(total >= c.drops.region_pixels * c.drops.min_pixels):
         sel = idx[label == k]
         if np.unique(sid[sel]).size < c.drops.region_min_strings:
             continue

@@ -11,6 +11,7 @@ from ..edges import EdgeMap, chain_roots
 from ..ground_plane import fast_median
 from ..matching import Candidates, Matches
 from . import kernels as kn
+from ..npfast import flat_nonzero
 
 #: ``[True]``, to prefix run-start masks (``np.concatenate``: ``np.r_`` costs ~20 us a call).
 _TRUE = np.ones(1, bool)
@@ -223,14 +224,14 @@ def hanging_runs(edges: EdgeMap, m: Matches, prev: np.ndarray, h: np.ndarray,
         has: np.ndarray = np.zeros(int(sid.max()) + 1 if k else 0, bool)
         has[sid[only]] = True
         cand &= has[sid]
-    bottom = np.flatnonzero(cand)
+    bottom = flat_nonzero(cand)
     if bottom.size == 0:
         return out
     feat_of_edge = np.full(len(edges), -1, np.int64)
     feat_of_edge[m.left_index] = np.arange(k)
     below = np.full(len(edges), -1, np.int64)
     has = edges.string_prev >= 0
-    below[edges.string_prev[has]] = np.flatnonzero(has)
+    below[edges.string_prev[has]] = flat_nonzero(has)
     if kn.nb_hanging is not None:
         return kn.nb_hanging(bottom, m.left_index.astype(np.int64), m.d.astype(np.float64),
                            below, feat_of_edge, prev.astype(np.int64), k, int(max_gap),
@@ -310,10 +311,10 @@ def _continuations(edges: EdgeMap, m: Matches, prev: np.ndarray, bottoms: np.nda
     ok = is_low.any(axis=0)
     found = np.full(bottoms.size, -1, np.int64)
     if ok.any():
-        found[ok] = under[np.argmax(is_low[:, ok], axis=0), np.flatnonzero(ok)]
+        found[ok] = under[np.argmax(is_low[:, ok], axis=0), flat_nonzero(ok)]
     if not ok.all():
         top = chain_roots(prev)                 # each run's top
-        miss = np.flatnonzero(~ok)
+        miss = flat_nonzero(~ok)
         e = m.left_index[top[bottoms[miss]]].astype(np.int64)
         for _ in range(max_gap):
             live = (found[miss] < 0) & (e >= 0)
@@ -373,7 +374,7 @@ def continuation_alternatives(edges: EdgeMap, m: Matches, prev: np.ndarray,
     """
     k = len(m)
     out = np.zeros(k, bool)
-    sel = np.flatnonzero(select)
+    sel = flat_nonzero(select)
     if sel.size == 0 or len(cand) == 0 or np.count_nonzero(lower) < min_support:
         return out
     bottoms, b_of = _run_bottoms(prev, sel)
@@ -381,7 +382,7 @@ def continuation_alternatives(edges: EdgeMap, m: Matches, prev: np.ndarray,
     feat_of_edge[m.left_index] = np.arange(k)
     below = np.full(len(edges), -1, np.int64)
     has_e = edges.string_prev >= 0
-    below[edges.string_prev[has_e]] = np.flatnonzero(has_e)
+    below[edges.string_prev[has_e]] = flat_nonzero(has_e)
     # The matched pixels of each bottom's string in the max_gap rows below it.
     under = _matches_below(m.left_index[bottoms].astype(np.int64), below, feat_of_edge,
                            max_gap)
@@ -415,7 +416,7 @@ def _run_bottoms(prev: np.ndarray, sel: np.ndarray) -> tuple[np.ndarray, np.ndar
     """
     nxt = np.full(prev.shape[0], -1, np.int64)
     has = prev >= 0
-    nxt[prev[has]] = np.flatnonzero(has)
+    nxt[prev[has]] = flat_nonzero(has)
     jump = chain_roots(nxt)
     bottoms, b_of = np.unique(jump[sel], return_inverse=True)
     return bottoms, b_of
@@ -442,9 +443,9 @@ def _lower_ground(found: np.ndarray, d: np.ndarray, pd: np.ndarray, lower: np.nd
     ok = found >= 0
     ok[ok] = pd[found[ok]] > 0
     ratio = np.full(found.shape[0], np.nan)
-    q = np.flatnonzero(ok)
+    q = flat_nonzero(ok)
     ratio[q] = d[found[q]] / pd[found[q]]
-    lo = np.flatnonzero(lower)
+    lo = flat_nonzero(lower)
     n_on = (np.abs(d[lo][None, :] - ratio[q, None] * pd[lo][None, :])
             <= tolerance_px).sum(axis=1)
     ok[q] = n_on >= min_support
@@ -528,7 +529,7 @@ def smooth_along_runs(x: np.ndarray, prev: np.ndarray, window: int) -> np.ndarra
         return x.copy()
     nxt = np.full(k, -1, np.int64)
     has = prev >= 0
-    nxt[prev[has]] = np.flatnonzero(has)
+    nxt[prev[has]] = flat_nonzero(has)
     total, count = x.copy(), np.ones(k)
     for step in (prev, nxt):
         cur: np.ndarray = np.arange(k)

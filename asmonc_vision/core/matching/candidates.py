@@ -7,6 +7,7 @@ import numpy as np
 from asmonc_vision.core.edges import EdgeMap
 from asmonc_vision.core.matching import kernels
 from asmonc_vision.core.matching.types import Candidates
+from ..npfast import flat_nonzero
 
 
 def expand_ranges(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -66,10 +67,10 @@ def candidate_matches(left: EdgeMap, right: EdgeMap, d_min: float, d_max: float,
     h = left.shape[0]
     span = float(left.shape[1]) + abs(float(d_max)) + abs(float(d_min)) + 4.0
     plane_r = (right.polarity < 0).astype(np.int64)
-    order_r = np.r_[np.flatnonzero(plane_r == 0), np.flatnonzero(plane_r == 1)]
+    order_r = np.r_[flat_nonzero(plane_r == 0), flat_nonzero(plane_r == 1)]
     key_r = ((plane_r * h + right.v) * span + right.u)[order_r]
     plane_l = (left.polarity < 0).astype(np.int64)
-    order_l = np.r_[np.flatnonzero(plane_l == 0), np.flatnonzero(plane_l == 1)]
+    order_l = np.r_[flat_nonzero(plane_l == 0), flat_nonzero(plane_l == 1)]
     key_l = (((plane_l * h + left.v) * span + left.u)[order_l])
     # Queries in ascending order (numpy's binary search is much faster on sorted keys).
     lo = np.empty(len(left), np.intp)
@@ -84,7 +85,7 @@ def candidate_matches(left: EdgeMap, right: EdgeMap, d_min: float, d_max: float,
     dori = np.abs(left.orientation[li] - right.orientation[rj])
     dori = np.minimum(dori, 2.0 * np.pi - dori)
     ok &= dori <= np.deg2rad(max_orientation_diff_deg)
-    keep = np.flatnonzero(ok)
+    keep = flat_nonzero(ok)
     li, rj = li[keep], rj[keep]
     return Candidates(left=li, right=rj, d=left.u[li].astype(np.float64) - right.u[rj])
 

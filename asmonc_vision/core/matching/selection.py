@@ -9,6 +9,7 @@ from asmonc_vision.core.matching import kernels
 from asmonc_vision.core.matching.candidates import candidate_matches, expand_ranges
 from asmonc_vision.core.matching.support import link_support, support_links
 from asmonc_vision.core.matching.types import Candidates, Matches, SupportLinks
+from ..npfast import flat_nonzero
 
 
 class _Groups:
@@ -26,12 +27,12 @@ class _Groups:
             g = g[order]
         first = np.ones(n, bool)
         first[1:] = g[1:] != g[:-1]
-        starts = np.flatnonzero(first)
+        starts = flat_nonzero(first)
         sizes = np.diff(np.append(starts, n))
         multi = sizes > 1
         # Members of the groups of two or more, in group order (indices into the input).
         pos = np.repeat(multi, sizes)
-        idx = np.flatnonzero(pos)
+        idx = flat_nonzero(pos)
         self.members = idx if order is None else order[idx]
         self.sizes = sizes[multi]
         self.starts = np.cumsum(self.sizes) - self.sizes
@@ -95,7 +96,7 @@ def select_matches(cand: Candidates, links: SupportLinks, left: EdgeMap, right: 
         accepted |= win
         if it == rounds - 1:
             break
-        k = np.flatnonzero(win)
+        k = flat_nonzero(win)
         taken_r[cand.right[k]] = True
         matched_l[cand.left[k]] = True
         alive &= accepted | ~(matched_l[cand.left] | taken_r[cand.right])
@@ -123,7 +124,7 @@ def pmf_match(left: EdgeMap, right: EdgeMap, d_min: float, d_max: float, *,
                           disparity_gradient_limit=disparity_gradient_limit)
     acc, support = select_matches(cand, links, left, right, iterations=iterations,
                                   min_support=min_support)
-    k = np.flatnonzero(acc)
+    k = flat_nonzero(acc)
     rival_match, rival_d, rival_ratio = match_rivals(cand, link_support(links, links.weight), k)
     li = cand.left[k]
     rj = cand.right[k]

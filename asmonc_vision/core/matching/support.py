@@ -8,6 +8,7 @@ import numpy as np
 from asmonc_vision.core.edges import EdgeMap
 from asmonc_vision.core.matching import kernels
 from asmonc_vision.core.matching.types import Candidates, SupportLinks
+from ..npfast import flat_nonzero
 
 
 _SLACK = 1.0 + 1e-4
@@ -37,7 +38,7 @@ def _cell_table(s_cell: np.ndarray, size: int) -> np.ndarray:
         return kernels.nb_cells(s_cell, size)
     first = np.ones(m, bool)
     first[1:] = s_cell[1:] != s_cell[:-1]
-    at = np.flatnonzero(first)
+    at = flat_nonzero(first)
     count = np.diff(np.append(at, m))
     if m < 2 ** 31 and (count.size == 0 or int(count.max()) <= 255):
         # A one-row integral image is a fast prefix sum (numpy's cumsum is not).
@@ -163,7 +164,7 @@ def _neighbour_pairs(left: EdgeMap, right: EdgeMap, cand: Candidates, rad: float
     # Cheap single-precision pre-test (index lists: boolean masks are slow).
     dd = s_d[j]
     dd -= np.repeat(np.tile(s_d, nd), cnt)
-    keep = np.flatnonzero(np.abs(dd, out=dd) <= np.float32(lim * rad * _SLACK))
+    keep = flat_nonzero(np.abs(dd, out=dd) <= np.float32(lim * rad * _SLACK))
     del dd
     j = j[keep]
     i = np.repeat(np.tile(pos.astype(np.int32), nd), cnt)[keep].astype(np.intp)
@@ -173,7 +174,7 @@ def _neighbour_pairs(left: EdgeMap, right: EdgeMap, cand: Candidates, rad: float
     dv = (s_v[j] - s_v[i]).astype(np.float64)
     s2 = dcu * dcu + dv * dv
     dd = s_d64[j] - s_d64[i]
-    keep = np.flatnonzero((s2 <= rad * rad) & (dd * dd <= (lim * lim) * s2) & (s2 > 0.0))
+    keep = flat_nonzero((s2 <= rad * rad) & (dd * dd <= (lim * lim) * s2) & (s2 > 0.0))
     return order[i[keep]], order[j[keep]], s2[keep]
 
 
@@ -220,9 +221,9 @@ def _group_links(cand: Candidates, n_left: int, a: np.ndarray, b: np.ndarray,
     n1 = c.size
     start = np.arange(n1)
     pair_link = start
-    grp = np.flatnonzero(multi)
+    grp = flat_nonzero(multi)
     if grp.size:
-        one = np.flatnonzero(~multi)
+        one = flat_nonzero(~multi)
         n1 = one.size
         e2 = cand.left[c2[grp]]
         grp = grp[_lexsort_small(e2, c[grp], n_left, m)]
@@ -231,7 +232,7 @@ def _group_links(cand: Candidates, n_left: int, a: np.ndarray, b: np.ndarray,
         cg, e2 = c[n1:], cand.left[c2[n1:]]
         first = np.ones(cg.size, bool)
         first[1:] = (cg[1:] != cg[:-1]) | (e2[1:] != e2[:-1])
-        start = np.concatenate((start[:n1], n1 + np.flatnonzero(first)))
+        start = np.concatenate((start[:n1], n1 + flat_nonzero(first)))
         pair_link = np.concatenate((pair_link[:n1], n1 + np.cumsum(first) - 1))
     np.sqrt(sep2, out=sep2)
     return SupportLinks(num_candidates=m, cand=c[start], start=start, pair_link=pair_link,
