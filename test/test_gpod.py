@@ -2884,3 +2884,24 @@ def test_wholes_and_parts_described_at_once_equal_two_descriptions(monkeypatch):
     monkeypatch.setattr(gdet.Detection, '_parts', check)
     bench.run_method(frames, 'gpod', map_enabled=False, egomotion=True, ego_results=ego)
     assert seen['frames'] >= 20 and seen['split'] >= 5 and seen['obstacles'] >= 40, seen
+
+
+def test_new_obstacle_is_the_dataclass_init():
+    """`results.new_obstacle` gives GpodObstacle(...)'s obstacle: the same type, every
+    field the same object in the same order (defaults included), equal and frozen."""
+    import pickle
+
+    from asmonc_vision.core.gpod import GpodObstacle
+    from asmonc_vision.core.gpod.results import new_obstacle
+    fields = dict(position=np.array([0.1, 0.2, 3.0]), height=0.3, range=3.0, bearing=0.1,
+                  width=0.2, disparity_excess=4.0, confidence=0.5, roi=(1, 2, 3, 4),
+                  num_edge_pixels=9, string_ids=np.array([1, 2], np.int32))
+    for extra in ({}, {'track_id': 4, 'age_s': 0.25}):
+        a, b = new_obstacle(**fields, **extra), GpodObstacle(**fields, **extra)
+        assert type(a) is type(b)
+        assert list(vars(a)) == list(vars(b))
+        assert all(vars(a)[k] is vars(b)[k] for k in vars(b))
+        assert repr(a) == repr(b)
+        assert pickle.loads(pickle.dumps(a)).__dict__.keys() == vars(b).keys()
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            a.height = 1.0         # type: ignore[misc]

@@ -195,10 +195,11 @@ def _map_report(ob: MapObject, near_xy: np.ndarray, track_id: int, cam: StereoCa
     excess = 0.0
     if allp.shape[0]:
         uu, vv = cam.project_left(allp)
-        x0 = int(np.clip(np.floor(uu.min()), 0, cam.width - 1))
-        x1 = int(np.clip(np.ceil(uu.max()), 0, cam.width - 1))
-        y0 = int(np.clip(np.floor(vv.min()), 0, cam.height - 1))
-        y1 = int(np.clip(np.ceil(vv.max()), 0, cam.height - 1))
+        # np.clip of these scalars as Python's min and max (the same ints; NaN raises)
+        x0 = int(min(max(np.floor(uu.min()), 0.0), cam.width - 1.0))
+        x1 = int(min(max(np.ceil(uu.max()), 0.0), cam.width - 1.0))
+        y0 = int(min(max(np.floor(vv.min()), 0.0), cam.height - 1.0))
+        y1 = int(min(max(np.ceil(vv.max()), 0.0), cam.height - 1.0))
         roi = (x0, y0, max(x1 - x0, 1), max(y1 - y0, 1))
     if top[2] > 0.1:
         u, v, d = cam.project(top[None, :])

@@ -24,7 +24,7 @@ from .footing import _FrameContext, ground_coords, string_feet
 from .grouping import _brink_bearings, _group_quantile, _normal_cdf, cluster_points_2d
 from .nearest import nearest_points
 from .plane_tracking import PlaneTracking
-from .results import GpodFeatures, GpodObstacle
+from .results import GpodFeatures, GpodObstacle, new_obstacle
 from .rules import (
     DROP_RULES,
     PIXEL_RULES,
@@ -585,12 +585,12 @@ class Detection(PlaneTracking):
             fk = foot_roi[k]
             if sign > 0 and fk[2] > 1e-6:    # extend down to where the obstacle meets the ground
                 v_foot = cam.f * fk[1] / fk[2] + cam.cy
-                if np.isfinite(v_foot):
+                if math.isfinite(v_foot):
                     yk1 = max(yk1, int(round(min(v_foot, cam.height - 1))))
             xk0, yk0 = max(int(x0[k]), 0), max(int(y0[k]), 0)
             xk1, yk1 = min(int(x1[k]), cam.width - 1), min(yk1, cam.height - 1)
             roi = (xk0, yk0, max(xk1 - xk0 + 1, 1), max(yk1 - yk0 + 1, 1))
-            out.append(GpodObstacle(
+            out.append(new_obstacle(
                 position=position[k].astype(np.float64), height=float(height[k]),
                 range=float(r_near[k]), bearing=float(bearing[k]),
                 width=float(hi_lat[k] - lo_lat[k]), disparity_excess=float(exc[k]),

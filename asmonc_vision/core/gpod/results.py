@@ -78,6 +78,22 @@ def replaced(ob: GpodObstacle, **changes) -> GpodObstacle:
     return out
 
 
+def new_obstacle(position: np.ndarray, height: float, range: float, bearing: float,
+                 width: float, disparity_excess: float, confidence: float,
+                 roi: tuple[int, int, int, int], num_edge_pixels: int,
+                 string_ids: np.ndarray, track_id: int = 0,
+                 age_s: float = 0.0) -> GpodObstacle:
+    """``GpodObstacle(...)`` of these fields (as its attributes say), the same object
+    (its fields set in their order, the same objects) without the frozen dataclass's
+    __init__ (one ``object.__setattr__`` a field: a few microseconds an obstacle)."""
+    out = object.__new__(GpodObstacle)
+    out.__dict__.update(position=position, height=height, range=range, bearing=bearing,
+                        width=width, disparity_excess=disparity_excess,
+                        confidence=confidence, roi=roi, num_edge_pixels=num_edge_pixels,
+                        string_ids=string_ids, track_id=track_id, age_s=age_s)
+    return out
+
+
 @dataclass(frozen=True)
 class GpodFeatures:
     """Matched edge features of one frame, for drawing and diagnostics.
