@@ -1377,3 +1377,18 @@ def test_counted_is_numpys_unique_with_counts():
         want_v, want_c = np.unique(x, return_counts=True)
         assert vals.tolist() == want_v.tolist() and cnt.tolist() == want_c.tolist()
         assert vals.dtype == want_v.dtype and cnt.dtype == np.int64
+
+
+def test_bearing_bins_are_the_clipped_degrees():
+    """`evidence_map._bearing_bin` gives ndarray.clip's bins byte for byte (int64),
+    behind, beside, at the camera's foot and for NaN or infinite points."""
+    from asmonc_vision.core.evidence_map import _BINS, _bearing_bin
+    rng = np.random.default_rng(2)
+    xy = np.vstack([rng.normal(0.0, 3.0, (500, 2)), [[0.0, 0.0], [-0.0, 0.0], [np.nan, 1.0],
+                                                     [np.inf, 0.0], [1.0, -np.inf],
+                                                     [-1.0, 1e-12], [-1.0, -1e-12]]])
+    with np.errstate(invalid='ignore'):
+        b = np.degrees(np.arctan2(xy[:, 1], xy[:, 0])) + 90.0
+        want = b.astype(np.int64).clip(0, _BINS - 1)
+        got = _bearing_bin(xy)
+    assert got.dtype == want.dtype and got.tobytes() == want.tobytes()

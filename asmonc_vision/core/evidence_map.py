@@ -86,7 +86,7 @@ from asmonc_vision.core.camera import MetricPlane, StereoCamera, columns, sub_ro
 from asmonc_vision.core.map_evidence import (DROP, GROUND, RAISED, PairEvidence, ground_frame,
                                              ground_motion)
 from asmonc_vision.core.map_settings import EvidenceMapConfig
-from .npfast import flat_nonzero
+from .npfast import flat_nonzero, linspace
 
 
 @dataclass(frozen=True)
@@ -444,7 +444,7 @@ class EvidenceMap:
         if not cells.size:
             return none
         if ground_xy.shape[0] > c.ray_max_points:
-            pick = np.linspace(0, ground_xy.shape[0] - 1, c.ray_max_points).astype(np.int64)
+            pick = linspace(0, ground_xy.shape[0] - 1, c.ray_max_points).astype(np.int64)
             ground_xy = ground_xy[pick]
         R = np.hypot(ground_xy[:, 0], ground_xy[:, 1])                 # (n,)
         gh = ground_xy / np.maximum(R, 1e-6)[:, None]                   # sight line directions
@@ -762,4 +762,5 @@ _HEAD = np.ones(1, bool)
 def _bearing_bin(xy: np.ndarray) -> np.ndarray:
     """(N,) int: the 1 degree bearing bin (0 .. _BINS - 1) of ground points (N, 2)."""
     b = np.degrees(np.arctan2(xy[:, 1], xy[:, 0])) + 90.0
-    return b.astype(np.int64).clip(0, _BINS - 1)
+    # (ndarray.clip of the int64 bins, without its integer-bounds checks)
+    return np.minimum(np.maximum(b.astype(np.int64), 0), _BINS - 1)
