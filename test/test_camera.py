@@ -112,3 +112,24 @@ def test_the_ground_axes_of_a_plane_asked_again_are_its_own():
         got = camera.ground_axes(plane)
         want = camera._ground_axes(np.asarray(plane.normal_up, float), plane.height)
         assert all(a.tobytes() == b.tobytes() for a, b in zip(got, want))
+
+
+def test_columns_is_np_stack_on_the_last_axis():
+    """`columns` gives np.stack(cols, axis=-1) byte for byte (values, dtype, shape): 1-D
+    and 2-D arrays, numpy scalars (so3_log's of one matrix), mixed dtypes, and arrays
+    of different shapes (np.stack's own answer or error)."""
+    from asmonc_vision.core.camera import columns
+    rng = np.random.default_rng(4)
+    a, b, c = rng.normal(size=(3, 50))
+    m = rng.normal(size=(3, 3))
+    cases = [(a, b), (a, b, c), (a[:0], b[:0]), (a.astype(np.float32), b),
+             (a.reshape(5, 10), c.reshape(5, 10)), (np.arange(4), np.arange(4.0)),
+             (m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]),
+             (a[::2], b[1::2])]
+    for cols in cases:
+        want = np.stack(cols, axis=-1)
+        got = columns(*cols)
+        assert got.dtype == want.dtype and got.shape == want.shape
+        assert got.tobytes() == want.tobytes()
+    with pytest.raises(ValueError):
+        columns(a, b[:3])

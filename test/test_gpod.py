@@ -2905,3 +2905,17 @@ def test_new_obstacle_is_the_dataclass_init():
         assert pickle.loads(pickle.dumps(a)).__dict__.keys() == vars(b).keys()
         with pytest.raises(dataclasses.FrozenInstanceError):
             a.height = 1.0         # type: ignore[misc]
+
+
+def test_global_threshold_is_pixel_thresholds_global_one(box_frame):
+    """`global_threshold` is `pixel_thresholds`' second value, bit for bit: before the
+    calibration, after it (the sigma mode, its ceiling), and in the fixed mode."""
+    det, _, _ = box_frame
+    fresh = GpodDetector(GpodConfig())
+    fixed = GpodDetector(override(GpodConfig(), {'threshold.mode': 'fixed'}))
+    for d in (det, fresh, fixed):
+        want = d.pixel_thresholds(np.zeros(0))[1]
+        got = d.global_threshold()
+        assert type(got) is type(want)
+        assert np.float64(got).tobytes() == np.float64(want).tobytes()
+    assert math.isfinite(det._sigma)

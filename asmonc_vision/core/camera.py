@@ -134,8 +134,9 @@ def columns(*cols: np.ndarray) -> np.ndarray:
     same values without np.stack's overhead (arrays of different shapes: np.stack's
     answer)."""
     shape = cols[0].shape
-    if any(c.shape != shape for c in cols):
-        return np.stack(cols, axis=-1)
+    for c in cols:
+        if c.shape != shape:
+            return np.stack(cols, axis=-1)
     out = np.empty(shape + (len(cols),), np.result_type(*cols))
     for i, c in enumerate(cols):
         out[..., i] = c

@@ -38,6 +38,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from asmonc_vision.core.camera import columns
+
 #: Chains end when the pairs are this far apart in time, seconds.
 MAX_GAP_S = 0.5
 
@@ -98,7 +100,7 @@ class TallReports:
             moving = ((self.moving_min_height_m > 0) & (h >= self.moving_min_height_m)
                       & (r <= self.moving_max_range_m))
         kind = tall | moving
-        xy = np.stack([r * np.cos(b), r * np.sin(b)], axis=1)[kind]
+        xy = columns(r * np.cos(b), r * np.sin(b))[kind]
         chain = _chain(xy, self._xy, self._chain, self._stamp_s, stamp_s,
                        self.moving_gate_m, self.moving_max_speed_mps)
         self._stamp_s = float(stamp_s)
@@ -170,7 +172,7 @@ class ChainedReports:
         b = np.asarray(bearing, float).reshape(-1)
         w = np.full(len(h), np.inf) if width is None else np.asarray(width, float).reshape(-1)
         known = np.isfinite(h)
-        xy = np.stack([r * np.cos(b), r * np.sin(b)], axis=1)
+        xy = columns(r * np.cos(b), r * np.sin(b))
         out = ~known
         chains = {}
         for k, sel in enumerate((known & (h >= 0), known & (h < 0))):   # raised, drops

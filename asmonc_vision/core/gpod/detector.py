@@ -225,7 +225,7 @@ class GpodDetector(Tracking):
         detections: tuple[GpodObstacle, ...] = ()
         if status == 'tracking':
             metric = _state_metric(cam, cast(np.ndarray, self._abc))   # (tracking: a plane)
-        threshold = self.pixel_thresholds(np.zeros(0))[1]
+        threshold = self.global_threshold()
         if status == 'tracking' and metric is not None:
             features, detections = self._detect(m, u, v, d, cam, metric, d_min, d_max, el,
                                                 er, cand, still)

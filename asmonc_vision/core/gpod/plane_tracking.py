@@ -268,7 +268,7 @@ class PlaneTracking(DetectorState):
         if c.threshold.mode == 'fixed' or not np.isfinite(self._sigma):
             return np.full(k, c.threshold.px), c.threshold.px
         ceiling = self.threshold_ceiling()
-        glob = float(np.clip(c.threshold.k * self._sigma, c.threshold.floor_px, ceiling))
+        glob = self.global_threshold()
         if not c.threshold.sigma_per_edge or self._sigma_bins is None:
             return np.full(k, glob), glob
         log_s, sig_b, v_b, f_b = self._sigma_bins
@@ -280,6 +280,17 @@ class PlaneTracking(DetectorState):
             sig = sig * np.interp(v, v_b, f_b)
         thr = (c.threshold.k * sig).clip(c.threshold.floor_px, ceiling)
         return thr, glob
+
+    def global_threshold(self) -> float:
+        """The global obstacle threshold, pixels: `pixel_thresholds`' second value
+        (``threshold.px`` in the 'fixed' mode or before sigma is known, else
+        ``threshold.k`` sigma within ``threshold.floor_px`` .. `threshold_ceiling`),
+        without the per-pixel thresholds."""
+        c = self.config
+        if c.threshold.mode == 'fixed' or not np.isfinite(self._sigma):
+            return c.threshold.px
+        return float(np.clip(c.threshold.k * self._sigma, c.threshold.floor_px,
+                             self.threshold_ceiling()))
 
     def min_obstacle_pixels(self, cam: StereoCamera) -> float:
         """Obstacle pixels an edge string needs on this camera:

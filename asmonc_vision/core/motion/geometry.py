@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from asmonc_vision.core.camera import columns
 from asmonc_vision.core.rotations import matrix_to_quaternion, quaternion_to_matrix  # noqa: F401
 
 
@@ -70,8 +71,8 @@ def so3_log(r) -> np.ndarray:
     r = np.asarray(r, float)
     tr = np.clip((np.trace(r, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)
     theta = np.arccos(tr)
-    v = np.stack([r[..., 2, 1] - r[..., 1, 2], r[..., 0, 2] - r[..., 2, 0],
-                  r[..., 1, 0] - r[..., 0, 1]], axis=-1)
+    v = columns(r[..., 2, 1] - r[..., 1, 2], r[..., 0, 2] - r[..., 2, 0],
+                r[..., 1, 0] - r[..., 0, 1])
     s = np.sin(theta)
     small = theta < 1e-6
     fac = np.where(small, 0.5 + theta ** 2 / 12.0, theta / (2.0 * np.where(small, 1.0, s)))
