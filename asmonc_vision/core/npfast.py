@@ -9,12 +9,14 @@ arrays through the C methods directly. No ROS here.
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 
-def flat_nonzero(a: np.ndarray) -> np.ndarray:
-    """``np.flatnonzero(a)``: (K,) intp indices of the non-zero entries of ``a`` (any
-    shape, any dtype; raveled in C order), the same array (values and dtype) through
-    ``ndarray.nonzero`` without np.flatnonzero's, np.ravel's and np.nonzero's wrappers."""
+def flat_nonzero(a: npt.ArrayLike) -> np.ndarray:
+    """``np.flatnonzero(a)``: (K,) intp indices of the non-zero entries of ``a`` (an
+    array of any shape and dtype, raveled in C order, or a numpy scalar or sequence),
+    the same array (values and dtype) through ``ndarray.nonzero`` without
+    np.flatnonzero's, np.ravel's and np.nonzero's wrappers."""
     return np.asarray(a).ravel().nonzero()[0]
 
 
