@@ -1392,3 +1392,36 @@ def test_bearing_bins_are_the_clipped_degrees():
         want = b.astype(np.int64).clip(0, _BINS - 1)
         got = _bearing_bin(xy)
     assert got.dtype == want.dtype and got.tobytes() == want.tobytes()
+
+
+def _any_box(mask, pad=0, align=1):
+    """The bounding box of `map_grid.nonzero_box` through mask.any (its former way)."""
+    rows = np.flatnonzero(mask.any(axis=1))
+    if not rows.size:
+        return None
+    cols = np.flatnonzero(mask.any(axis=0))
+    y0, x0 = max(int(rows[0]) - pad, 0), max(int(cols[0]) - pad, 0)
+    y0 -= y0 % align
+    x0 -= x0 % align
+    return (y0, min(int(rows[-1]) + pad + 1, mask.shape[0]),
+            x0, min(int(cols[-1]) + pad + 1, mask.shape[1]))
+
+
+def test_nonzero_box_is_the_box_of_the_rows_and_columns_with_any():
+    """`map_grid.nonzero_box` from the non-zero cells' flat indices gives the box of
+    the rows and columns that hold any (mask.any), for bool, uint8 and float masks
+    (NaN counts), empty, full, single cells, borders, strided views, pads and aligns."""
+    from asmonc_vision.core import map_grid
+    rng = np.random.default_rng(6)
+    masks = [np.zeros((180, 180), bool), np.ones((7, 5), np.uint8), np.zeros((1, 1), bool)]
+    for _ in range(300):
+        n0, n1 = rng.integers(1, 60, 2)
+        m = rng.random((n0, n1)) < rng.choice([0.002, 0.02, 0.3])
+        masks += [m, m.astype(np.uint8), m[::2, 1::3]]
+    f = np.zeros((9, 11))
+    f[3, 7] = np.nan
+    f[5, 2] = -0.5
+    masks += [f, np.eye(6, dtype=bool)[:, ::-1]]
+    for m in masks:
+        for pad, align in ((0, 1), (1, 1), (2, 2), (3, 2), (40, 1)):
+            assert map_grid.nonzero_box(m, pad, align) == _any_box(m, pad, align)

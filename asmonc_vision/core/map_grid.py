@@ -20,15 +20,20 @@ def nonzero_box(mask: np.ndarray, pad: int = 0, align: int = 1
     each side and clipped to the grid: (y0, y1, x0, x1), rows ``y0:y1`` and columns
     ``x0:x1``; ``y0`` and ``x0`` rounded down to a multiple of ``align``. None when the
     mask is all zero."""
-    rows = flat_nonzero(mask.any(axis=1))
-    if not rows.size:
+    # the non-zero cells' flat indices, in row-major order: the first and the last are
+    # in the first and the last row that hold any, their columns' extremes are the
+    # box's (the rows and columns that ``mask.any`` would find, without its two passes)
+    nz = flat_nonzero(mask)
+    if not nz.size:
         return None
-    cols = flat_nonzero(mask.any(axis=0))
-    y0, x0 = max(int(rows[0]) - pad, 0), max(int(cols[0]) - pad, 0)
+    n1 = mask.shape[1]
+    cols = nz % n1
+    row0, row1 = int(nz[0]) // n1, int(nz[-1]) // n1
+    y0, x0 = max(row0 - pad, 0), max(int(cols.min()) - pad, 0)
     y0 -= y0 % align
     x0 -= x0 % align
-    return (y0, min(int(rows[-1]) + pad + 1, mask.shape[0]),
-            x0, min(int(cols[-1]) + pad + 1, mask.shape[1]))
+    return (y0, min(row1 + pad + 1, mask.shape[0]),
+            x0, min(int(cols.max()) + pad + 1, mask.shape[1]))
 
 
 def dilate(mask: np.ndarray, radius: int, whole: bool = False) -> np.ndarray:
