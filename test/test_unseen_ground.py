@@ -266,10 +266,80 @@ def test_a_band_that_shows_the_grounds_texture_is_not_reported():
     assert mon.update(CAM, PLANE, u[keep], v[keep], np.zeros(keep.sum()), 0.8) is not None
 
 
+def _walk(mon, rng, edge, step=0.12, n=40, travel=True):
+    """n pairs of ground whose edges stop at ``edge(k)`` metres, the wearer walking
+    ``step`` metres a pair (``travel`` False: the travel unknown); whether each reported."""
+    got = []
+    for k in range(n):
+        xy, u, v = _ground_points(rng, 4000)
+        keep = xy[:, 0] < edge(k)
+        got.append(mon.update(CAM, PLANE, u[keep], v[keep], np.zeros(keep.sum()), 0.8,
+                              travel_m=step if travel else None) is not None)
+    return got
+
+
+def _learnt_following(seed):
+    rng = np.random.default_rng(seed)
+    mon = UnseenGroundMonitor(max_ratio=0.15, min_expected=30.0, frames=2, max_range=5.0,
+                              half_width=0.5, follow_travel_m=1.5)
+    _learn(mon, rng)
+    return rng, mon
+
+
+def test_a_band_that_keeps_its_range_while_the_wearer_walks_is_the_cameras_reach():
+    """Edges that stop at 3 m however far the wearer walks (a smoother surface than the
+    one learnt, ground seen more obliquely) hide nothing: after 1.5 m of walking the band
+    is no longer reported, and the cells learn what they show, so that it stays so. On
+    tuning walk kerb_ramp 1016 (backpack rig) the raised footway's finer texture was said
+    as "cannot see the way ahead" for 14 s of walking."""
+    rng, mon = _learnt_following(11)
+    got = _walk(mon, rng, lambda k: 3.0)
+    assert got[1] and got[5]                        # at first as a wall would be
+    quiet = got.index(False, 2)
+    assert 0.12 * quiet <= 1.5 + 0.3                # within the walk's 1.5 m
+    assert not any(got[quiet:]), got
+    assert mon.expected[16] < 0.5 * mon.expected[8]    # 4 m: learnt as showing little
+    # without the wearer's travel, the same band is reported throughout
+    rng, mon = _learnt_following(11)
+    assert all(_walk(mon, rng, lambda k: 3.0, travel=False)[1:])
+    # and with the rule off
+    rng, mon = _learnt(11, frames=2)
+    assert all(_walk(mon, rng, lambda k: 3.0)[1:])
+
+
+def test_a_wall_walked_up_to_stays_reported():
+    rng, mon = _learnt_following(12)
+    got = _walk(mon, rng, lambda k: 4.5 - 0.12 * k, n=22)    # 4.5 m -> 2 m
+    assert all(got[2:]), got
+    # standing before it (no travel): still reported
+    assert all(_walk(mon, rng, lambda k: 1.98, step=0.0, n=10))
+
+
+def test_bands_found_now_and_then_are_not_a_band_that_keeps_to_the_wearer():
+    """Only a band found in every pair of its trail is judged: bands glimpsed now and
+    then at about one range (as a turn sweeps the view) said nothing of the plain wall
+    that then came into view at that range, and it was never said (tuning stop_turn
+    1012, backpack rig, and 1038, chest rig)."""
+    rng, mon = _learnt_following(14)
+    _walk(mon, rng, lambda k: 2.75 if k % 2 else 10.0, n=30)       # 3.6 m of walking
+    got = _walk(mon, rng, lambda k: 2.9 - 0.12 * k, n=6)            # the wall
+    assert all(got[1:]), got
+
+
+def test_a_band_nearer_than_the_cameras_reach_is_a_new_band():
+    """Once the band at the camera's reach keeps to the wearer, a plain wall that comes
+    nearer than it is reported: the reach's verdict is not the wall's."""
+    rng, mon = _learnt_following(13)
+    got = _walk(mon, rng, lambda k: 3.5, n=20)
+    assert not got[-1]
+    got = _walk(mon, rng, lambda k: 2.5 - 0.12 * k, n=8)   # a wall's foot at 2.5 m
+    assert all(got[1:]), got
+
+
 @pytest.mark.parametrize('kw, match', [
     (dict(max_ratio=1.0), 'max_ratio'), (dict(min_expected=0.0), 'min_expected'),
     (dict(frames=0), 'frames'), (dict(max_range=0.2), 'max_range'),
-    (dict(half_width=0.0), 'half_width')])
+    (dict(half_width=0.0), 'half_width'), (dict(follow_travel_m=-1.0), 'follow_travel_m')])
 def test_bad_settings_are_refused(kw, match):
     args = dict(max_ratio=0.15, min_expected=30.0, frames=2, max_range=5.0, half_width=0.5)
     args.update(kw)
@@ -369,3 +439,30 @@ def test_the_corridor_counts_are_numpys_histogram():
         ok = np.isfinite(y) & (np.abs(y) <= half)
         want = np.histogram(x[ok], bins=edges)[0].astype(float)
         assert mon._count(xy).tobytes() == want.tobytes()
+
+
+def test_the_detector_gives_the_monitor_the_wearers_travel(monkeypatch):
+    """The detector lays the pair's camera motion (``surface_motion``, as the ground
+    surface is carried; X_prev = R X_curr + t) on the plane's forward axis: 0.1 m walked
+    forward along the ground is a travel of 0.1 m; no motion, none."""
+    cam, frames = _plain_wall_frames()
+    got = []
+    orig = UnseenGroundMonitor.update
+
+    def update(self, *a, travel_m=None, **k):
+        got.append(travel_m)
+        return orig(self, *a, travel_m=travel_m, **k)
+
+    monkeypatch.setattr(UnseenGroundMonitor, 'update', update)
+    det = GpodDetector(GpodConfig())
+    fwd = np.array([0.0, -math.sin(PITCH), math.cos(PITCH)])  # along the ground, optical
+    det.surface_motion = lambda still: (np.eye(3), 0.1 * fwd)
+    for f in frames[:8]:
+        det.process(f.left, f.right, cam, stamp_ns=int(f.time * 1e9))
+    assert got and all(t == pytest.approx(0.1, abs=0.01) for t in got), got
+    got.clear()
+    det = GpodDetector(GpodConfig())
+    det.surface_motion = lambda still: None
+    for f in frames[:8]:
+        det.process(f.left, f.right, cam, stamp_ns=int(f.time * 1e9))
+    assert got and all(t is None for t in got), got

@@ -48,10 +48,24 @@ safety score does not count it as an obstacle report. R is the last ground edge 
 seen, moved on to where the ground's fine texture gives way to a plain face
 (`_foot_and_face`).
 
+What hides the ground stays where it is while the wearer walks: the band's near edge
+comes nearer by the distance walked. The camera's own reach does not: on a smoother
+surface than the one the expectation was learnt on, or ground seen ever more obliquely,
+the edges thin out from about the same range however far the wearer walks. With the
+wearer's forward travel given (`update`'s ``travel_m``, from the pair's camera motion)
+and ``follow_travel_m`` > 0, a band found in pairs in a row over that much walking whose
+near edge came nearer by less than ``FOLLOW_SHARE`` of the distance walked (the least
+squares slope of its range against the distance walked) *keeps to the wearer*: it is not
+reported, and the cells in view learn what they show at the usual rate, so that the
+expectation comes to describe the new ground, until the band is no longer found. Without
+the travel (motion unknown, or the wearer standing) nothing changes.
+
 Limits, which no passive stereo cue avoids: ground that itself has no edges for metres (a
-smooth floor after a textured one) looks the same as a wall with none, and is reported;
-a wall already in view when the monitor starts has no expectation behind it, and is not;
-a plain surface across only part of the corridor is not reported. On a small image the
+smooth floor after a textured one) looks the same as a wall with none, and is reported
+until the wearer has walked ``follow_travel_m`` onto it (for as long as the wearer stands,
+or the camera's motion is unknown); a wall already in view when the monitor starts has no
+expectation behind it, and is not; a plain surface across only part of the corridor is
+not reported. On a small image the
 ground beyond about 3 m shows too few matched edge pixels to expect anything of it: a
 wall is found when its foot is about 2.5-3 m ahead, not at 4-5 m.
 
@@ -110,6 +124,9 @@ PLAIN_MIN_SAMPLES = int(round(0.5 * FOOT_SEARCH_M / FOOT_STEP_M))
 FOOT_RUN = 3
 #: Least number of trusted cells in view in a reported band.
 MIN_CELLS = 2
+#: A band found over ``follow_travel_m`` of walking whose near edge came nearer by less
+#: than this share of the distance walked keeps to the wearer, not to the world.
+FOLLOW_SHARE = 0.5
 
 
 def is_unknown(height: float) -> bool:
@@ -156,10 +173,12 @@ class UnseenGroundMonitor:
         frames: pairs in a row a band must be found unseen before it is reported (>= 1).
         max_range: metres, the far end of the corridor (> CELL_DEPTH_M).
         half_width: metres, the corridor's half width (> 0).
+        follow_travel_m: metres of walking over which a band is watched for keeping to
+            the wearer (>= 0; 0: off).
     """
 
     def __init__(self, max_ratio: float, min_expected: float, frames: int, max_range: float,
-                 half_width: float) -> None:
+                 half_width: float, follow_travel_m: float = 0.0) -> None:
         if not 0.0 < max_ratio < 1.0:
             raise ValueError(f'max_ratio = {max_ratio} must be in (0, 1)')
         if not min_expected > 0:
@@ -170,6 +189,9 @@ class UnseenGroundMonitor:
             raise ValueError(f'max_range = {max_range} must be > {CELL_DEPTH_M}')
         if not half_width > 0:
             raise ValueError(f'half_width = {half_width} must be > 0')
+        if not (math.isfinite(follow_travel_m) and follow_travel_m >= 0):
+            raise ValueError(f'follow_travel_m = {follow_travel_m} must be >= 0')
+        self.follow_travel_m = float(follow_travel_m)
         self.max_ratio = float(max_ratio)
         self.min_expected = float(min_expected)
         self.frames = int(frames)
@@ -189,6 +211,13 @@ class UnseenGroundMonitor:
         #: pairs in a row the band was found, and its first cell in the last of them
         self._streak = 0
         self._last_cell = -10
+        #: metres walked forward over the pairs with a known travel
+        self._travel = 0.0
+        #: (distance walked, near edge's range) of the band in the pairs that found one
+        self._trail: list[tuple[float, float]] = []
+        #: the band keeps to the wearer (`_keeps_to_wearer`), at this range (m)
+        self._follows = False
+        self._follow_range = math.inf
 
     # -------------------------------------------------------------- geometry
     def pixel_ground(self, cam: StereoCamera, metric: MetricPlane, u: np.ndarray,
@@ -324,8 +353,8 @@ class UnseenGroundMonitor:
 
     def update(self, cam: StereoCamera, metric: MetricPlane, u: np.ndarray, v: np.ndarray,
                excess: np.ndarray, threshold: np.ndarray | float,
-               explained: np.ndarray | None = None, left: np.ndarray | None = None
-               ) -> UnseenReport | None:
+               explained: np.ndarray | None = None, left: np.ndarray | None = None,
+               travel_m: float | None = None) -> UnseenReport | None:
         """Count one frame's edge pixels, report the unseen band, learn the rest.
 
         Args:
@@ -340,6 +369,9 @@ class UnseenGroundMonitor:
             left: (H, W) uint8 the left image, to place the band's near edge where the
                 ground's fine texture gives way to the hiding surface's
                 (`_foot_and_face`); None: at the last ground edge pixel seen.
+            travel_m: metres the wearer walked forward along the ground since the
+                previous pair (the camera's motion laid on the plane), or None (unknown):
+                for a band that keeps to the wearer (`_keeps_to_wearer`).
         Returns:
             the report, or None.
         """
@@ -356,9 +388,11 @@ class UnseenGroundMonitor:
         trusted = view & (self.seen_frames >= TRUST_FRAMES)
         n_r = len(view)
         found = self._band_start(trusted, k_all)
+        follows = self._keeps_to_wearer(found, travel_m)
         learn = view.copy()
         report = None
-        if found is None:
+        if found is None or follows:
+            # no band, or one that keeps to the wearer: the ground as it looks from here
             self._streak, self._last_cell = 0, -10
         else:
             band = trusted & (np.arange(n_r) >= found)
@@ -387,15 +421,62 @@ class UnseenGroundMonitor:
                 self._streak, self._last_cell = 0, -10
         # learn: the running mean of each cell in view and not hidden; a cell that looks
         # hidden itself is learnt slowly (a wall creeping into the corridor's far end
-        # must not teach that the ground there shows nothing)
+        # must not teach that the ground there shows nothing), unless the band keeps to
+        # the wearer (nothing in the world hides it)
         e = self.expected
         first = learn & (self.seen_frames == 0)
         e[first] = k_all[first]
         rest = learn & ~first
-        rate = np.where(k_all < self.max_ratio * e, EMA_RATE_HIDDEN, EMA_RATE)
+        rate = (np.full(n_r, EMA_RATE) if follows
+                else np.where(k_all < self.max_ratio * e, EMA_RATE_HIDDEN, EMA_RATE))
         e[rest] += rate[rest] * (k_all[rest] - e[rest])              # x <- x + a (z - x)
         self.seen_frames[learn] += 1
         return report
+
+    def _keeps_to_wearer(self, found: int | None, travel_m: float | None) -> bool:
+        """Whether the band found this pair (its first cell ``found``, None: none) keeps
+        to the wearer. The pairs in a row that found a band, each at the distance walked
+        so far (a pair with an unknown ``travel_m`` adds no distance), are kept over the last
+        2 ``follow_travel_m`` of walking; once they span ``follow_travel_m``, the band
+        keeps to the wearer if its near edge's range fell by less than ``FOLLOW_SHARE``
+        of the distance walked (least squares slope of range against distance; a wall
+        walked up to: -1). It goes on keeping to the wearer until no band is found over
+        ``follow_travel_m`` of walking, or one is found more than two cells nearer (a
+        new band: something in front of the wearer's reach). Always False with
+        ``follow_travel_m`` 0."""
+        if self.follow_travel_m <= 0.0:
+            return False
+        if travel_m is not None and math.isfinite(travel_m):
+            self._travel += float(travel_m)
+        trail = self._trail
+        if found is None:
+            # a band keeps to the wearer only if found in every pair of its trail; once
+            # it does, it does until none is found over follow_travel_m of walking (the
+            # expectation learnt, the band shows in a pair now and then)
+            if not self._follows or (trail and
+                                     self._travel - trail[-1][0] > self.follow_travel_m):
+                trail.clear()
+                self._follows = False
+            return False
+        r = float(self.range_edges[found])
+        if self._follows and r < self._follow_range - 2.0 * CELL_DEPTH_M:
+            trail.clear()
+            self._follows = False
+        trail.append((self._travel, r))
+        # the last 2 follow_travel_m of walking (and 200 pairs: a wearer standing)
+        while len(trail) > 200 or trail[0][0] < self._travel - 2.0 * self.follow_travel_m:
+            trail.pop(0)
+        if self._follows:
+            return True
+        s = np.array([p[0] for p in trail])
+        if s[-1] - s[0] < self.follow_travel_m:
+            return False
+        rr = np.array([p[1] for p in trail])
+        ds = s - s.mean()
+        slope = float(ds @ (rr - rr.mean())) / float(ds @ ds)   # (ds spans follow_travel_m)
+        self._follows = slope > -FOLLOW_SHARE
+        self._follow_range = float(np.median(rr))
+        return self._follows
 
     def _report(self, cam: StereoCamera, metric: MetricPlane, xy: np.ndarray,
                 excess: np.ndarray, threshold, band: np.ndarray, found: int,

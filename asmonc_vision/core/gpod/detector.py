@@ -12,7 +12,7 @@ from typing import Any, Callable, cast
 import numpy as np
 
 from ..alignment import AlignmentConfig, VerticalAlignment, brightness_gain_offset
-from ..camera import MetricPlane, StereoCamera
+from ..camera import MetricPlane, StereoCamera, ground_axes
 from ..config import override
 from ..edges import detect_vertical_edges, image_noise_sigma, textured_edge_threshold
 from ..ground_plane import fast_median
@@ -128,7 +128,7 @@ class GpodDetector(Tracking):
             metric = cast(MetricPlane, metric)   # (a pass stays 'tracking' only with one)
             obstacles = self._track(detections, stamp_s, p.still, cam, metric, motion)
             unseen = self._unseen_ground(p.features, p.threshold, cam, metric,
-                                         detections + obstacles)
+                                         detections + obstacles, p.still)
             if unseen:
                 detections = tuple(sorted(detections + unseen, key=lambda o: o.range))
                 obstacles = tuple(sorted(obstacles + unseen, key=lambda o: o.range))
@@ -239,15 +239,18 @@ class GpodDetector(Tracking):
                      still, timings, motion)
 
     def _unseen_ground(self, features: GpodFeatures, threshold: float, cam: StereoCamera,
-                       metric: MetricPlane, known: tuple[GpodObstacle, ...]
-                       ) -> tuple[GpodObstacle, ...]:
+                       metric: MetricPlane, known: tuple[GpodObstacle, ...],
+                       still: bool = False) -> tuple[GpodObstacle, ...]:
         """The frame's band of unseen corridor ground (`core.unseen_ground`), unless an
         obstacle or drop-off in ``known`` at least ``unseen.explain_min_confidence``
         confident explains it, as unknown ground straight ahead: an untracked entry
         (``track_id`` 0) whose ``height`` is ``UNKNOWN_HEIGHT`` (NaN: ground that cannot
         be seen is not a thing; ``disparity_excess`` 0, ``num_edge_pixels`` 0;
         ``confidence`` 1 - seen / expected). Empty when there is none or
-        ``unseen.max_ratio`` is 0."""
+        ``unseen.max_ratio`` is 0. The wearer's travel since the previous pair, for a
+        band that keeps to the wearer, is the camera's motion (`_ground_motion`, as the
+        ground surface is carried; ``still``: the rig stood still) along the plane's
+        forward axis."""
         if self._unseen is None:
             return ()
         # the known feet on the ground: (forward, left) from their range and bearing; a
@@ -256,8 +259,15 @@ class GpodDetector(Tracking):
                       if o.confidence >= self.config.unseen.explain_min_confidence)
         explained = _ground_points(known) if known else None
         thr = features.threshold if features.threshold is not None else threshold
+        travel = None
+        if self._unseen.follow_travel_m > 0.0:
+            motion = self._ground_motion(still)
+            if motion is not None:
+                # X_prev = R X_curr + t: t is the camera's position now, in the previous
+                # pair's frame; its forward part along the ground is the travel
+                travel = float(np.asarray(motion[1], float).reshape(3) @ ground_axes(metric)[1])
         r = self._unseen.update(cam, metric, features.u_left, features.v, features.excess,
-                                thr, explained, left=self._left)
+                                thr, explained, left=self._left, travel_m=travel)
         if r is None:
             return ()
         u, v = cam.project_left(np.stack([r.position, r.position - r.height

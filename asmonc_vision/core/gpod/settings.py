@@ -554,6 +554,12 @@ class UnseenSettings:
         'explains the missing ground (a weak report that no alarm would announce must not '
         'silence the unseen ground behind it; the alarm node\'s min_confidence), 0..1',
         range=(0.0, 1.0))
+    follow_travel_m: float = param(
+        1.5, 'Unseen ground: a band found while the wearer walked this far whose near edge '
+        'came nearer by less than half the distance walked keeps to the wearer, not to the '
+        'world (the camera\'s own reach on smoother or more oblique ground, not a thing '
+        'hiding it): not reported, and learnt as what the ground shows; metres, 0 = off',
+        range=(0.0, 20.0))
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -111,6 +111,7 @@ class DetectorState:
         #: the corridor's ground edge pixels expected, and its bands gone unseen
         self._unseen = (UnseenGroundMonitor(c.unseen.max_ratio, c.unseen.min_expected,
                                             c.unseen.frames, c.unseen.range_m,
-                                            c.unseen.half_width_m)
+                                            c.unseen.half_width_m,
+                                            c.unseen.follow_travel_m)
                         if c.unseen.max_ratio > 0 else None)
 
