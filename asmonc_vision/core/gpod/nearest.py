@@ -107,7 +107,7 @@ def _soft_nearest_groups(xy: np.ndarray, sr: np.ndarray, group: np.ndarray, n_gr
             g = np.ascontiguousarray(g, np.float64)
     q, undecided = kg.nb_soft_finish(xy, idx, start, near, w, far, g)
     out[want] = q[want]
-    for k in flat_nonzero(undecided).tolist():       # left to numpy
+    for k in flat_nonzero(undecided).tolist():     # left to numpy
         sel = idx[start[k]:start[k + 1]]
         out[k] = soft_nearest(xy[sel], sr[sel], g)
     return out
