@@ -468,14 +468,14 @@ class UnseenGroundMonitor:
             trail.pop(0)
         if self._follows:
             return True
-        s = np.array([p[0] for p in trail])
-        if s[-1] - s[0] < self.follow_travel_m:
+        if trail[-1][0] - trail[0][0] < self.follow_travel_m:
             return False
-        rr = np.array([p[1] for p in trail])
+        s, rr = np.asarray(trail).T               # distance walked, band's range (m)
         ds = s - s.mean()
         slope = float(ds @ (rr - rr.mean())) / float(ds @ ds)   # (ds spans follow_travel_m)
         self._follows = slope > -FOLLOW_SHARE
-        self._follow_range = float(np.median(rr))
+        if self._follows:
+            self._follow_range = float(np.median(rr))
         return self._follows
 
     def _report(self, cam: StereoCamera, metric: MetricPlane, xy: np.ndarray,
