@@ -185,3 +185,50 @@ def test_a_pixels_contrary_rivals_are_those_on_the_other_side_of_the_ground():
     assert contrary_rival_share(Rivalled(), pd, thr, raised) == pytest.approx([0.0, 0.0, 0.0])
     Rivalled.rival_match = None
     assert contrary_rival_share(Rivalled(), pd, thr, raised) is None
+
+
+def test_the_compiled_rival_tests_give_the_numpy_paths_results(monkeypatch):
+    """The rival tests compiled (`kernels.nb_rivals_on_ground`, `nb_rival_share`) give
+    the numpy paths' results bit for bit: periodic matches, ambiguous drops and the
+    contrary rivals' share, on random rivals with ties at the support ratio (in single
+    precision) and on the ground's bounds, and NaN ground."""
+    from asmonc_vision.core.gpod import kernels as kn
+    from asmonc_vision.core.gpod.support import contrary_rival_share
+    kn.warm_up()
+    if kn.nb_rival_share is None or kn.nb_rivals_on_ground is None:
+        pytest.skip('numba not installed')
+    rng = np.random.default_rng(7)
+    k, n_r = 400, 3000
+    pd = rng.uniform(5.0, 30.0, k)
+    pd[::37] = np.nan
+    thr = rng.uniform(0.3, 1.5, k)
+    d = (pd + rng.normal(0.0, 3.0, k)).astype(np.float32)
+    j = np.sort(rng.integers(0, k, n_r)).astype(np.int32)
+    rd = (pd[j] + rng.normal(0.0, 2.0, n_r)).astype(np.float32)
+    rd[::5] = (pd[j] + thr[j])[::5]                        # on the ground's bounds
+    rd[1::5] = (pd[j] - thr[j])[1::5]
+    ratio = rng.uniform(0.0, 1.2, n_r).astype(np.float32)
+    config = GpodConfig()
+    r = config.detection.ambiguous_match_ratio
+    ratio[::7] = np.float32(r)                               # ties, in single precision
+    ratio[3::7] = np.nextafter(np.float32(r), np.float32(0.0))
+    m = Matches(u_left=np.zeros(k, np.float32), u_right=np.zeros(k, np.float32),
+                v=np.zeros(k, np.int32), d=d, strength=np.ones(k, np.float32),
+                string_id=np.zeros(k, np.int32), left_index=np.arange(k, dtype=np.int32),
+                right_index=np.arange(k, dtype=np.int32), support=np.ones(k, np.float32),
+                rival_match=j, rival_d=rd, rival_ratio=ratio)
+    raised = rng.random(k) < 0.5
+
+    def run():
+        return [rules.periodic_matches(override(config, {'detection.periodic_min_rivals': n}),
+                                       m, pd, thr) for n in (1, 2, 3)] + [
+            rules.ambiguous_drops(config, m, pd, thr), contrary_rival_share(m, pd, thr, raised)]
+
+    fast = run()
+    monkeypatch.setattr(kn, 'nb_rival_share', None)
+    monkeypatch.setattr(kn, 'nb_rivals_on_ground', None)
+    slow = run()
+    for x, y in zip(fast, slow):
+        assert x.dtype == y.dtype
+        np.testing.assert_array_equal(x, y)
+    assert all(x.any() for x in fast)                        # the tests were exercised

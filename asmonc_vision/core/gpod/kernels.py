@@ -518,6 +518,57 @@ nb_still = _jit(_still_kernel)
 nb_temporal = _jit(_temporal_kernel)
 
 
+
+def _rival_share_kernel(j, ratio, rival_d, pd, thr, raised, k):
+    """`support.contrary_rival_share` (for numba): one pass over the rivals in their
+    order (np.bincount's sums). j (R,) int32 the match of each rival, ratio and rival_d
+    (R,) float32 its support ratio and disparity; pd, thr (K,) float64 the ground's
+    disparity and the threshold at each match, raised (K,) bool. Returns (K,) float32."""
+    total = np.zeros(k)
+    num = np.zeros(k)
+    for i in range(j.shape[0]):
+        q = j[i]
+        r = np.float64(ratio[i])
+        total[q] += r
+        d = np.float64(rival_d[i])
+        if raised[q]:
+            contrary = d <= pd[q] + thr[q]
+        else:
+            contrary = d >= pd[q] - thr[q]
+        if contrary:
+            num[q] += r
+    out = np.empty(k, np.float32)
+    for q in range(k):
+        out[q] = np.float32(num[q] / (1.0 + total[q]))
+    return out
+
+
+def _rivals_on_ground_kernel(j, strong, rival_d, pd, thr, d, k):
+    """The rival tests of `rules.periodic_matches` and `rules.ambiguous_drops` (for
+    numba), one pass over the rivals ``strong`` (R,) bool (j (R,) int32 the match of
+    each rival, rival_d (R,) float32 its disparity): per match (K,), how many strong
+    rivals it has (int64), whether one of them lies on the ground (within ``thr`` of
+    ``pd``, (K,) float64 px), and whether one on the ground lies nearer than the match
+    (a larger disparity than its own ``d`` (K,) float32)."""
+    n_strong = np.zeros(k, np.int64)
+    ground = np.zeros(k, np.bool_)
+    nearer = np.zeros(k, np.bool_)
+    for i in range(j.shape[0]):
+        if not strong[i]:
+            continue
+        q = j[i]
+        n_strong[q] += 1
+        rd = np.float64(rival_d[i])
+        if abs(rd - pd[q]) <= thr[q]:
+            ground[q] = True
+            if rd > np.float64(d[q]):
+                nearer[q] = True
+    return n_strong, ground, nearer
+
+
+nb_rival_share = _jit(_rival_share_kernel)
+nb_rivals_on_ground = _jit(_rivals_on_ground_kernel)
+
 def _by_group(group, n_groups):
     """The rows of each group (for numba): (N,) int64 row indices by group, ascending
     within each (a stable counting sort), and (n_groups + 1,) int64 group starts."""
@@ -566,7 +617,8 @@ def warm_up() -> None:
     """Compile the numba kernels once per process (see `matching.warm_up`), before the
     first frame; falls back to the numpy paths if numba is missing or fails."""
     global _warm, nb_occluded, nb_hanging, nb_link_groups, nb_group_quantile, nb_extent, \
-        nb_runs, nb_occluded_all, nb_hanging_all, nb_still, nb_temporal, nb_thin
+        nb_runs, nb_occluded_all, nb_hanging_all, nb_still, nb_temporal, nb_thin, \
+        nb_rival_share, nb_rivals_on_ground
     if _warm:
         return
     _warm = True
@@ -576,6 +628,7 @@ def warm_up() -> None:
         nb_occluded = nb_hanging = nb_link_groups = None
         nb_group_quantile = nb_extent = nb_runs = nb_occluded_all = None
         nb_hanging_all = nb_still = nb_temporal = nb_thin = None
+        nb_rival_share = nb_rivals_on_ground = None
         kernels_geometry.warm_up(False)
         return
     kernels_geometry.warm_up(True)
@@ -604,3 +657,6 @@ def warm_up() -> None:
         nb_hanging_all, np.full(1, -1, np.int32), np.zeros(1, np.int32),
         np.zeros(1, np.int32), np.zeros(1, np.float32), i - 1, np.ones(1), 0.5, True,
         np.ones(1, bool), 32, 1.0, 0.1, np.ones(1, bool)))
+    j1, r1, b1 = np.zeros(1, np.int32), np.ones(1, np.float32), np.ones(1, bool)
+    nb_rival_share = _warmed(nb_rival_share, j1, r1, r1, f1, f1, b1, 1)
+    nb_rivals_on_ground = _warmed(nb_rivals_on_ground, j1, b1, r1, f1, f1, r1, 1)

@@ -29,6 +29,7 @@ import numpy as np
 from ..camera import MetricPlane
 from ..edges import EdgeMap
 from ..matching import Candidates, Matches
+from . import kernels as kn
 from .faces import face_gap_points, lone_face_points, silhouette_owners, view_edge_points
 from .footing import _FrameContext, ground_coords
 from .grouping import cluster_points_2d
@@ -120,6 +121,12 @@ def periodic_matches(c: GpodConfig, m: Matches, pd: np.ndarray, thr: np.ndarray
             or m.rival_ratio is None or k == 0):
         return out
     strong = m.rival_ratio >= r
+    if kn.nb_rivals_on_ground is not None:
+        # The same counts and tests, compiled (one pass over the rivals).
+        n_strong, ground, _ = kn.nb_rivals_on_ground(
+            m.rival_match, strong, m.rival_d, np.asarray(pd, np.float64),
+            np.asarray(thr, np.float64), m.d, k)
+        return (n_strong >= n_min) & ground
     j = m.rival_match[strong]
     n_strong = np.bincount(j, minlength=k)
     on_ground = np.abs(m.rival_d[strong].astype(np.float64) - pd[j]) <= thr[j]
@@ -143,6 +150,11 @@ def ambiguous_drops(c: GpodConfig, m: Matches, pd: np.ndarray, thr: np.ndarray
     if (r <= 0 or m.rival_match is None or m.rival_d is None or m.rival_ratio is None
             or k == 0):
         return no_drop
+    if kn.nb_rivals_on_ground is not None:
+        # The same tests, compiled (one pass over the rivals).
+        return kn.nb_rivals_on_ground(m.rival_match, m.rival_ratio >= r, m.rival_d,
+                                      np.asarray(pd, np.float64),
+                                      np.asarray(thr, np.float64), m.d, k)[2]
     j = m.rival_match
     rd = m.rival_d.astype(np.float64)
     sel = flat_nonzero((m.rival_ratio >= r) & (np.abs(rd - pd[j]) <= thr[j]))

@@ -14,6 +14,7 @@ from ..edges import EdgeMap
 from ..ground_plane import plane_is_plausible
 from ..matching import Matches
 from ..motion.geometry import so3_log
+from . import kernels as kn
 from .results import GpodFeatures, GpodObstacle
 
 #: Largest camera translation (m) and rotation (rad) between two frames of a rig seen
@@ -150,6 +151,10 @@ def contrary_rival_share(m: Matches, pd: np.ndarray, thr: np.ndarray,
         return None
     k = len(m)
     j = m.rival_match
+    if kn.nb_rival_share is not None:
+        # The same sums in the same order, compiled (one pass over the rivals).
+        return kn.nb_rival_share(j, m.rival_ratio, m.rival_d, np.asarray(pd, np.float64),
+                                 np.asarray(thr, np.float64), np.asarray(raised, bool), k)
     r = m.rival_ratio.astype(np.float64)
     rd = m.rival_d.astype(np.float64)
     total = 1.0 + np.bincount(j, weights=r, minlength=k)
