@@ -10,8 +10,8 @@ from typing import cast
 
 import numpy as np
 
-from ..camera import (MetricPlane, StereoCamera, add_rows, plane_disparity, row_norms,
-                      sub_scaled)
+from ..camera import (MetricPlane, StereoCamera, add_rows, ground_axes, plane_disparity,
+                      row_norms, sub_scaled)
 from ..edges import EdgeMap, gradient_noise_gain
 from ..ground_surface import depth_noise, fit_ground_surface
 from ..matching import Candidates, Matches
@@ -245,7 +245,7 @@ class Detection(PlaneTracking):
             idx = flat_nonzero(sel)
             if idx.size:
                 found.extend(self._clusters(idx, sign, radius, min_px, m, pts, h, excess,
-                                            cam, metric))
+                                            cam, metric, ev.clustered))
         found.sort(key=lambda o: o.range)
         return features, tuple(found)
 
@@ -350,12 +350,20 @@ class Detection(PlaneTracking):
 
     def _clusters(self, idx: np.ndarray, sign: float, radius: float, min_pixels: int,
                   m: Matches, pts: np.ndarray, h: np.ndarray, excess: np.ndarray,
-                  cam: StereoCamera, metric: MetricPlane) -> list[GpodObstacle]:
+                  cam: StereoCamera, metric: MetricPlane, memo: dict | None = None
+                  ) -> list[GpodObstacle]:
         """Cluster the selected pixels (by string, feet proximity) into obstacles; drop
-        clusters of fewer than ``min_pixels`` pixels."""
+        clusters of fewer than ``min_pixels`` pixels. ``memo``: the frame's clusterings
+        by (sign, radius) (`FrameEvidence.clustered`), one of the same pixels taken as
+        it is."""
         hh = h[idx]
-        g2, fwd, lft = ground_coords(pts[idx], hh, metric, axes=True)
-        label = cluster_points_2d(g2, m.string_id[idx], radius)
+        known = memo.get((sign, radius)) if memo else None
+        if known is not None and np.array_equal(known[0], idx):
+            g2, label = known[1], known[2]
+            _, fwd, lft = ground_axes(metric)
+        else:
+            g2, fwd, lft = ground_coords(pts[idx], hh, metric, axes=True)
+            label = cluster_points_2d(g2, m.string_id[idx], radius)
         pr = self.config.detection.part_radius_m
         if sign > 0 and 0.0 < pr < radius:
             return self._parts(idx, label, pr, sign, min_pixels, hh, g2, m, excess, cam,
@@ -577,23 +585,26 @@ class Detection(PlaneTracking):
         n_ev = np.bincount(label, weights=self._evidence_weight(m.strength[idx]),
                            minlength=n_c)
         conf = (p_any * np.minimum(1.0, n_ev / c.detection.confidence_full_pixels)).clip(0.0, 1.0)
+        # (per obstacle, Python numbers: each value as numpy's scalar would give it)
+        x0l, x1l, y0l, y1l = x0.tolist(), x1.tolist(), y0.tolist(), y1.tolist()
+        foot_l, height_l, count_l = foot_roi.tolist(), height.tolist(), count.tolist()
+        range_l, bearing_l, exc_l = r_near.tolist(), bearing.tolist(), exc.tolist()
+        width_l, conf_l, sid_l = (hi_lat - lo_lat).tolist(), conf.tolist(), sid_start.tolist()
         out = []
-        for k in range(n_c):
-            if count[k] < min_pixels:
-                continue
-            yk1 = int(y1[k])
-            fk = foot_roi[k]
+        for k in flat_nonzero(count >= min_pixels).tolist():
+            yk1 = y1l[k]
+            fk = foot_l[k]
             if sign > 0 and fk[2] > 1e-6:    # extend down to where the obstacle meets the ground
                 v_foot = cam.f * fk[1] / fk[2] + cam.cy
                 if math.isfinite(v_foot):
                     yk1 = max(yk1, int(round(min(v_foot, cam.height - 1))))
-            xk0, yk0 = max(int(x0[k]), 0), max(int(y0[k]), 0)
-            xk1, yk1 = min(int(x1[k]), cam.width - 1), min(yk1, cam.height - 1)
+            xk0, yk0 = max(x0l[k], 0), max(y0l[k], 0)
+            xk1, yk1 = min(x1l[k], cam.width - 1), min(yk1, cam.height - 1)
             roi = (xk0, yk0, max(xk1 - xk0 + 1, 1), max(yk1 - yk0 + 1, 1))
             out.append(new_obstacle(
-                position=position[k].astype(np.float64), height=float(height[k]),
-                range=float(r_near[k]), bearing=float(bearing[k]),
-                width=float(hi_lat[k] - lo_lat[k]), disparity_excess=float(exc[k]),
-                confidence=float(conf[k]), roi=roi, num_edge_pixels=int(count[k]),
-                string_ids=sid_u[sid_start[k]:sid_start[k + 1]].astype(np.int32)))
+                position=position[k].astype(np.float64), height=height_l[k],
+                range=range_l[k], bearing=bearing_l[k], width=width_l[k],
+                disparity_excess=exc_l[k], confidence=conf_l[k], roi=roi,
+                num_edge_pixels=count_l[k],
+                string_ids=sid_u[sid_l[k]:sid_l[k + 1]].astype(np.int32)))
         return out

@@ -21,7 +21,7 @@ ROS here.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
@@ -89,6 +89,9 @@ class FrameEvidence:
     obst_string: np.ndarray | None = None   # (n_s,) bool (rules ``strings``)
     n_drop: np.ndarray | None = None        # (n_s,) weighted drop pixels per string
     drop_string: np.ndarray | None = None   # (n_s,) bool (rules ``drops``)
+    #: clusterings of pixels by (sign, radius): (pixel indices, feet, labels)
+    #: (`bending_ground`'s, for `Detection._clusters` to reuse on the same pixels)
+    clustered: dict = field(default_factory=dict)
 
     @property
     def sid(self) -> np.ndarray:
@@ -226,7 +229,7 @@ def _string_pieces(c: GpodConfig, ev: FrameEvidence) -> None:
 
 def bending_ground(c: GpodConfig, px: np.ndarray, pts: np.ndarray, h: np.ndarray,
                    metric: MetricPlane, n_s: int, sid: np.ndarray, radius: float,
-                   sign: float) -> np.ndarray:
+                   sign: float, memo: dict | None = None) -> np.ndarray:
     """(n_s,) bool: the strings that are ground bending away from the ground reference:
     in a cluster of their pixels (``px`` (K,) bool; feet clustered at ``radius`` m) of at
     least 8 pixels spread over ``bend.min_span_m`` or more along the walking direction
@@ -235,7 +238,10 @@ def bending_ground(c: GpodConfig, px: np.ndarray, pts: np.ndarray, h: np.ndarray
     `BEND_MAX_START_M` off it at its near end. Beyond a brow the ground goes on falling,
     beyond a dip rising, from where the ground is: the farther its points the farther
     off; the lower ground beyond a drop and the top of a kerb are level, as far off near
-    as far, and start a step away."""
+    as far, and start a step away. ``memo`` (a dict, or None): the clustering is kept
+    in it under ``(sign, radius)`` as (pixel indices (P,) int64, their feet (P, 2), their
+    cluster labels (P,) int64), for a later clustering of the same pixels
+    (`Detection._clusters`)."""
     out = np.zeros(n_s, bool)
     idx = flat_nonzero(px)
     if idx.size < 8 or c.bend.min_grade <= 0:
@@ -243,6 +249,8 @@ def bending_ground(c: GpodConfig, px: np.ndarray, pts: np.ndarray, h: np.ndarray
     h_i, sid_i = h[idx], sid[idx]
     g2 = ground_coords(pts[idx], h_i, metric)
     label = cluster_points_2d(g2, sid_i, radius)
+    if memo is not None:
+        memo[(sign, radius)] = (idx, g2, label)
     # (clusters of fewer than 8 pixels are none)
     for k in flat_nonzero(np.bincount(label) >= 8).tolist():
         sel = label == k
@@ -274,7 +282,7 @@ def _ground_bend_up(c: GpodConfig, ev: FrameEvidence) -> None:
     assert s is not None
     if s.any():
         s &= ~bending_ground(c, ev.obst & s[ev.sid], ev.pts, ev.h, ev.metric, ev.n_s, ev.sid,
-                             c.detection.cluster_radius_m, 1.0)
+                             c.detection.cluster_radius_m, 1.0, ev.clustered)
 
 
 def _half_occlusion(c: GpodConfig, ev: FrameEvidence) -> None:
@@ -341,7 +349,7 @@ def _ground_bend_down(c: GpodConfig, ev: FrameEvidence) -> None:
     assert s is not None
     if s.any():
         s &= ~bending_ground(c, ev.drop & s[ev.sid], ev.pts, ev.h, ev.metric, ev.n_s,
-                             ev.sid, c.drops.cluster_radius_m, -1.0)
+                             ev.sid, c.drops.cluster_radius_m, -1.0, ev.clustered)
 
 
 # --- placement rules -----------------------------------------------------------------
