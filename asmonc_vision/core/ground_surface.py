@@ -66,7 +66,7 @@ import numpy as np
 from . import surface_kernels
 from .camera import MetricPlane, StereoCamera, ground_axes, sub_rows
 from .config import check_fields, param
-from .ground_plane import fast_percentile
+from .ground_plane import fast_median, fast_percentile
 from .npfast import flat_nonzero
 
 
@@ -486,7 +486,7 @@ def fit_ground_surface(points: np.ndarray, plane: MetricPlane,
     # vigorous walk) and a profile would bend to make up for it, not for the ground.
     anchor = (s >= first - c.knot_spacing_m) & (s < first) & (np.abs(h) <= c.gate_m)
     if np.count_nonzero(anchor) >= c.min_features:
-        offset = float(np.median(h[anchor]))
+        offset = fast_median(h[anchor])      # (finite: |h| <= gate_m)
         if abs(offset) > c.anchor_max_m:
             knots_s = _nominal_knots(first, first, c)
             return GroundSurface(plane, knots_s, np.zeros(knots_s.size), first,
