@@ -401,6 +401,8 @@ def lone_face_points(ctx: _FrameContext, xy: np.ndarray, group: np.ndarray, n_gr
                   & (_row_median(sep) >= _LONE_MIN_SEP_PX)
                   & (_row_median(sep / np.maximum(shift, 1e-9))
                      >= _LONE_MIN_SEP_FRACTION))
+        if not ok.any():
+            continue                            # no face passes the image's tests
         # each face's nearest point to the camera (the foot, its end, or between)
         ends = points[rows, end]
         d = ends - foot
@@ -408,12 +410,15 @@ def lone_face_points(ctx: _FrameContext, xy: np.ndarray, group: np.ndarray, n_gr
         near = foot + t[:, None] * d
         ok &= np.hypot(near[:, 0], near[:, 1]) <= math.hypot(*foot) - _LONE_MIN_GAIN_M
         best = None
-        for j in flat_nonzero(ok)[np.argsort(-support[ok], kind='stable')]:
-            if g_all is None:
-                g_all = np.ascontiguousarray(ctx.ground_xy, np.float64).reshape(-1, 2)
-            if not hides(float(ends[j, 0]), float(ends[j, 1]), 0.0,
-                         np.ascontiguousarray(foot[None]), np.zeros(1), g_all, h / cam_h,
-                         _FREE_SPACE_MARGIN_M, _FACE_HIDDEN_MIN):
+        tried = flat_nonzero(ok)
+        if tried.size == 0:
+            continue
+        if g_all is None:
+            g_all = np.ascontiguousarray(ctx.ground_xy, np.float64).reshape(-1, 2)
+        foot_1, sd_1 = np.ascontiguousarray(foot[None]), np.zeros(1)
+        for j in tried[np.argsort(-support[tried], kind='stable')].tolist():
+            if not hides(float(ends[j, 0]), float(ends[j, 1]), 0.0, foot_1, sd_1, g_all,
+                         h / cam_h, _FREE_SPACE_MARGIN_M, _FACE_HIDDEN_MIN):
                 best = near[j]                  # the best supported face that hides no
                 break                           # visible ground
         if best is not None:
