@@ -106,7 +106,8 @@ _OTHER_BODY_HEIGHT_FRACTION = 1.0 / _WEAK_HEIGHT_RATIO
 
 
 def _ground_across_line(ground: np.ndarray, c: np.ndarray, d: np.ndarray, a: np.ndarray,
-                        b: np.ndarray) -> tuple[int, int, int, int, int, float, float]:
+                        b: np.ndarray, bearing: np.ndarray | None = None
+                        ) -> tuple[int, int, int, int, int, float, float]:
     """Visible ground on either side of the ground line through ``c`` along unit ``d``,
     within the bearings of its points ``a`` and ``b`` ((2,) each, metres): the numbers of
     ground features (G, 2) more than ``_FACE_BEHIND_M`` in front of it (the camera's side)
@@ -115,9 +116,11 @@ def _ground_across_line(ground: np.ndarray, c: np.ndarray, d: np.ndarray, a: np.
     weighted by its range (so that
     evenly seen ground counts the same near and far: within a wedge of bearings, clear
     pavement gives 0.71-0.86 times as many features per band 1 m behind a line 2.5-5.5 m
-    ahead as 1 m in front of it, and 0.98-1.03 times the range-weighted sum)."""
+    ahead as 1 m in front of it, and 0.98-1.03 times the range-weighted sum).
+    ``bearing``: (G,) the ground features' bearings, ``np.arctan2(ground[:, 1],
+    ground[:, 0])`` (radians), when the caller has them (None: worked out here)."""
     b0, b1 = math.atan2(a[1], a[0]), math.atan2(b[1], b[0])
-    bg = np.arctan2(ground[:, 1], ground[:, 0])
+    bg = np.arctan2(ground[:, 1], ground[:, 0]) if bearing is None else bearing
     w = ground[(bg >= min(b0, b1)) & (bg <= max(b0, b1))]
     nrm = np.array([-d[1], d[0]])
     off = math.copysign(1.0, float(nrm @ -c)) * ((w - c) @ nrm)
@@ -179,6 +182,7 @@ def view_edge_points(xy: np.ndarray, group: np.ndarray, n_groups: int, to_image,
         return out
     counts = np.bincount(group, minlength=n_groups)
     ground = None
+    g_brg: np.ndarray | None = None         # the ground's bearings, once it is needed
     for k in flat_nonzero(counts >= _FACE_MIN_FEET):
         c, d, along, rms = _fit_line(xy[group == k])
         span = float(along.max() - along.min())
@@ -219,6 +223,7 @@ def view_edge_points(xy: np.ndarray, group: np.ndarray, n_groups: int, to_image,
             continue
         if ground is None:
             ground = ground_xy() if callable(ground_xy) else ground_xy
+            g_brg = np.arctan2(ground[:, 1], ground[:, 0])     # (one for every line)
         # Ground seen through the line between the feet: separate objects, not a face.
         # Also within the widest gap between successive feet alone: objects in a row hide
         # the ground behind themselves, which dilutes the whole span's share (a post and
@@ -229,10 +234,11 @@ def view_edge_points(xy: np.ndarray, group: np.ndarray, n_groups: int, to_image,
         i_gap = int(np.argmax(np.diff(t_s)))
         if t_s[i_gap + 1] - t_s[i_gap] >= _FACE_GAP_SEEN_M:
             spans.append((c + t_s[i_gap] * d, c + t_s[i_gap + 1] * d))
-        if any(_seen_through(*_ground_across_line(ground, c, d, a, b)[3:]) for a, b in spans):
+        if any(_seen_through(*_ground_across_line(ground, c, d, a, b, g_brg)[3:])
+               for a, b in spans):
             continue
         # Visible ground behind the extension shows the face ends before the view's edge.
-        _, n_behind, n_wedge, *_ = _ground_across_line(ground, c, d, e, q)
+        _, n_behind, n_wedge, *_ = _ground_across_line(ground, c, d, e, q, g_brg)
         if _ground_behind(n_behind, n_wedge):
             continue
         out[k] = q
@@ -484,6 +490,7 @@ def face_gap_points(xy: np.ndarray, group: np.ndarray, n_groups: int, q: np.ndar
     disc = np.sqrt(np.maximum(half_tr ** 2 - (mxx * myy - mxy ** 2), 0.0))
     ok &= (half_tr - disc) / n <= _FACE_MAX_RMS_M ** 2
     ground = None
+    g_brg: np.ndarray | None = None         # the ground's bearings, once it is needed
     for t in flat_nonzero(ok):
         a, b = int(ia[t]), int(ib[t])
         lam = half_tr[t] + disc[t]              # the line's direction: the larger eigenvalue
@@ -504,10 +511,11 @@ def face_gap_points(xy: np.ndarray, group: np.ndarray, n_groups: int, q: np.ndar
             continue                            # the nearest point is within one of them
         if ground is None:
             ground = ground_xy() if callable(ground_xy) else ground_xy
+            g_brg = np.arctan2(ground[:, 1], ground[:, 0])     # (one for every pair)
         if ground.shape[0] == 0:
             continue
         n_front, n_behind, n_wedge, b_front, b_behind, w_front, w_behind = _ground_across_line(
-            ground, ct, d, ct + lo_t * d, ct + hi_t * d)
+            ground, ct, d, ct + lo_t * d, ct + hi_t * d, g_brg)
         # Near the line, the ground behind the gap seen about as densely as in front of
         # it: two objects with a way between them (a bollard and a wall 3.6 m apart once
         # made a "face" 6 m away), not one face.
