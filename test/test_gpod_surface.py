@@ -198,3 +198,52 @@ def test_short_or_gentle_bend_is_ground_but_a_short_look_at_lower_ground_is_a_dr
     assert rules.bending_ground(det.config, drop, pts, brow, plane, 2, sid, 1.0, -1.0).tolist() == [
         False, False]
 
+
+
+def _risen_evidence(s, lat, h, sid, n_s, known_until):
+    """`rules.FrameEvidence` of obstacle strings ``sid`` (K,) with their pixels at ground
+    coordinates s, lat (m) and heights h (m) above a surface known up to ``known_until``
+    m (the plane of the rig above beyond it); every pixel reliably matched."""
+    from types import SimpleNamespace
+
+    from asmonc_vision.core.ground_surface import GroundSurface
+    pts, plane = _along(s, lat, h)
+    surface = GroundSurface(plane, np.array([2.0, known_until]), np.zeros(2), known_until)
+    k = s.size
+    return rules.FrameEvidence(
+        m=SimpleNamespace(string_id=np.asarray(sid)), el=None, er=None, cand=None,
+        metric=plane, pd=np.zeros(k), pts=pts, h=np.asarray(h, float), excess=np.zeros(k),
+        ex_mean=np.zeros(k), thr=np.ones(k), prev=np.full(k, -1), run=np.full(k, 9),
+        usable=np.ones(k, bool), below=np.zeros(k, bool), slope=1.0, weight=np.ones(k),
+        min_px=2.0, n_s=n_s, obst=np.ones(k, bool), drop=np.zeros(k, bool),
+        obst_string=np.ones(n_s, bool), surface=surface)
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_a_string_floating_within_the_rise_beyond_the_known_ground_is_that_ground(seed):
+    """Rule ``risen_ground``: beyond a surface known to 3 m, the rim of a manhole cover
+    5.3-5.8 m ahead lying 0.45-0.5 m above the surface's continuation (a rise the surface
+    did not follow: 0.57 m at most at max_grade_rise 0.25) is ground; a box's edge there
+    coming down from 0.5 m to the ground, a kerb's top 12 cm up, a string as high but
+    nearer than the known ground ends, and one higher than the ground can have risen
+    (0.45-0.7 m at 3.5 m: 0.12 m at most) stay obstacles. risen.min_height_m = 0 is off."""
+    rng = np.random.default_rng(seed)
+    n = 12
+    s_rim = np.sort(rng.uniform(5.3, 5.8, n))
+    cases = [
+        (s_rim, rng.uniform(0.45, 0.5, n), True),                    # the manhole rim
+        (np.full(n, 5.5) + rng.normal(0, 0.01, n), np.linspace(0.0, 0.5, n), False),  # a box
+        (s_rim, np.full(n, 0.12) + rng.normal(0, 0.01, n), False),   # a kerb's top
+        (np.sort(rng.uniform(2.3, 2.8, n)), rng.uniform(0.45, 0.5, n), False),  # nearer
+        (np.sort(rng.uniform(3.4, 3.6, n)), rng.uniform(0.45, 0.7, n), False),  # too high
+    ]
+    s = np.concatenate([c[0] for c in cases])
+    h = np.concatenate([c[1] for c in cases])
+    sid = np.repeat(np.arange(len(cases)), n)
+    lat = 0.2 * rng.normal(size=s.size)
+    ev = _risen_evidence(s, lat, h, sid, len(cases), known_until=3.0)
+    rules.STRING_RULES['risen_ground'](GpodConfig(), ev)
+    assert ev.obst_string.tolist() == [not risen for _, _, risen in cases]
+    ev = _risen_evidence(s, lat, h, sid, len(cases), known_until=3.0)
+    rules.STRING_RULES['risen_ground'](override(GpodConfig(), {'risen.min_height_m': 0.0}), ev)
+    assert ev.obst_string.all()

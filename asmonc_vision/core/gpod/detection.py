@@ -208,7 +208,8 @@ class Detection(PlaneTracking):
                            excess=excess, ex_mean=ex_mean, thr=thr,
                            prev=prev, run=run, usable=usable, below=below, slope=slope,
                            weight=self._evidence_weight(m.strength),
-                           min_px=self.min_obstacle_pixels(cam), n_s=n_s, obst=obst, drop=drop)
+                           min_px=self.min_obstacle_pixels(cam), n_s=n_s, obst=obst, drop=drop,
+                           surface=self._surface)
         run_rules(c, c.rules.pixels, PIXEL_RULES, ev)
         weight, min_px = ev.weight, ev.min_px
         n_obst = np.bincount(sid[obst], weights=weight[obst], minlength=n_s) + 1e-9

@@ -28,6 +28,7 @@ import numpy as np
 
 from ..camera import MetricPlane
 from ..edges import EdgeMap
+from ..ground_surface import GroundSurface
 from ..matching import Candidates, Matches
 from . import kernels as kn
 from .faces import face_gap_points, lone_face_points, silhouette_owners, view_edge_points
@@ -89,6 +90,7 @@ class FrameEvidence:
     obst_string: np.ndarray | None = None   # (n_s,) bool (rules ``strings``)
     n_drop: np.ndarray | None = None        # (n_s,) weighted drop pixels per string
     drop_string: np.ndarray | None = None   # (n_s,) bool (rules ``drops``)
+    surface: GroundSurface | None = None    # the ground surface ahead (None: the plane)
     #: clusterings of pixels by (sign, radius): (pixel indices, feet, labels)
     #: (`bending_ground`'s, for `Detection._clusters` to reuse on the same pixels)
     clustered: dict = field(default_factory=dict)
@@ -274,6 +276,36 @@ def _floating_string(c: GpodConfig, ev: FrameEvidence) -> None:
         low = np.full(ev.n_s, np.inf)
         np.minimum.at(low, ev.sid[ev.usable], ev.h[ev.usable])
         s &= low <= c.detection.max_floating_height_m
+
+
+def _risen_ground(c: GpodConfig, ev: FrameEvidence) -> None:
+    """A string beyond the known ground whose reliable pixels all lie more than
+    ``risen.min_height_m`` above the surface (higher than a kerb or a step; nothing of it
+    comes down to the ground) and no higher than the ground may have risen since the known
+    ground (``surface.max_grade_rise`` per metre beyond ``known_until_m``) is the ground
+    risen ahead, seen where it has texture (a manhole cover on a rise the surface could not
+    follow for want of features), not an obstacle: an obstacle stands on the ground, and
+    its edges come down to it."""
+    s = ev.obst_string
+    assert s is not None
+    surf = ev.surface
+    if surf is None or not s.any() or c.risen.min_height_m <= 0.0:
+        return
+    sel = flat_nonzero(s[ev.sid] & ev.usable)
+    if not sel.size:
+        return
+    dist = surf.coordinates(ev.pts[sel])[0]
+    beyond = dist - surf.known_until_m
+    h = ev.h[sel]
+    sid = ev.sid[sel]
+    # per string: its lowest height, and how far its pixels rise above the highest
+    # ground the surface allows where they are (the surface itself on the known ground)
+    low = np.full(ev.n_s, np.inf)
+    np.minimum.at(low, sid, h)
+    over = np.full(ev.n_s, -np.inf)
+    np.maximum.at(over, sid, h - c.surface.max_grade_rise * np.maximum(beyond, 0.0))
+    risen = (low > c.risen.min_height_m) & (over <= 0.0)
+    s &= ~risen
 
 
 def _ground_bend_up(c: GpodConfig, ev: FrameEvidence) -> None:
@@ -474,6 +506,7 @@ PIXEL_RULES: dict[str, Rule] = {
 }
 STRING_RULES: dict[str, Rule] = {
     'floating_string': _floating_string,
+    'risen_ground': _risen_ground,
     'ground_bend': _ground_bend_up,
     'half_occlusion': _half_occlusion,
 }

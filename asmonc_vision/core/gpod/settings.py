@@ -506,6 +506,23 @@ class BendSettings:
 
 
 @dataclass(frozen=True)
+class RisenSettings:
+    """GPOD stage 7, rule risen_ground: beyond the known ground, a string that floats
+    within the rise the ground may have made is that ground (``GpodConfig.risen``)."""
+
+    min_height_m: float = param(
+        0.2, 'An obstacle string beyond the known ground (ground surface known_until_m) '
+        'whose reliable pixels all lie more than this above the surface (higher than a '
+        'kerb or a step: none comes down to the ground) and no higher than the ground may '
+        'have risen since the known ground (surface.max_grade_rise per metre beyond it) is '
+        'the ground risen ahead where it has texture (a manhole cover on a rise the surface '
+        'could not follow), not an obstacle, metres; 0 = off', range=(0.0, 10.0))
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
 class CoarseSettings:
     """GPOD stage 11: the second pass on images binned 2 x 2 (``GpodConfig.coarse``)."""
 
@@ -636,7 +653,7 @@ class TrackSettings:
 #: The named rules (core/gpod/rules.py) each list of `RuleSettings` may hold.
 PIXEL_RULE_NAMES = ('periodic_pattern', 'ambiguous_drop', 'hanging_run',
                     'lower_ground_continuation', 'string_pieces')
-STRING_RULE_NAMES = ('floating_string', 'ground_bend', 'half_occlusion')
+STRING_RULE_NAMES = ('floating_string', 'risen_ground', 'ground_bend', 'half_occlusion')
 DROP_RULE_NAMES = ('drop_region', 'ground_bend')
 PLACEMENT_RULE_NAMES = ('silhouettes', 'view_edge', 'face_gap', 'lone_face')
 
@@ -658,8 +675,10 @@ class RuleSettings:
     strings: tuple[str, ...] = param(
         STRING_RULE_NAMES, 'Rules on the obstacle strings, in order: floating_string (all '
         'its reliable pixels above detection.max_floating_height_m: a mismatch), '
-        'ground_bend (ground rising beyond a dip, bend.*), half_occlusion (an obstacle only '
-        'through edges hidden in the right image)')
+        'risen_ground (beyond the known ground, all of it higher than risen.min_height_m '
+        'but within the rise the ground may have made: risen ground), ground_bend '
+        '(ground rising beyond a dip, bend.*), half_occlusion (an obstacle only through '
+        'edges hidden in the right image)')
     drops: tuple[str, ...] = param(
         DROP_RULE_NAMES, 'Rules on the drop-off strings, in order: drop_region (a string '
         'in a region of lower ground, drops.region_*), ground_bend (ground falling away '
@@ -709,6 +728,7 @@ class GpodConfig:
     drops: DropSettings = group(DropSettings, 'stages 6-7: drop-offs')
     rules: RuleSettings = group(RuleSettings, 'stages 6-10: the named rules, in order')
     bend: BendSettings = group(BendSettings, 'stage 7: rule ground_bend')
+    risen: RisenSettings = group(RisenSettings, 'stage 7: rule risen_ground')
     coarse: CoarseSettings = group(CoarseSettings, 'stage 11: the binned second pass')
     unseen: UnseenSettings = group(UnseenSettings, 'stage 12: unseen ground')
     tracks: TrackSettings = group(TrackSettings, 'stage 13: obstacle tracks')
