@@ -550,34 +550,9 @@ class Detection(PlaneTracking):
         my = _group_quantile(label, g2[:, 1], 0.5, n_c)
         norm = np.maximum(np.hypot(mx, my), 1e-9)
         ex = excess[idx]
-        if kn.nb_extent is not None and count.min() > 0:
-            # The same extremes and string lists, compiled (one pass).
-            lo_lat, hi_lat, exc, x0, x1, y0, y1, sid_u, sid_start = kn.nb_extent(
-                np.asarray(label, np.int64), n_c, np.ascontiguousarray(g2, np.float64),
-                mx, my, norm, np.ascontiguousarray(ex, np.float64), m.u_left[idx],
-                m.v[idx], m.string_id[idx], sign > 0)
-        else:
-            lat = (g2[:, 1] * mx[label] - g2[:, 0] * my[label]) / norm[label]
-            order = np.argsort(label, kind='stable')
-            starts = flat_nonzero(np.concatenate((_TRUE, np.diff(label[order]) != 0)))
-            lo_lat = np.minimum.reduceat(lat[order], starts)
-            hi_lat = np.maximum.reduceat(lat[order], starts)
-            ex_o = ex[order]
-            exc = (np.maximum.reduceat(ex_o, starts) if sign > 0
-                   else np.minimum.reduceat(ex_o, starts))
-            ul = m.u_left[idx][order]
-            vv = m.v[idx][order]
-            x0 = np.floor(np.minimum.reduceat(ul, starts)).astype(np.int64)
-            x1 = np.ceil(np.maximum.reduceat(ul, starts)).astype(np.int64)
-            y0 = np.minimum.reduceat(vv, starts).astype(np.int64)
-            y1 = np.maximum.reduceat(vv, starts).astype(np.int64)
-            sid = m.string_id[idx][order]
-            lab_o = label[order]
-            srt = np.lexsort((sid, lab_o))
-            sid_s, lab_s = sid[srt], lab_o[srt]
-            uniq = np.concatenate((_TRUE, (sid_s[1:] != sid_s[:-1]) | (lab_s[1:] != lab_s[:-1])))
-            sid_u, lab_u = sid_s[uniq], lab_s[uniq]
-            sid_start = np.searchsorted(lab_u, np.arange(n_c + 1))
+        lo_lat, hi_lat, exc, x0, x1, y0, y1, sid_u, sid_start = _cluster_extents(
+            label, n_c, count, g2, mx, my, norm, ex, m.u_left[idx], m.v[idx],
+            m.string_id[idx], sign > 0)
         z = (np.abs(ex) - self._frame_thr[idx]) / c.detection.disparity_sigma_px
         p_i = _normal_cdf(z).clip(0.0, 1.0 - 1e-12)
         p_any = 1.0 - np.exp(np.bincount(label, weights=np.log1p(-p_i), minlength=n_c))
@@ -609,3 +584,42 @@ class Detection(PlaneTracking):
                 num_edge_pixels=count_l[k],
                 string_ids=sid_u[sid_l[k]:sid_l[k + 1]].astype(np.int32)))
         return out
+
+
+def _cluster_extents(label: np.ndarray, n_c: int, count: np.ndarray, g2: np.ndarray,
+                     mx: np.ndarray, my: np.ndarray, norm: np.ndarray, ex: np.ndarray,
+                     u: np.ndarray, v: np.ndarray, sid: np.ndarray, positive: bool) -> tuple:
+    """Per cluster of ``label`` ((P,) int, 0..n_c-1; ``count`` (n_c,) its sizes): the
+    lowest and highest lateral offset (m) of the feet ``g2`` ((P, 2), plane x forward,
+    y left) across the line of sight to the cluster's median foot (``mx``, ``my``, its
+    length ``norm``; each (n_c,)), the largest (``positive``) or smallest disparity excess
+    ``ex`` (px), the image box (x0, x1, y0, y1 int64 px) of the pixels at (``u``, ``v``),
+    and its string ids ``sid`` as one sorted list ``sid_u`` cut at ``sid_start``
+    ((n_c + 1,)): cluster k's strings are ``sid_u[sid_start[k]:sid_start[k + 1]]``."""
+    if kn.nb_extent is not None and count.min() > 0:
+        # The same extremes and string lists, compiled (one pass).
+        return kn.nb_extent(
+            np.asarray(label, np.int64), n_c, np.ascontiguousarray(g2, np.float64),
+            mx, my, norm, np.ascontiguousarray(ex, np.float64), u, v, sid, positive)
+    lat = (g2[:, 1] * mx[label] - g2[:, 0] * my[label]) / norm[label]
+    order = np.argsort(label, kind='stable')
+    starts = flat_nonzero(np.concatenate((_TRUE, np.diff(label[order]) != 0)))
+    lo_lat = np.minimum.reduceat(lat[order], starts)
+    hi_lat = np.maximum.reduceat(lat[order], starts)
+    ex_o = ex[order]
+    exc = (np.maximum.reduceat(ex_o, starts) if positive
+           else np.minimum.reduceat(ex_o, starts))
+    ul = u[order]
+    vv = v[order]
+    x0 = np.floor(np.minimum.reduceat(ul, starts)).astype(np.int64)
+    x1 = np.ceil(np.maximum.reduceat(ul, starts)).astype(np.int64)
+    y0 = np.minimum.reduceat(vv, starts).astype(np.int64)
+    y1 = np.maximum.reduceat(vv, starts).astype(np.int64)
+    sid_o = sid[order]
+    lab_o = label[order]
+    srt = np.lexsort((sid_o, lab_o))
+    sid_s, lab_s = sid_o[srt], lab_o[srt]
+    uniq = np.concatenate((_TRUE, (sid_s[1:] != sid_s[:-1]) | (lab_s[1:] != lab_s[:-1])))
+    sid_u, lab_u = sid_s[uniq], lab_s[uniq]
+    sid_start = np.searchsorted(lab_u, np.arange(n_c + 1))
+    return lo_lat, hi_lat, exc, x0, x1, y0, y1, sid_u, sid_start
