@@ -228,6 +228,33 @@ def test_walking_mask_window():
     assert iv.sum() == pytest.approx(3.0)
 
 
+def test_fault_while_walking_is_its_share_of_the_walking_time():
+    """FAULT in force while standing (starting up) does not count; FAULT while walking
+    does, each frame for its interval, whatever cleared it."""
+    frames = walk(10, speed=0.0) + [
+        TruthFrame(S0 + (10 + k) * DT, R_X, np.array([0.1 * k, 0.0, 1.25])) for k in range(40)]
+    truth = SafetyTruth([], frames)
+    s = score_safety(truth, [alarm(0, AlarmLevel.FAULT), alarm(10, AlarmLevel.CLEAR),
+                             alarm(25, AlarmLevel.FAULT), alarm(35, AlarmLevel.CAUTION, 3, 2.0),
+                             alarm(40, AlarmLevel.FAULT)])
+    walking, interval = walking_mask(truth, SafetyCriteria().walking_speed,
+                                     SafetyCriteria().walking_window_s)
+    i = np.arange(50)
+    fault = (i < 10) | ((i >= 25) & (i < 35)) | (i >= 40)
+    want = float(interval[walking & fault].sum())
+    # the 2 s walked under FAULT, and the last standing frames that the centred window
+    # already counts as walking (at most half the window)
+    assert 2.0 - 1e-6 <= want <= 2.0 + 0.5 * SafetyCriteria().walking_window_s
+    assert s.walking_fault_s == pytest.approx(want)
+    assert s.fault_share_walking == pytest.approx(want / s.walking_s)
+    m = type(s).merge([s, s])
+    assert m.walking_fault_s == pytest.approx(2 * want)
+    assert m.as_dict()['fault_share_walking'] == pytest.approx(want / s.walking_s)
+    # no walking: no share
+    still = score_safety(SafetyTruth([], walk(10, speed=0.0)), [alarm(0, AlarmLevel.FAULT)])
+    assert still.walking_fault_s == 0.0 and still.fault_share_walking is None
+
+
 def test_scores_merge():
     truth = SafetyTruth([BOX], walk())
     a = score_safety(truth, [alarm(0, AlarmLevel.CLEAR)])

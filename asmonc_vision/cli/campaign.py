@@ -312,22 +312,23 @@ def trace_lines(runs, alarms: list[dict], window: tuple[float, float]) -> list[s
 def _cell(s) -> list[str]:
     """warned x/y; cued x/y (cued at least `cue_lead_s` before contact, or as they came
     into the corridor: `eval.safety`); false alarm events per 10 min walking; false
-    reports per frame; recall."""
+    reports per frame; recall; the share of walking time with FAULT in force."""
     fa = (f'{len(s.false_alarm_events) / s.walking_s * 600:.1f}' if s.walking_s > 0 else '-')
     fr = f'{s.false_reports_per_frame:.3f}' if s.false_reports_per_frame is not None else '-'
     rc = f'{s.recall:.0%}' if s.recall is not None else '-'
+    fs = f'{s.fault_share_walking:.1%}' if s.fault_share_walking is not None else '-'
     return [f'{s.warned}/{s.on_path}', f'{s.cued_ahead + s.cued_at_entry}/{s.on_path}', fa, fr,
-            rc]
+            rc, fs]
 
 
 def table(results: list[dict], methods: list[str], title: str) -> list[str]:
     """The printed table of one seed set: per class, per rig, totals."""
     from asmonc_vision.eval.safety import SafetyScore
 
-    heads = ['warned', 'cued', 'FA/10min', 'FR/frame', 'recall']
+    heads = ['warned', 'cued', 'FA/10min', 'FR/frame', 'recall', 'FAULT']
     w0 = 22
     line1 = f'{"":{w0}s} {"walks":>5s} {"min":>5s} ' + ''.join(
-        f'| {METHOD_NAMES[m]:<47s}' for m in methods)
+        f'| {METHOD_NAMES[m]:<56s}' for m in methods)
     line2 = f'{"":{w0}s} {"":5s} {"":5s} ' + ''.join(
         '| ' + ''.join(f'{h:>9s}' for h in heads) + '  ' for _ in methods)
     out = [f'=== {title} ===', line1, line2]
@@ -530,7 +531,9 @@ def run(args) -> int:
     print('warned = obstacles on the path warned in time / on the path; cued = cued 3 s '
           'before contact, standing or as they came into the corridor / on the path; '
           'FA/10min = false alarm events per 10 minutes of walking; FR/frame = false '
-          'reports per frame; recall = (obstacle, frame) pairs found (EVALUATION.md)')
+          'reports per frame; recall = (obstacle, frame) pairs found (EVALUATION.md); '
+          'FAULT = share of walking time with FAULT in force ("cannot see the way ahead", '
+          'a lost ground, a sensor fault)')
     for s in sets:
         rs = [r for r in results if r['walk'].seed_set == s]
         lo, hi = TUNING_SEEDS if s == 'tuning' else BLIND_SEEDS

@@ -49,6 +49,10 @@ Definitions (`SafetyCriteria` holds every number):
   unknown), matched one to one to reports, nearest pair first, within the same
   tolerance (and the drop rule); binned by |height| and range (the nearest point of the
   footprint). The headline adds the subset >= ``min_height`` within ``corridor_length``.
+* **FAULT while walking** (beside the definitions, not one of them): the share of walking
+  time with FAULT in force ("cannot see the way ahead", a lost ground, a sensor fault),
+  each walking frame counted for its frame interval: the fault cue a wearer hears on a
+  path that may be clear.
 
 A terrace (raised or lowered ground, ``ground_region``) the wearer stands on is ground,
 not an obstacle, while the point below the camera is inside it.
@@ -305,6 +309,7 @@ class SafetyScore:
     frames_on_path_fault: int = 0
     duration_s: float = 0.0
     walking_s: float = 0.0
+    walking_fault_s: float = 0.0
     false_alarm_events: list = field(default_factory=list)
     alarms_false: int = 0
     alarms_warning: int = 0
@@ -329,6 +334,11 @@ class SafetyScore:
                 if self.walking_s > 0 else None)
 
     @property
+    def fault_share_walking(self) -> float | None:
+        """The share of walking time with FAULT in force (None: no walking)."""
+        return self.walking_fault_s / self.walking_s if self.walking_s > 0 else None
+
+    @property
     def false_reports_per_frame(self) -> float | None:
         return self.false_reports / self.frames_scored if self.frames_scored else None
 
@@ -349,7 +359,7 @@ class SafetyScore:
                       'cued_at_entry',
                       'frames',
                       'frames_on_path', 'frames_on_path_clear', 'frames_on_path_fault',
-                      'duration_s', 'walking_s', 'alarms_false', 'alarms_warning',
+                      'duration_s', 'walking_s', 'walking_fault_s', 'alarms_false', 'alarms_warning',
                       'frames_scored', 'frames_missing', 'reports', 'false_reports',
                       'recall_eligible', 'recall_found', 'headline_eligible',
                       'headline_found'):
@@ -375,6 +385,8 @@ class SafetyScore:
                                'obstacles': self.path_obstacles},
             'frames': self.frames, 'duration_s': self.duration_s,
             'walking_s': self.walking_s,
+            'walking_fault_s': self.walking_fault_s,
+            'fault_share_walking': self.fault_share_walking,
             'frames_on_path': self.frames_on_path,
             'frames_on_path_clear': self.frames_on_path_clear,
             'frames_on_path_fault': self.frames_on_path_fault,
@@ -465,6 +477,8 @@ def score_safety(truth: SafetyTruth, alarms: Sequence[dict],
     out.frames = len(frames)
     out.duration_s = float(interval.sum())
     out.walking_s = float(interval[walking].sum())
+    fault = np.array([lv == AlarmLevel.FAULT for lv in alarm_levels_at(stamps, alarms)], bool)
+    out.walking_fault_s = float(interval[walking & fault].sum())
     present = [truth.present(f) for f in frames]
 
     _score_warnings(c, truth, alarms, stamps, present, out)
