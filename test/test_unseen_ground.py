@@ -326,6 +326,26 @@ def test_bands_found_now_and_then_are_not_a_band_that_keeps_to_the_wearer():
     assert all(got[1:]), got
 
 
+def test_the_cameras_reach_found_in_most_pairs_keeps_to_the_wearer():
+    """The camera's reach flickers: found in 8 pairs of 10 at about one range (tuning
+    kerb_up 1026, backpack rig: a raised footway's finer texture, "cannot see the way
+    ahead" for a third of the walk while each missed pair started the trail again). A
+    pair now and then without the band does not break the trail; bands found in fewer
+    than FOLLOW_FOUND_SHARE of the pairs are not judged (the test above), nor is a trail
+    broken by more than FOLLOW_GAP_SHARE of follow_travel_m without a band."""
+    def reach(k):
+        return 10.0 if k % 5 == 2 else 3.0          # the band missed in 1 pair of 5
+    rng, mon = _learnt_following(15)
+    got = _walk(mon, rng, reach, n=40)
+    assert got[1] and got[4]                        # at first as a wall would be
+    quiet = max(k for k, g in enumerate(got) if g) + 1
+    assert 0.12 * quiet <= 1.5 + 0.5, got           # quiet within about the 1.5 m
+    # a gap of 0.6 m (5 pairs) every 10 pairs starts the trail again: reported on
+    rng, mon = _learnt_following(15)
+    got = _walk(mon, rng, lambda k: 10.0 if k % 10 >= 5 else 3.0, n=40)
+    assert got[31] or got[32], got
+
+
 def test_a_band_nearer_than_the_cameras_reach_is_a_new_band():
     """Once the band at the camera's reach keeps to the wearer, a plain wall that comes
     nearer than it is reported: the reach's verdict is not the wall's."""

@@ -53,9 +53,12 @@ comes nearer by the distance walked. The camera's own reach does not: on a smoot
 surface than the one the expectation was learnt on, or ground seen ever more obliquely,
 the edges thin out from about the same range however far the wearer walks. With the
 wearer's forward travel given (`update`'s ``travel_m``, from the pair's camera motion)
-and ``follow_travel_m`` > 0, a band found in pairs in a row over that much walking whose
-near edge came nearer by less than ``FOLLOW_SHARE`` of the distance walked (the least
-squares slope of its range against the distance walked) *keeps to the wearer*: it is not
+and ``follow_travel_m`` > 0, a band found over that much walking (in at least
+``FOLLOW_FOUND_SHARE`` of the pairs, with no stretch of more than ``FOLLOW_GAP_SHARE`` of
+it without: the camera's reach flickers, bands glimpsed as a turn sweeps the view come
+and go) whose near edge came nearer by less than ``FOLLOW_SHARE`` of the distance walked
+(the least squares slope of its range against the distance walked) *keeps to the
+wearer*: it is not
 reported, and the cells in view learn what they show at the usual rate, so that the
 expectation comes to describe the new ground, until the band is no longer found. Without
 the travel (motion unknown, or the wearer standing) nothing changes.
@@ -127,6 +130,13 @@ MIN_CELLS = 2
 #: A band found over ``follow_travel_m`` of walking whose near edge came nearer by less
 #: than this share of the distance walked keeps to the wearer, not to the world.
 FOLLOW_SHARE = 0.5
+#: A band's trail (`_keeps_to_wearer`) goes on over pairs that find no band while none was
+#: found over this share of ``follow_travel_m`` of walking, and is judged only when at
+#: least FOLLOW_FOUND_SHARE of its pairs found the band: the camera's reach flickers
+#: (found in 8 pairs of 10 on a raised footway's finer texture), bands glimpsed as a turn
+#: sweeps the view come and go (every other pair).
+FOLLOW_GAP_SHARE = 0.35
+FOLLOW_FOUND_SHARE = 0.75
 
 
 def is_unknown(height: float) -> bool:
@@ -435,48 +445,66 @@ class UnseenGroundMonitor:
 
     def _keeps_to_wearer(self, found: int | None, travel_m: float | None) -> bool:
         """Whether the band found this pair (its first cell ``found``, None: none) keeps
-        to the wearer. The pairs in a row that found a band, each at the distance walked
-        so far (a pair with an unknown ``travel_m`` adds no distance), are kept over the last
-        2 ``follow_travel_m`` of walking; once they span ``follow_travel_m``, the band
-        keeps to the wearer if its near edge's range fell by less than ``FOLLOW_SHARE``
-        of the distance walked (least squares slope of range against distance; a wall
-        walked up to: -1). It goes on keeping to the wearer until no band is found over
-        ``follow_travel_m`` of walking, or one is found more than two cells nearer (a
-        new band: something in front of the wearer's reach). Always False with
-        ``follow_travel_m`` 0."""
+        to the wearer. The pairs since a band was first found, each at the distance
+        walked so far (a pair with an unknown ``travel_m`` adds no distance) with the
+        band's range (NaN: none found), are kept over the last 2 ``follow_travel_m`` of
+        walking, until no band is found over ``FOLLOW_GAP_SHARE`` of ``follow_travel_m``;
+        once they span ``follow_travel_m`` and at least ``FOLLOW_FOUND_SHARE`` of them
+        found it, the band keeps to the wearer if its near edge's range fell by less
+        than ``FOLLOW_SHARE`` of the distance walked (least squares slope of range
+        against distance over the pairs that found it; a wall walked up to: -1). It
+        goes on keeping to the wearer until no band is found over ``follow_travel_m`` of
+        walking, or one is found more than two cells nearer (a new band: something in
+        front of the wearer's reach). Always False with ``follow_travel_m`` 0."""
         if self.follow_travel_m <= 0.0:
             return False
         if travel_m is not None and math.isfinite(travel_m):
             self._travel += float(travel_m)
         trail = self._trail
         if found is None:
-            # a band keeps to the wearer only if found in every pair of its trail; once
-            # it does, it does until none is found over follow_travel_m of walking (the
+            # the trail goes on over a gap of less than FOLLOW_GAP_SHARE of
+            # follow_travel_m of walking (the pair kept as a miss, NaN); once the band
+            # keeps to the wearer, until none is found over follow_travel_m (the
             # expectation learnt, the band shows in a pair now and then)
-            if not self._follows or (trail and
-                                     self._travel - trail[-1][0] > self.follow_travel_m):
+            last = next((d for d, r in reversed(trail) if r == r), None)
+            gap = (self.follow_travel_m if self._follows
+                   else FOLLOW_GAP_SHARE * self.follow_travel_m)
+            if last is None or self._travel - last > gap:
                 trail.clear()
                 self._follows = False
+            elif not self._follows:
+                trail.append((self._travel, math.nan))
+                self._trim(trail)
             return False
         r = float(self.range_edges[found])
         if self._follows and r < self._follow_range - 2.0 * CELL_DEPTH_M:
             trail.clear()
             self._follows = False
         trail.append((self._travel, r))
-        # the last 2 follow_travel_m of walking (and 200 pairs: a wearer standing)
-        while len(trail) > 200 or trail[0][0] < self._travel - 2.0 * self.follow_travel_m:
-            trail.pop(0)
+        self._trim(trail)
         if self._follows:
             return True
         if trail[-1][0] - trail[0][0] < self.follow_travel_m:
             return False
         s, rr = np.asarray(trail).T               # distance walked, band's range (m)
+        hit = np.isfinite(rr)
+        if hit.mean() < FOLLOW_FOUND_SHARE:
+            return False
+        s, rr = s[hit], rr[hit]
+        if s[-1] - s[0] < self.follow_travel_m:
+            return False
         ds = s - s.mean()
         slope = float(ds @ (rr - rr.mean())) / float(ds @ ds)   # (ds spans follow_travel_m)
         self._follows = slope > -FOLLOW_SHARE
         if self._follows:
             self._follow_range = float(np.median(rr))
         return self._follows
+
+    def _trim(self, trail: list) -> None:
+        """Keep the last 2 ``follow_travel_m`` of walking of ``trail`` (and 200 pairs:
+        a wearer standing)."""
+        while len(trail) > 200 or trail[0][0] < self._travel - 2.0 * self.follow_travel_m:
+            trail.pop(0)
 
     def _report(self, cam: StereoCamera, metric: MetricPlane, xy: np.ndarray,
                 excess: np.ndarray, threshold, band: np.ndarray, found: int,

@@ -359,7 +359,8 @@ class SafetyScore:
                       'cued_at_entry',
                       'frames',
                       'frames_on_path', 'frames_on_path_clear', 'frames_on_path_fault',
-                      'duration_s', 'walking_s', 'walking_fault_s', 'alarms_false', 'alarms_warning',
+                      'duration_s', 'walking_s', 'walking_fault_s', 'alarms_false',
+                      'alarms_warning',
                       'frames_scored', 'frames_missing', 'reports', 'false_reports',
                       'recall_eligible', 'recall_found', 'headline_eligible',
                       'headline_found'):
