@@ -58,10 +58,10 @@ and ``follow_travel_m`` > 0, a band found over that much walking (in at least
 it without: the camera's reach flickers, bands glimpsed as a turn sweeps the view come
 and go) whose near edge came nearer by less than ``FOLLOW_SHARE`` of the distance walked
 (the least squares slope of its range against the distance walked) *keeps to the
-wearer*: it is not
-reported, and the cells in view learn what they show at the usual rate, so that the
-expectation comes to describe the new ground, until the band is no longer found. Without
-the travel (motion unknown, or the wearer standing) nothing changes.
+wearer*: it is not reported, and the cells in view learn what they show at the usual
+rate, so that the expectation comes to describe the new ground, until the band is no
+longer found. Without the travel (motion unknown, or the wearer standing) nothing
+changes.
 
 Limits, which no passive stereo cue avoids: ground that itself has no edges for metres (a
 smooth floor after a textured one) looks the same as a wall with none, and is reported
@@ -466,7 +466,7 @@ class UnseenGroundMonitor:
             # follow_travel_m of walking (the pair kept as a miss, NaN); once the band
             # keeps to the wearer, until none is found over follow_travel_m (the
             # expectation learnt, the band shows in a pair now and then)
-            last = next((d for d, r in reversed(trail) if r == r), None)
+            last = next((d for d, r in reversed(trail) if not math.isnan(r)), None)
             gap = (self.follow_travel_m if self._follows
                    else FOLLOW_GAP_SHARE * self.follow_travel_m)
             if last is None or self._travel - last > gap:
