@@ -478,11 +478,11 @@ def score_safety(truth: SafetyTruth, alarms: Sequence[dict],
     out.frames = len(frames)
     out.duration_s = float(interval.sum())
     out.walking_s = float(interval[walking].sum())
-    fault = np.array([lv == AlarmLevel.FAULT for lv in alarm_levels_at(stamps, alarms)], bool)
-    out.walking_fault_s = float(interval[walking & fault].sum())
+    levels = alarm_levels_at(stamps, alarms)
+    out.walking_fault_s = float(interval[walking & (levels == AlarmLevel.FAULT)].sum())
     present = [truth.present(f) for f in frames]
 
-    _score_warnings(c, truth, alarms, stamps, present, out)
+    _score_warnings(c, truth, levels, stamps, present, out)
     _score_false_alarms(c, truth, alarms, stamps, present, out)
 
     # -- false reports and recall
@@ -497,14 +497,14 @@ def score_safety(truth: SafetyTruth, alarms: Sequence[dict],
     return out
 
 
-def _score_warnings(c: SafetyCriteria, truth: SafetyTruth, alarms: Sequence[dict],
+def _score_warnings(c: SafetyCriteria, truth: SafetyTruth, levels: np.ndarray,
                     stamps: list[int], present: list, out: SafetyScore) -> None:
     """Warned in time: per obstacle on the path, the alarm in force at its first pair on
     the path (warned, under FAULT, late or never), the pairs on the path by level, and
     the cue's lead: the range in the corridor where CAUTION or higher was first in force
-    over the walking speed then (infinite for a standing wearer); into ``out``."""
+    over the walking speed then (infinite for a standing wearer); into ``out``. ``levels``:
+    (F,) the alarm level in force at each frame (`alarm_levels_at`)."""
     frames = truth.frames
-    levels = alarm_levels_at(stamps, alarms)
     speed, _ = walking_speed(truth, c.walking_window_s)
     track: dict[int, dict] = {}
     cued: dict[int, float] = {}                 # obstacle id -> lead of its first cue, s
