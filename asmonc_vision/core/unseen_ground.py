@@ -29,6 +29,10 @@ from R out to the corridor's far end (at least ``MIN_CELLS`` of them):
   texture is not matched that far);
 - so are the last ``TAIL_CELLS`` (a plain patch of ground ends, a wall hides all behind
   it);
+- and so is the ground beyond the corridor's far end: fewer than ``BEYOND_MIN`` of the
+  pair's ground pixels lie within the corridor's width up to ``BEYOND_M`` past it
+  (between the dashes of a painted centre line the asphalt shows no edges out to the far
+  end, but the next dash shows beyond it; a wall shows none there, or a stray few);
 - and, for a band not already being reported, the cells in front of R showed at least
   ``FRONT_RATIO`` of theirs (a poor view everywhere, such as motion blur, is not ground
   hidden from some range on).
@@ -137,6 +141,12 @@ FOLLOW_SHARE = 0.5
 #: sweeps the view come and go (every other pair).
 FOLLOW_GAP_SHARE = 0.35
 FOLLOW_FOUND_SHARE = 0.75
+#: What hides the ground out to the corridor's far end hides the ground beyond it too: a
+#: band is not hidden when at least BEYOND_MIN of the pair's ground pixels lie within the
+#: corridor's width up to BEYOND_M beyond its far end (the next dash of a painted line
+#: past a gap of plain asphalt; a plain wall shows none, or a stray few).
+BEYOND_M = 7.0
+BEYOND_MIN = 10
 
 
 def is_unknown(height: float) -> bool:
@@ -263,6 +273,19 @@ class UnseenGroundMonitor:
                   & (v >= MARGIN_PX) & (v <= cam.height - 1 - MARGIN_PX)).all(axis=0)
         return inside[:-1] & inside[1:]
 
+    def _beyond(self, xy: np.ndarray, view: np.ndarray) -> float:
+        """Number of ground points xy (N, 2) within the corridor's width from the far
+        end of the last cell in ``view`` (n_r,) out to ``BEYOND_M`` past it (0 with no
+        cell in view)."""
+        cells = flat_nonzero(view)
+        if not len(cells):
+            return 0.0
+        far = float(self.range_edges[cells[-1] + 1])
+        with np.errstate(invalid='ignore'):
+            ok = ((np.abs(xy[:, 1]) <= self.half_width) & (xy[:, 0] > far)
+                  & (xy[:, 0] <= far + BEYOND_M))
+        return float(np.count_nonzero(ok))
+
     def _count(self, xy: np.ndarray) -> np.ndarray:
         """(n_r,) number of ground points xy (N, 2) in each cell of the corridor."""
         ok = (np.isfinite(xy[:, 0]) & np.isfinite(xy[:, 1]) & (xy[:, 1] >= -self.half_width)
@@ -341,9 +364,11 @@ class UnseenGroundMonitor:
         return r_near, True
 
     # ---------------------------------------------------------------- update
-    def _band_start(self, trusted: np.ndarray, k_all: np.ndarray) -> int | None:
-        """The first cell of the nearest band hidden out to the corridor's far end (the
-        module doc's first two conditions), or None."""
+    def _band_start(self, trusted: np.ndarray, k_all: np.ndarray,
+                    k_beyond: float = 0.0) -> int | None:
+        """The first cell of the nearest band hidden out to the corridor's far end and
+        beyond it (the module doc's first two conditions; ``k_beyond`` ground pixels seen
+        up to ``BEYOND_M`` past the far end), or None."""
         n_r = len(trusted)
         # suffix sums over the trusted cells, from the far end in
         lam = np.where(trusted, self.expected, 0.0)[::-1].cumsum()[::-1]
@@ -358,6 +383,9 @@ class UnseenGroundMonitor:
         # hides all behind it
         tail = flat_nonzero(trusted & (np.arange(n_r) >= i))[-TAIL_CELLS:]
         if k_all[tail].sum() > self.max_ratio * self.expected[tail].sum() + SLACK:
+            return None
+        # and so is the ground beyond it: ground seen there is seen past the band
+        if k_beyond >= BEYOND_MIN:
             return None
         return i
 
@@ -397,7 +425,7 @@ class UnseenGroundMonitor:
         view = self.cells_in_view(cam, metric)
         trusted = view & (self.seen_frames >= TRUST_FRAMES)
         n_r = len(view)
-        found = self._band_start(trusted, k_all)
+        found = self._band_start(trusted, k_all, self._beyond(xy[ground], view))
         follows = self._keeps_to_wearer(found, travel_m)
         learn = view.copy()
         report = None
