@@ -174,7 +174,6 @@ def test_ground_seen_beyond_the_corridors_far_end_is_not_hidden_by_a_wall():
         keep = gap | (far & (np.cumsum(far) <= n_beyond))
         r = mon.update(CAM, PLANE, u[keep], v[keep], np.zeros(keep.sum()), 0.8)
         assert (r is not None) == reported, (n_beyond, r)
-        mon._streak = 0                             # each pair judged on its own
     # beyond the window, or standing above the ground (a wall's stray matches), it is
     # not ground seen beyond the band
     xy2, u2, v2 = _ground_points(rng, int(4000 * 14.0 / 5.0), r_max=15.0)
@@ -182,7 +181,6 @@ def test_ground_seen_beyond_the_corridors_far_end_is_not_hidden_by_a_wall():
     keep = (xy2[:, 0] < 2.5) | out
     assert out.sum() >= BEYOND_MIN
     assert mon.update(CAM, PLANE, u2[keep], v2[keep], np.zeros(keep.sum()), 0.8) is not None
-    mon._streak = 0
     keep = gap | far
     excess = np.where(far[keep], 12.0, 0.0)
     assert mon.update(CAM, PLANE, u[keep], v[keep], excess, 0.8) is not None
