@@ -14,7 +14,8 @@ import pytest
 from asmonc_vision.core.camera import MetricPlane, StereoCamera
 from asmonc_vision.core.config import override
 from asmonc_vision.core.gpod import GpodConfig, GpodDetector, GpodObstacle
-from asmonc_vision.core.unseen_ground import UnseenGroundMonitor, _texture_energy, is_unknown
+from asmonc_vision.core.unseen_ground import (
+    BEYOND_M, BEYOND_MIN, UnseenGroundMonitor, _texture_energy, is_unknown)
 
 CAM = StereoCamera(f=300.0, cx=159.5, cy=119.5, baseline=0.35, width=320, height=240)
 PITCH = math.radians(20.0)
@@ -162,7 +163,6 @@ def test_ground_seen_beyond_the_corridors_far_end_is_not_hidden_by_a_wall():
     edge pixels out to 5 m either, but the next dash shows beyond it: on tuning walk
     asphalt_markings 1019 (chest rig) such gaps were said as "cannot see the way ahead"
     for 55 % of the walking. A wall shows none beyond it, or a stray few."""
-    from asmonc_vision.core.unseen_ground import BEYOND_M, BEYOND_MIN
     rng, mon = _learnt(15, frames=1)
     # the learnt density (4000 points from 1 m to 6 m), out to 12 m
     xy, u, v = _ground_points(rng, int(4000 * (4.0 + BEYOND_M) / 5.0), r_max=5.0 + BEYOND_M)

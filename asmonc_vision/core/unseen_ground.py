@@ -364,11 +364,9 @@ class UnseenGroundMonitor:
         return r_near, True
 
     # ---------------------------------------------------------------- update
-    def _band_start(self, trusted: np.ndarray, k_all: np.ndarray,
-                    k_beyond: float = 0.0) -> int | None:
-        """The first cell of the nearest band hidden out to the corridor's far end and
-        beyond it (the module doc's first two conditions; ``k_beyond`` ground pixels seen
-        up to ``BEYOND_M`` past the far end), or None."""
+    def _band_start(self, trusted: np.ndarray, k_all: np.ndarray) -> int | None:
+        """The first cell of the nearest band hidden out to the corridor's far end (the
+        module doc's first two conditions), or None."""
         n_r = len(trusted)
         # suffix sums over the trusted cells, from the far end in
         lam = np.where(trusted, self.expected, 0.0)[::-1].cumsum()[::-1]
@@ -383,9 +381,6 @@ class UnseenGroundMonitor:
         # hides all behind it
         tail = flat_nonzero(trusted & (np.arange(n_r) >= i))[-TAIL_CELLS:]
         if k_all[tail].sum() > self.max_ratio * self.expected[tail].sum() + SLACK:
-            return None
-        # and so is the ground beyond it: ground seen there is seen past the band
-        if k_beyond >= BEYOND_MIN:
             return None
         return i
 
@@ -421,11 +416,14 @@ class UnseenGroundMonitor:
         with np.errstate(invalid='ignore'):
             # ground or lower: a pixel standing above the threshold is not ground seen
             ground = np.isfinite(excess) & (excess <= thr)
-        k_all = self._count(xy[ground])
+        seen = xy[ground]
+        k_all = self._count(seen)
         view = self.cells_in_view(cam, metric)
         trusted = view & (self.seen_frames >= TRUST_FRAMES)
         n_r = len(view)
-        found = self._band_start(trusted, k_all, self._beyond(xy[ground], view))
+        found = self._band_start(trusted, k_all)
+        if found is not None and self._beyond(seen, view) >= BEYOND_MIN:
+            found = None        # ground seen beyond the far end is seen past the band
         follows = self._keeps_to_wearer(found, travel_m)
         learn = view.copy()
         report = None
