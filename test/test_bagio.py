@@ -75,3 +75,66 @@ def test_image_to_gray_encodings_and_errors():
         bagio.image_to_gray('16UC1', 4, 6, 12, bytes(48))
     with pytest.raises(bagio.ImageFormatError, match='header says'):
         bagio.image_to_gray('mono8', 4, 6, 6, bytes(10))
+
+
+def _shift_right_camera(src, dst, shift_px: int, limit: int = 24):
+    """Copy the first ``limit`` pairs of bag ``src`` to ``dst`` with the right image's
+    content moved ``shift_px`` columns to the left and its principal point with it
+    (``P[0,2] = cx - shift_px``): the same pair, rectified without
+    CALIB_ZERO_DISPARITY."""
+    store = bagio.typestore()
+    types = {t: typ for t, (typ, _) in bagio.bag_topics(src).items()}
+    topics = ['/stereo/left/image_rect', '/stereo/right/image_rect',
+              '/stereo/left/camera_info', '/stereo/right/camera_info']
+    stamps: list[int] = []
+    with Writer(dst, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        conns = {t: w.add_connection(t, types[t], typestore=store) for t in topics}
+        for topic, t, m in bagio.read_messages(src, topics):
+            s = bagio.header_stamp_ns(m)
+            if s not in stamps:
+                stamps.append(s)
+            if len(stamps) > limit:
+                break
+            if topic == '/stereo/right/image_rect':
+                img = np.asarray(m.data, np.uint8).reshape(m.height, m.step)
+                moved = np.concatenate([img[:, shift_px:], img[:, -1:].repeat(shift_px, 1)], 1)
+                m.data = np.ascontiguousarray(moved).reshape(-1)
+            elif topic == '/stereo/right/camera_info':
+                m.p = np.asarray(m.p, float).copy()
+                m.p[2] -= shift_px
+            w.write(conns[topic], t, bytes(store.serialize_cdr(m, types[topic])))
+
+
+def test_a_right_camera_with_its_own_principal_point_is_moved_to_the_left_one(tmp_path):
+    """A rectified pair whose right principal point lies 6 px left of the left one's
+    (CameraInfo P[0,2]) loads as the same pair: its right image moved back
+    (`core.camera.align_right_image`), the camera, the detector's ground and its
+    obstacles unchanged;
+    taken as it stands, every disparity would be 6 px off."""
+    from pathlib import Path
+
+    from asmonc_vision.core.gpod import GpodDetector
+    from asmonc_vision.io.frames import load_frames
+
+    src = Path(__file__).resolve().parents[1] / 'bags' / 'static_obstacles'
+    _shift_right_camera(src, tmp_path / 'moved', 6)
+    a, b = load_frames(src, 24), load_frames(tmp_path / 'moved', 24)
+    assert len(a) == len(b) == 24
+    for fa, fb in zip(a, b):
+        assert fa.stamp_ns == fb.stamp_ns and fa.cam == fb.cam
+        np.testing.assert_array_equal(fb.right[:, 6:], fa.right[:, 6:])
+    da, db = GpodDetector(), GpodDetector()
+    for fa, fb in zip(a, b):
+        ra = da.process(fa.left, fa.right, fa.cam)
+        rb = db.process(fb.left, fb.right, fb.cam)
+    assert ra.metric_plane is not None and rb.metric_plane is not None
+    # (a disparity offset alone would be taken into the plane's c, and every range off)
+    np.testing.assert_allclose(rb.plane_abc, ra.plane_abc, atol=0.05)
+    assert rb.metric_plane.height == pytest.approx(ra.metric_plane.height, abs=0.005)
+    assert len(rb.obstacles) == len(ra.obstacles) > 0
+    np.testing.assert_allclose(sorted(o.range for o in rb.obstacles),
+                               sorted(o.range for o in ra.obstacles), atol=0.05)
+    # the principal points' offset is checked: a quarter of the width is no pair
+    _shift_right_camera(src, tmp_path / 'far', 80, limit=1)
+    with pytest.raises(bagio.BagError, match='principal points differ'):
+        load_frames(tmp_path / 'far', 1)

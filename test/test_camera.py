@@ -2,8 +2,10 @@
 import numpy as np
 import pytest
 
-from asmonc_vision.core.camera import (MetricPlane, StereoCamera, ground_range_bearing,
-                                       metric_from_plane, plane_disparity, plane_from_metric)
+from asmonc_vision.core.camera import (MetricPlane, StereoCamera, align_right_image,
+                                       ground_range_bearing, metric_from_plane,
+                                       plane_disparity, plane_from_metric,
+                                       principal_offset_px)
 
 CAM = StereoCamera(f=300.0, cx=159.5, cy=119.5, baseline=0.35, width=320, height=240)
 
@@ -133,3 +135,25 @@ def test_columns_is_np_stack_on_the_last_axis():
         assert got.tobytes() == want.tobytes()
     with pytest.raises(ValueError):
         columns(a, b[:3])
+
+
+def test_a_right_principal_point_of_its_own_is_moved_to_the_left_one():
+    """cx_left - cx_right from the P matrices; the right image moved by it (bilinear
+    for a fraction, the edge column repeated), so that a column's content lands where
+    the left camera's principal point puts it."""
+    pl = [300.0, 0, 159.5, 0, 0, 300.0, 119.5, 0, 0, 0, 1, 0]
+    pr = list(pl)
+    pr[2], pr[3] = 152.25, -105.0
+    assert principal_offset_px(pl, pr) == pytest.approx(7.25)
+    assert principal_offset_px(pl, pl) == 0.0
+    with pytest.raises(ValueError, match='cx_left - cx_right = 7.25'):
+        principal_offset_px(pl, pr, width=28)
+    row = np.arange(0, 100, 10, dtype=np.uint8)[None, :].repeat(3, 0)
+    np.testing.assert_array_equal(align_right_image(row, 2.0)[0],
+                                  [0, 0, 0, 10, 20, 30, 40, 50, 60, 70])
+    np.testing.assert_array_equal(align_right_image(row, -1.0)[0],
+                                  [10, 20, 30, 40, 50, 60, 70, 80, 90, 90])
+    np.testing.assert_array_equal(align_right_image(row, 2.5)[0],
+                                  [0, 0, 0, 5, 15, 25, 35, 45, 55, 65])
+    assert align_right_image(row, 0.0) is row
+    assert align_right_image(row, 2.5).dtype == np.uint8

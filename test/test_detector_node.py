@@ -124,6 +124,44 @@ def test_a_rig_off_its_calibration_is_corrected_and_reported(ros_context):
         probe.destroy_node()
 
 
+
+def test_a_right_camera_with_its_own_principal_point_is_aligned(graph):
+    """Pairs rectified without CALIB_ZERO_DISPARITY: the right camera_info's principal
+    point 6 px left of the left one's (P[0,2]), its image content with it. The detector
+    moves the right image back (`core.camera.align_right_image`): the same ground
+    (1.25 m) and obstacles as from the pair as recorded; taken as it stands, each
+    disparity would be 6 px off."""
+    import copy
+
+    import numpy as np
+
+    from asmonc_vision.nodes.conversions import array_to_image_msg
+
+    from asmonc_vision.core.gpod import GpodDetector
+    from asmonc_vision.nodes.conversions import image_msg_to_gray, stereo_camera_from_infos
+
+    det, ex, send, got = graph
+    frames = load_frames(BAGS / 'static_obstacles', [0, 1, 2, 3, 45, 46, 47])
+    ref = GpodDetector()          # the pairs as recorded
+    for left, right, li, ri in frames:
+        r = ref.process(image_msg_to_gray(left), image_msg_to_gray(right),
+                        stereo_camera_from_infos(li, ri))
+    for i, (left, right, li, ri) in enumerate(frames):
+        a = np.frombuffer(bytes(right.data), np.uint8).reshape(right.height, right.width)
+        moved = array_to_image_msg(np.ascontiguousarray(
+            np.concatenate([a[:, 6:], a[:, -1:].repeat(6, 1)], 1)), right.header)
+        ri = copy.deepcopy(ri)
+        ri.p[2] -= 6.0
+        send(left, moved, li, ri)
+        assert spin_until(ex, lambda i=i: len(got['obstacles']) == i + 1, timeout=15)
+    assert spin_until(ex, lambda: len(got['plane']) == len(frames))
+    assert got['plane'][-1].status == GroundPlane.TRACKING
+    last = got['plane'][-1]
+    assert last.height == pytest.approx(1.25, abs=0.05)
+    # (a disparity offset alone would be taken into the plane's c, and every range off)
+    np.testing.assert_allclose([last.a, last.b, last.c], r.plane_abc, atol=0.05)
+    assert len(got['obstacles'][-1].obstacles) >= 3
+
 def test_walking_tracks_take_egomotion_as_their_motion_input(graph_ego):
     """Walking: with the pair's /egomotion (here from the core estimator on the same
     frames) the node's obstacle tracks are carried from frame to frame and keep their

@@ -113,6 +113,51 @@ class StereoCamera:
         return u, v, d
 
 
+
+def principal_offset_px(p_left, p_right, width: int | None = None) -> float:
+    """``cx_left - cx_right`` of a rectified pair's projection matrices (3x4 or flat 12),
+    px: the disparity of a point at infinity (Middlebury's ``doffs``). 0 when the two
+    principal points agree (``cv2.stereoRectify``'s ``CALIB_ZERO_DISPARITY``, the
+    ``StereoCamera`` convention); `align_right_image` makes them agree.
+
+    Raises:
+        ValueError: the offset is not finite, or (with ``width``) a quarter of the
+            image's width or more: not one rectified pair.
+    """
+    off = float(np.asarray(p_left, float).reshape(3, 4)[0, 2]
+                - np.asarray(p_right, float).reshape(3, 4)[0, 2])
+    if not math.isfinite(off) or (width is not None and abs(off) >= 0.25 * width):
+        raise ValueError(f'the principal points differ by cx_left - cx_right = {off} px '
+                         f'(must be finite and under a quarter of the width {width})')
+    return off
+
+
+def align_right_image(right: np.ndarray, offset_px: float) -> np.ndarray:
+    """The right image moved ``offset_px`` columns to the right (``principal_offset_px``),
+    so that its principal point is the left's and ``d = u_left - u_right`` is ``f·B/z``.
+
+    Args:
+        right: (H, W) uint8 right image, rectified.
+        offset_px: cx_left - cx_right, px (fractional: bilinear).
+    Returns:
+        (H, W) uint8: the moved image (the edge column repeated where the move leaves
+        none: a constant along rows adds no vertical edge to match); ``right`` itself
+        when the offset is 0.
+    """
+    if offset_px == 0.0:
+        return right
+    w = right.shape[1]
+    k = math.floor(offset_px)
+    a = offset_px - k
+    # dst(x) = (1 - a) src(x - k) + a src(x - k - 1), columns clipped into the image
+    x = np.arange(w)
+    c0 = np.clip(x - k, 0, w - 1)
+    c1 = np.clip(x - k - 1, 0, w - 1)
+    if a == 0.0:
+        return np.ascontiguousarray(right[:, c0])
+    out = (1.0 - a) * right[:, c0] + a * right[:, c1]
+    return np.rint(out).astype(right.dtype)
+
 @dataclass(frozen=True)
 class MetricPlane:
     """A plane in the left optical frame: ``normal_up . X + height = 0`` for X on it.

@@ -81,10 +81,15 @@ def load_frames(bag: Path, limit: int = 0, images: bool = True) -> list[Frame]:
         limit: at most this many pairs (0: all).
         images: False skips the images (for scoring recorded outputs: stamps, cameras
             and truth only); a pair is then any stamp with both CameraInfos.
+
+    A right camera whose principal point differs from the left's (``cx`` in the
+    CameraInfos' P) has its image moved to the left's (`core.camera.align_right_image`),
+    as the nodes do.
+
     Raises:
-        bagio.BagError: unreadable bag.
+        bagio.BagError: unreadable bag, or camera_infos that are not one rectified pair.
     """
-    from asmonc_vision.core.camera import StereoCamera
+    from asmonc_vision.core.camera import StereoCamera, align_right_image, principal_offset_px
 
     T = {k: bagio.TOPICS[k][0] for k in ('left_image', 'right_image', 'left_info', 'right_info',
                                          'gt_obstacles', 'gt_ground_plane', 'gt_camera_pose')}
@@ -117,11 +122,17 @@ def load_frames(bag: Path, limit: int = 0, images: bool = True) -> list[Frame]:
             continue
         li, ri = s[T['left_info']], s[T['right_info']]
         cam = StereoCamera.from_projection(li.p, ri.p, li.width, li.height)
+        try:
+            offset = principal_offset_px(li.p, ri.p, li.width)
+        except ValueError as exc:
+            raise bagio.BagError(f'{bag}: camera_info of the pair at {stamp / 1e9:.3f} s: '
+                                 f'{exc}') from exc
         left = right = None
         if images:
             lm, rm = s[T['left_image']], s[T['right_image']]
             left = bagio.image_to_gray(lm.encoding, lm.height, lm.width, lm.step, lm.data)
-            right = bagio.image_to_gray(rm.encoding, rm.height, rm.width, rm.step, rm.data)
+            right = align_right_image(
+                bagio.image_to_gray(rm.encoding, rm.height, rm.width, rm.step, rm.data), offset)
         truth = (frame_from_obstacle_array(s[T['gt_obstacles']])
                  if T['gt_obstacles'] in s else None)
         tplane = (plane_from_msg(s[T['gt_ground_plane']], cam)

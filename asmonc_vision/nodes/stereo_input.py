@@ -23,7 +23,7 @@ import numpy as np
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 
-from asmonc_vision.core.camera import StereoCamera
+from asmonc_vision.core.camera import StereoCamera, align_right_image, principal_offset_px
 from asmonc_vision.core.config import check_fields, param
 from asmonc_vision.nodes.common import IMAGE_QOS, Diagnostics, watch_input_links
 from asmonc_vision.nodes.conversions import (ImageFormatError, image_msg_to_gray, stamp_to_ns,
@@ -161,6 +161,8 @@ class StereoInputNode(Node):
         self._cv = threading.Condition()
         self._stop = False
         self._camera: StereoCamera | None = None
+        #: cx_left - cx_right of the camera_infos, px (`core.camera.principal_offset_px`)
+        self._right_offset = 0.0
         self._camera_key = None
         #: set when a pair waited `info_wait` for a camera_info in vain (cleared by one)
         self._info_missing = False
@@ -317,15 +319,18 @@ class StereoInputNode(Node):
         if key != self._camera_key:
             try:
                 cam = stereo_camera_from_infos(pair.left_info, pair.right_info)
+                offset = principal_offset_px(pair.left_info.p, pair.right_info.p, cam.width)
             except ValueError as exc:
                 self.get_logger().error(f'bad camera_info: {exc}', throttle_duration_sec=2.0)
                 return None
             if self._camera is not None:
                 self.get_logger().info(f'camera changed to {cam}; restarting the {self.label}')
                 self.restart()
-            self._camera, self._camera_key = cam, key
+            self._camera, self._camera_key, self._right_offset = cam, key, offset
             self.get_logger().info(
-                f'camera: {cam.width}x{cam.height}, f={cam.f:.1f} px, B={cam.baseline:.3f} m')
+                f'camera: {cam.width}x{cam.height}, f={cam.f:.1f} px, B={cam.baseline:.3f} m'
+                + (f'; right image moved {offset:+.2f} px to the left principal point'
+                   if offset else ''))
         return self._camera
 
     def _check_gap(self, stamp_ns: int) -> None:
@@ -392,6 +397,7 @@ class StereoInputNode(Node):
                       f'{cam.width}x{cam.height}; pair skipped', throttle_duration_sec=2.0)
             self.skip_pair(pair, Diagnostics.ERROR, 'image size differs from camera_info')
             return
+        right = align_right_image(right, self._right_offset)
         self.process_pair(pair, left, right, cam)
         self._last_stamp_ns = pair.stamp_ns
         self.frames_done += 1
