@@ -1144,6 +1144,27 @@ def test_at_a_start_the_detectors_reports_go_out_as_they_are(start_raw_s):
     assert all(len(out[j]) == len(own[j]) for j in range(26, 30)), (own, out)
 
 
+def test_the_compiled_guard_gives_the_dilated_grids_cells():
+    """`map_kernels.near_kernel` (`EvidenceMap._near`: marked cells within a square of
+    given cells) gives the dilated grid's booleans at the cells (`map_grid.dilate`),
+    at the grid's borders and corners too, for the guards' radii."""
+    from asmonc_vision.core import map_grid, map_kernels
+    if map_kernels.nb_near is None:
+        pytest.skip('numba is not available')
+    rng = np.random.default_rng(7)
+    emap = EvidenceMap(EvidenceMapConfig(enabled=True))
+    n = emap.n
+    corners = np.array([0, n - 1, n * (n - 1), n * n - 1, n, 2 * n - 1], np.int64)
+    for size in (0, 1, 5, 40, 400):
+        marked = np.concatenate((rng.integers(0, n * n, size), corners[:size % 4]))
+        cells = np.concatenate((rng.integers(0, n * n, 300), corners, marked[:3] + 1))
+        cells = np.clip(cells, 0, n * n - 1).astype(np.int64)
+        for radius in (0, 1, 2, 3):
+            got = map_kernels.nb_near(marked.astype(np.int64), n, cells, radius)
+            want = map_grid.dilate(emap._grid_of(marked), radius).reshape(-1)[cells] > 0
+            np.testing.assert_array_equal(got, want)
+
+
 def test_the_compiled_pixel_counts_give_numpys():
     """`map_kernels.count_kernel` (the compiled `EvidenceMap._count`, into grids kept
     between pairs) gives numpy's bincounts and cells, pair after pair (the cells of the

@@ -343,8 +343,7 @@ class EvidenceMap:
         if c.clear_guard_cells > 0:
             # ground seen beside a thing seen in this pair (its foot, the ground in front
             # of its face in the same cell) does not clear it
-            near = map_grid.dilate(self._grid_of(raised, u_d), c.clear_guard_cells)
-            free_g &= near.reshape(-1)[u_g] == 0
+            free_g &= ~self._near(np.concatenate((raised, u_d)), u_g, c.clear_guard_cells)
         free = u_g[free_g]
         # ground that can rule a drop out: pixels of height known to drop_clear_max_sigma_m
         free_d = free
@@ -385,6 +384,17 @@ class EvidenceMap:
         out = self._counts.count(flat, kind, sure, use_kernel)
         self._pair_count = self._counts.pair
         return out
+
+    def _near(self, marked: np.ndarray, cells: np.ndarray, radius: int) -> np.ndarray:
+        """(C,) bool: whether any of the ``marked`` cells ((K,) int64 flat indices) lies
+        within ``radius`` cells in x and in y of each of ``cells`` ((C,) int64 flat
+        indices): the grid of the marked cells dilated by that square
+        (`map_grid.dilate`), read at the cells (`map_kernels.near_kernel` where it
+        compiled: the same booleans)."""
+        if map_kernels.nb_near is not None:
+            return map_kernels.nb_near(np.asarray(marked, np.int64), self.n,
+                                       np.asarray(cells, np.int64), int(radius))
+        return map_grid.dilate(self._grid_of(marked), radius).reshape(-1)[cells] > 0
 
     def _grid_of(self, *cells: np.ndarray) -> np.ndarray:
         """(n, n) uint8: 1 at the given flat cell indices, else 0."""
@@ -493,9 +503,7 @@ class EvidenceMap:
             return
         conf_r = self._grid_of(cells_r).reshape(-1) > 0
         conf_d = self._grid_of(cells_d).reshape(-1) > 0
-        got = map_grid.dilate(self._grid_of(self._pair_cells),
-                              c.miss_guard_cells).reshape(-1) > 0
-        cells = cells[~got[cells]]
+        cells = cells[~self._near(self._pair_cells, cells, c.miss_guard_cells)]
         if not cells.size:
             return
         g, feet, up = self._cell_feet(cells)
