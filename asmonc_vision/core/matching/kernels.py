@@ -110,10 +110,10 @@ def candidates_kernel(pol_l, v_l, u_l, s_l, o_l, pol_r, v_r, u_r, s_r, o_r, h, w
 
 
 def cells_kernel(s_cell, size):
-    """:func:`_cell_table` as a loop (for numba): (size + 1,) int64, ``table[k]`` the
-    number of the sorted cells ``s_cell`` (M,) below k (a count per cell, then its
-    prefix sum)."""
-    table = np.zeros(size + 1, np.int64)
+    """:func:`_cell_table` as a loop (for numba): (size + 1,) int32 (M < 2^31),
+    ``table[k]`` the number of the sorted cells ``s_cell`` (M,) below k (a count per
+    cell, then its prefix sum)."""
+    table = np.zeros(size + 1, np.int32)
     for c in s_cell:
         table[c + 1] += 1
     for k in range(1, size + 1):
@@ -227,15 +227,13 @@ def group_kernel(a, b, s2, d, d_prev, d_next, monotonic, tol, c_left, n_left):
     c2 = np.empty(n, np.int64)
     w = np.empty(n, np.float64)
     # link k < npair: candidate a[k] supported by b[k]; k >= npair: the reverse
-    cand_of = np.concatenate((a, b))
-    sup_of = np.concatenate((b, a))
-    s2_of = np.concatenate((s2, s2))
     q1 = 0
     q2 = 0
     for k in range(n):
-        ck = cand_of[k]
-        sk = sup_of[k]
-        s2k = s2_of[k]
+        kp = k if k < npair else k - npair
+        ck = a[kp] if k < npair else b[kp]
+        sk = b[kp] if k < npair else a[kp]
+        s2k = s2[kp]
         if multi[k]:
             grp[q2] = k
             key[q2] = ck * n_left + c_left[sk]
@@ -256,9 +254,10 @@ def group_kernel(a, b, s2, d, d_prev, d_next, monotonic, tol, c_left, n_left):
     for t in range(n_multi):
         k = grp[order[t]]
         kk = key[order[t]]
-        ck = cand_of[k]
-        sk = sup_of[k]
-        s2k = s2_of[k]
+        kp = k if k < npair else k - npair
+        ck = a[kp] if k < npair else b[kp]
+        sk = b[kp] if k < npair else a[kp]
+        s2k = s2[kp]
         p = n1 + t
         c[p] = ck
         c2[p] = sk

@@ -34,7 +34,7 @@ def _argsort(keys: np.ndarray) -> np.ndarray:
 def _cell_table(s_cell: np.ndarray, size: int) -> np.ndarray:
     """(size + 1,) int: ``table[k]`` = number of the sorted cells ``s_cell`` below k."""
     m = s_cell.shape[0]
-    if kernels.nb_cells is not None:
+    if kernels.nb_cells is not None and m < 2 ** 31:
         return kernels.nb_cells(s_cell, size)
     first = np.ones(m, bool)
     first[1:] = s_cell[1:] != s_cell[:-1]
