@@ -106,7 +106,7 @@ def candidates_kernel(pol_l, v_l, u_l, s_l, o_l, pol_r, v_r, u_r, s_r, o_r, h, w
             rj[n] = j
             d[n] = ul - np.float64(u_r[j])
             n += 1
-    return li[:n].copy(), rj[:n].copy(), d[:n].copy()
+    return li[:n], rj[:n], d[:n]
 
 
 def cells_kernel(s_cell, size):
@@ -163,8 +163,8 @@ def pairs_kernel(table, half, w, s_uc, s_d64, s_v, rad2, lim2):
     single-precision pre-test only skips pairs that the exact tests reject)."""
     nd = half.shape[0]
     m = s_uc.shape[0]
-    lo = np.empty((nd, m), np.int64)
-    hi = np.empty((nd, m), np.int64)
+    lo = np.empty((nd, m), np.int32)          # (table values: < M < 2^31)
+    hi = np.empty((nd, m), np.int32)
     tot = 0
     for k in range(nd):
         hk = half[k]
