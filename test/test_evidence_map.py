@@ -1165,6 +1165,29 @@ def test_the_compiled_guard_gives_the_dilated_grids_cells():
             np.testing.assert_array_equal(got, want)
 
 
+def test_the_compiled_surest_weights_give_numpys():
+    """`map_kernels.surest_kernel` (`EvidenceMap._surest`: the surest pixel's weight per
+    cell) gives the maxima ``np.maximum.at`` takes into a zero grid, NaN included."""
+    from asmonc_vision.core import map_kernels
+    if map_kernels.nb_surest is None:
+        pytest.skip('numba is not available')
+    rng = np.random.default_rng(11)
+    n2 = 180 * 180
+    for size in (0, 1, 30, 2000):
+        flat = rng.integers(0, n2, size).astype(np.int64)
+        flat[: size // 2] = flat[0] if size else 0
+        weight = rng.random(size)
+        if size > 5:
+            weight[3] = np.nan
+            weight[4] = -0.5
+        cells = np.unique(np.concatenate((flat[::3], rng.integers(0, n2, 7))))
+        got = map_kernels.nb_surest(flat, weight, cells)
+        best = np.zeros(n2)
+        with np.errstate(invalid='ignore'):
+            np.maximum.at(best, flat, weight)
+        np.testing.assert_array_equal(got, best[cells])
+
+
 def test_the_compiled_pixel_counts_give_numpys():
     """`map_kernels.count_kernel` (the compiled `EvidenceMap._count`, into grids kept
     between pairs) gives numpy's bincounts and cells, pair after pair (the cells of the

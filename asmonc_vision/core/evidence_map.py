@@ -285,6 +285,10 @@ class EvidenceMap:
         alike): the cell's evidence is as sure as its surest match."""
         if ev.weight is None or not self.config.weigh_by_rivals:
             return 1.0
+        if map_kernels.nb_surest is not None:
+            return map_kernels.nb_surest(np.asarray(flat, np.int64),
+                                         np.asarray(ev.weight[inside][sel], np.float64),
+                                         np.asarray(cells, np.int64))
         best = np.zeros(self.n * self.n)
         np.maximum.at(best, flat, ev.weight[inside][sel])
         return best[cells]

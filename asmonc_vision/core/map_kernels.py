@@ -20,6 +20,9 @@
   guards). Its numpy path dilates the marked cells' grid by the square
   (`map_grid.dilate`) and reads it at the cells; the kernel looks in each cell's square
   only: the same booleans, without the grid's dilation.
+* `surest_kernel`, the surest pixel's weight per cell of `EvidenceMap._enter`. Its
+  numpy path takes the maxima into a zero grid (``np.maximum.at``) and reads the
+  cells; the kernel finds each pixel's cell among the cells: the same maxima.
 """
 from __future__ import annotations
 
@@ -203,6 +206,26 @@ def near_kernel(marked, n, cells, radius):
 
 #: ``near_kernel`` compiled (None without numba; `warm_up` sets it to None when it fails)
 nb_near = jit(near_kernel)
+
+
+def surest_kernel(flat, weight, cells):
+    """(K,) float64: the largest of 0 and the ``weight`` (P,) float64 of the pixels in
+    each of ``cells`` ((K,) int64 flat indices, ascending, distinct), ``flat`` (P,) int64
+    the pixels' cells (for numba): ``np.maximum.at`` of the weights into a zero grid,
+    read at the cells (NaN propagated as np.maximum does), without the grid."""
+    k = cells.shape[0]
+    best = np.zeros(k)
+    for p in range(flat.shape[0]):
+        i = np.searchsorted(cells, flat[p])
+        if i < k and cells[i] == flat[p]:
+            b, w = best[i], weight[p]
+            if b == b and (w != w or w > b):
+                best[i] = w
+    return best
+
+
+#: ``surest_kernel`` compiled (None without numba; `warm_up` sets it to None when it fails)
+nb_surest = jit(surest_kernel)
 
 
 class PixelCounts:
@@ -398,11 +421,12 @@ _warm = False
 def warm_up() -> None:
     """Compile the kernels once per process (or load them from numba's disk cache), before
     the first pair: an `EvidenceMap` calls this when it is made."""
-    global _warm, nb_rays, nb_count, nb_heights, nb_near
+    global _warm, nb_rays, nb_count, nb_heights, nb_near, nb_surest
     if _warm:
         return
     _warm = True
     nb_near = warmed(nb_near, np.array([1, 2]), 3, np.array([0, 8]), 1)
+    nb_surest = warmed(nb_surest, np.array([1, 2]), np.ones(2), np.array([2]))
     nb_rays = warmed(nb_rays, np.zeros((1, 2)), np.zeros(1), np.ones((1, 2)), np.ones(1),
                      1.0, 0.03, 0.2)
     z = np.zeros(4, np.int64)
