@@ -1237,7 +1237,8 @@ def test_the_compiled_pixel_counts_give_numpys():
 @pytest.mark.parametrize('threads', [1, 0])
 def test_grid_operations_on_the_box_give_the_whole_grids(threads):
     """`map_grid.dilate` and `map_grid.label_regions` worked out on the box of the
-    non-zero cells give what they give over the whole grid: the same cells and the
+    non-zero cells (found from the mask, or from its cells given) give what they give
+    over the whole grid: the same cells and the
     regions in the same order (cv2.connectedComponents' labels), with OpenCV on one
     thread and on its default."""
     import cv2
@@ -1259,11 +1260,13 @@ def test_grid_operations_on_the_box_give_the_whole_grids(threads):
                 np.testing.assert_array_equal(map_grid.dilate(mask, r),
                                               map_grid.dilate(mask, r, whole=True))
                 got = map_grid.label_regions(mask, r)
+                known = map_grid.label_regions(mask, r, cells=np.flatnonzero(mask))
                 want = map_grid.label_regions(mask, r, whole=True)
-                assert len(got) == len(want)
-                for a, b in zip(got, want):
-                    assert a.dtype == b.dtype
+                assert len(got) == len(want) == len(known)
+                for a, b, k in zip(got, want, known):
+                    assert a.dtype == b.dtype == k.dtype
                     np.testing.assert_array_equal(a, b)
+                    np.testing.assert_array_equal(k, b)
     finally:
         cv2.setNumThreads(old)
 

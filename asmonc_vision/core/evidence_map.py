@@ -481,10 +481,11 @@ class EvidenceMap:
         right = np.count_nonzero(through & (lateral <= 0), axis=1)
         return cells[(np.minimum(left, right) >= c.ray_min_pixels) & (left + right > n_r[cells])]
 
-    def _label(self, mask: np.ndarray) -> list[np.ndarray]:
+    def _label(self, mask: np.ndarray, cells: np.ndarray | None = None) -> list[np.ndarray]:
         """Flat cell indices of each region of ``mask`` (8-connected, gaps of
-        ``join_cells`` bridged; `map_grid.label_regions`)."""
-        return map_grid.label_regions(mask, self.config.join_cells)
+        ``join_cells`` bridged; `map_grid.label_regions`; ``cells``: the mask's cells,
+        ascending, when known)."""
+        return map_grid.label_regions(mask, self.config.join_cells, cells=cells)
 
     def _unseen(self, ev: PairEvidence, cam: StereoCamera) -> None:
         """Confirmed cells in plain view that this pair saw nothing at are fading.
@@ -671,7 +672,7 @@ class EvidenceMap:
             L = (self.L_d if drop else self.L_r).reshape(-1)
             # the cells' points in G, all at once (elementwise: each region's the same)
             g_cells = self.to_ground(pt_xy[cells].astype(np.float64))
-            for cs in self._label(self._grid_of(cells) > 0):
+            for cs in self._label(self._grid_of(cells) > 0, cells):
                 if cs.size < (c.min_drop_cells if drop else c.min_region_cells):
                     continue
                 g = g_cells[np.searchsorted(cells, cs)]
