@@ -502,20 +502,20 @@ class EvidenceMap:
         c = self.config
         if (c.miss_logodds <= 0 and c.unseen_report_s <= 0) or self._pair_count is None:
             return
-        cells_r, cells_d = self._confirmed_cells(False), self._confirmed_cells(True)
-        cells = np.union1d(cells_r, cells_d)
+        # the confirmed cells, raised and drop (`_confirmed_cells` of both, ascending),
+        # and which of the two each is
+        cells, conf_r, conf_d = self._confirmed_both()
         if not cells.size:
             return
-        conf_r = self._grid_of(cells_r).reshape(-1) > 0
-        conf_d = self._grid_of(cells_d).reshape(-1) > 0
-        cells = cells[~self._near(self._pair_cells, cells, c.miss_guard_cells)]
+        kept = flat_nonzero(~self._near(self._pair_cells, cells, c.miss_guard_cells))
+        cells, conf_r, conf_d = cells[kept], conf_r[kept], conf_d[kept]
         if not cells.size:
             return
         g, feet, up = self._cell_feet(cells)
         view = self._in_both_images(feet, cam)
         # a raised thing near a level camera shows its upper part, not its foot: the
         # point at _SEEN_SHARE of its height in view is in plain view too
-        raised_cell = conf_r[cells]
+        raised_cell = conf_r
         if raised_cell.any():
             seen_at = _SEEN_SHARE * np.maximum(self.h_x.reshape(-1)[cells], 0.0)   # (M,) m
             view |= raised_cell & self._in_both_images(feet + seen_at[:, None] * up[None, :],
@@ -539,9 +539,9 @@ class EvidenceMap:
         # passer-by's cells behind them; the ground beyond need not have been matched;
         # what hides a thing is nearer and reported itself)
         self._missed[cells[view]] = True
-        cells = cells[unhidden & (far[b] >= r + c.cell_m)]
-        self.L_r.reshape(-1)[cells[conf_r[cells]]] -= c.miss_logodds
-        self.L_d.reshape(-1)[cells[conf_d[cells]]] -= c.miss_logodds
+        fading = unhidden & (far[b] >= r + c.cell_m)
+        self.L_r.reshape(-1)[cells[fading & conf_r]] -= c.miss_logodds
+        self.L_d.reshape(-1)[cells[fading & conf_d]] -= c.miss_logodds
         self.L_r.clip(c.min_logodds, c.max_logodds, out=self.L_r)
         self.L_d.clip(c.min_logodds, c.max_logodds, out=self.L_d)
 
@@ -601,6 +601,18 @@ class EvidenceMap:
         """(n, n) bool: the cells reported (log-odds ≥ ``report_logodds``, two views;
         `_confirmed_cells` on the grid)."""
         return self._grid_of(self._confirmed_cells(drop)) > 0
+
+    def _confirmed_both(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The cells `_confirmed_cells` gives raised or drop ((K,) int64 flat indices,
+        ascending: their union) and (K,) bool each, whether each is a raised one and
+        whether a drop one (both where the two log-odds are equal)."""
+        tv = flat_nonzero(self.two_views)
+        lr, ld = self.L_r.reshape(-1)[tv], self.L_d.reshape(-1)[tv]
+        rep = self.config.report_logodds
+        is_r = (lr >= rep) & (lr >= ld)
+        is_d = (ld >= rep) & (ld >= lr)
+        sel = flat_nonzero(is_r | is_d)
+        return tv[sel], is_r[sel], is_d[sel]
 
     def _confirmed_cells(self, drop: bool = False) -> np.ndarray:
         """(K,) int64 the flat indices of the cells `confirmed` reports, ascending (from
