@@ -656,8 +656,9 @@ class EvidenceMap:
         new_ids = np.zeros_like(self.ids)
         used: set[int] = set()
         masks = []                     # (drop, the cells of a mask, flat indices)
+        both, conf_r, conf_d = self._confirmed_both()
         for drop in (False, True):
-            cells = self._confirmed_cells(drop)
+            cells = both[conf_d if drop else conf_r]       # (`_confirmed_cells`)
             if not cells.size:
                 continue
             if cam is None:
