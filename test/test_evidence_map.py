@@ -1144,6 +1144,50 @@ def test_at_a_start_the_detectors_reports_go_out_as_they_are(start_raw_s):
     assert all(len(out[j]) == len(own[j]) for j in range(26, 30)), (own, out)
 
 
+def test_the_compiled_guard_gives_the_dilated_grids_cells():
+    """`map_kernels.near_kernel` (`EvidenceMap._near`: marked cells within a square of
+    given cells) gives the dilated grid's booleans at the cells (`map_grid.dilate`),
+    at the grid's borders and corners too, for the guards' radii."""
+    from asmonc_vision.core import map_grid, map_kernels
+    if map_kernels.nb_near is None:
+        pytest.skip('numba is not available')
+    rng = np.random.default_rng(7)
+    emap = EvidenceMap(EvidenceMapConfig(enabled=True))
+    n = emap.n
+    corners = np.array([0, n - 1, n * (n - 1), n * n - 1, n, 2 * n - 1], np.int64)
+    for size in (0, 1, 5, 40, 400):
+        marked = np.concatenate((rng.integers(0, n * n, size), corners[:size % 4]))
+        cells = np.concatenate((rng.integers(0, n * n, 300), corners, marked[:3] + 1))
+        cells = np.clip(cells, 0, n * n - 1).astype(np.int64)
+        for radius in (0, 1, 2, 3):
+            got = map_kernels.nb_near(marked.astype(np.int64), n, cells, radius)
+            want = map_grid.dilate(emap._grid_of(marked), radius).reshape(-1)[cells] > 0
+            np.testing.assert_array_equal(got, want)
+
+
+def test_the_compiled_surest_weights_give_numpys():
+    """`map_kernels.surest_kernel` (`EvidenceMap._surest`: the surest pixel's weight per
+    cell) gives the maxima ``np.maximum.at`` takes into a zero grid, NaN included."""
+    from asmonc_vision.core import map_kernels
+    if map_kernels.nb_surest is None:
+        pytest.skip('numba is not available')
+    rng = np.random.default_rng(11)
+    n2 = 180 * 180
+    for size in (0, 1, 30, 2000):
+        flat = rng.integers(0, n2, size).astype(np.int64)
+        flat[: size // 2] = flat[0] if size else 0
+        weight = rng.random(size)
+        if size > 5:
+            weight[3] = np.nan
+            weight[4] = -0.5
+        cells = np.unique(np.concatenate((flat[::3], rng.integers(0, n2, 7))))
+        got = map_kernels.nb_surest(flat, weight, cells)
+        best = np.zeros(n2)
+        with np.errstate(invalid='ignore'):
+            np.maximum.at(best, flat, weight)
+        np.testing.assert_array_equal(got, best[cells])
+
+
 def test_the_compiled_pixel_counts_give_numpys():
     """`map_kernels.count_kernel` (the compiled `EvidenceMap._count`, into grids kept
     between pairs) gives numpy's bincounts and cells, pair after pair (the cells of the
@@ -1193,7 +1237,8 @@ def test_the_compiled_pixel_counts_give_numpys():
 @pytest.mark.parametrize('threads', [1, 0])
 def test_grid_operations_on_the_box_give_the_whole_grids(threads):
     """`map_grid.dilate` and `map_grid.label_regions` worked out on the box of the
-    non-zero cells give what they give over the whole grid: the same cells and the
+    non-zero cells (found from the mask, or from its cells given) give what they give
+    over the whole grid: the same cells and the
     regions in the same order (cv2.connectedComponents' labels), with OpenCV on one
     thread and on its default."""
     import cv2
@@ -1215,11 +1260,13 @@ def test_grid_operations_on_the_box_give_the_whole_grids(threads):
                 np.testing.assert_array_equal(map_grid.dilate(mask, r),
                                               map_grid.dilate(mask, r, whole=True))
                 got = map_grid.label_regions(mask, r)
+                known = map_grid.label_regions(mask, r, cells=np.flatnonzero(mask))
                 want = map_grid.label_regions(mask, r, whole=True)
-                assert len(got) == len(want)
-                for a, b in zip(got, want):
-                    assert a.dtype == b.dtype
+                assert len(got) == len(want) == len(known)
+                for a, b, k in zip(got, want, known):
+                    assert a.dtype == b.dtype == k.dtype
                     np.testing.assert_array_equal(a, b)
+                    np.testing.assert_array_equal(k, b)
     finally:
         cv2.setNumThreads(old)
 

@@ -242,3 +242,33 @@ def test_lsq_plane_at_height_keeps_the_height_and_fits_the_orientation():
     wrong = lsq_plane_at_height(CAM, u, v, d, 1.5)
     assert cyclopean_height(CAM, wrong) == pytest.approx(1.5, abs=1e-9)
     assert lsq_plane_at_height(CAM, u[:1], v[:1], d[:1], 1.3) is None
+
+
+def test_the_compiled_ransac_residuals_give_numpys(monkeypatch):
+    """`ground_plane.residuals_kernel` (the RANSAC hypotheses' truncated squared
+    residuals and inlier shares) gives numpy's values bit for bit, NaN included, and a
+    fit through either draws and returns the same."""
+    from asmonc_vision.core import ground_plane as gp
+    gp.warm_up()
+    if gp.nb_residuals is None:
+        pytest.skip('numba is not available')
+    rng = np.random.default_rng(3)
+    u, v = rng.uniform(0, 320, 700), rng.uniform(120, 240, 700)
+    d = 0.1 * v - 8.0 + rng.normal(0, 0.6, 700)
+    a, b, c = rng.normal(0, 0.01, 16), 0.1 + rng.normal(0, 0.01, 16), rng.normal(-8, 1, 16)
+    a[3] = np.nan
+    fast = gp._residuals(a, b, c, u, v, d, 1.0)
+    kernel = gp.nb_residuals
+    monkeypatch.setattr(gp, 'nb_residuals', None)
+    slow = gp._residuals(a, b, c, u, v, d, 1.0)
+    for x, y in zip(fast, slow):
+        assert x.dtype == y.dtype and x.shape == y.shape
+        np.testing.assert_array_equal(x, y)
+    fits = []
+    for k in (kernel, None):
+        monkeypatch.setattr(gp, 'nb_residuals', k)
+        fits.append(gp.fit_ground_plane(u, v, d, weights=np.maximum(d, 0.0) ** 3,
+                                        rng=np.random.default_rng(5)))
+    assert fits[0] is not None and fits[1] is not None
+    np.testing.assert_array_equal(fits[0].abc, fits[1].abc)
+    np.testing.assert_array_equal(fits[0].inliers, fits[1].inliers)

@@ -285,6 +285,10 @@ class EvidenceMap:
         alike): the cell's evidence is as sure as its surest match."""
         if ev.weight is None or not self.config.weigh_by_rivals:
             return 1.0
+        if map_kernels.nb_surest is not None:
+            return map_kernels.nb_surest(np.asarray(flat, np.int64),
+                                         np.asarray(ev.weight[inside][sel], np.float64),
+                                         np.asarray(cells, np.int64))
         best = np.zeros(self.n * self.n)
         np.maximum.at(best, flat, ev.weight[inside][sel])
         return best[cells]
@@ -343,8 +347,7 @@ class EvidenceMap:
         if c.clear_guard_cells > 0:
             # ground seen beside a thing seen in this pair (its foot, the ground in front
             # of its face in the same cell) does not clear it
-            near = map_grid.dilate(self._grid_of(raised, u_d), c.clear_guard_cells)
-            free_g &= near.reshape(-1)[u_g] == 0
+            free_g &= ~self._near(np.concatenate((raised, u_d)), u_g, c.clear_guard_cells)
         free = u_g[free_g]
         # ground that can rule a drop out: pixels of height known to drop_clear_max_sigma_m
         free_d = free
@@ -385,6 +388,17 @@ class EvidenceMap:
         out = self._counts.count(flat, kind, sure, use_kernel)
         self._pair_count = self._counts.pair
         return out
+
+    def _near(self, marked: np.ndarray, cells: np.ndarray, radius: int) -> np.ndarray:
+        """(C,) bool: whether any of the ``marked`` cells ((K,) int64 flat indices) lies
+        within ``radius`` cells in x and in y of each of ``cells`` ((C,) int64 flat
+        indices): the grid of the marked cells dilated by that square
+        (`map_grid.dilate`), read at the cells (`map_kernels.near_kernel` where it
+        compiled: the same booleans)."""
+        if map_kernels.nb_near is not None:
+            return map_kernels.nb_near(np.asarray(marked, np.int64), self.n,
+                                       np.asarray(cells, np.int64), int(radius))
+        return map_grid.dilate(self._grid_of(marked), radius).reshape(-1)[cells] > 0
 
     def _grid_of(self, *cells: np.ndarray) -> np.ndarray:
         """(n, n) uint8: 1 at the given flat cell indices, else 0."""
@@ -467,10 +481,11 @@ class EvidenceMap:
         right = np.count_nonzero(through & (lateral <= 0), axis=1)
         return cells[(np.minimum(left, right) >= c.ray_min_pixels) & (left + right > n_r[cells])]
 
-    def _label(self, mask: np.ndarray) -> list[np.ndarray]:
+    def _label(self, mask: np.ndarray, cells: np.ndarray | None = None) -> list[np.ndarray]:
         """Flat cell indices of each region of ``mask`` (8-connected, gaps of
-        ``join_cells`` bridged; `map_grid.label_regions`)."""
-        return map_grid.label_regions(mask, self.config.join_cells)
+        ``join_cells`` bridged; `map_grid.label_regions`; ``cells``: the mask's cells,
+        ascending, when known)."""
+        return map_grid.label_regions(mask, self.config.join_cells, cells=cells)
 
     def _unseen(self, ev: PairEvidence, cam: StereoCamera) -> None:
         """Confirmed cells in plain view that this pair saw nothing at are fading.
@@ -487,22 +502,20 @@ class EvidenceMap:
         c = self.config
         if (c.miss_logodds <= 0 and c.unseen_report_s <= 0) or self._pair_count is None:
             return
-        cells_r, cells_d = self._confirmed_cells(False), self._confirmed_cells(True)
-        cells = np.union1d(cells_r, cells_d)
+        # the confirmed cells, raised and drop (`_confirmed_cells` of both, ascending),
+        # and which of the two each is
+        cells, conf_r, conf_d = self._confirmed_both()
         if not cells.size:
             return
-        conf_r = self._grid_of(cells_r).reshape(-1) > 0
-        conf_d = self._grid_of(cells_d).reshape(-1) > 0
-        got = map_grid.dilate(self._grid_of(self._pair_cells),
-                              c.miss_guard_cells).reshape(-1) > 0
-        cells = cells[~got[cells]]
+        kept = flat_nonzero(~self._near(self._pair_cells, cells, c.miss_guard_cells))
+        cells, conf_r, conf_d = cells[kept], conf_r[kept], conf_d[kept]
         if not cells.size:
             return
         g, feet, up = self._cell_feet(cells)
         view = self._in_both_images(feet, cam)
         # a raised thing near a level camera shows its upper part, not its foot: the
         # point at _SEEN_SHARE of its height in view is in plain view too
-        raised_cell = conf_r[cells]
+        raised_cell = conf_r
         if raised_cell.any():
             seen_at = _SEEN_SHARE * np.maximum(self.h_x.reshape(-1)[cells], 0.0)   # (M,) m
             view |= raised_cell & self._in_both_images(feet + seen_at[:, None] * up[None, :],
@@ -526,9 +539,9 @@ class EvidenceMap:
         # passer-by's cells behind them; the ground beyond need not have been matched;
         # what hides a thing is nearer and reported itself)
         self._missed[cells[view]] = True
-        cells = cells[unhidden & (far[b] >= r + c.cell_m)]
-        self.L_r.reshape(-1)[cells[conf_r[cells]]] -= c.miss_logodds
-        self.L_d.reshape(-1)[cells[conf_d[cells]]] -= c.miss_logodds
+        fading = unhidden & (far[b] >= r + c.cell_m)
+        self.L_r.reshape(-1)[cells[fading & conf_r]] -= c.miss_logodds
+        self.L_d.reshape(-1)[cells[fading & conf_d]] -= c.miss_logodds
         self.L_r.clip(c.min_logodds, c.max_logodds, out=self.L_r)
         self.L_d.clip(c.min_logodds, c.max_logodds, out=self.L_d)
 
@@ -589,6 +602,18 @@ class EvidenceMap:
         `_confirmed_cells` on the grid)."""
         return self._grid_of(self._confirmed_cells(drop)) > 0
 
+    def _confirmed_both(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The cells `_confirmed_cells` gives raised or drop ((K,) int64 flat indices,
+        ascending: their union) and (K,) bool each, whether each is a raised one and
+        whether a drop one (both where the two log-odds are equal)."""
+        tv = flat_nonzero(self.two_views)
+        lr, ld = self.L_r.reshape(-1)[tv], self.L_d.reshape(-1)[tv]
+        rep = self.config.report_logodds
+        is_r = (lr >= rep) & (lr >= ld)
+        is_d = (ld >= rep) & (ld >= lr)
+        sel = flat_nonzero(is_r | is_d)
+        return tv[sel], is_r[sel], is_d[sel]
+
     def _confirmed_cells(self, drop: bool = False) -> np.ndarray:
         """(K,) int64 the flat indices of the cells `confirmed` reports, ascending (from
         the cells with two views alone)."""
@@ -631,8 +656,9 @@ class EvidenceMap:
         new_ids = np.zeros_like(self.ids)
         used: set[int] = set()
         masks = []                     # (drop, the cells of a mask, flat indices)
+        both, conf_r, conf_d = self._confirmed_both()
         for drop in (False, True):
-            cells = self._confirmed_cells(drop)
+            cells = both[conf_d if drop else conf_r]       # (`_confirmed_cells`)
             if not cells.size:
                 continue
             if cam is None:
@@ -659,7 +685,7 @@ class EvidenceMap:
             L = (self.L_d if drop else self.L_r).reshape(-1)
             # the cells' points in G, all at once (elementwise: each region's the same)
             g_cells = self.to_ground(pt_xy[cells].astype(np.float64))
-            for cs in self._label(self._grid_of(cells) > 0):
+            for cs in self._label(self._grid_of(cells) > 0, cells):
                 if cs.size < (c.min_drop_cells if drop else c.min_region_cells):
                     continue
                 g = g_cells[np.searchsorted(cells, cs)]

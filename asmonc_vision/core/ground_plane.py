@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import surface_kernels
+from .jit import jit, warmed
 from .camera import MetricPlane, StereoCamera, metric_from_plane, vector_norm
 from .config import check_fields, param
 from .npfast import flat_nonzero
@@ -241,28 +242,73 @@ def _ransac_best(u: np.ndarray, v: np.ndarray, d: np.ndarray, threshold: float,
             a, b, c = a[ok], b[ok], c[ok]
         if a.size == 0:
             continue
-        # res = ds - (a*us + b*vs + c), sq = res^2, in place (the same arithmetic).
-        sq = np.multiply(a[:, None], us[None, :])
-        sq += b[:, None] * vs[None, :]
-        sq += c[:, None]
-        np.subtract(ds[None, :], sq, out=sq)
-        np.multiply(sq, sq, out=sq)
-        trunc = np.minimum(sq, t2)
+        # res = ds - (a*us + b*vs + c), sq = res^2; trunc = min(sq, t2); the share of the
+        # points with sq <= t2
+        trunc, within = _residuals(a, b, c, us, vs, ds, t2)
         score = trunc.sum(axis=1) if ws is None else trunc @ ws
         if prior is not None and cam is not None:
             score += prior.penalty(cam, a, b, c) * w_total
         if min_support_fraction > 0.0:
-            score[np.mean(sq <= t2, axis=1) < min_support_fraction] = np.inf
+            score[within < min_support_fraction] = np.inf
         j = int(np.argmin(score))
         if np.isfinite(score[j]) and score[j] < best_score:
             best_score = float(score[j])
             best = np.array([a[j], b[j], c[j]])
-            w = float(np.mean(sq[j] <= t2))
+            w = float(within[j])
             if w >= 1.0:
                 needed = 0.0
             elif w > 0.0:
                 needed = math.log(1.0 - confidence) / math.log(1.0 - w ** 3)
     return best
+
+
+def _residuals(a: np.ndarray, b: np.ndarray, c: np.ndarray, us: np.ndarray,
+               vs: np.ndarray, ds: np.ndarray, t2: float) -> tuple[np.ndarray, np.ndarray]:
+    """The truncated squared residuals of the points (us, vs, ds) (N,) float64 px
+    against the planes (a, b, c) (K,) float64: ((K, N) float64 ``min(res^2, t2)``, res
+    = ``ds - (a us + b vs + c)``; (K,) float64 the share of the points with ``res^2 <=
+    t2``), in numpy's arithmetic (`residuals_kernel` where it compiled: the same
+    values)."""
+    if nb_residuals is not None:
+        return nb_residuals(a, b, c, us, vs, ds, float(t2))
+    sq = np.multiply(a[:, None], us[None, :])
+    sq += b[:, None] * vs[None, :]
+    sq += c[:, None]
+    np.subtract(ds[None, :], sq, out=sq)
+    np.multiply(sq, sq, out=sq)
+    return np.minimum(sq, t2), np.mean(sq <= t2, axis=1)
+
+
+def residuals_kernel(a, b, c, us, vs, ds, t2):
+    """`_residuals` as loops (for numba): each residual's operations in numpy's order
+    (``(a u + b v) + c``, subtracted from d, squared), the minimum propagating NaN as
+    np.minimum does, the share a count over N (np.mean's sum of ones, exact)."""
+    k, n = a.shape[0], us.shape[0]
+    trunc = np.empty((k, n))
+    within = np.empty(k)
+    for i in range(k):
+        ai, bi, ci = a[i], b[i], c[i]
+        cnt = 0
+        for j in range(n):
+            r = ds[j] - ((ai * us[j] + bi * vs[j]) + ci)
+            sq = r * r
+            if sq <= t2:
+                cnt += 1
+            trunc[i, j] = t2 if sq > t2 else sq
+        within[i] = cnt / n if n else np.nan
+    return trunc, within
+
+
+#: ``residuals_kernel`` compiled (None without numba, or when `warm_up` failed)
+nb_residuals = jit(residuals_kernel)
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) `residuals_kernel` before the first frame;
+    without numba, or if that fails, `_residuals` takes the numpy path."""
+    global nb_residuals
+    z = np.zeros(2)
+    nb_residuals = warmed(nb_residuals, z, z, z, z, z, z, 1.0)
 
 
 def fast_median(x: np.ndarray) -> float:

@@ -23,17 +23,23 @@ def nonzero_box(mask: np.ndarray, pad: int = 0, align: int = 1
     # the non-zero cells' flat indices, in row-major order: the first and the last are
     # in the first and the last row that hold any, their columns' extremes are the
     # box's (the rows and columns that ``mask.any`` would find, without its two passes)
-    nz = flat_nonzero(mask)
+    return cells_box(flat_nonzero(mask), mask.shape, pad, align)
+
+
+def cells_box(nz: np.ndarray, shape: tuple[int, int], pad: int = 0, align: int = 1
+              ) -> tuple[int, int, int, int] | None:
+    """`nonzero_box` of a 2-D mask of ``shape`` whose non-zero cells are the flat indices
+    ``nz`` ((K,) int, ascending)."""
     if not nz.size:
         return None
-    n1 = mask.shape[1]
+    n1 = shape[1]
     cols = nz % n1
     row0, row1 = int(nz[0]) // n1, int(nz[-1]) // n1
     y0, x0 = max(row0 - pad, 0), max(int(cols.min()) - pad, 0)
     y0 -= y0 % align
     x0 -= x0 % align
-    return (y0, min(row1 + pad + 1, mask.shape[0]),
-            x0, min(int(cols.max()) + pad + 1, mask.shape[1]))
+    return (y0, min(row1 + pad + 1, shape[0]),
+            x0, min(int(cols.max()) + pad + 1, shape[1]))
 
 
 def dilate(mask: np.ndarray, radius: int, whole: bool = False) -> np.ndarray:
@@ -53,17 +59,23 @@ def dilate(mask: np.ndarray, radius: int, whole: bool = False) -> np.ndarray:
     return out
 
 
-def label_regions(mask: np.ndarray, join_cells: int, whole: bool = False
-                  ) -> list[np.ndarray]:
+def label_regions(mask: np.ndarray, join_cells: int, whole: bool = False,
+                  cells: np.ndarray | None = None) -> list[np.ndarray]:
     """Flat cell indices (int64, ascending) of each region of the 2-D bool ``mask``:
     8-connected, gaps of ``join_cells`` cells bridged (the mask dilated by that many
     before the labelling; only the mask's own cells are returned), in the order of
     ``cv2.connectedComponents``' labels over the whole grid. Worked out on the box of the
     mask's cells (its corner on even rows and columns: the labelling scans 2 x 2 blocks,
     so its labels come in the same order as over the whole grid); ``whole``: on the
-    whole grid."""
+    whole grid. ``cells``: the mask's cells as flat indices ((K,) int, ascending), when
+    known (the box found from them)."""
     n0, n1 = mask.shape
-    box = (0, n0, 0, n1) if whole else nonzero_box(mask, join_cells, align=2)
+    if whole:
+        box: tuple[int, int, int, int] | None = (0, n0, 0, n1)
+    elif cells is not None:
+        box = cells_box(cells, (n0, n1), join_cells, align=2)
+    else:
+        box = nonzero_box(mask, join_cells, align=2)
     if box is None:
         return []
     y0, y1, x0, x1 = box

@@ -16,6 +16,13 @@
   each kind with ``np.flatnonzero``; the kernel adds each pixel to grids kept between
   pairs (zero but at the cells of the pair before, which it clears first) and lists the
   cells it touched: the same integer counts and cells, without a pass over the grid.
+* `near_kernel`, whether a pair's marked cells lie near given cells (`EvidenceMap`'s
+  guards). Its numpy path dilates the marked cells' grid by the square
+  (`map_grid.dilate`) and reads it at the cells; the kernel looks in each cell's square
+  only: the same booleans, without the grid's dilation.
+* `surest_kernel`, the surest pixel's weight per cell of `EvidenceMap._enter`. Its
+  numpy path takes the maxima into a zero grid (``np.maximum.at``) and reads the
+  cells; the kernel finds each pixel's cell among the cells: the same maxima.
 """
 from __future__ import annotations
 
@@ -171,6 +178,54 @@ def count_kernel(flat, kind, sure, n_r, n_d, n_g, n_sure, pair, prev_r, prev_d, 
 
 #: ``count_kernel`` compiled (None without numba; `warm_up` sets it to None when it fails)
 nb_count = jit(count_kernel)
+
+
+def near_kernel(marked, n, cells, radius):
+    """(C,) bool: whether any of the ``marked`` cells ((K,) int64 flat indices of an
+    n x n grid) lies within ``radius`` cells in x and in y of each of ``cells`` ((C,)
+    int64 flat indices), the square cut at the grid's border (for numba): the
+    ``cv2.dilate`` of the marked cells' grid by the square, read at the cells."""
+    grid = np.zeros(n * n, np.bool_)
+    for k in range(marked.shape[0]):
+        grid[marked[k]] = True
+    out = np.zeros(cells.shape[0], np.bool_)
+    for i in range(cells.shape[0]):
+        y, x = cells[i] // n, cells[i] % n
+        x0, x1 = max(x - radius, 0), min(x + radius, n - 1)
+        found = False
+        for yy in range(max(y - radius, 0), min(y + radius, n - 1) + 1):
+            for xx in range(x0, x1 + 1):
+                if grid[yy * n + xx]:
+                    found = True
+                    break
+            if found:
+                break
+        out[i] = found
+    return out
+
+
+#: ``near_kernel`` compiled (None without numba; `warm_up` sets it to None when it fails)
+nb_near = jit(near_kernel)
+
+
+def surest_kernel(flat, weight, cells):
+    """(K,) float64: the largest of 0 and the ``weight`` (P,) float64 of the pixels in
+    each of ``cells`` ((K,) int64 flat indices, ascending, distinct), ``flat`` (P,) int64
+    the pixels' cells (for numba): ``np.maximum.at`` of the weights into a zero grid,
+    read at the cells (NaN propagated as np.maximum does), without the grid."""
+    k = cells.shape[0]
+    best = np.zeros(k)
+    for p in range(flat.shape[0]):
+        i = np.searchsorted(cells, flat[p])
+        if i < k and cells[i] == flat[p]:
+            b, w = best[i], weight[p]
+            if b == b and (w != w or w > b):
+                best[i] = w
+    return best
+
+
+#: ``surest_kernel`` compiled (None without numba; `warm_up` sets it to None when it fails)
+nb_surest = jit(surest_kernel)
 
 
 class PixelCounts:
@@ -366,10 +421,12 @@ _warm = False
 def warm_up() -> None:
     """Compile the kernels once per process (or load them from numba's disk cache), before
     the first pair: an `EvidenceMap` calls this when it is made."""
-    global _warm, nb_rays, nb_count, nb_heights
+    global _warm, nb_rays, nb_count, nb_heights, nb_near, nb_surest
     if _warm:
         return
     _warm = True
+    nb_near = warmed(nb_near, np.array([1, 2]), 3, np.array([0, 8]), 1)
+    nb_surest = warmed(nb_surest, np.array([1, 2]), np.ones(2), np.array([2]))
     nb_rays = warmed(nb_rays, np.zeros((1, 2)), np.zeros(1), np.ones((1, 2)), np.ones(1),
                      1.0, 0.03, 0.2)
     z = np.zeros(4, np.int64)

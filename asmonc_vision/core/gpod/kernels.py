@@ -14,6 +14,7 @@ from ..jit import jit as _jit
 from ..jit import warmed as _warmed
 from ..matching import warm_up as matching_warm_up
 from ..surface_kernels import warm_up as surface_warm_up
+from ..ground_plane import warm_up as plane_warm_up
 from . import kernels_geometry
 
 #: The compiled thinning (`_thin_kernel`) counts cells up to this many columns plus rows.
@@ -624,6 +625,7 @@ def warm_up() -> None:
     _warm = True
     edges_warm_up()
     surface_warm_up()
+    plane_warm_up()
     if not matching_warm_up() or nb_occluded is None:
         nb_occluded = nb_hanging = nb_link_groups = None
         nb_group_quantile = nb_extent = nb_runs = nb_occluded_all = None

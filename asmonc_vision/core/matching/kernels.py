@@ -106,14 +106,14 @@ def candidates_kernel(pol_l, v_l, u_l, s_l, o_l, pol_r, v_r, u_r, s_r, o_r, h, w
             rj[n] = j
             d[n] = ul - np.float64(u_r[j])
             n += 1
-    return li[:n].copy(), rj[:n].copy(), d[:n].copy()
+    return li[:n], rj[:n], d[:n]
 
 
 def cells_kernel(s_cell, size):
-    """:func:`_cell_table` as a loop (for numba): (size + 1,) int64, ``table[k]`` the
-    number of the sorted cells ``s_cell`` (M,) below k (a count per cell, then its
-    prefix sum)."""
-    table = np.zeros(size + 1, np.int64)
+    """:func:`_cell_table` as a loop (for numba): (size + 1,) int32 (M < 2^31),
+    ``table[k]`` the number of the sorted cells ``s_cell`` (M,) below k (a count per
+    cell, then its prefix sum)."""
+    table = np.zeros(size + 1, np.int32)
     for c in s_cell:
         table[c + 1] += 1
     for k in range(1, size + 1):
@@ -163,8 +163,8 @@ def pairs_kernel(table, half, w, s_uc, s_d64, s_v, rad2, lim2):
     single-precision pre-test only skips pairs that the exact tests reject)."""
     nd = half.shape[0]
     m = s_uc.shape[0]
-    lo = np.empty((nd, m), np.int64)
-    hi = np.empty((nd, m), np.int64)
+    lo = np.empty((nd, m), np.int32)          # (table values: < M < 2^31)
+    hi = np.empty((nd, m), np.int32)
     tot = 0
     for k in range(nd):
         hk = half[k]
@@ -227,15 +227,13 @@ def group_kernel(a, b, s2, d, d_prev, d_next, monotonic, tol, c_left, n_left):
     c2 = np.empty(n, np.int64)
     w = np.empty(n, np.float64)
     # link k < npair: candidate a[k] supported by b[k]; k >= npair: the reverse
-    cand_of = np.concatenate((a, b))
-    sup_of = np.concatenate((b, a))
-    s2_of = np.concatenate((s2, s2))
     q1 = 0
     q2 = 0
     for k in range(n):
-        ck = cand_of[k]
-        sk = sup_of[k]
-        s2k = s2_of[k]
+        kp = k if k < npair else k - npair
+        ck = a[kp] if k < npair else b[kp]
+        sk = b[kp] if k < npair else a[kp]
+        s2k = s2[kp]
         if multi[k]:
             grp[q2] = k
             key[q2] = ck * n_left + c_left[sk]
@@ -256,9 +254,10 @@ def group_kernel(a, b, s2, d, d_prev, d_next, monotonic, tol, c_left, n_left):
     for t in range(n_multi):
         k = grp[order[t]]
         kk = key[order[t]]
-        ck = cand_of[k]
-        sk = sup_of[k]
-        s2k = s2_of[k]
+        kp = k if k < npair else k - npair
+        ck = a[kp] if k < npair else b[kp]
+        sk = b[kp] if k < npair else a[kp]
+        s2k = s2[kp]
         p = n1 + t
         c[p] = ck
         c2[p] = sk
@@ -275,23 +274,30 @@ def select_kernel(c_left, c_right, n_l, n_r, l_cand, l_start, pair_cand, weight,
                    min_support):
     """:func:`select_matches` as loops (for numba), with the same arithmetic: a link's
     best alive weight (a maximum: exact), summed per candidate in link order (as
-    ``np.bincount``), strict maxima per left and right edge."""
+    ``np.bincount``), strict maxima per left and right edge. Returns (accepted (M,) bool,
+    support (M,) float64 of the last round, support of the first round: every
+    candidate alive, as ``link_support`` of all links gives it).
+
+    The candidates that are not alive take no part in the maxima (numpy's -inf values:
+    never a group's strict maximum, nor one above ``min_support``), and a round's
+    winners are accepted and their edges taken in one pass (when a round accepts none
+    anew, the loop ends and nothing taken is read)."""
     m = c_left.shape[0]
     nq = l_cand.shape[0]
     npair = weight.shape[0]
     accepted = np.zeros(m, np.bool_)
     alive = np.ones(m, np.bool_)
     support = np.zeros(m)
-    win = np.zeros(m, np.bool_)
+    first = support
     taken_r = np.zeros(n_r, np.bool_)
     matched_l = np.zeros(n_l, np.bool_)
     gmax_l = np.empty(n_l)
     cnt_l = np.empty(n_l, np.int64)
     gmax_r = np.empty(n_r)
     cnt_r = np.empty(n_r, np.int64)
-    val = np.empty(m)
     for it in range(rounds):
-        support[:] = 0.0
+        if it > 0:
+            support = np.zeros(m)
         for q in range(nq):
             end = l_start[q + 1] if q + 1 < nq else npair
             best = -np.inf
@@ -300,14 +306,16 @@ def select_kernel(c_left, c_right, n_l, n_r, l_cand, l_start, pair_cand, weight,
                 if wp > best:
                     best = wp
             support[l_cand[q]] += best
-        for c in range(m):
-            val[c] = support[c] if (it == 0 or alive[c]) else -np.inf
+        if it == 0:
+            first = support
         gmax_l[:] = -np.inf
         gmax_r[:] = -np.inf
         cnt_l[:] = 0
         cnt_r[:] = 0
         for c in range(m):
-            x = val[c]
+            if not alive[c]:
+                continue
+            x = support[c]
             e = c_left[c]
             if x > gmax_l[e]:
                 gmax_l[e] = x
@@ -322,28 +330,24 @@ def select_kernel(c_left, c_right, n_l, n_r, l_cand, l_start, pair_cand, weight,
                 cnt_r[r] += 1
         new = False
         for c in range(m):
+            if not alive[c]:
+                continue
+            x = support[c]
             e = c_left[c]
             r = c_right[c]
-            wc = (alive[c] and support[c] > min_support and val[c] == gmax_l[e]
-                  and cnt_l[e] == 1 and val[c] == gmax_r[r] and cnt_r[r] == 1)
-            win[c] = wc
-            if wc and not accepted[c]:
-                new = True
-        if not new:
+            if (x > min_support and x == gmax_l[e] and cnt_l[e] == 1 and x == gmax_r[r]
+                    and cnt_r[r] == 1):
+                if not accepted[c]:
+                    new = True
+                    accepted[c] = True
+                taken_r[r] = True
+                matched_l[e] = True
+        if not new or it == rounds - 1:
             break
-        for c in range(m):
-            if win[c]:
-                accepted[c] = True
-        if it == rounds - 1:
-            break
-        for c in range(m):
-            if win[c]:
-                taken_r[c_right[c]] = True
-                matched_l[c_left[c]] = True
         for c in range(m):
             alive[c] = alive[c] and (accepted[c] or not (matched_l[c_left[c]]
                                                          or taken_r[c_right[c]]))
-    return accepted, support
+    return accepted, support, first
 
 
 def rivals_kernel(c_left, c_right, d, support, k, lo_l, hi_l, n_r):

@@ -63,27 +63,37 @@ def select_matches(cand: Candidates, links: SupportLinks, left: EdgeMap, right: 
     Returns:
         (accepted (M,) bool, support (M,) float64 from the last round).
     """
+    accepted, support, _ = _select(cand, links, len(left), len(right), iterations,
+                                   min_support)
+    return accepted, support
+
+
+def _select(cand: Candidates, links: SupportLinks, n_l: int, n_r: int, iterations: int,
+            min_support: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`select_matches` (``n_l``, ``n_r``: the numbers of left and right edges), also
+    returning the first round's support (M,) float64 (every candidate alive:
+    ``link_support(links, links.weight)``)."""
     m = len(cand)
     accepted = np.zeros(m, bool)
     support = np.zeros(m)
     if m == 0:
-        return accepted, support
-    n_l, n_r = len(left), len(right)
+        return accepted, support, support
     if kernels.nb_select is not None and len(links):
         return kernels.nb_select(cand.left, cand.right, n_l, n_r, links.cand, links.start,
-                          links.pair_cand, links.weight, max(int(iterations), 1),
-                          float(min_support))
+                                 links.pair_cand, links.weight, max(int(iterations), 1),
+                                 float(min_support))
     alive = np.ones(m, bool)
     by_left = _Groups(cand.left, n_l)
     by_right = _Groups(cand.right, n_r)
     taken_r = np.zeros(n_r, bool)
     matched_l = np.zeros(n_l, bool)
     rounds = max(int(iterations), 1)
+    first = support
     for it in range(rounds):
         # A supporter is alive when it is an accepted match or neither of its edges is
         # used by one: exactly the candidates still alive here.
         if it == 0:
-            support = link_support(links, links.weight)
+            support = first = link_support(links, links.weight)
             val: np.ndarray = support
         else:
             support = link_support(links, np.where(alive[links.pair_cand], links.weight, 0.0))
@@ -100,7 +110,7 @@ def select_matches(cand: Candidates, links: SupportLinks, left: EdgeMap, right: 
         taken_r[cand.right[k]] = True
         matched_l[cand.left[k]] = True
         alive &= accepted | ~(matched_l[cand.left] | taken_r[cand.right])
-    return accepted, support
+    return accepted, support, first
 
 
 def pmf_match(left: EdgeMap, right: EdgeMap, d_min: float, d_max: float, *,
@@ -122,10 +132,10 @@ def pmf_match(left: EdgeMap, right: EdgeMap, d_min: float, d_max: float, *,
                              right_gain=right_gain)
     links = support_links(left, right, cand, d_min, d_max, support_radius=support_radius,
                           disparity_gradient_limit=disparity_gradient_limit)
-    acc, support = select_matches(cand, links, left, right, iterations=iterations,
-                                  min_support=min_support)
+    acc, support, first = _select(cand, links, len(left), len(right), iterations,
+                                  min_support)
     k = flat_nonzero(acc)
-    rival_match, rival_d, rival_ratio = match_rivals(cand, link_support(links, links.weight), k)
+    rival_match, rival_d, rival_ratio = match_rivals(cand, first, k)
     li = cand.left[k]
     rj = cand.right[k]
     m = Matches(u_left=left.u[li].astype(np.float32), u_right=right.u[rj].astype(np.float32),

@@ -34,7 +34,7 @@ def _argsort(keys: np.ndarray) -> np.ndarray:
 def _cell_table(s_cell: np.ndarray, size: int) -> np.ndarray:
     """(size + 1,) int: ``table[k]`` = number of the sorted cells ``s_cell`` below k."""
     m = s_cell.shape[0]
-    if kernels.nb_cells is not None:
+    if kernels.nb_cells is not None and m < 2 ** 31:
         return kernels.nb_cells(s_cell, size)
     first = np.ones(m, bool)
     first[1:] = s_cell[1:] != s_cell[:-1]
@@ -131,7 +131,6 @@ def _neighbour_pairs(left: EdgeMap, right: EdgeMap, cand: Candidates, rad: float
     order = _argsort(np.asarray((vc * w + col) * 2.0 + (uc - col)))
     s_uc64 = uc[order]
     s_d64 = cand.d[order].astype(np.float64)
-    s_d = s_d64.astype(np.float32)
     s_v = vc[order]
     # Support is symmetric: pairs are found once (rows below, or to the right on the
     # same row) and used both ways. All row offsets at once: window (dv, i) is the
@@ -162,6 +161,7 @@ def _neighbour_pairs(left: EdgeMap, right: EdgeMap, cand: Candidates, rad: float
     j = np.repeat(lo.ravel() - (np.cumsum(cnt) - cnt), cnt)
     j += np.arange(tot)
     # Cheap single-precision pre-test (index lists: boolean masks are slow).
+    s_d = s_d64.astype(np.float32)
     dd = s_d[j]
     dd -= np.repeat(np.tile(s_d, nd), cnt)
     keep = flat_nonzero(np.abs(dd, out=dd) <= np.float32(lim * rad * _SLACK))
