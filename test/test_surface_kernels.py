@@ -14,7 +14,7 @@ needs_numba = pytest.mark.skipif(sk.nb_segment is None, reason='numba not availa
 
 
 @needs_numba
-@pytest.mark.parametrize('n', [1, 7, 8, 9, 127, 128, 129, 200, 239, 240, 241, 463, 465, 911, 913, 1000, 1807, 1809, 3599, 3601, 4097, 7183, 7185, 8192])
+@pytest.mark.parametrize('n', [1, 7, 8, 9, 127, 128, 129, 200, 1000, 4097])
 def test_the_compiled_sum_adds_as_numpy_does(n):
     rng = np.random.default_rng(n)
     x = rng.normal(size=n) * 10.0 ** rng.uniform(-4, 4, size=n)

@@ -30,87 +30,11 @@ RULES = ('', 'rule_support', 'rule_grade', 'rule_step', 'rule_spread')
 def pairwise_sum(a, lo, hi):
     """``a[lo:hi].sum()`` of a contiguous float64 array exactly as numpy adds it: up to
     128 values `jit.pairwise_sum_kernel`'s sum, above that the sums of the two halves
-    (split at a multiple of 8) added, each summed alike (numpy's recursion). Up to
-    ``_PAIRWISE_LEVELS[-1]`` values the recursion is written out level by level
-    (`_pairwise_1` ... `_pairwise_6`: numba cannot call a recursive function from
-    another compiled one), above that it runs on an explicit stack."""
-    n = hi - lo
-    if n <= 128:
+    (split at a multiple of 8) added, each summed alike (numpy's recursion, on an
+    explicit stack: numba cannot call a recursive function from another compiled
+    one)."""
+    if hi - lo <= 128:
         return nb_pairwise_leaf(a, lo, hi)
-    if n <= 3600:
-        return nb_pairwise_5(a, lo, hi)
-    if n <= 7184:
-        return nb_pairwise_6(a, lo, hi)
-    return nb_pairwise_stack(a, lo, hi)
-
-
-#: the most values each written-out level of `pairwise_sum` takes: a level splits n
-#: values into n2 = n // 2 - (n // 2) % 8 and n - n2 <= n / 2 + 8, the level below's most
-_PAIRWISE_LEVELS = (128, 240, 464, 912, 1808, 3600, 7184)
-
-
-def _pairwise_1(a, lo, hi):
-    """`pairwise_sum` of at most 240 values."""
-    n = hi - lo
-    if n <= 128:
-        return nb_pairwise_leaf(a, lo, hi)
-    n2 = n // 2
-    n2 -= n2 % 8
-    return nb_pairwise_leaf(a, lo, lo + n2) + nb_pairwise_leaf(a, lo + n2, hi)
-
-
-def _pairwise_2(a, lo, hi):
-    """`pairwise_sum` of at most 464 values."""
-    n = hi - lo
-    if n <= 128:
-        return nb_pairwise_leaf(a, lo, hi)
-    n2 = n // 2
-    n2 -= n2 % 8
-    return nb_pairwise_1(a, lo, lo + n2) + nb_pairwise_1(a, lo + n2, hi)
-
-
-def _pairwise_3(a, lo, hi):
-    """`pairwise_sum` of at most 912 values."""
-    n = hi - lo
-    if n <= 128:
-        return nb_pairwise_leaf(a, lo, hi)
-    n2 = n // 2
-    n2 -= n2 % 8
-    return nb_pairwise_2(a, lo, lo + n2) + nb_pairwise_2(a, lo + n2, hi)
-
-
-def _pairwise_4(a, lo, hi):
-    """`pairwise_sum` of at most 1808 values."""
-    n = hi - lo
-    if n <= 128:
-        return nb_pairwise_leaf(a, lo, hi)
-    n2 = n // 2
-    n2 -= n2 % 8
-    return nb_pairwise_3(a, lo, lo + n2) + nb_pairwise_3(a, lo + n2, hi)
-
-
-def _pairwise_5(a, lo, hi):
-    """`pairwise_sum` of at most 3600 values."""
-    n = hi - lo
-    if n <= 128:
-        return nb_pairwise_leaf(a, lo, hi)
-    n2 = n // 2
-    n2 -= n2 % 8
-    return nb_pairwise_4(a, lo, lo + n2) + nb_pairwise_4(a, lo + n2, hi)
-
-
-def _pairwise_6(a, lo, hi):
-    """`pairwise_sum` of at most 7184 values."""
-    n = hi - lo
-    if n <= 128:
-        return nb_pairwise_leaf(a, lo, hi)
-    n2 = n // 2
-    n2 -= n2 % 8
-    return nb_pairwise_5(a, lo, lo + n2) + nb_pairwise_5(a, lo + n2, hi)
-
-
-def _pairwise_stack(a, lo, hi):
-    """`pairwise_sum` on an explicit stack (any length)."""
     los = np.empty(64, np.int64)
     his = np.empty(64, np.int64)
     phase = np.zeros(64, np.int64)
@@ -435,13 +359,6 @@ def knot_sums_kernel(s, h, ks, kz, gate):
     return stt, stc
 
 
-nb_pairwise_1 = _jit(_pairwise_1)
-nb_pairwise_2 = _jit(_pairwise_2)
-nb_pairwise_3 = _jit(_pairwise_3)
-nb_pairwise_4 = _jit(_pairwise_4)
-nb_pairwise_5 = _jit(_pairwise_5)
-nb_pairwise_6 = _jit(_pairwise_6)
-nb_pairwise_stack = _jit(_pairwise_stack)
 nb_pairwise_sum = _jit(pairwise_sum)
 nb_total = _jit(_total)
 nb_sorted_percentile = _jit(sorted_percentile)
