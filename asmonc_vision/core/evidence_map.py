@@ -502,7 +502,7 @@ class EvidenceMap:
         c = self.config
         if (c.miss_logodds <= 0 and c.unseen_report_s <= 0) or self._pair_count is None:
             return
-        # the confirmed cells, raised and drop (`_confirmed_cells` of both, ascending),
+        # the confirmed cells, raised and drop (ascending),
         # and which of the two each is
         cells, conf_r, conf_d = self._confirmed_both()
         if not cells.size:
@@ -603,9 +603,11 @@ class EvidenceMap:
         return self._grid_of(self._confirmed_cells(drop)) > 0
 
     def _confirmed_both(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The cells `_confirmed_cells` gives raised or drop ((K,) int64 flat indices,
-        ascending: their union) and (K,) bool each, whether each is a raised one and
-        whether a drop one (both where the two log-odds are equal)."""
+        """The confirmed cells, raised or drop ((K,) int64 flat indices, ascending: from
+        the cells with two views alone, those whose log-odds of a kind reach
+        ``report_logodds`` and are not below the other kind's) and (K,) bool each,
+        whether each is a raised one and whether a drop one (both where the two log-odds
+        are equal)."""
         tv = flat_nonzero(self.two_views)
         lr, ld = self.L_r.reshape(-1)[tv], self.L_d.reshape(-1)[tv]
         rep = self.config.report_logodds
@@ -615,12 +617,10 @@ class EvidenceMap:
         return tv[sel], is_r[sel], is_d[sel]
 
     def _confirmed_cells(self, drop: bool = False) -> np.ndarray:
-        """(K,) int64 the flat indices of the cells `confirmed` reports, ascending (from
-        the cells with two views alone)."""
-        tv = flat_nonzero(self.two_views)
-        L = (self.L_d if drop else self.L_r).reshape(-1)[tv]
-        other = (self.L_r if drop else self.L_d).reshape(-1)[tv]
-        return tv[(L >= self.config.report_logodds) & (L >= other)]
+        """(K,) int64 the flat indices of the cells `confirmed` reports, ascending (the
+        raised or the drop ones of `_confirmed_both`)."""
+        cells, is_r, is_d = self._confirmed_both()
+        return cells[is_d if drop else is_r]
 
     def probability(self) -> np.ndarray:
         """(n, n) float32 P(raised) = 1 / (1 + exp(-L_r)) of every cell."""
@@ -658,7 +658,7 @@ class EvidenceMap:
         masks = []                     # (drop, the cells of a mask, flat indices)
         both, conf_r, conf_d = self._confirmed_both()
         for drop in (False, True):
-            cells = both[conf_d if drop else conf_r]       # (`_confirmed_cells`)
+            cells = both[conf_d if drop else conf_r]
             if not cells.size:
                 continue
             if cam is None:
