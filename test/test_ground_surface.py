@@ -8,6 +8,7 @@ stay obstacles: the profile must not bend into a 10 cm step.
 import numpy as np
 import pytest
 
+from asmonc_vision.core import ground_surface as gs
 from asmonc_vision.core.camera import MetricPlane, StereoCamera, ground_axes
 from asmonc_vision.core.ground_surface import (GroundSurface, GroundSurfaceConfig,
                                                depth_noise, fit_ground_surface)
@@ -339,6 +340,34 @@ def test_a_kerb_ramp_is_ground_and_its_kerbs_are_not(seed, start):
     foot = origin + (start + 0.2) * fwd + 1.5 * left + rise * PLANE.normal_up
     assert surf.height_above(foot[None, :])[0] == pytest.approx(rise - 0.2 * rise / length,
                                                                 abs=0.04)
+
+
+def _ramp_between_kerbs(seed, start, across):
+    """One segment's features (t m from its start, lat m to the left, h m above the
+    plane; 1 cm noise): 140 beside the walking corridor on kerbs 13 cm high from
+    ``start`` m on, and 60 in the corridor on a ramp rising 0.1 a metre from there (with
+    ``across``: the kerb itself)."""
+    rng = np.random.default_rng(seed)
+    tc, lc = rng.uniform(0.0, 1.0, 60), rng.uniform(-0.55, 0.55, 60)
+    hc = (np.where(tc > start, 0.13, 0.0) if across
+          else 0.1 * np.clip(tc - start, 0.0, None))
+    tb, lb = rng.uniform(0.0, 1.0, 140), rng.choice([-1.0, 1.0], 140) * rng.uniform(0.65, 1.7, 140)
+    hb = np.where(tb > start, 0.13, 0.0)
+    h = np.concatenate([hc, hb]) + rng.normal(0.0, 0.01, 200)
+    return np.concatenate([tc, tb]), np.concatenate([lc, lb]), h
+
+
+@pytest.mark.parametrize('start', [0.15, 0.5, 0.85])
+def test_a_ramp_between_kerbs_is_a_bend_and_a_kerb_across_is_a_step(start):
+    """rule_step's corridor test (`_path_step`): most of a segment's features on the
+    kerbs beside a kerb ramp step 13 cm, but the corridor's own line-plus-step finds a
+    bend there, not a step: no step, in each of 20 seeds (the ramp is ground). With the
+    kerb across the corridor too, the step is found in each (a kerb up ahead)."""
+    width = gs.GroundSurfaceConfig().step_half_width_m
+    for seed in range(20):
+        ramp = gs._path_step(*_ramp_between_kerbs(seed, start, False), 0.0, 1.0, width)
+        kerb = gs._path_step(*_ramp_between_kerbs(seed, start, True), 0.0, 1.0, width)
+        assert ramp <= 0.04 < kerb, (seed, ramp, kerb)
 
 
 def test_the_lowest_ground_does_not_rise_beyond_the_known():

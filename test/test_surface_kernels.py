@@ -70,13 +70,17 @@ def _features(rng, kind, n):
                       rng.choice([-0.12, 0.12]), 0.0)
     elif kind == 'clutter':
         h += np.where(rng.random(n) < 0.2, rng.uniform(0.05, 0.5, n), 0.0)
+    elif kind == 'kerb_ramp':          # kerbs beside a ramp: the corridor's own step
+        half = rng.uniform(0.6, 1.3)
+        h += np.where(np.abs(lat) > half, np.where(s > 3.7, 0.13, 0.0),
+                      0.1 * np.clip(s - 3.7, 0.0, None))
     return s, lat, h, rng.uniform(0.0, 0.2, n), rng.uniform(0.0, 0.05, n)
 
 
 @needs_numba
-@pytest.mark.parametrize('kind', ['flat', 'slope', 'step', 'clutter'])
+@pytest.mark.parametrize('kind', ['flat', 'slope', 'step', 'clutter', 'kerb_ramp'])
 def test_the_compiled_segment_test_is_the_numpy_one(kind):
-    rng = np.random.default_rng(['flat', 'slope', 'step', 'clutter'].index(kind))
+    rng = np.random.default_rng(['flat', 'slope', 'step', 'clutter', 'kerb_ramp'].index(kind))
     c = gs.GroundSurfaceConfig()
     verdicts = set()
     for _ in range(150):

@@ -113,8 +113,8 @@ class GroundSurfaceConfig:
         'kerb) is not a slope', range=(0.001, 1.0))
     step_half_width_m: float = param(
         0.6, 'A step inside a segment counts when the features within this distance of '
-        'the walking line show it too (their median residual beyond it less that before '
-        'it, at least half of it), metres: a kerb beside the path (beside a kerb ramp) is '
+        'the walking line show it too (their own line-plus-step there steps at least half '
+        'as much), metres: a kerb beside the path (beside a kerb ramp) is '
         'an obstacle there, not a step of the ground ahead', range=(0.1, 50.0))
     max_spread_m: float = param(
         0.05, "Largest robust spread (1.4826 MAD) of a segment's residuals, metres",
@@ -396,26 +396,44 @@ def _boundary_step(t: np.ndarray, h: np.ndarray, z_a: float) -> float:
     return delta if delta >= _STEP_T * max(se, 1e-9) else 0.0
 
 
+def _corridor_step(t: np.ndarray, h: np.ndarray, cut: float) -> float:
+    """The corridor's own step (m) at ``cut`` m: least squares of
+    h = c + g t + delta [t > cut] over its features (t: (N,) m from the segment's start,
+    h: (N,) m); NaN with fewer than 3 features on either side, or t constant on each.
+    The line has the corridor's own slope: a ramp in the corridor that starts inside
+    the segment is a bend, whose line-plus-step steps little (in the segment's middle
+    not at all), where a kerb across the path steps its whole height."""
+    t = np.asarray(t, float)
+    h = np.asarray(h, float)
+    after = t > cut
+    n, na = float(t.size), float(np.count_nonzero(after))
+    if min(na, n - na) < 3 or (np.ptp(t[after]) == 0.0 and np.ptp(t[~after]) == 0.0):
+        return math.nan
+    st, stt = float(t.sum()), float(np.sum(t * t))
+    sh, sth = float(h.sum()), float(np.sum(t * h))
+    sta, sha = float(np.where(after, t, 0.0).sum()), float(np.where(after, h, 0.0).sum())
+    ata = np.array([[[n, st, na], [st, stt, sta], [na, sta, na]]])
+    ath = np.array([[sh, sth, sha]])
+    return float(_solve3(ata, ath)[2][0])
+
+
 def _path_step(t: np.ndarray, lat: np.ndarray, h: np.ndarray, z_a: float, length: float,
                half_width: float) -> float:
     """The step (m) of the ground ahead in a segment's features (t: (N,) m from its
     start, lat: (N,) m to the left, h: (N,) m): inside the segment (`_best_step`) if the
-    walking corridor (|lat| <= ``half_width``) shows it too (the median residual of its
-    features beyond the step less that of those before it, at least half the step the
-    same way, when it has 3 features on each side), or at the segment's start
-    (`_boundary_step`) if larger and at least _KNOT_STEP_M. A kerb across the path
-    steps in the corridor; a kerb beside the path (beside a kerb ramp) does not: it is an
-    obstacle beside the path, not a step of the ground ahead."""
-    delta, cut, c0, g = _best_step(t, h, length)
+    walking corridor (|lat| <= ``half_width``) shows it too (its own line-plus-step at
+    the same place, `_corridor_step`, steps at least half as much the same way, when it
+    has 3 features on each side), or at the segment's start (`_boundary_step`) if larger
+    and at least _KNOT_STEP_M. A kerb across the path steps in the corridor; a kerb
+    beside the path (beside a kerb ramp) does not: it is an obstacle beside the path,
+    not a step of the ground ahead, and the ramp between them is a line or a bend."""
+    delta, cut, _, _ = _best_step(t, h, length)
     step = abs(delta)
     if step > 0.0:
         path = np.abs(lat) <= half_width
-        res = h[path] - (c0 + g * t[path])
-        after = t[path] > cut
-        if np.count_nonzero(after) >= 3 and np.count_nonzero(~after) >= 3:
-            shift = float(np.median(res[after]) - np.median(res[~after]))
-            if shift * math.copysign(1.0, delta) < 0.5 * step:
-                step = 0.0
+        own = _corridor_step(t[path], h[path], cut)
+        if math.isfinite(own) and own * math.copysign(1.0, delta) < 0.5 * step:
+            step = 0.0
     at_start = _boundary_step(t, h, z_a)
     return max(step, at_start) if at_start >= _KNOT_STEP_M else step
 

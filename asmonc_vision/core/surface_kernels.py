@@ -232,34 +232,51 @@ def _boundary_step(t, h, z_a, step_t):
     return delta if delta >= step_t * max(se, 1e-9) else 0.0
 
 
+def _corridor_step(t, lat, h, half_width, cut):
+    """`ground_surface._corridor_step` of the features with |lat| <= half_width."""
+    n_c = 0
+    for i in range(t.shape[0]):
+        if abs(lat[i]) <= half_width:
+            n_c += 1
+    tc = np.empty(n_c)
+    hc = np.empty(n_c)
+    ta = np.empty(n_c)
+    ha = np.empty(n_c)
+    j = na = 0
+    lo_a = lo_b = math.inf
+    hi_a = hi_b = -math.inf
+    for i in range(t.shape[0]):
+        if abs(lat[i]) <= half_width:
+            tc[j], hc[j] = t[i], h[i]
+            if t[i] > cut:
+                ta[j], ha[j] = t[i], h[i]
+                na += 1
+                lo_a, hi_a = min(lo_a, t[i]), max(hi_a, t[i])
+            else:
+                ta[j], ha[j] = 0.0, 0.0
+                lo_b, hi_b = min(lo_b, t[i]), max(hi_b, t[i])
+            j += 1
+    n, fna = float(n_c), float(na)
+    if min(fna, n - fna) < 3 or (hi_a - lo_a == 0.0 and hi_b - lo_b == 0.0):
+        return math.nan
+    m = np.empty((3, 3))
+    r = np.empty(3)
+    st, stt, sta = nb_total(tc), nb_total(tc * tc), nb_total(ta)
+    m[0, 0], m[0, 1], m[0, 2] = n, st, fna
+    m[1, 0], m[1, 1], m[1, 2] = st, stt, sta
+    m[2, 0], m[2, 1], m[2, 2] = fna, sta, fna
+    r[0], r[1], r[2] = nb_total(hc), nb_total(tc * hc), nb_total(ha)
+    return nb_solve3(m, r)[2]
+
+
 def _path_step(t, lat, h, z_a, length, half_width, step_t, knot_step):
     """`ground_surface._path_step`."""
-    delta, cut, c0, g = nb_best_step(t, h, length, 9, step_t)
+    delta, cut, _, _ = nb_best_step(t, h, length, 9, step_t)
     step = abs(delta)
     if step > 0.0:
-        n_after = n_before = 0
-        for i in range(t.shape[0]):
-            if abs(lat[i]) <= half_width:
-                if t[i] > cut:
-                    n_after += 1
-                else:
-                    n_before += 1
-        if n_after >= 3 and n_before >= 3:
-            ra = np.empty(n_after)
-            rb = np.empty(n_before)
-            ia = ib = 0
-            for i in range(t.shape[0]):
-                if abs(lat[i]) <= half_width:
-                    res = h[i] - (c0 + g * t[i])
-                    if t[i] > cut:
-                        ra[ia] = res
-                        ia += 1
-                    else:
-                        rb[ib] = res
-                        ib += 1
-            shift = nb_median(ra) - nb_median(rb)
-            if shift * math.copysign(1.0, delta) < 0.5 * step:
-                step = 0.0
+        own = nb_corridor_step(t, lat, h, half_width, cut)
+        if math.isfinite(own) and own * math.copysign(1.0, delta) < 0.5 * step:
+            step = 0.0
     at_start = nb_boundary_step(t, h, z_a, step_t)
     return max(step, at_start) if at_start >= knot_step else step
 
@@ -369,6 +386,7 @@ nb_fit_line_knot = _jit(_fit_line_knot)
 nb_solve3 = _jit(_solve3)
 nb_best_step = _jit(_best_step)
 nb_boundary_step = _jit(_boundary_step)
+nb_corridor_step = _jit(_corridor_step)
 nb_path_step = _jit(_path_step)
 nb_segment = _jit(segment_kernel)
 nb_knot_sums = _jit(knot_sums_kernel)
