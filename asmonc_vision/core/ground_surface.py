@@ -302,11 +302,11 @@ def _fit_segment(s: np.ndarray, h: np.ndarray, s_a: float, z_a: float, length: f
 
 
 def _best_step(t: np.ndarray, h: np.ndarray, length: float, splits: int = 9
-               ) -> tuple[float, float, float, float]:
+               ) -> tuple[float, float]:
     """The step that best explains a segment's features beside a line: for each split
     t* at 1/(splits+1) .. splits/(splits+1) of the segment, least squares of
     h = c + g t + delta [t > t*] over the features (t: (N,) m from the segment's start,
-    h: (N,) m). Returns (delta m, t* m, c m, g) of the split whose residual sum is
+    h: (N,) m). Returns (delta m, t* m) of the split whose residual sum is
     least; delta is 0 (a slope has no step) unless that sum is at most 3/4 of the line's
     alone or the step is significant against the features' own scatter (its t
     statistic, sqrt((rss_line - rss) / (rss / (N - 3))), at least ``_STEP_T``: a kerb
@@ -316,7 +316,7 @@ def _best_step(t: np.ndarray, h: np.ndarray, length: float, splits: int = 9
     Every split is solved at once from the sums of the normal equations (A^T A) x =
     A^T h, A = [1, t, [t > t*]] (Cramer's rule); the residual sum is h^T h - x^T A^T h.
     The sums are numpy's (pairwise), as `surface_kernels` repeats them."""
-    none = (math.nan, math.nan, math.nan, math.nan)
+    none = (math.nan, math.nan)
     if t.size < 6:
         return none
     t = np.asarray(t, float)
@@ -350,7 +350,7 @@ def _best_step(t: np.ndarray, h: np.ndarray, length: float, splits: int = 9
     best_rss = max(float(rss[k]), 0.0)
     significant = rss_line - best_rss >= _STEP_T ** 2 * best_rss / max(n - 3.0, 1.0)
     delta = float(coef[k, 2]) if best_rss <= 0.75 * rss_line or significant else 0.0
-    return delta, float(cuts[k]), float(coef[k, 0]), float(coef[k, 1])
+    return delta, float(cuts[k])
 
 
 def _solve3(m: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -427,7 +427,7 @@ def _path_step(t: np.ndarray, lat: np.ndarray, h: np.ndarray, z_a: float, length
     and at least _KNOT_STEP_M. A kerb across the path steps in the corridor; a kerb
     beside the path (beside a kerb ramp) does not: it is an obstacle beside the path,
     not a step of the ground ahead, and the ramp between them is a line or a bend."""
-    delta, cut, _, _ = _best_step(t, h, length)
+    delta, cut = _best_step(t, h, length)
     step = abs(delta)
     if step > 0.0:
         path = np.abs(lat) <= half_width

@@ -160,22 +160,22 @@ def _solve3(m, r):
 
 
 def _best_step(t, h, length, splits, step_t):
-    """`ground_surface._best_step` (delta, cut, c, g), NaNs when it has none."""
+    """`ground_surface._best_step` (delta, cut), NaNs when it has none."""
     nan = math.nan
     if t.shape[0] < 6:
-        return nan, nan, nan, nan
+        return nan, nan
     n = float(t.shape[0])
     st, stt = nb_total(t), nb_total(t * t)
     sh, sth, shh = nb_total(h), nb_total(t * h), nb_total(h * h)
     det = n * stt - st * st
     if det <= 1e-12 * max(n * stt, 1e-300):
-        return nan, nan, nan, nan
+        return nan, nan
     c0 = (stt * sh - st * sth) / det
     g0 = (n * sth - st * sh) / det
     rss_line = max(shh - (c0 * sh + g0 * sth), 0.0)
     best_k = -1
     best_rss = math.inf
-    best = (nan, nan, nan, nan)
+    best = (nan, nan)
     m = np.empty((3, 3))
     r = np.empty(3)
     masked_t = np.empty(t.shape[0])
@@ -203,13 +203,13 @@ def _best_step(t, h, length, splits, step_t):
         rss = shh - (((0.0 + x0 * sh) + x1 * sth) + x2 * sha)
         if rss < best_rss:
             best_rss, best_k = rss, k
-            best = (x2, cut, x0, x1)
+            best = (x2, cut)
     if not any_valid or best_k < 0:
-        return nan, nan, nan, nan
+        return nan, nan
     best_rss = max(best_rss, 0.0)
     significant = rss_line - best_rss >= step_t ** 2 * best_rss / max(n - 3.0, 1.0)
     delta = best[0] if best_rss <= 0.75 * rss_line or significant else 0.0
-    return delta, best[1], best[2], best[3]
+    return delta, best[1]
 
 
 def _boundary_step(t, h, z_a, step_t):
@@ -271,7 +271,7 @@ def _corridor_step(t, lat, h, half_width, cut):
 
 def _path_step(t, lat, h, z_a, length, half_width, step_t, knot_step):
     """`ground_surface._path_step`."""
-    delta, cut, _, _ = nb_best_step(t, h, length, 9, step_t)
+    delta, cut = nb_best_step(t, h, length, 9, step_t)
     step = abs(delta)
     if step > 0.0:
         own = nb_corridor_step(t, lat, h, half_width, cut)
