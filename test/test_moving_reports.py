@@ -36,6 +36,15 @@ def test_a_passer_by_coming_towards_the_wearer_passes_from_the_third_pair():
     assert got == [False, False, True, True, True, True]
 
 
+def test_a_passer_by_first_seen_far_off_passes_in_time_with_the_map_defaults():
+    """people_towards 1022's passer-by, found from 5.4 m on and closing at 2.5 m/s: with
+    the map's settings its legs pass from 4.4 m (0.76 s before 2.5 m), counted from 5 m."""
+    t = TallReports.from_config(EvidenceMapConfig())
+    seq = [[(0.8, 5.4 - 0.25 * i, 2.0 * (-1) ** i)] for i in range(8)]
+    got = [bool(p[0]) for p in feed(t, seq)]
+    assert got.index(True) == 4 and all(got[4:])
+
+
 def test_reports_that_jump_about_never_pass():
     # 0.8 m "things" 1.2 m or more from the one of the pair before: no walker moves so
     rng = np.random.default_rng(3)

@@ -197,9 +197,9 @@ class EvidenceMapConfig:
         4.0, 'fastest a chained report may move between pairs in the wearer\'s ground frame '
         '(a passer-by and the wearer walking towards each other), m/s', range=(0.0, 20.0))
     moving_max_range_m: float = param(
-        4.5, 'chained reports farther than this along the ground do not count, m (the '
+        5.0, 'chained reports farther than this along the ground do not count, m (the '
         'ground ahead is less sure farther on; a passer-by closing at 2.5 m/s is chained '
-        'by about 4 m, 0.6 s before it must be warned of at 2.5 m)', range=(0.0, 50.0))
+        'by about 4.5 m, 0.8 s before it must be warned of at 2.5 m)', range=(0.0, 50.0))
     min_region_cells: int = param(1, 'least confirmed cells in a reported region',
                                   range=(1, 10000))
     min_drop_cells: int = param(

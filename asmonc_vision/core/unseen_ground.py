@@ -17,7 +17,9 @@ of a plain wall, matched here and there, project onto the ground behind the wall
 and would otherwise count as the ground it hides (a standing thing that is detected
 explains the band it hides, below). The monitor keeps a running mean of that count over
 the frames the cell was in view and not hidden (``expected``; learnt slowly where the
-cell itself looks hidden). The cells are fixed to the wearer (range, lateral), not to
+cell itself looks hidden, and from no more than ``SURGE_RATIO`` times itself, plus
+``SLACK``, in one pair: a pair with many times the usual edges, its edge threshold
+lowered on weakly textured ground, must not make the usual count look hidden). The cells are fixed to the wearer (range, lateral), not to
 the world, so the expectation describes "the ground the wearer walks on, at that
 distance" and carries through turns.
 
@@ -101,6 +103,12 @@ EMA_RATE = 0.1
 EMA_RATE_HIDDEN = 0.01
 #: Frames a cell must have been seen before its expectation is used.
 TRUST_FRAMES = 5
+#: A trusted cell learns at most SURGE_RATIO times its expectation, plus SLACK, from one
+#: pair: a pair
+#: whose edge threshold was lowered on weakly textured ground (`core.edges`), or a
+#: marking passing through the cell, shows many times the usual edge pixels, and would
+#: otherwise lift the expectation so far that the next pairs' usual count looks hidden.
+SURGE_RATIO = 2.0
 #: A detected obstacle in the corridor (or within 0.1 m of it) no farther than R + this
 #: explains the unseen ground.
 EXPLAINED_M = 0.5
@@ -465,7 +473,10 @@ class UnseenGroundMonitor:
         rest = learn & ~first
         rate = (np.full(n_r, EMA_RATE) if follows
                 else np.where(k_all < self.max_ratio * e, EMA_RATE_HIDDEN, EMA_RATE))
-        e[rest] += rate[rest] * (k_all[rest] - e[rest])              # x <- x + a (z - x)
+        # a trusted cell's surge is clipped (SURGE_RATIO); a new cell learns what it sees
+        z = np.where(self.seen_frames >= TRUST_FRAMES,
+                     np.minimum(k_all, SURGE_RATIO * e + SLACK), k_all)
+        e[rest] += rate[rest] * (z[rest] - e[rest])                  # x <- x + a (z - x)
         self.seen_frames[learn] += 1
         return report
 
