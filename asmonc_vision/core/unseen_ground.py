@@ -19,9 +19,9 @@ explains the band it hides, below). The monitor keeps a running mean of that cou
 the frames the cell was in view and not hidden (``expected``; learnt slowly where the
 cell itself looks hidden, and from no more than ``SURGE_RATIO`` times itself, plus
 ``SLACK``, in one pair: a pair with many times the usual edges, its edge threshold
-lowered on weakly textured ground, must not make the usual count look hidden). The cells are fixed to the wearer (range, lateral), not to
-the world, so the expectation describes "the ground the wearer walks on, at that
-distance" and carries through turns.
+lowered on weakly textured ground, must not make the usual count look hidden). The
+cells are fixed to the wearer (range, lateral), not to the world, so the expectation
+describes "the ground the wearer walks on, at that distance" and carries through turns.
 
 The corridor's ground is *unseen from range R on* when, over the trusted cells in view
 from R out to the corridor's far end (at least ``MIN_CELLS`` of them):
