@@ -104,10 +104,10 @@ EMA_RATE_HIDDEN = 0.01
 #: Frames a cell must have been seen before its expectation is used.
 TRUST_FRAMES = 5
 #: A trusted cell learns at most SURGE_RATIO times its expectation, plus SLACK, from one
-#: pair: a pair
-#: whose edge threshold was lowered on weakly textured ground (`core.edges`), or a
-#: marking passing through the cell, shows many times the usual edge pixels, and would
-#: otherwise lift the expectation so far that the next pairs' usual count looks hidden.
+#: pair: a pair whose edge threshold was lowered on weakly textured ground
+#: (`core.edges`), or a marking passing through the cell, shows many times the usual
+#: edge pixels, and would otherwise lift the expectation so far that the next pairs'
+#: usual count looks hidden.
 SURGE_RATIO = 2.0
 #: A detected obstacle in the corridor (or within 0.1 m of it) no farther than R + this
 #: explains the unseen ground.
