@@ -248,45 +248,39 @@ def test_a_hidden_band_is_not_learnt_as_ground_that_shows_nothing():
         assert r is not None, k                     # a wall stood in front of stays
 
 
-def _surge_then_usual(surge_ratio=None):
+def _surge_then_usual():
     """Reports of the 3 usual pairs that follow 10 pairs whose ground from 3 m on showed
     20 times the usual edge pixels (the edge threshold lowered on weak far texture), and
-    the expectation of the cells from 3 m on before and after the surge; with
-    ``surge_ratio`` the module's SURGE_RATIO is replaced for the call."""
-    import asmonc_vision.core.unseen_ground as ug
-    old = ug.SURGE_RATIO
-    ug.SURGE_RATIO = old if surge_ratio is None else surge_ratio
-    try:
-        rng = np.random.default_rng(11)
-        mon = _monitor(frames=2)
-        far = mon.range_edges[:-1] >= 3.0
-        for _ in range(12):                          # the usual ground, out to 5 m
-            _, u, v = _ground_points(rng, 4000, r_max=5.0)
-            assert mon.update(CAM, PLANE, u, v, np.zeros(len(u)), 0.8) is None
-        before = mon.expected[far].sum()
-        for _ in range(10):
-            xy, u, v = _ground_points(rng, 4000, r_max=5.0)
-            xs, us, vs = _ground_points(rng, 40000, r_max=5.0)
-            more = xs[:, 0] >= 3.0
-            u, v = np.r_[u, us[more]], np.r_[v, vs[more]]
-            mon.update(CAM, PLANE, u, v, np.zeros(len(u)), 0.8)
-        after = mon.expected[far].sum()
-        reports = []
-        for _ in range(3):
-            _, u, v = _ground_points(rng, 4000, r_max=5.0)
-            reports.append(mon.update(CAM, PLANE, u, v, np.zeros(len(u)), 0.8))
-        return reports, before, after
-    finally:
-        ug.SURGE_RATIO = old
+    the expectation of the cells from 3 m on before and after the surge."""
+    rng = np.random.default_rng(11)
+    mon = _monitor(frames=2)
+    far = mon.range_edges[:-1] >= 3.0
+    for _ in range(12):                              # the usual ground, out to 5 m
+        _, u, v = _ground_points(rng, 4000, r_max=5.0)
+        assert mon.update(CAM, PLANE, u, v, np.zeros(len(u)), 0.8) is None
+    before = mon.expected[far].sum()
+    for _ in range(10):
+        _, u, v = _ground_points(rng, 4000, r_max=5.0)
+        xs, us, vs = _ground_points(rng, 40000, r_max=5.0)
+        more = xs[:, 0] >= 3.0
+        u, v = np.r_[u, us[more]], np.r_[v, vs[more]]
+        mon.update(CAM, PLANE, u, v, np.zeros(len(u)), 0.8)
+    after = mon.expected[far].sum()
+    reports = []
+    for _ in range(3):
+        _, u, v = _ground_points(rng, 4000, r_max=5.0)
+        reports.append(mon.update(CAM, PLANE, u, v, np.zeros(len(u)), 0.8))
+    return reports, before, after
 
 
-def test_a_surge_of_edges_does_not_make_the_usual_ground_look_hidden():
+def test_a_surge_of_edges_does_not_make_the_usual_ground_look_hidden(monkeypatch):
     reports, before, after = _surge_then_usual()
     assert reports == [None, None, None]
     # the surge is learnt, but from at most SURGE_RATIO times the expectation a pair
     assert before < after < 3.0 * before
     # learnt unclipped, the same surge makes the usual ground look hidden from 3 m on
-    reports, _, after = _surge_then_usual(surge_ratio=1e9)
+    monkeypatch.setattr('asmonc_vision.core.unseen_ground.SURGE_RATIO', 1e9)
+    reports, _, after = _surge_then_usual()
     assert after > 5.0 * before
     assert reports[-1] is not None and 2.75 <= reports[-1].range <= 3.25, reports
 
