@@ -8,14 +8,16 @@ texture at all on its faces) that appears in front of a rig standing still.
 import functools
 import math
 
+import cv2
 import numpy as np
 import pytest
 
 from asmonc_vision.core.camera import MetricPlane, StereoCamera
 from asmonc_vision.core.config import override
 from asmonc_vision.core.gpod import GpodConfig, GpodDetector, GpodObstacle
+from asmonc_vision.core import unseen_ground
 from asmonc_vision.core.unseen_ground import (
-    BEYOND_M, BEYOND_MIN, UnseenGroundMonitor, _texture_energy, is_unknown)
+    BEYOND_M, BEYOND_MIN, UnseenGroundMonitor, _texture_energy, is_unknown, noise_energy)
 
 CAM = StereoCamera(f=300.0, cx=159.5, cy=119.5, baseline=0.35, width=320, height=240)
 PITCH = math.radians(20.0)
@@ -228,7 +230,7 @@ def test_a_band_that_showed_the_grounds_texture_breaks_the_pairs_in_a_row(
     rng, mon = _learnt(12, frames=2)
     seq = iter(faces)
     monkeypatch.setattr(UnseenGroundMonitor, '_foot_and_face',
-                        lambda self, energy, cam, metric, r_near, far: (r_near, next(seq)))
+                        lambda self, energy, cam, metric, r_near, far, floor: (r_near, next(seq)))
     left = np.zeros((CAM.height, CAM.width), np.uint8)
     got = []
     for _ in faces:
@@ -331,6 +333,116 @@ def test_a_band_that_shows_the_grounds_texture_is_not_reported():
     xy, u, v = _ground_points(rng, 4000)
     keep = xy[:, 0] < 3.0
     assert mon.update(CAM, PLANE, u[keep], v[keep], np.zeros(keep.sum()), 0.8) is not None
+
+
+def _fading_ground(rng, foot=None, amplitude=60.0):
+    """(H, W) uint8 image of ground whose fine texture (a grain a few pixels across, of
+    ``amplitude`` grey levels at 2 m and nearer) fades with range, as a small image's far
+    ground does (its amplitude falls as 1 / range^2, to a sixth from 2 m to 5 m), plain
+    from ``foot`` metres on (None: ground to the horizon), with pixel noise of 2 grey
+    levels everywhere."""
+    n_up = PLANE.normal_up
+    fwd = np.array([0.0, 0.0, 1.0]) - n_up[2] * n_up
+    fwd /= np.linalg.norm(fwd)
+    r = np.linspace(0.5, 40.0, 4000)
+    _, v = CAM.project_left(-PLANE.height * n_up + r[:, None] * fwd)
+    rows = np.arange(CAM.height)
+    r_row = np.interp(rows, v[::-1], r[::-1], left=np.inf, right=0.5)   # range of each row
+    amp = np.clip(amplitude * (2.0 / r_row) ** 2, 0.0, amplitude)
+    if foot is not None:
+        amp[r_row >= foot] = 0.0
+    grain = cv2.GaussianBlur(rng.normal(0.0, 1.0, (CAM.height, CAM.width)), (0, 0), 1.5)
+    tex = grain / grain.std() * amp[:, None]
+    noise = rng.normal(0.0, 2.0, tex.shape)                  # the camera's, everywhere
+    return np.clip(120.0 + tex + noise, 0, 255).astype(np.uint8)
+
+
+def test_far_ground_whose_texture_is_as_usual_at_its_range_is_not_plain():
+    """Far ground shows a finer, fainter texture than near ground. When a pair shows fewer
+    edge pixels beyond 3 m (a darker stain, the exposure drifting down), the band's face
+    is compared with the texture the cells there usually show, not with the nearer
+    ground's alone: the usual fading texture is not reported, a plain face is; and a
+    monitor that never saw the image (nothing learnt of the cells' texture) reports the
+    fading texture as plain."""
+    n_up = PLANE.normal_up
+    fwd = np.array([0.0, 0.0, 1.0]) - n_up[2] * n_up
+    fwd /= np.linalg.norm(fwd)
+    for foot, with_image, want in ((None, True, False), (3.0, True, True),
+                                   (None, False, True)):
+        rng = np.random.default_rng(21)
+        mon = _monitor(frames=1)
+        for _ in range(12):
+            _, u, v = _ground_points(rng, 4000)
+            left = _fading_ground(rng) if with_image else None
+            assert mon.update(CAM, PLANE, u, v, np.zeros(len(u)), 0.8, left=left) is None
+        xy, u, v = _ground_points(rng, 4000)
+        keep = xy[:, 0] < 3.0
+        r = mon.update(CAM, PLANE, u[keep], v[keep], np.zeros(keep.sum()), 0.8,
+                       left=_fading_ground(rng, foot))
+        assert (r is not None) == want, (foot, with_image, r)
+
+
+@pytest.mark.parametrize('lifted', [False, True])
+def test_markings_passing_do_not_make_the_plain_ground_after_them_look_plain(monkeypatch,
+                                                                            lifted):
+    """A zebra crossing's bars pass through the corridor's far cells for 2 s, with many
+    times the ground's texture energy; then the plain asphalt after it (the usual faint
+    texture) shows fewer edge pixels beyond 3 m: not reported, for the cells' usual
+    texture learns a rise slowly (`ENERGY_RISE`) and from at most `SURGE_RATIO` times
+    itself. Learnt as fast as a fall and unclipped (``lifted``), the bars teach the
+    cells a texture the asphalt after them lacks, and it is reported."""
+    if lifted:
+        monkeypatch.setattr(unseen_ground, 'ENERGY_RISE', 1.0)
+        monkeypatch.setattr(unseen_ground, 'SURGE_RATIO', 1e9)
+    rng = np.random.default_rng(23)
+    mon = _monitor(frames=1)
+    bars = (np.arange(CAM.width) // 4 % 2 * 100).astype(np.uint8)[None, :]
+    for k in range(32):
+        _, u, v = _ground_points(rng, 4000)
+        left = _fading_ground(rng)
+        if k >= 12:                                   # the bars, over the whole image
+            left = np.clip(left.astype(int) + bars, 0, 255).astype(np.uint8)
+        assert mon.update(CAM, PLANE, u, v, np.zeros(len(u)), 0.8, left=left) is None
+    xy, u, v = _ground_points(rng, 4000)
+    keep = xy[:, 0] < 3.0
+    r = mon.update(CAM, PLANE, u[keep], v[keep], np.zeros(keep.sum()), 0.8,
+                   left=_fading_ground(rng))
+    assert (r is not None) == lifted, r
+
+
+@pytest.mark.parametrize('sigma', [2.0, 3.0])
+def test_the_noise_floor_is_the_texture_energy_of_the_pixel_noise(sigma):
+    """`noise_energy` of a smoothly shaded image with Gaussian pixel noise is the texture
+    energy that noise gives (within 5 %), whatever the shading."""
+    rng = np.random.default_rng(int(sigma))
+    yy, xx = np.mgrid[0:CAM.height, 0:CAM.width]
+    shade = 60.0 + 0.3 * xx + 0.2 * yy
+    noise = rng.normal(0.0, sigma, shade.shape)
+    got = noise_energy(np.clip(shade + noise, 0, 255).astype(np.uint8))
+    flat = np.clip(120.0 + noise, 0, 255).astype(np.uint8)
+    want = float(_texture_energy(flat)[2:-2, 2:-2].mean())       # the noise's alone
+    assert abs(got - want) <= 0.05 * want, (got, want)
+
+
+def test_a_plain_wall_on_faintly_textured_ground_is_still_plain():
+    """Ground whose texture is faint beyond 3 m (its energy less than twice the pixel
+    noise's, as on smooth slabs in a small image) and a plain wall from 3 m, its face
+    showing the pixel noise alone: compared above the noise floor the wall is still
+    plain, and reported (compared with the noise in, the face would show half the
+    texture the ground there usually shows: not plain)."""
+    rng = np.random.default_rng(31)
+    mon = _monitor(frames=1)
+    for _ in range(12):
+        _, u, v = _ground_points(rng, 4000)
+        left = _fading_ground(rng, amplitude=5.0)
+        assert mon.update(CAM, PLANE, u, v, np.zeros(len(u)), 0.8, left=left) is None
+    floor = noise_energy(_fading_ground(rng, amplitude=5.0))
+    assert mon.energy[12:15].mean() < 2.0 * floor
+    xy, u, v = _ground_points(rng, 4000)
+    keep = xy[:, 0] < 3.0
+    r = mon.update(CAM, PLANE, u[keep], v[keep], np.zeros(keep.sum()), 0.8,
+                   left=_fading_ground(rng, 3.0, amplitude=5.0))
+    assert r is not None
 
 
 def _walk(mon, rng, edge, step=0.12, n=40, travel=True):

@@ -40,7 +40,15 @@ from R out to the corridor's far end (at least ``MIN_CELLS`` of them):
   hidden from some range on).
 - and, when the left image is given, the band does not show the ground's own fine
   texture: a blurred camera or faint far joints give fewer matched edges over ground that
-  is still there, while a surface with no edges is plain (`_foot_and_face`).
+  is still there, while a surface with no edges is plain (`_foot_and_face`). Plain is
+  judged twice: against the nearer ground's texture, and, unless the band's matched edges
+  stand above the ground as many as its ground's are missing (a raised footway), against
+  the texture its own first cells usually show (``energy``: a running mean per cell,
+  learnt with ``expected``; a rise learnt at ``ENERGY_RISE`` of the rate, from at most
+  ``SURGE_RATIO`` times itself, so that markings passing do not count), both above the
+  pixel noise's (`noise_energy`). The ground's texture is finer in the image, and
+  fainter, the farther it lies: a darker stain 3 m ahead still shows the texture the
+  ground usually shows there, and is not hidden; a wall's face shows the noise alone.
 The nearest such R, found in ``frames`` pairs in a row (within a cell of the previous
 one; a pair whose band shows the ground's texture breaks the row), is reported as
 *unknown ahead* from R, unless a detected obstacle or drop-off already stands in the
@@ -109,6 +117,9 @@ TRUST_FRAMES = 5
 #: edge pixels, and would otherwise lift the expectation so far that the next pairs'
 #: usual count looks hidden.
 SURGE_RATIO = 2.0
+#: A cell's usual texture energy learns a rise at ENERGY_RISE times the rate of a fall: it
+#: describes the plain ground between markings, not the markings.
+ENERGY_RISE = 0.2
 #: A detected obstacle in the corridor (or within 0.1 m of it) no farther than R + this
 #: explains the unseen ground.
 EXPLAINED_M = 0.5
@@ -236,6 +247,10 @@ class UnseenGroundMonitor:
         self.expected = np.zeros(n_r)
         #: (n_r,) frames each cell was seen in (counted into ``expected``).
         self.seen_frames = np.zeros(n_r, np.int64)
+        #: (n_r,) running mean of each cell's fine texture energy (`_cell_energy`; grey
+        #: levels per pixel), learnt with ``expected`` from the pairs with a left image
+        #: (NaN: never measured)
+        self.energy = np.full(n_r, np.nan)
         #: pairs in a row the band was found, and its first cell in the last of them
         self._streak = 0
         self._last_cell = -10
@@ -307,8 +322,41 @@ class UnseenGroundMonitor:
         b[x == edges[-1]] = n_r - 1
         return np.bincount(b[(b >= 0) & (b < n_r)], minlength=n_r).astype(float)
 
+    def _cell_energy(self, energy: np.ndarray, cam: StereoCamera,
+                     metric: MetricPlane) -> np.ndarray:
+        """(n_r,) mean fine texture energy (``energy`` (H, W), `_texture_energy`) of each
+        cell's image rows: the corridor's rows sampled every ``FOOT_STEP_M`` along the
+        ground inside the cell, each averaged over the corridor's columns; NaN for a cell
+        none of whose rows is in the image."""
+        origin, fwd, lft = ground_axes(metric)
+        h, w = energy.shape
+        r = np.arange(0.5 * FOOT_STEP_M, self.range_edges[-1], FOOT_STEP_M)
+        lat = np.array([-self.half_width, 0.0, self.half_width])
+        p = origin + r[:, None, None] * fwd + lat[None, :, None] * lft      # (R, 3, 3)
+        z = p[..., 2]
+        ok = (z > 1e-3).all(axis=1)
+        zs = np.where(z > 1e-3, z, 1.0)
+        u = cam.f * p[..., 0] / zs + cam.cx                                 # (R, 3)
+        vi = np.rint(cam.f * p[:, 1, 1] / zs[:, 1] + cam.cy)
+        u0 = np.clip(np.floor(np.minimum(u[:, 0], u[:, 2])), 0, w)
+        u1 = np.clip(np.ceil(np.maximum(u[:, 0], u[:, 2])), 0, w)
+        ok &= (u1 - u0 >= 2) & (vi >= 1) & (vi <= h - 2)
+        # row means over [u0, u1) from the integral image
+        ii = cv2.integral(energy, sdepth=cv2.CV_64F)                    # (h + 1, w + 1)
+        rows = np.where(ok, vi, 0).astype(np.intp)
+        a, b = np.where(ok, u0, 0).astype(np.intp), np.where(ok, u1, 1).astype(np.intp)
+        mean = ((ii[rows + 1, b] - ii[rows, b] - ii[rows + 1, a] + ii[rows, a])
+                / np.maximum(b - a, 1))
+        cell = np.minimum((r / CELL_DEPTH_M).astype(np.intp), len(self.range_edges) - 2)
+        n_r = len(self.range_edges) - 1
+        tot = np.bincount(cell[ok], weights=mean[ok], minlength=n_r)
+        cnt = np.bincount(cell[ok], minlength=n_r)
+        with np.errstate(invalid='ignore', divide='ignore'):
+            return np.where(cnt > 0, tot / np.maximum(cnt, 1), np.nan)
+
     def _foot_and_face(self, energy: np.ndarray, cam: StereoCamera, metric: MetricPlane,
-                       r_near: float, far: float) -> tuple[float, bool | None]:
+                       r_near: float, far: float,
+                       floor: float | None = None) -> tuple[float, bool | None]:
         """The near edge of the unseen band, refined in the image, and whether what hides
         the band has a plain face.
 
@@ -321,7 +369,12 @@ class UnseenGroundMonitor:
         to ``FOOT_SEARCH_M`` nearer) and the hiding face's (the median of the rows of the
         band's last ``FOOT_SEARCH_M``). When the ground's is at least ``FOOT_CONTRAST``
         times the face's, the foot is where the energy first stays below their mean for
-        ``FOOT_RUN`` samples. Otherwise ``r_near`` stands.
+        ``FOOT_RUN`` samples. Otherwise ``r_near`` stands. With a ``floor`` (the texture
+        energy of the camera's pixel noise alone, `noise_energy`), the texture above it
+        in the band's first ``FOOT_SEARCH_M`` (the rows' median) is also compared with
+        the texture above it that its cells usually show (``energy``, the mean over
+        those cells): when that is less than ``FOOT_CONTRAST`` times it (at least
+        ``FOOT_RUN`` rows in the image), the face is not plain.
 
         Returns:
             (metres along the ground, at least ``r_near``; True when the face is plain --
@@ -356,6 +409,21 @@ class UnseenGroundMonitor:
         if len(ground) < FOOT_RUN or len(face) < FOOT_RUN:
             return r_near, None
         e_g, e_f = float(np.median(ground)), float(np.median(face))
+        if floor is not None:
+            # the band's first FOOT_SEARCH_M shows the texture the ground there usually
+            # shows (far ground's texture is finer in the image, and fainter, than the
+            # nearer ground's: compared with that alone, it looks plain); texture above
+            # the pixel noise's (a plain face shows the noise alone)
+            span = np.arange(r_near, min(far, r_near + FOOT_SEARCH_M), step)
+            just = rows(span)
+            just = just[np.isfinite(just)]
+            cells = np.unique(np.minimum((span / CELL_DEPTH_M).astype(np.intp),
+                                         len(self.energy) - 1))
+            usual = float(np.mean(self.energy[cells])) - floor
+            if len(just) >= FOOT_RUN and math.isfinite(usual):
+                above = float(np.median(just)) - floor
+                if above > 0.0 and usual < FOOT_CONTRAST * above:
+                    return r_near, False
         if e_g < FOOT_CONTRAST * max(e_f, 1e-6):
             # not plain -- if enough of both was seen to tell: a wall walked up to leaves
             # only the image's last rows of ground before it, which may be the wall's
@@ -424,9 +492,13 @@ class UnseenGroundMonitor:
         with np.errstate(invalid='ignore'):
             # ground or lower: a pixel standing above the threshold is not ground seen
             ground = np.isfinite(excess) & (excess <= thr)
+            raised = np.isfinite(excess) & (excess > thr)
         seen = xy[ground]
         k_all = self._count(seen)
         view = self.cells_in_view(cam, metric)
+        tex = _texture_energy(left) if left is not None else None
+        cell_e = (self._cell_energy(tex, cam, metric) if tex is not None
+                  else np.full(len(view), np.nan))
         trusted = view & (self.seen_frames >= TRUST_FRAMES)
         n_r = len(view)
         found = self._band_start(trusted, k_all)
@@ -453,7 +525,9 @@ class UnseenGroundMonitor:
                 self._streak = self._streak + 1 if near else 1
                 self._last_cell = found
                 report, textured = self._report(cam, metric, xy, excess, threshold, band,
-                                                found, k_all, explained, left)
+                                                found, k_all, explained, tex,
+                                                float(self._count(xy[raised])[band].sum()),
+                                                noise_energy(left) if left is not None else None)
                 if textured:
                     # the band showed the ground's own texture: this pair is evidence
                     # against it, and the pairs in a row start again (a turn that sets
@@ -477,6 +551,18 @@ class UnseenGroundMonitor:
         z = np.where(self.seen_frames >= TRUST_FRAMES,
                      np.minimum(k_all, SURGE_RATIO * e + SLACK), k_all)
         e[rest] += rate[rest] * (z[rest] - e[rest])                  # x <- x + a (z - x)
+        # each cell's texture energy, learnt with its edge pixels
+        # each cell's usual texture energy, learnt with its edge pixels; a rise is learnt
+        # at ENERGY_RISE of the rate and from at most SURGE_RATIO times itself (a zebra
+        # crossing passing through must not make the plain asphalt after it look plain)
+        g = self.energy
+        ok = learn & np.isfinite(cell_e)
+        new_e = ok & ~np.isfinite(g)
+        g[new_e] = cell_e[new_e]
+        old_e = ok & ~new_e
+        z_e = np.minimum(cell_e, SURGE_RATIO * g)
+        rate_e = np.where(z_e > g, ENERGY_RISE * rate, rate)
+        g[old_e] += rate_e[old_e] * (z_e[old_e] - g[old_e])         # x <- x + a (z - x)
         self.seen_frames[learn] += 1
         return report
 
@@ -546,7 +632,8 @@ class UnseenGroundMonitor:
     def _report(self, cam: StereoCamera, metric: MetricPlane, xy: np.ndarray,
                 excess: np.ndarray, threshold, band: np.ndarray, found: int,
                 k_all: np.ndarray, explained: np.ndarray | None,
-                left: np.ndarray | None) -> tuple[UnseenReport | None, bool]:
+                tex: np.ndarray | None, raised: float = 0.0,
+                floor: float | None = None) -> tuple[UnseenReport | None, bool]:
         """The found band as a report: its near edge placed, unless a known obstacle
         explains it or it has not yet been found ``frames`` pairs in a row. Returns
         (the report or None, whether the band showed the ground's own fine texture)."""
@@ -560,9 +647,14 @@ class UnseenGroundMonitor:
                   & (xy[:, 0] >= r0) & (xy[:, 0] < r0 + CELL_DEPTH_M))
         r_near = float(np.max(xy[inside, 0])) if inside.any() else r0
         far = float(self.range_edges[flat_nonzero(band)[-1] + 1])
-        if left is not None:
-            r_near, plain = self._foot_and_face(_texture_energy(left), cam, metric, r_near,
-                                                far)
+        if tex is not None:
+            # the texture the ground at the face's range usually shows; unless the band's
+            # matched edges stand above the ground, as many as the ground's are missing
+            # (a raised footway beyond a kerb: textured, but not the ground)
+            lam = float(self.expected[band].sum())
+            r_near, plain = self._foot_and_face(
+                tex, cam, metric, r_near, far,
+                floor if raised <= self.max_ratio * lam + SLACK else None)
             if plain is False:
                 # the band shows the ground's fine texture: nothing plain hides it
                 return None, True
@@ -580,6 +672,29 @@ class UnseenGroundMonitor:
                             width=2.0 * self.half_width,
                             expected=float(self.expected[band].sum()),
                             seen=float(k_all[band].sum()), far_range=far), False
+
+
+#: Texture energy (`_texture_energy`) of pixel noise alone, per grey level of its
+#: standard deviation: the 3 x 3 box and the central difference leave 0.385 / 2 of it per
+#: direction, and E|x| = sqrt(2 / pi) sigma of a Gaussian: 2 * 0.19 * 0.80.
+NOISE_ENERGY = 0.307
+#: The Laplacian difference kernel of Immerkaer's noise estimate.
+_NOISE_KERNEL = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)
+
+
+def noise_energy(left: np.ndarray) -> float:
+    """The texture energy of a grey image's pixel noise alone: ``NOISE_ENERGY`` times its
+    standard deviation, estimated from the mean absolute response to a difference of
+    Laplacians, which cancels smooth shading (Immerkaer 1996, "Fast noise variance
+    estimation"); texture adds to it, so that textured images give somewhat more.
+
+    Args:
+        left: (H, W) uint8 grey image, H, W >= 3.
+    Returns:
+        grey levels per pixel (>= 0).
+    """
+    r = cv2.filter2D(left.astype(np.float32), -1, _NOISE_KERNEL)[1:-1, 1:-1]
+    return NOISE_ENERGY * math.sqrt(0.5 * math.pi) * float(np.abs(r).mean()) / 6.0
 
 
 def _texture_energy(left: np.ndarray) -> np.ndarray:
