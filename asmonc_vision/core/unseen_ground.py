@@ -537,6 +537,15 @@ class UnseenGroundMonitor:
                     self._streak, self._last_cell = 0, -10
             else:
                 self._streak, self._last_cell = 0, -10
+        self._learn(learn, k_all, cell_e, follows)
+        return report
+
+    def _learn(self, learn: np.ndarray, k_all: np.ndarray, cell_e: np.ndarray,
+               follows: bool) -> None:
+        """Learn the cells in ``learn`` (n_r,) bool from this pair's edge pixels
+        ``k_all`` (n_r,) and texture energy ``cell_e`` (n_r,; NaN: not measured);
+        ``follows``: the band keeps to the wearer."""
+        n_r = len(learn)
         # learn: the running mean of each cell in view and not hidden; a cell that looks
         # hidden itself is learnt slowly (a wall creeping into the corridor's far end
         # must not teach that the ground there shows nothing), unless the band keeps to
@@ -551,7 +560,6 @@ class UnseenGroundMonitor:
         z = np.where(self.seen_frames >= TRUST_FRAMES,
                      np.minimum(k_all, SURGE_RATIO * e + SLACK), k_all)
         e[rest] += rate[rest] * (z[rest] - e[rest])                  # x <- x + a (z - x)
-        # each cell's texture energy, learnt with its edge pixels
         # each cell's usual texture energy, learnt with its edge pixels; a rise is learnt
         # at ENERGY_RISE of the rate and from at most SURGE_RATIO times itself (a zebra
         # crossing passing through must not make the plain asphalt after it look plain)
@@ -564,7 +572,6 @@ class UnseenGroundMonitor:
         rate_e = np.where(z_e > g, ENERGY_RISE * rate, rate)
         g[old_e] += rate_e[old_e] * (z_e[old_e] - g[old_e])         # x <- x + a (z - x)
         self.seen_frames[learn] += 1
-        return report
 
     def _keeps_to_wearer(self, found: int | None, travel_m: float | None) -> bool:
         """Whether the band found this pair (its first cell ``found``, None: none) keeps
