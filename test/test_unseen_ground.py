@@ -17,7 +17,8 @@ from asmonc_vision.core.config import override
 from asmonc_vision.core.gpod import GpodConfig, GpodDetector, GpodObstacle
 from asmonc_vision.core import unseen_ground
 from asmonc_vision.core.unseen_ground import (
-    BEYOND_M, BEYOND_MIN, UnseenGroundMonitor, _texture_energy, is_unknown, noise_energy)
+    BEYOND_M, BEYOND_MIN, UnseenGroundMonitor, _texture_energy, _texture_integral, is_unknown,
+    noise_energy)
 
 CAM = StereoCamera(f=300.0, cx=159.5, cy=119.5, baseline=0.35, width=320, height=240)
 PITCH = math.radians(20.0)
@@ -301,12 +302,11 @@ def test_the_near_edge_moves_to_where_the_ground_texture_ends():
     img = np.full((CAM.height, CAM.width), 120, np.uint8)
     rows = np.arange(CAM.height)[:, None] > v_foot[0]
     img = np.where(rows, rng.integers(90, 150, img.shape), img).astype(np.uint8)
-    energy = _texture_energy(img)
-    r = mon._foot_and_face(energy, CAM, PLANE, 2.6, 5.0)[0]
+    r = mon._foot_and_face(_texture_integral(img), CAM, PLANE, 2.6, 5.0)[0]
     assert abs(r - foot) <= 0.06, r
     # no contrast between the two: the last ground edge pixel stands
     flat = np.full_like(img, 120)
-    assert mon._foot_and_face(_texture_energy(flat), CAM, PLANE, 2.6, 5.0)[0] == 2.6
+    assert mon._foot_and_face(_texture_integral(flat), CAM, PLANE, 2.6, 5.0)[0] == 2.6
 
 
 def test_a_band_that_shows_the_grounds_texture_is_not_reported():

@@ -322,15 +322,14 @@ class UnseenGroundMonitor:
         b[x == edges[-1]] = n_r - 1
         return np.bincount(b[(b >= 0) & (b < n_r)], minlength=n_r).astype(float)
 
-    def _cell_energy(self, energy: np.ndarray, cam: StereoCamera,
-                     metric: MetricPlane) -> np.ndarray:
-        """(n_r,) mean fine texture energy (``energy`` (H, W), `_texture_energy`) of each
-        cell's image rows: the corridor's rows sampled every ``FOOT_STEP_M`` along the
-        ground inside the cell, each averaged over the corridor's columns; NaN for a cell
-        none of whose rows is in the image."""
+    def _row_energy(self, ii: np.ndarray, cam: StereoCamera, metric: MetricPlane,
+                    r: np.ndarray) -> np.ndarray:
+        """(len(r),) mean fine texture energy of the corridor's image row at each range r
+        (metres along the ground), over the corridor's columns, from ``ii`` (H + 1, W + 1)
+        float64, the integral image of the texture energy (`_texture_integral`); NaN
+        where that row is not in the image (or spans fewer than 2 columns)."""
         origin, fwd, lft = ground_axes(metric)
-        h, w = energy.shape
-        r = np.arange(0.5 * FOOT_STEP_M, self.range_edges[-1], FOOT_STEP_M)
+        h, w = ii.shape[0] - 1, ii.shape[1] - 1
         lat = np.array([-self.half_width, 0.0, self.half_width])
         p = origin + r[:, None, None] * fwd + lat[None, :, None] * lft      # (R, 3, 3)
         z = p[..., 2]
@@ -341,29 +340,42 @@ class UnseenGroundMonitor:
         u0 = np.clip(np.floor(np.minimum(u[:, 0], u[:, 2])), 0, w)
         u1 = np.clip(np.ceil(np.maximum(u[:, 0], u[:, 2])), 0, w)
         ok &= (u1 - u0 >= 2) & (vi >= 1) & (vi <= h - 2)
-        # row means over [u0, u1) from the integral image
-        ii = cv2.integral(energy, sdepth=cv2.CV_64F)                    # (h + 1, w + 1)
         rows = np.where(ok, vi, 0).astype(np.intp)
         a, b = np.where(ok, u0, 0).astype(np.intp), np.where(ok, u1, 1).astype(np.intp)
         mean = ((ii[rows + 1, b] - ii[rows, b] - ii[rows + 1, a] + ii[rows, a])
                 / np.maximum(b - a, 1))
-        cell = np.minimum((r / CELL_DEPTH_M).astype(np.intp), len(self.range_edges) - 2)
+        return np.where(ok, mean, np.nan)
+
+    def _cell_of(self, r: np.ndarray) -> np.ndarray:
+        """(len(r),) intp the corridor cell of each range r >= 0 (metres; the last cell
+        for r at or beyond the corridor's far end)."""
+        return np.minimum((r / CELL_DEPTH_M).astype(np.intp), len(self.range_edges) - 2)
+
+    def _cell_energy(self, ii: np.ndarray, cam: StereoCamera,
+                     metric: MetricPlane) -> np.ndarray:
+        """(n_r,) mean fine texture energy (``ii``, `_row_energy`) of each cell's image
+        rows: the corridor's rows sampled every ``FOOT_STEP_M`` along the ground inside
+        the cell; NaN for a cell none of whose rows is in the image."""
+        r = np.arange(0.5 * FOOT_STEP_M, self.range_edges[-1], FOOT_STEP_M)
+        mean = self._row_energy(ii, cam, metric, r)
+        ok = np.isfinite(mean)
+        cell = self._cell_of(r)
         n_r = len(self.range_edges) - 1
         tot = np.bincount(cell[ok], weights=mean[ok], minlength=n_r)
         cnt = np.bincount(cell[ok], minlength=n_r)
         with np.errstate(invalid='ignore', divide='ignore'):
             return np.where(cnt > 0, tot / np.maximum(cnt, 1), np.nan)
 
-    def _foot_and_face(self, energy: np.ndarray, cam: StereoCamera, metric: MetricPlane,
+    def _foot_and_face(self, ii: np.ndarray, cam: StereoCamera, metric: MetricPlane,
                        r_near: float, far: float,
                        floor: float | None = None) -> tuple[float, bool | None]:
         """The near edge of the unseen band, refined in the image, and whether what hides
         the band has a plain face.
 
         The last ground edge pixel seen (``r_near``) can lie short of what hides the
-        ground: a tile's plain inside shows no edges. The ground's fine texture
-        (``energy``, `_texture_energy`) usually goes on up to the foot, where the hiding
-        surface's plain face begins. Along the corridor, from ``r_near`` out to
+        ground: a tile's plain inside shows no edges. The ground's fine texture (``ii``,
+        its integral image, `_texture_integral`) usually goes on up to the foot, where
+        the hiding surface's plain face begins. Along the corridor, from ``r_near`` out to
         ``FOOT_SEARCH_M`` beyond it, the texture energy of each image row (averaged over
         the corridor's columns) is compared with the ground's (the median of the rows up
         to ``FOOT_SEARCH_M`` nearer) and the hiding face's (the median of the rows of the
@@ -384,23 +396,8 @@ class UnseenGroundMonitor:
             None when too few rows of either are in the image to tell: fewer than
             ``FOOT_RUN``, or fewer than ``PLAIN_MIN_SAMPLES`` to say it is not plain).
         """
-        origin, fwd, lft = ground_axes(metric)
-        h, w = energy.shape
-        lat = np.array([-self.half_width, 0.0, self.half_width])
-
         def rows(r: np.ndarray) -> np.ndarray:
-            """(len(r),) mean energy of the corridor's image row at each range r (NaN
-            where that row is not in the image)."""
-            p = origin + r[:, None, None] * fwd + lat[None, :, None] * lft   # (R, 3, 3)
-            out = np.full(len(r), np.nan)
-            for j in flat_nonzero((p[:, :, 2] > 1e-3).all(axis=1)):
-                u = cam.f * p[j, :, 0] / p[j, :, 2] + cam.cx
-                vi = int(round(cam.f * p[j, 1, 1] / p[j, 1, 2] + cam.cy))
-                u0 = int(max(0, np.floor(min(u[0], u[2]))))
-                u1 = int(min(w, np.ceil(max(u[0], u[2]))))
-                if u1 - u0 >= 2 and 1 <= vi <= h - 2:
-                    out[j] = float(energy[vi, u0:u1].mean())
-            return out
+            return self._row_energy(ii, cam, metric, r)
 
         step = FOOT_STEP_M
         ground = rows(np.arange(max(0.0, r_near - FOOT_SEARCH_M), r_near, step))
@@ -417,8 +414,7 @@ class UnseenGroundMonitor:
             span = np.arange(r_near, min(far, r_near + FOOT_SEARCH_M), step)
             just = rows(span)
             just = just[np.isfinite(just)]
-            cells = np.unique(np.minimum((span / CELL_DEPTH_M).astype(np.intp),
-                                         len(self.energy) - 1))
+            cells = np.unique(self._cell_of(span))
             usual = float(np.mean(self.energy[cells])) - floor
             if len(just) >= FOOT_RUN and math.isfinite(usual):
                 above = float(np.median(just)) - floor
@@ -496,8 +492,8 @@ class UnseenGroundMonitor:
         seen = xy[ground]
         k_all = self._count(seen)
         view = self.cells_in_view(cam, metric)
-        tex = _texture_energy(left) if left is not None else None
-        cell_e = (self._cell_energy(tex, cam, metric) if tex is not None
+        ii = _texture_integral(left) if left is not None else None
+        cell_e = (self._cell_energy(ii, cam, metric) if ii is not None
                   else np.full(len(view), np.nan))
         trusted = view & (self.seen_frames >= TRUST_FRAMES)
         n_r = len(view)
@@ -525,7 +521,7 @@ class UnseenGroundMonitor:
                 self._streak = self._streak + 1 if near else 1
                 self._last_cell = found
                 report, textured = self._report(cam, metric, xy, excess, threshold, band,
-                                                found, k_all, explained, tex,
+                                                found, k_all, explained, ii,
                                                 float(self._count(xy[raised])[band].sum()),
                                                 noise_energy(left) if left is not None else None)
                 if textured:
@@ -639,11 +635,15 @@ class UnseenGroundMonitor:
     def _report(self, cam: StereoCamera, metric: MetricPlane, xy: np.ndarray,
                 excess: np.ndarray, threshold, band: np.ndarray, found: int,
                 k_all: np.ndarray, explained: np.ndarray | None,
-                tex: np.ndarray | None, raised: float = 0.0,
+                ii: np.ndarray | None, raised: float = 0.0,
                 floor: float | None = None) -> tuple[UnseenReport | None, bool]:
         """The found band as a report: its near edge placed, unless a known obstacle
-        explains it or it has not yet been found ``frames`` pairs in a row. Returns
-        (the report or None, whether the band showed the ground's own fine texture)."""
+        explains it or it has not yet been found ``frames`` pairs in a row. ``ii``: the
+        integral image of the pair's texture energy (`_texture_integral`; None: no image);
+        ``raised``: the band's matched edge pixels standing above the threshold;
+        ``floor``: the pixel noise's texture energy (`noise_energy`; None: unknown).
+        Returns (the report or None, whether the band showed the ground's own fine
+        texture)."""
         r0 = float(self.range_edges[found])
         # the last ground seen in the band's first cell moves R to it
         thr = np.broadcast_to(np.asarray(threshold, float), excess.shape)
@@ -654,13 +654,13 @@ class UnseenGroundMonitor:
                   & (xy[:, 0] >= r0) & (xy[:, 0] < r0 + CELL_DEPTH_M))
         r_near = float(np.max(xy[inside, 0])) if inside.any() else r0
         far = float(self.range_edges[flat_nonzero(band)[-1] + 1])
-        if tex is not None:
+        if ii is not None:
             # the texture the ground at the face's range usually shows; unless the band's
             # matched edges stand above the ground, as many as the ground's are missing
             # (a raised footway beyond a kerb: textured, but not the ground)
             lam = float(self.expected[band].sum())
             r_near, plain = self._foot_and_face(
-                tex, cam, metric, r_near, far,
+                ii, cam, metric, r_near, far,
                 floor if raised <= self.max_ratio * lam + SLACK else None)
             if plain is False:
                 # the band shows the ground's fine texture: nothing plain hides it
@@ -702,6 +702,11 @@ def noise_energy(left: np.ndarray) -> float:
     """
     r = cv2.filter2D(left.astype(np.float32), -1, _NOISE_KERNEL)[1:-1, 1:-1]
     return NOISE_ENERGY * math.sqrt(0.5 * math.pi) * float(np.abs(r).mean()) / 6.0
+
+
+def _texture_integral(left: np.ndarray) -> np.ndarray:
+    """(H + 1, W + 1) float64 integral image (`cv2.integral`) of `_texture_energy`."""
+    return cv2.integral(_texture_energy(left), sdepth=cv2.CV_64F)
 
 
 def _texture_energy(left: np.ndarray) -> np.ndarray:
