@@ -67,6 +67,35 @@ def test_warned_when_the_alarm_is_stamped_exactly_at_the_first_frame_on_the_path
     assert s.frames_on_path == 20
 
 
+def test_what_the_warning_of_a_warned_obstacle_was_about():
+    """Warned in time counts any CAUTION or higher in force (the definition); what that
+    warning was about is told apart. At the box's first pair on the path (x = 0.5 m, the
+    box 2.5 m ahead): a CAUTION placed on the box, stamped two pairs before, is about
+    *itself*; a STOP about a bin 1 m ahead beside the path is *nearer* (it outranks the
+    box); a CAUTION about a post 2.9 m off is *farther*: the box was not the nearest thing
+    the alarm knew of, so it went unseen, warned by chance."""
+    post = TrueObstacle(2, 1.0, rect(2.9, 3.0, 1.4, 1.5), kind='post')
+    bin_ = TrueObstacle(3, 0.8, rect(1.4, 1.6, 0.7, 0.9), kind='bin')
+    truth = SafetyTruth([BOX, post, bin_], walk(25))
+    cases = [(alarm(3, AlarmLevel.CAUTION, 1, 2.7), 'itself'),
+             (alarm(5, AlarmLevel.STOP, 3, math.hypot(1.0, 0.8), math.atan2(0.8, 1.0)),
+              'nearer'),
+             (alarm(5, AlarmLevel.CAUTION, 2, math.hypot(2.45, 1.45), math.atan2(1.45, 2.45)),
+              'farther')]
+    for a, want in cases:
+        s = score_safety(truth, [a])
+        assert (s.on_path, s.warned) == (1, 1)
+        assert s.path_obstacles[0]['warned_by'] == want
+        assert s.warned_by_farther == int(want == 'farther')
+        told = any('(box, 20 cm): warned by an alarm about something farther off' in ln
+                   for ln in format_safety(s.as_dict()))
+        assert told == (want == 'farther')
+    # not warned: nothing to tell
+    s = score_safety(truth, [alarm(0, AlarmLevel.CLEAR)])
+    assert (s.warned, s.warned_by_farther) == (0, 0)
+    assert s.path_obstacles[0]['warned_by'] is None
+
+
 def test_cue_lead_is_the_range_where_the_cue_began_over_the_walking_speed():
     # walking at 1 m/s towards the box (near edge at 3 m): a CAUTION at frame 0 (3.0 m)
     # leads contact by 3 s; one at frame 2 (2.8 m) by 2.8 s: warned in time both, cued

@@ -31,7 +31,13 @@ Definitions (`SafetyCriteria` holds every number):
   CAUTION, WARNING or STOP: *warned*. FAULT there: *under FAULT* (apart). Otherwise
   (CLEAR, or nothing said yet): *late* when a warning is in force at a later frame on
   the path, else *never*. Also counted: frames with an obstacle on the path with CLEAR
-  (or nothing) in force, and with FAULT.
+  (or nothing) in force, and with FAULT. Beside the definition, what the warning of a
+  warned obstacle was about (``warned_by``): put on the ground with the true pose of its
+  stamp, it lies within the false alarm tolerance (below) of the obstacle's own
+  footprint (*itself*), or else nearer to the wearer than the obstacle (*nearer*: a
+  nearer hazard outranks it) or not (*farther*: something farther off was the nearest
+  thing the alarm knew of, so the obstacle itself was not seen then; warned by the
+  definition, by chance).
 * **False alarm**: a CAUTION, WARNING or STOP whose range and bearing, put on the ground
   with the true pose of its stamp (the frame at or before it), lie farther than
   max(``alarm_tolerance_m``, ``alarm_tolerance_frac`` x range) from the footprint of
@@ -69,7 +75,8 @@ import numpy as np
 from asmonc_vision.core.alarm import AlarmLevel
 from asmonc_vision.core.config import check_fields, param
 from asmonc_vision.eval.evaluation import (HEIGHT_BINS_M, RANGE_BINS_M, WARNING_LEVELS,
-                                           FrameObstacles, alarm_levels_at, json_ready)
+                                           FrameObstacles, alarm_in_force, alarm_levels_at,
+                                           json_ready)
 
 
 @dataclass(frozen=True)
@@ -301,6 +308,7 @@ class SafetyScore:
     late: int = 0
     never: int = 0
     under_fault: int = 0
+    warned_by_farther: int = 0
     cued_ahead: int = 0
     cued_at_entry: int = 0
     frames: int = 0
@@ -355,7 +363,8 @@ class SafetyScore:
         """The totals of several walks (events and obstacles listed together)."""
         out = cls(criteria=scores[0].criteria if scores else {})
         for s in scores:
-            for k in ('on_path', 'warned', 'late', 'never', 'under_fault', 'cued_ahead',
+            for k in ('on_path', 'warned', 'late', 'never', 'under_fault',
+                      'warned_by_farther', 'cued_ahead',
                       'cued_at_entry',
                       'frames',
                       'frames_on_path', 'frames_on_path_clear', 'frames_on_path_fault',
@@ -381,6 +390,7 @@ class SafetyScore:
             'warned_in_time': {'on_path': self.on_path, 'warned': self.warned,
                                'late': self.late, 'never': self.never,
                                'under_fault': self.under_fault,
+                               'warned_by_farther': self.warned_by_farther,
                                'cued_ahead': self.cued_ahead,
                                'cued_at_entry': self.cued_at_entry,
                                'obstacles': self.path_obstacles},
@@ -482,7 +492,7 @@ def score_safety(truth: SafetyTruth, alarms: Sequence[dict],
     out.walking_fault_s = float(interval[walking & (levels == AlarmLevel.FAULT)].sum())
     present = [truth.present(f) for f in frames]
 
-    _score_warnings(c, truth, levels, stamps, present, out)
+    _score_warnings(c, truth, levels, stamps, present, out, alarms)
     _score_false_alarms(c, truth, alarms, stamps, present, out)
 
     # -- false reports and recall
@@ -498,18 +508,21 @@ def score_safety(truth: SafetyTruth, alarms: Sequence[dict],
 
 
 def _score_warnings(c: SafetyCriteria, truth: SafetyTruth, levels: np.ndarray,
-                    stamps: list[int], present: list, out: SafetyScore) -> None:
+                    stamps: list[int], present: list, out: SafetyScore,
+                    alarms: Sequence[dict] = ()) -> None:
     """Warned in time: per obstacle on the path, the alarm in force at its first pair on
-    the path (warned, under FAULT, late or never), the pairs on the path by level, and
-    the cue's lead: the range in the corridor where CAUTION or higher was first in force
-    over the walking speed then (infinite for a standing wearer); into ``out``. ``levels``:
-    (F,) the alarm level in force at each frame (`alarm_levels_at`)."""
+    the path (warned, under FAULT, late or never; a warning: what it was about,
+    `_warned_by`), the pairs on the path by level, and the cue's lead: the range in
+    the corridor where CAUTION or higher was first in force over the walking speed then
+    (infinite for a standing wearer); into ``out``. ``levels``: (F,) the alarm level in
+    force at each frame (`alarm_levels_at`) of ``alarms``."""
+    in_force = alarm_in_force(stamps, alarms) if len(alarms) else np.full(len(stamps), -1)
     frames = truth.frames
     speed, _ = walking_speed(truth, c.walking_window_s)
     track: dict[int, dict] = {}
     cued: dict[int, float] = {}                 # obstacle id -> lead of its first cue, s
     entry: dict[int, float] = {}                # id -> lead at its first pair in the corridor
-    for f, level, obs, v in zip(frames, levels, present, speed):
+    for k, (f, level, obs, v) in enumerate(zip(frames, levels, present, speed)):
         on = []
         for ob in obs:
             if abs(ob.height) < c.min_height:
@@ -535,7 +548,10 @@ def _score_warnings(c: SafetyCriteria, truth: SafetyTruth, levels: np.ndarray,
                 o = track[ob.id] = dict(id=ob.id, height_m=ob.height, kind=ob.kind,
                                         first_t_s=(f.stamp_ns - stamps[0]) / 1e9,
                                         first_range_m=r, first_level=int(level),
-                                        warned_later_at_m=None, nearest_m=r)
+                                        warned_later_at_m=None, nearest_m=r,
+                                        warned_by=None)
+                if level in WARNING_LEVELS and in_force[k] >= 0:
+                    o['warned_by'] = _warned_by(c, truth, alarms[in_force[k]], ob, f)
             o['nearest_m'] = min(o['nearest_m'], r)
             if (o['first_level'] not in WARNING_LEVELS and o['warned_later_at_m'] is None
                     and level in WARNING_LEVELS):
@@ -553,6 +569,7 @@ def _score_warnings(c: SafetyCriteria, truth: SafetyTruth, levels: np.ndarray,
                                  and lead >= most - c.entry_slack_s)
         if o['first_level'] in WARNING_LEVELS:
             o['outcome'] = 'warned'
+            out.warned_by_farther += int(o['warned_by'] == 'farther')
         elif o['first_level'] == AlarmLevel.FAULT:
             o['outcome'] = 'under_fault'
         elif o['warned_later_at_m'] is not None:
@@ -562,6 +579,26 @@ def _score_warnings(c: SafetyCriteria, truth: SafetyTruth, levels: np.ndarray,
         setattr(out, o['outcome'], getattr(out, o['outcome']) + 1)
     out.on_path = len(track)
     out.path_obstacles = [track[k] for k in sorted(track)]
+
+
+def _warned_by(c: SafetyCriteria, truth: SafetyTruth, alarm: dict, ob: TrueObstacle,
+               frame: TruthFrame) -> str:
+    """What ``alarm`` (a CAUTION, WARNING or STOP in force at ``frame``, ``ob``'s first
+    pair on the path) was about: put on the ground with the true pose of its stamp
+    (``frame``'s when the stamp lies outside the walk: a node's own clock), 'itself' when
+    within the false alarm tolerance of ``ob``'s footprint (as present at ``frame``), else
+    'nearer' when nearer to the point below the camera at ``frame`` than that footprint,
+    else 'farther'."""
+    t = int(alarm['stamp_ns'])
+    inside = truth.frames[0].stamp_ns <= t <= truth.frames[-1].stamp_ns
+    f = truth.frame_at(t) if inside else frame
+    rng, brg = float(alarm.get('range', 0.0)), float(alarm.get('bearing', 0.0))
+    q = f.to_world(np.array([rng]), np.array([brg]))[0]
+    if footprint_distance(ob, q) <= max(c.alarm_tolerance_m, c.alarm_tolerance_frac * rng):
+        return 'itself'
+    here = frame.foot
+    return ('nearer' if float(np.hypot(*(q - here))) < footprint_distance(ob, here)
+            else 'farther')
 
 
 def _score_false_alarms(c: SafetyCriteria, truth: SafetyTruth, alarms: Sequence[dict],
@@ -658,6 +695,8 @@ def format_safety(s: dict, indent: str = '') -> list[str]:
         f"{w['late']}, never {w['never']}, under FAULT {w['under_fault']}); frames on the "
         f"path {s['frames_on_path']}, CLEAR in force in {s['frames_on_path_clear']}, FAULT in "
         f"{s['frames_on_path_fault']}"
+        + (f"; warned by an alarm about something farther off (the obstacle unseen) "
+           f"{w['warned_by_farther']}/{w['warned']}" if 'warned_by_farther' in w else '')
         + (f"; cued at least {s['criteria']['cue_lead_s']:g} s before contact "
            f"{w['cued_ahead']}/{w['on_path']}" if 'cued_ahead' in w else '')
         + (f" (and {w['cued_at_entry']} that came into the corridor later, cued as they "
@@ -697,4 +736,9 @@ def format_events(s: dict) -> list[str]:
             lines.append(f"  obstacle {o['id']} ({o['kind'] or 'obstacle'}, "
                          f"{o['height_m'] * 100:.0f} cm): {o['outcome'].replace('_', ' ')}, "
                          f"on the path at {o['first_t_s']:.1f} s from {o['first_range_m']:.1f} m")
+        elif o.get('warned_by') == 'farther':
+            lines.append(f"  obstacle {o['id']} ({o['kind'] or 'obstacle'}, "
+                         f"{o['height_m'] * 100:.0f} cm): warned by an alarm about something "
+                         f"farther off, on the path at {o['first_t_s']:.1f} s from "
+                         f"{o['first_range_m']:.1f} m")
     return lines
