@@ -47,6 +47,24 @@ def test_scene_places_the_box_at_the_range():
     assert abs(truth.height - 0.04) < 0.005 and abs(truth.range - 2.5) < 0.05
 
 
+def test_the_chest_rig_sees_the_box_at_the_range():
+    """``rig='chest'``: the level chest rig (640 x 480, f = 560 px) sees the same kind of
+    scene, the box's nearest point at the range asked for."""
+    sc = smallbox.small_box_scene(0.05, 3.0, seed=4, box_frames=2, clear_frames=1,
+                                  rig='chest')
+    assert sc.rig == smallbox.scene_rig('chest')
+    cam, frames = smallbox.scene_frames(0.05, 3.0, 4, box_frames=2, clear_frames=1,
+                                        rig='chest')
+    assert (cam.width, cam.height, cam.f) == (640, 480, 560.0) and len(frames) == 3
+    truth = frames[-1][2][0]
+    assert abs(truth.height - 0.05) < 0.005 and abs(truth.range - 3.0) < 0.05
+
+
+def test_an_unknown_rig_is_an_error():
+    with pytest.raises(ValueError, match="unknown rig 'helmet'"):
+        smallbox.scene_rig('helmet')
+
+
 def test_cells_pair_or_grid():
     p = SimpleNamespace(heights=[0.04, 0.08], ranges=[2.5, 5.0], grid=False)
     assert smallbox._cells(p) == [(0.04, 2.5), (0.08, 5.0)]

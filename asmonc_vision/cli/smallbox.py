@@ -1,15 +1,16 @@
 """Small obstacles seen by a wearer standing still: GPOD against the SGBM baseline.
 
     python -m asmonc_vision.cli.smallbox [--heights 0.04 0.08] [--ranges 2.5 5] [--grid]
-        [--seeds 10] [--frames 20] [--clear-frames 5] [--method gpod sgbm]
+        [--seeds 10] [--frames 20] [--clear-frames 5] [--rig backpack] [--method gpod sgbm]
         [--workers 1] [--cache DIR] [--json out.json]
 
 The paper's accuracy targets (Molton et al. 1998): 90 % detection of 4 cm obstacles at
 2.5 m and of 8 cm obstacles at 5 m. For every cell (heights and ranges paired in order
 when they are as many, e.g. the default 4 cm at 2.5 m and 8 cm at 5 m; every
 height x range with --grid or when they are not) and every seed
-0 .. seeds-1 the simulator (`asmonc_vision.sim`, the paper's rig: f = 300 px,
-B = 0.35 m, 320x240, cameras 1.25 m up pitched 20 degrees down) renders a wearer
+0 .. seeds-1 the simulator (`asmonc_vision.sim`; `--rig`: the paper's rig, f = 300 px,
+B = 0.35 m, 320x240, cameras 1.25 m up pitched 20 degrees down, or a level chest rig,
+f = 560 px, B = 0.12 m, 640x480, 1.3 m up, 5 degrees down) renders a wearer
 standing on a random pavement (`small_box_scene`): `--clear-frames` obstacle-free
 frames (GPOD calibrates its ground plane on them), then `--frames` frames with one box
 of that height whose nearest footprint point is at that range (random bearing, size,
@@ -40,7 +41,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from asmonc_vision.eval.smallbox import METHODS
+from asmonc_vision.eval.smallbox import METHODS, RIGS
 
 
 def add_arguments(p) -> None:
@@ -59,6 +60,10 @@ def add_arguments(p) -> None:
                    '(default 20)')
     p.add_argument('--clear-frames', type=int, default=5,
                    help='obstacle-free frames first, for the calibration (default 5)')
+    p.add_argument('--rig', choices=RIGS, default='backpack',
+                   help="the rig: the paper's ('backpack', default: 320x240, f = 300 px, "
+                        "B = 0.35 m, 1.25 m up, 20 degrees down) or a level chest rig "
+                        "('chest': 640x480, f = 560 px, B = 0.12 m, 1.3 m up, 5 degrees down)")
     p.add_argument('--method', nargs='+', choices=METHODS, default=list(METHODS),
                    help='methods to run on the same frames (default gpod sgbm)')
     p.add_argument('--match-radius', type=float, default=0.3,

@@ -25,9 +25,26 @@ ON_BOX_MARGIN_PX = 4
 
 # --- the scene -----------------------------------------------------------------------------
 
+#: The rigs a scene can be seen by: the paper's (`RigSettings()`: 320 x 240, f = 300 px,
+#: B = 0.35 m, 1.25 m up, 20 degrees down) and a level chest rig (`RigSettings.chest()`:
+#: 640 x 480, f = 560 px, B = 0.12 m, 1.3 m up, 5 degrees down).
+RIGS = ('backpack', 'chest')
+
+
+def scene_rig(rig: str):
+    """The `asmonc_vision.sim.RigSettings` of a rig name in `RIGS`."""
+    from asmonc_vision.sim import RigSettings
+
+    if rig == 'backpack':
+        return RigSettings()
+    if rig == 'chest':
+        return RigSettings.chest()
+    raise ValueError(f"unknown rig '{rig}'; expected one of {', '.join(RIGS)}")
+
+
 def small_box_scene(height: float, range_m: float, seed: int, box_frames: int = 20,
-                    clear_frames: int = 5):
-    """A wearer standing still (the paper's rig, simulator) on a random pavement; after
+                    clear_frames: int = 5, rig: str = 'backpack'):
+    """A wearer standing still (``rig``, `RIGS`; simulator) on a random pavement; after
     ``clear_frames`` obstacle-free frames a box of ``height`` (m) appears whose nearest
     footprint point is ``range_m`` away along the ground, for ``box_frames`` frames
     (random bearing within +-0.6 of the half field of view, size 0.2-0.45 x 0.25-0.5 m,
@@ -36,13 +53,14 @@ def small_box_scene(height: float, range_m: float, seed: int, box_frames: int = 
     Returns:
         an `asmonc_vision.sim.Scenario` of clear_frames + box_frames frames.
     """
-    from asmonc_vision.sim import Box, Ground, Leg, RigSettings, Scenario, Trajectory, World
+    from asmonc_vision.sim import Box, Ground, Leg, Scenario, Trajectory, World
     from asmonc_vision.sim.scenarios import obstacle_albedo, random_pavement
 
-    rig = RigSettings()
+    settings = scene_rig(rig)
     rng = np.random.default_rng([seed, 77])
     ground = Ground(pavement=random_pavement(rng))
-    bearing = float(rng.uniform(-0.6, 0.6) * math.atan((rig.width / 2) / rig.focal))
+    bearing = float(rng.uniform(-0.6, 0.6) * math.atan((settings.width / 2)
+                                                        / settings.focal))
     length, width = float(rng.uniform(0.2, 0.45)), float(rng.uniform(0.25, 0.5))
     yaw = float(rng.uniform(0.0, 90.0))
     cy, sy = math.cos(math.radians(yaw)), math.sin(math.radians(yaw))
@@ -53,28 +71,29 @@ def small_box_scene(height: float, range_m: float, seed: int, box_frames: int = 
     box = Box(x=dist * math.cos(bearing), y=dist * math.sin(bearing), length=length,
               width=width, height=height, yaw_deg=yaw,
               albedo=obstacle_albedo(rng, ground.pavement.brightness), name='box',
-              appear=(clear_frames - 0.5) / rig.fps)
+              appear=(clear_frames - 0.5) / settings.fps)
     world = World(ground, [box], seed=seed)
-    duration = (clear_frames + box_frames) / rig.fps
-    traj = Trajectory([Leg(duration + 1.0, 0.0)], rig, world,
+    duration = (clear_frames + box_frames) / settings.fps
+    traj = Trajectory([Leg(duration + 1.0, 0.0)], settings, world,
                       rng=np.random.default_rng([seed, 5]))
-    return Scenario('small_box', 'small box, standing', seed, duration, rig, world, traj)
+    return Scenario('small_box', 'small box, standing', seed, duration, settings, world, traj)
 
 
 def scene_frames(height: float, range_m: float, seed: int, box_frames: int = 20,
-                 clear_frames: int = 5, cache: Path | None = None):
+                 clear_frames: int = 5, cache: Path | None = None, rig: str = 'backpack'):
     """The rendered frames of `small_box_scene`: (camera, [(left, right, truths)]), truths
     being the frame's `ObstacleTruth`s; read from / written to ``cache`` if given."""
     path = None
     if cache is not None:
         path = Path(cache) / (f'smallbox_h{height:.3f}_r{range_m:.3f}_s{seed}'
-                              f'_b{box_frames}_c{clear_frames}.pkl')
+                              f'_b{box_frames}_c{clear_frames}'
+                              + ('' if rig == 'backpack' else f'_{rig}') + '.pkl')
         if path.exists():
             with open(path, 'rb') as fh:
                 return pickle.load(fh)
     from asmonc_vision.sim import StereoRenderer, simulate_frame
 
-    sc = small_box_scene(height, range_m, seed, box_frames, clear_frames)
+    sc = small_box_scene(height, range_m, seed, box_frames, clear_frames, rig)
     renderer = StereoRenderer(sc.rig)
     frames = []
     for k in range(sc.n_frames):
@@ -184,8 +203,9 @@ def rows(methods) -> tuple[str, ...]:
 def run_scene(height: float, range_m: float, seed: int, box_frames: int = 20,
               clear_frames: int = 5, methods=METHODS, match_radius: float = 0.3,
               gpod_config=None, cache: Path | None = None,
-              map_enabled: bool | None = None) -> dict:
-    """Render one scene and run each method, fresh, on its frames in order.
+              map_enabled: bool | None = None, rig: str = 'backpack') -> dict:
+    """Render one scene (seen by ``rig``, `RIGS`) and run each method, fresh, on its
+    frames in order.
 
     Returns:
         {row: tally} (see `rows`, `new_tally`, `score_frame`).
@@ -193,10 +213,8 @@ def run_scene(height: float, range_m: float, seed: int, box_frames: int = 20,
     import cv2
 
     cv2.setNumThreads(1)
-    from asmonc_vision.sim import RigSettings
-
-    cam, frames = scene_frames(height, range_m, seed, box_frames, clear_frames, cache)
-    rig_fps = RigSettings().fps        # the rig of small_box_scene
+    cam, frames = scene_frames(height, range_m, seed, box_frames, clear_frames, cache, rig)
+    rig_fps = scene_rig(rig).fps
     out = {}
     for method in methods:
         det = make_detector(method, gpod_config, map_enabled)
@@ -226,15 +244,16 @@ def _run_scene_job(job):
 
 def measure(heights, ranges, seeds, box_frames: int = 20, clear_frames: int = 5,
             methods=METHODS, match_radius: float = 0.3, gpod_config=None, workers: int = 1,
-            cache: Path | None = None, progress=None, map_enabled: bool | None = None) -> dict:
-    """Run every (height, range) cell over the seeds.
+            cache: Path | None = None, progress=None, map_enabled: bool | None = None,
+            rig: str = 'backpack') -> dict:
+    """Run every (height, range) cell over the seeds, seen by ``rig`` (`RIGS`).
 
     Returns:
         {(height, range): {row: tally}} (rows: see `rows`).
     """
     kw = dict(box_frames=box_frames, clear_frames=clear_frames, methods=tuple(methods),
               match_radius=match_radius, gpod_config=gpod_config, cache=cache,
-              map_enabled=map_enabled)
+              map_enabled=map_enabled, rig=rig)
     jobs = [(h, r, s, kw) for h in heights for r in ranges for s in seeds]
     cells: dict = {}
     total = len(jobs)
@@ -302,18 +321,20 @@ def smallbox_command(args) -> int:
         res = measure([h], [r], seeds, args.frames, args.clear_frames, args.method,
                       args.match_radius, workers=args.workers, cache=args.cache,
                       progress=lambda d, _t, base=done: progress(base + d, total),
-                      map_enabled={'default': None, 'on': True, 'off': False}[args.map])
+                      map_enabled={'default': None, 'on': True, 'off': False}[args.map],
+                      rig=args.rig)
         done += len(seeds)
         cells.update(res)
     if not args.quiet:
         print(file=sys.stderr)
-    print(f'small boxes, standing still: {len(seeds)} scene(s) x {args.frames} frames per cell '
-          f'(+{args.clear_frames} clear), match radius {args.match_radius} m, '
-          f'{time.time() - t0:.0f} s')
+    print(f'small boxes, standing still, {args.rig} rig: {len(seeds)} scene(s) x '
+          f'{args.frames} frames per cell (+{args.clear_frames} clear), match radius '
+          f'{args.match_radius} m, {time.time() - t0:.0f} s')
     for line in format_table(cells, args.method):
         print(line)
     if args.json is not None:
-        out = {'seeds': seeds, 'frames': args.frames, 'clear_frames': args.clear_frames,
+        out = {'rig': args.rig, 'seeds': seeds, 'frames': args.frames,
+               'clear_frames': args.clear_frames,
                'match_radius': args.match_radius,
                'cells': [{'height': h, 'range': r,
                           **{m: summarise(per[m]) for m in rows(args.method)}}
