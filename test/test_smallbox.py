@@ -52,7 +52,7 @@ def test_the_chest_rig_sees_the_box_at_the_range():
     scene, the box's nearest point at the range asked for."""
     sc = smallbox.small_box_scene(0.05, 3.0, seed=4, box_frames=2, clear_frames=1,
                                   rig='chest')
-    assert sc.rig == smallbox.scene_rig('chest')
+    assert sc.rig == smallbox.nominal_rig('chest')
     cam, frames = smallbox.scene_frames(0.05, 3.0, 4, box_frames=2, clear_frames=1,
                                         rig='chest')
     assert (cam.width, cam.height, cam.f) == (640, 480, 560.0) and len(frames) == 3
@@ -62,7 +62,7 @@ def test_the_chest_rig_sees_the_box_at_the_range():
 
 def test_an_unknown_rig_is_an_error():
     with pytest.raises(ValueError, match="unknown rig 'helmet'"):
-        smallbox.scene_rig('helmet')
+        smallbox.nominal_rig('helmet')
 
 
 def test_cells_pair_or_grid():

@@ -345,11 +345,11 @@ def table(results: list[dict], methods: list[str], title: str) -> list[str]:
         for v in sorted({getattr(r['walk'], key) for r in results}):
             out.append(row(f'{name} {v}', [r for r in results if getattr(r['walk'], key) == v]))
     out.append(row('all', results))
-    about = [SafetyScore.merge([r['scores'][m] for r in results]) for m in methods]
+    totals = [SafetyScore.merge([r['scores'][m] for r in results]) for m in methods]
     out.append('of the obstacles warned, warned by an alarm about something farther off '
                '(the obstacle itself unseen then): '
                + ', '.join(f'{METHOD_NAMES[m]} {s.warned_by_farther}/{s.warned}'
-                           for m, s in zip(methods, about)))
+                           for m, s in zip(methods, totals)))
     return out
 
 

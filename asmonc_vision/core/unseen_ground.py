@@ -99,6 +99,7 @@ import cv2
 import numpy as np
 
 from .camera import MetricPlane, StereoCamera, columns, ground_axes
+from .edges import image_noise_sigma
 from .npfast import flat_nonzero
 
 #: Depth of a corridor cell along the walking direction, metres.
@@ -685,23 +686,21 @@ class UnseenGroundMonitor:
 #: standard deviation: the 3 x 3 box and the central difference leave 0.385 / 2 of it per
 #: direction, and E|x| = sqrt(2 / pi) sigma of a Gaussian: 2 * 0.19 * 0.80.
 NOISE_ENERGY = 0.307
-#: The Laplacian difference kernel of Immerkaer's noise estimate.
-_NOISE_KERNEL = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)
 
 
 def noise_energy(left: np.ndarray) -> float:
     """The texture energy of a grey image's pixel noise alone: ``NOISE_ENERGY`` times its
-    standard deviation, estimated from the mean absolute response to a difference of
-    Laplacians, which cancels smooth shading (Immerkaer 1996, "Fast noise variance
-    estimation"); texture adds to it, so that textured images give somewhat more.
+    standard deviation, Immerkaer's estimate from the mean absolute response to a
+    difference of Laplacians, which cancels smooth shading (`edges.image_noise_sigma`
+    with ``robust`` False); texture adds to it, so that textured images give somewhat
+    more.
 
     Args:
         left: (H, W) uint8 grey image, H, W >= 3.
     Returns:
         grey levels per pixel (>= 0).
     """
-    r = cv2.filter2D(left.astype(np.float32), -1, _NOISE_KERNEL)[1:-1, 1:-1]
-    return NOISE_ENERGY * math.sqrt(0.5 * math.pi) * float(np.abs(r).mean()) / 6.0
+    return NOISE_ENERGY * image_noise_sigma(left, robust=False)
 
 
 def _texture_integral(left: np.ndarray) -> np.ndarray:

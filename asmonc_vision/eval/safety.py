@@ -457,6 +457,10 @@ def _report_tolerance(c: SafetyCriteria, rng: float) -> float:
     return max(c.report_tolerance_m, c.report_tolerance_frac * float(rng))
 
 
+def _alarm_tolerance(c: SafetyCriteria, rng: float) -> float:
+    return max(c.alarm_tolerance_m, c.alarm_tolerance_frac * float(rng))
+
+
 def _matchable(ob: TrueObstacle, report_height: float) -> bool:
     """A drop is matched only by a report of negative height."""
     return not (ob.height < 0 and report_height >= 0)
@@ -594,7 +598,7 @@ def _warned_by(c: SafetyCriteria, truth: SafetyTruth, alarm: dict, ob: TrueObsta
     f = truth.frame_at(t) if inside else frame
     rng, brg = float(alarm.get('range', 0.0)), float(alarm.get('bearing', 0.0))
     q = f.to_world(np.array([rng]), np.array([brg]))[0]
-    if footprint_distance(ob, q) <= max(c.alarm_tolerance_m, c.alarm_tolerance_frac * rng):
+    if footprint_distance(ob, q) <= _alarm_tolerance(c, rng):
         return 'itself'
     here = frame.foot
     return ('nearer' if float(np.hypot(*(q - here))) < footprint_distance(ob, here)
@@ -617,7 +621,7 @@ def _score_false_alarms(c: SafetyCriteria, truth: SafetyTruth, alarms: Sequence[
             rng, brg = float(a.get('range', 0.0)), float(a.get('bearing', 0.0))
             q = f.to_world(np.array([rng]), np.array([brg]))[0]
             near = min((footprint_distance(ob, q) for ob in present[i]), default=math.inf)
-            if near > max(c.alarm_tolerance_m, c.alarm_tolerance_frac * rng):
+            if near > _alarm_tolerance(c, rng):
                 out.alarms_false += 1
                 if key != prev:
                     out.false_alarm_events.append(dict(

@@ -31,8 +31,9 @@ ON_BOX_MARGIN_PX = 4
 RIGS = ('backpack', 'chest')
 
 
-def scene_rig(rig: str):
-    """The `asmonc_vision.sim.RigSettings` of a rig name in `RIGS`."""
+def nominal_rig(rig: str):
+    """The `asmonc_vision.sim.RigSettings` of a rig name in `RIGS`, at its nominal height
+    and pitch (the campaign's walks draw them at random, `sim.scenes.scene_rig`)."""
     from asmonc_vision.sim import RigSettings
 
     if rig == 'backpack':
@@ -56,7 +57,7 @@ def small_box_scene(height: float, range_m: float, seed: int, box_frames: int = 
     from asmonc_vision.sim import Box, Ground, Leg, Scenario, Trajectory, World
     from asmonc_vision.sim.scenarios import obstacle_albedo, random_pavement
 
-    settings = scene_rig(rig)
+    settings = nominal_rig(rig)
     rng = np.random.default_rng([seed, 77])
     ground = Ground(pavement=random_pavement(rng))
     bearing = float(rng.uniform(-0.6, 0.6) * math.atan((settings.width / 2)
@@ -214,7 +215,7 @@ def run_scene(height: float, range_m: float, seed: int, box_frames: int = 20,
 
     cv2.setNumThreads(1)
     cam, frames = scene_frames(height, range_m, seed, box_frames, clear_frames, cache, rig)
-    rig_fps = scene_rig(rig).fps
+    rig_fps = nominal_rig(rig).fps
     out = {}
     for method in methods:
         det = make_detector(method, gpod_config, map_enabled)
