@@ -130,6 +130,23 @@ def test_event_lines_name_each_false_alarm_and_each_unwarned_obstacle():
                         'nearest true obstacle 1.4 m')
     assert lines[1] == ('      gpod: obstacle 3 (drop, -12 cm): late, on the path at 2.5 s '
                         'from 6.1 m')
+    # "all clear" in force with a hazard on the path (a drop whose plane took its lower
+    # ground): said per walk, and counted under the table
+    s.frames_on_path, s.frames_on_path_clear = 27, 18
+    lines = C.event_lines({'scores': {'gpod': s}}, ['gpod'])
+    assert lines[2] == ('      gpod: "all clear" in force in 18 of the 27 frames with a '
+                        'hazard on the path')
+
+
+def test_the_table_counts_all_clear_with_a_hazard_on_the_path():
+    from asmonc_vision.eval.safety import SafetyScore
+
+    walk = C.Walk('tuning', 'step_down', 1011, 'chest', 20.0)
+    results = [{'walk': walk, 'scores': {'gpod': SafetyScore(
+        frames_on_path=n, frames_on_path_clear=c)}} for n, c in ((27, 18), (40, 0))]
+    out = C.table(results, ['gpod'], 'TUNING')
+    assert out[-1] == ('frames on the path with "all clear" in force (a hazard there, the '
+                       'wearer told the way is clear): ours (GPOD) 18/67')
 
 
 def test_sim_bags_carry_the_footprints(tmp_path):

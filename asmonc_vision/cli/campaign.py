@@ -350,6 +350,10 @@ def table(results: list[dict], methods: list[str], title: str) -> list[str]:
                '(the obstacle itself unseen then): '
                + ', '.join(f'{METHOD_NAMES[m]} {s.warned_by_farther}/{s.warned}'
                            for m, s in zip(methods, totals)))
+    out.append('frames on the path with "all clear" in force (a hazard there, the wearer '
+               'told the way is clear): '
+               + ', '.join(f'{METHOD_NAMES[m]} {s.frames_on_path_clear}/{s.frames_on_path}'
+                           for m, s in zip(methods, totals)))
     return out
 
 
@@ -434,11 +438,18 @@ def walk_line(r: dict, methods: list[str]) -> str:
 
 def event_lines(r: dict, methods: list[str]) -> list[str]:
     """`--events`: per method, the walk's false alarm events and its obstacles on the
-    path not warned in time (`eval.safety.format_events`)."""
+    path not warned in time (`eval.safety.format_events`), and how many of its frames
+    with a hazard on the path had "all clear" in force."""
     from asmonc_vision.eval.safety import format_events
 
-    return [f'      {m}: {line.strip()}' for m in methods
-            for line in format_events(r['scores'][m].as_dict())]
+    out = []
+    for m in methods:
+        s = r['scores'][m]
+        out += [f'      {m}: {line.strip()}' for line in format_events(s.as_dict())]
+        if s.frames_on_path_clear:
+            out.append(f'      {m}: "all clear" in force in {s.frames_on_path_clear} of the '
+                       f'{s.frames_on_path} frames with a hazard on the path')
+    return out
 
 
 class _Bar:
