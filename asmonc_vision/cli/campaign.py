@@ -36,13 +36,16 @@ set its seed belongs to): to look again at one walk a table showed.
 
 `--events` prints, under each walk's line, what lies behind its numbers: each false
 alarm event (its time in the walk, level, range and bearing, and how far the nearest true
-obstacle was) and each obstacle on the path that was not warned in time (late, never, or
-under FAULT), per method.
+obstacle was), each obstacle on the path that was not warned in time (late, never, or
+under FAULT) or was warned by an alarm about something farther off, and how many of the
+walk's frames with a hazard on the path had "all clear" in force, per method.
 
 Prints per set a table per scene class and per rig, ours and the peer side by side:
 warned in time (warned/on the path), cued (at least 3 s before contact, or as they came
 into the corridor; /on the path), false alarm events per 10 minutes of walking, false
-reports per frame, recall; then the set's totals; and the time per walk-minute
+reports per frame, recall; then the set's totals, the obstacles warned by an alarm
+about something farther off, and the frames with a hazard on the path and "all clear" in
+force; and the time per walk-minute
 (rendering, each detector). `--trace T0 T1` (with `--walk`) prints under each walk, per
 method, every pair from T0 to T1 s into it: the ground status, the alarm in force and each
 report. `--markdown FILE` writes the tables as Markdown (a results
@@ -102,8 +105,9 @@ def add_arguments(p) -> None:
                         'kerb_ramp:1003:chest')
     p.add_argument('--events', action='store_true',
                    help='under each walk, its false alarm events (time, level, range, '
-                        'bearing, the nearest true obstacle) and the obstacles on the path '
-                        'not warned in time, per method')
+                        'bearing, the nearest true obstacle), the obstacles on the path '
+                        'not warned in time, and its frames with a hazard on the path and '
+                        '"all clear" in force, per method')
     p.add_argument('--trace', nargs=2, type=float, default=None, metavar=('T0', 'T1'),
                    help='with --walk: under each walk, per method, every pair from T0 to T1 '
                         's into the walk: the ground status, the alarm in force and each '
