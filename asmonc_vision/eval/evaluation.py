@@ -407,7 +407,12 @@ def alarm_in_force(stamps: Sequence[int], alarms: Sequence[dict]) -> np.ndarray:
 def alarm_levels_at(stamps: Sequence[int], alarms: Sequence[dict]) -> np.ndarray:
     """The alarm level in force at each frame stamp (`alarm_in_force`; -1 before the
     first alarm), as (len(stamps),) int64 levels."""
-    idx = alarm_in_force(stamps, alarms)
+    return levels_in_force(alarm_in_force(stamps, alarms), alarms)
+
+
+def levels_in_force(idx: np.ndarray, alarms: Sequence[dict]) -> np.ndarray:
+    """The levels of the alarms at indices ``idx`` ((F,) int64, `alarm_in_force`; -1:
+    none, level -1), as (F,) int64."""
     out = np.full(idx.shape, -1, np.int64)
     ok = idx >= 0
     if ok.any():

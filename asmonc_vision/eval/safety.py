@@ -75,8 +75,8 @@ import numpy as np
 from asmonc_vision.core.alarm import AlarmLevel
 from asmonc_vision.core.config import check_fields, param
 from asmonc_vision.eval.evaluation import (HEIGHT_BINS_M, RANGE_BINS_M, WARNING_LEVELS,
-                                           FrameObstacles, alarm_in_force, alarm_levels_at,
-                                           json_ready)
+                                           FrameObstacles, alarm_in_force, json_ready,
+                                           levels_in_force)
 
 
 @dataclass(frozen=True)
@@ -492,11 +492,12 @@ def score_safety(truth: SafetyTruth, alarms: Sequence[dict],
     out.frames = len(frames)
     out.duration_s = float(interval.sum())
     out.walking_s = float(interval[walking].sum())
-    levels = alarm_levels_at(stamps, alarms)
+    in_force = alarm_in_force(stamps, alarms)
+    levels = levels_in_force(in_force, alarms)
     out.walking_fault_s = float(interval[walking & (levels == AlarmLevel.FAULT)].sum())
     present = [truth.present(f) for f in frames]
 
-    _score_warnings(c, truth, levels, stamps, present, out, alarms)
+    _score_warnings(c, truth, alarms, in_force, levels, stamps, present, out)
     _score_false_alarms(c, truth, alarms, stamps, present, out)
 
     # -- false reports and recall
@@ -511,16 +512,16 @@ def score_safety(truth: SafetyTruth, alarms: Sequence[dict],
     return out
 
 
-def _score_warnings(c: SafetyCriteria, truth: SafetyTruth, levels: np.ndarray,
-                    stamps: list[int], present: list, out: SafetyScore,
-                    alarms: Sequence[dict] = ()) -> None:
+def _score_warnings(c: SafetyCriteria, truth: SafetyTruth, alarms: Sequence[dict],
+                    in_force: np.ndarray, levels: np.ndarray, stamps: list[int],
+                    present: list, out: SafetyScore) -> None:
     """Warned in time: per obstacle on the path, the alarm in force at its first pair on
     the path (warned, under FAULT, late or never; a warning: what it was about,
     `_warned_by`), the pairs on the path by level, and the cue's lead: the range in
     the corridor where CAUTION or higher was first in force over the walking speed then
-    (infinite for a standing wearer); into ``out``. ``levels``: (F,) the alarm level in
-    force at each frame (`alarm_levels_at`) of ``alarms``."""
-    in_force = alarm_in_force(stamps, alarms) if len(alarms) else np.full(len(stamps), -1)
+    (infinite for a standing wearer); into ``out``. ``in_force``: (F,) the index into
+    ``alarms`` of the alarm in force at each frame (`alarm_in_force`), ``levels`` its
+    level (`levels_in_force`)."""
     frames = truth.frames
     speed, _ = walking_speed(truth, c.walking_window_s)
     track: dict[int, dict] = {}
@@ -737,12 +738,12 @@ def format_events(s: dict) -> list[str]:
         lines.append(f"  ... {len(fa['event_list']) - 20} more")
     for o in w['obstacles']:
         if o['outcome'] != 'warned':
-            lines.append(f"  obstacle {o['id']} ({o['kind'] or 'obstacle'}, "
-                         f"{o['height_m'] * 100:.0f} cm): {o['outcome'].replace('_', ' ')}, "
-                         f"on the path at {o['first_t_s']:.1f} s from {o['first_range_m']:.1f} m")
+            what = o['outcome'].replace('_', ' ')
         elif o.get('warned_by') == 'farther':
-            lines.append(f"  obstacle {o['id']} ({o['kind'] or 'obstacle'}, "
-                         f"{o['height_m'] * 100:.0f} cm): warned by an alarm about something "
-                         f"farther off, on the path at {o['first_t_s']:.1f} s from "
-                         f"{o['first_range_m']:.1f} m")
+            what = 'warned by an alarm about something farther off'
+        else:
+            continue
+        lines.append(f"  obstacle {o['id']} ({o['kind'] or 'obstacle'}, "
+                     f"{o['height_m'] * 100:.0f} cm): {what}, "
+                     f"on the path at {o['first_t_s']:.1f} s from {o['first_range_m']:.1f} m")
     return lines
