@@ -13,6 +13,7 @@ import pytest
 
 from asmonc_vision.core.camera import MetricPlane, StereoCamera
 from asmonc_vision.core.evidence_map import EvidenceMap, EvidenceMapConfig, MapObject
+from asmonc_vision.core.map_drop_hold import DropHold, nearest_ground_in_view
 from asmonc_vision.core.map_evidence import (DROP, GROUND, NONE, RAISED, PairEvidence,
                                              pair_evidence)
 from asmonc_vision.core.map_reports import (CORRIDOR_ID_BASE, MAP_ID_BASE,
@@ -671,6 +672,93 @@ def test_a_drop_seen_intermittently_is_reported_from_memory():
                         CAM)
         reported[kind] = [o for o in emap.objects if o.is_drop == (kind == DROP)]
     assert reported[DROP] and not reported[RAISED]
+
+
+def test_the_nearest_ground_in_view():
+    """The bottom row's centre sight line of the paper's rig (pitched down 20 degrees,
+    1.25 m up; the bottom row 21.7 degrees below the axis) meets the ground 1.40 m
+    ahead; a camera pitched up 30 degrees sees no ground there."""
+    assert nearest_ground_in_view(CAM, PLANE) == pytest.approx(
+        H / math.tan(PITCH + math.atan((CAM.height - 1 - CAM.cy) / CAM.f)), abs=1e-6)
+    up = math.radians(-30.0)
+    tilted = MetricPlane(normal_up=np.array([0.0, -math.cos(up), -math.sin(up)]), height=H)
+    assert nearest_ground_in_view(CAM, tilted) == math.inf
+
+
+def _to_the_edge(hold: bool, stand_s: float = 0.0, end_x: float = 3.6) -> list:
+    """A step 15 cm down at x = 4 m, confirmed from the walk while its edge is in view;
+    from x = 2.5 m (the edge 1.5 m ahead, at the bottom of
+    the view) the pair's plane is the lower ground's, against which the lower ground is
+    ground seen free and nothing nearer is seen; the wearer walks to ``end_x`` and
+    stands ``stand_s``. The objects of the last pair."""
+    emap = EvidenceMap(EvidenceMapConfig(
+        enabled=True, hold=dataclasses.replace(EvidenceMapConfig().hold, enabled=hold)))
+    lower = ground_grid(4.0, 5.5, -0.8, 0.8, step=0.1)
+    lower[:, 2] = -0.15
+    seen_free = lower.copy()
+    seen_free[:, 2] = 0.0
+    ground = ground_grid(1.0, 3.95, step=0.1)
+
+    def scene(x):
+        if x < 2.45:
+            return [(lower, DROP, None), (ground, GROUND, None)]
+        return [(seen_free, GROUND, None)]
+    xs = np.arange(0.0, end_x + 1e-9, 0.12)
+    for i, x in enumerate(xs):
+        motion = None if i == 0 else step_motion(x - xs[i - 1])
+        emap.update(0.1 * i, PLANE, evidence(scene(x), x), motion, False, CAM)
+    t0 = 0.1 * len(xs)
+    for i in range(int(round(stand_s / 0.1))):
+        emap.update(t0 + 0.1 * i, PLANE, evidence(scene(xs[-1]), xs[-1]), None, True, CAM)
+    return list(emap.objects)
+
+
+@pytest.mark.parametrize('hold', [True, False])
+def test_a_drop_whose_edge_left_the_view_is_held_to_the_edge(hold):
+    """rule_drop_hold: a confirmed drop whose nearest point is within margin_m of the
+    nearest ground in view is not cleared by the lower ground seen free against a plane
+    fitted beyond its edge, nor by standing before it (no decay): it is reported at the
+    edge, 0.4 m ahead, after 3 s standing there. Without the rule the lower ground seen
+    free clears it and the wearer is told the way is clear."""
+    drops = [o for o in _to_the_edge(hold, stand_s=3.0) if o.is_drop]
+    assert bool(drops) == hold
+    if hold:
+        assert drops[0].nearest_xy[0] == pytest.approx(4.0 - 3.6, abs=0.15)
+        assert drops[0].height == pytest.approx(-0.15, abs=0.03)
+
+
+def test_the_hold_takes_only_drops_confirmed_before_they_reached_the_view_bottom():
+    """DropHold.cells on the paper's rig (nearest ground in view 1.40 m, reach 2.40 m
+    with margin_m 1 m): a region first confirmed 3 m ahead is held once 2 m ahead; one
+    first confirmed 2 m ahead (the far side of a crest, confirmed against a plane fitted
+    to the rising ground before the brow) is not; once the wearer has passed the held
+    one's nearest point its cells nearer than the ground in view are let go, and it is
+    not held again."""
+    hold = DropHold(EvidenceMapConfig().hold)
+    before = np.zeros(100, bool)
+    a, b = np.array([10, 11, 12]), np.array([20, 21])
+
+    def pair(xa, xb=None):
+        cells = a if xb is None else np.concatenate([a, b])
+        region = np.array([5] * 3 + ([] if xb is None else [6] * 2))
+        x = np.asarray(list(xa) + ([] if xb is None else list(xb)), float)
+        w = np.stack([x, np.zeros_like(x)], 1)
+        return hold.cells(cells, region, w, lambda p: p, CAM, PLANE, before)
+
+    held, gone = pair([3.0, 3.1, 3.2])
+    assert held.size == 0 and gone.size == 0 and before[a].all()
+    held, gone = pair([2.0, 2.1, 2.2], [2.0, 2.1])
+    assert held.tolist() == a.tolist() and gone.size == 0 and not before[b].any()
+    held, gone = pair([-0.1, 0.5, 1.6])
+    assert held.size == 0 and gone.tolist() == [10, 11]
+    held, gone = pair([0.5, 0.6, 1.6])
+    assert held.size == 0 and gone.size == 0
+
+
+def test_a_held_drop_is_let_go_once_walked_past():
+    """Past its edge (the wearer stepped down) the drop is behind the wearer and not
+    held or reported."""
+    assert not [o for o in _to_the_edge(True, end_x=4.8) if o.is_drop]
 
 
 @pytest.mark.parametrize('pixels, taken', [(1, False), (2, True), (3, True), (4, True)])

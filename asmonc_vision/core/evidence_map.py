@@ -43,7 +43,11 @@ Each pair, `EvidenceMap.update`:
    thing said to be there is cleared by the ground seen where it stood); a confirmed
    cell in plain view with no evidence of the pair near it loses
    ``miss_logodds`` (`_unseen`: a passer-by who walked on is not seen again); log-odds
-   stay within [``min_logodds``, ``max_logodds``]. The top of a raised
+   stay within [``min_logodds``, ``max_logodds``]; a confirmed drop whose nearest
+   point has come within ``hold.margin_m`` of the nearest ground in view, confirmed
+   farther, keeps its drop log-odds through the pair until the wearer passes it
+   (`core.map_drop_hold`, rule_drop_hold: its edge is out of view, and the pair's
+   plane may be the lower ground beyond it). The top of a raised
    cell is a scalar Kalman filter per cell (batched):
 
        predict:  x = F x,          F = 1 (a thing stays as tall as it is)
@@ -83,6 +87,7 @@ import numpy as np
 
 from asmonc_vision.core import map_grid, map_kernels
 from asmonc_vision.core.camera import MetricPlane, StereoCamera, columns, sub_rows
+from asmonc_vision.core.map_drop_hold import DropHold
 from asmonc_vision.core.map_evidence import (DROP, GROUND, RAISED, PairEvidence, ground_frame,
                                              ground_motion)
 from asmonc_vision.core.map_settings import EvidenceMapConfig
@@ -138,6 +143,7 @@ class EvidenceMap:
         c = self.config
         self.n = int(math.ceil(2 * c.radius_m / c.cell_m))
         self._next_id = 1
+        self._hold = DropHold(c.hold)
         map_kernels.warm_up()
         self.reset()
 
@@ -156,10 +162,12 @@ class EvidenceMap:
         self.last_hit_s = np.full((n, n), -np.inf)
         self.free_s = np.full((n, n), -np.inf)        # ground last seen there, finely
         self.moved_in = np.zeros((n, n), bool)        # raised where ground was just seen
+        self.drop_before = np.zeros((n, n), bool)     # drop confirmed beyond the hold's reach
         self.ids = np.zeros((n, n), np.int32)          # region id of the previous pair
         self.pose = np.zeros(3)                        # G in W: x, y, yaw
         self.origin = np.array([-self.config.radius_m, -self.config.radius_m])
         self._plane: MetricPlane | None = None
+        self._hold.reset()
         self._stamp_s: float | None = None
         self._gap = 0
         #: pairs entered since the last reset (the map's evidence is continuous over them)
@@ -189,7 +197,7 @@ class EvidenceMap:
         fills = ((self.L_r, 0), (self.L_d, 0), (self.h_x, 0), (self.h_P, np.inf),
                  (self.pt_xy, 0), (self.first_xy, np.nan), (self.still_hits, 0),
                  (self.two_views, False), (self.last_hit_s, -np.inf), (self.ids, 0),
-                 (self.free_s, -np.inf), (self.moved_in, False))
+                 (self.free_s, -np.inf), (self.moved_in, False), (self.drop_before, False))
         for a, fill in fills:
             map_grid.shift(a, int(k[1]), int(k[0]), fill)
 
@@ -219,6 +227,13 @@ class EvidenceMap:
         if moved is None:
             return self.objects
         self.placed_pairs += 1
+        # rule_drop_hold: a confirmed drop whose edge has left the view keeps its log-odds
+        drops = self._confirmed_cells(drop=True)
+        held, let_go = self._hold.cells(drops, self.ids.reshape(-1)[drops],
+                                        self.pt_xy.reshape(-1, 2)[drops].astype(np.float64),
+                                        self.to_ground, cam, plane,
+                                        self.drop_before.reshape(-1))
+        held_L = self.L_d.reshape(-1)[held]
         # in place: still, or a step shorter than stationary_step_m (turning on the spot);
         # no parallax, so only separate frames can count as separate looks
         still = still or moved < c.stationary_step_m
@@ -235,6 +250,10 @@ class EvidenceMap:
             self._enter(stamp_s, ev, still)
             if cam is not None:
                 self._unseen(ev, cam)
+        Ld = self.L_d.reshape(-1)
+        Ld[held] = np.maximum(Ld[held], held_L)
+        Ld[let_go] = np.minimum(Ld[let_go], 0.0)
+        self._forget(let_go)
         self.objects = self._regions(stamp_s, cam)
         return self.objects
 
@@ -292,6 +311,10 @@ class EvidenceMap:
         best = np.zeros(self.n * self.n)
         np.maximum.at(best, flat, ev.weight[inside][sel])
         return best[cells]
+
+    def _cell_xy(self, cells: np.ndarray) -> np.ndarray:
+        """(K, 2) evidence points of ``cells`` (flat indices) in the current G, m."""
+        return self.to_ground(self.pt_xy.reshape(-1, 2)[cells].astype(np.float64))
 
     def to_world(self, xy: np.ndarray) -> np.ndarray:
         """(N, 2) points of the current G to W, m."""
@@ -462,7 +485,7 @@ class EvidenceMap:
             ground_xy = ground_xy[pick]
         R = np.hypot(ground_xy[:, 0], ground_xy[:, 1])                 # (n,)
         gh = ground_xy / np.maximum(R, 1e-6)[:, None]                   # sight line directions
-        p = self.to_ground(self.pt_xy.reshape(-1, 2)[cells].astype(np.float64))   # (m, 2)
+        p = self._cell_xy(cells)                                            # (m, 2)
         top = hx[cells] - np.maximum(c.ray_margin_m, 2.0 * np.sqrt(hP[cells]))
         if map_kernels.nb_rays is not None and use_kernel and gh.dtype == np.float64:
             # the same counts, compiled (`map_kernels.rays_kernel`)
@@ -561,7 +584,7 @@ class EvidenceMap:
         on the plane, m), and (3,) the plane's up normal in that frame."""
         assert self._plane is not None                 # after an update
         Rcg, o = ground_frame(self._plane)
-        g = self.to_ground(self.pt_xy.reshape(-1, 2)[cells].astype(np.float64))
+        g = self._cell_xy(cells)
         return g, g @ Rcg[:, :2].T + o[None, :], Rcg[:, 2]
 
     def _forget(self, cells: np.ndarray) -> None:
@@ -572,6 +595,7 @@ class EvidenceMap:
         self.still_hits.reshape(-1)[cells] = 0
         self.two_views.reshape(-1)[cells] = False
         self.moved_in.reshape(-1)[cells] = False
+        self.drop_before.reshape(-1)[cells] = False
 
     def ground_seen_around(self, xy: np.ndarray, stamp_s: float, within_s: float
                            ) -> np.ndarray:
@@ -677,14 +701,14 @@ class EvidenceMap:
                 vis &= ~gone
                 below &= ~gone
             masks.extend([(drop, cells[vis]), (drop, cells[below])])
-        pt_xy, h_x = self.pt_xy.reshape(-1, 2), self.h_x.reshape(-1)
+        h_x = self.h_x.reshape(-1)
         ids, last_hit = self.ids.reshape(-1), self.last_hit_s.reshape(-1)
         for drop, cells in masks:
             if not cells.size:
                 continue
             L = (self.L_d if drop else self.L_r).reshape(-1)
             # the cells' points in G, all at once (elementwise: each region's the same)
-            g_cells = self.to_ground(pt_xy[cells].astype(np.float64))
+            g_cells = self._cell_xy(cells)
             for cs in self._label(self._grid_of(cells) > 0, cells):
                 if cs.size < (c.min_drop_cells if drop else c.min_region_cells):
                     continue

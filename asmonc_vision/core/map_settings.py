@@ -47,6 +47,32 @@ class DropSpanConfig:
 
 
 @dataclass(frozen=True)
+class DropHoldConfig:
+    """rule_drop_hold (`core.map_drop_hold`): a confirmed drop whose edge has left the
+    bottom of the view is held until the wearer reaches it (``map.hold.*``)."""
+
+    enabled: bool = param(
+        True, "hold a confirmed drop-off whose nearest point has come within margin_m of "
+        "the nearest ground the camera sees, and was confirmed farther than that: no "
+        "ground seen, no miss and no decay takes from its cells until the wearer has "
+        "passed its nearest point (then its cells nearer than the view are let go). With "
+        "its edge out of view the pair's plane can be the lower ground beyond it (a level "
+        "chest camera sees the ground from about 2.4 m), against which the drop's lower "
+        "ground is ground seen free")
+    margin_m: float = param(
+        1.0, "a drop is held once its nearest point is at most this beyond the nearest "
+        "ground in view, m: the ground an edge hides behind it (about depth times range "
+        "over camera height, 0.3 m for 16 cm at 2.4 m from 1.3 m up) and the last of the "
+        "ground before it, too little to hold a chest rig's plane (a pair whose plane "
+        "was 10 cm low cleared one side of a 16 cm step down 3.5 m ahead, the view's "
+        "bottom at 2.6 m: 0.5 kept that side's drop from the map)",
+        range=(0.0, 5.0))
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
 class EvidenceMapConfig:
     """Settings of the evidence map (`EvidenceMap`)."""
 
@@ -264,6 +290,9 @@ class EvidenceMapConfig:
     span: DropSpanConfig = group(
         DropSpanConfig, 'rule_drop_span: a drop-off seen on both sides of the walking '
         'corridor reported where its edge crosses it')
+    hold: DropHoldConfig = group(
+        DropHoldConfig, 'rule_drop_hold: a confirmed drop whose edge has left the bottom '
+        'of the view held until the wearer reaches it')
     default_sigma_px: float = param(0.4, 'σ_d of a match when the detector gives '
                                     'neither a per-pixel threshold nor a sigma, px',
                                     range=(0.01, 10.0))
