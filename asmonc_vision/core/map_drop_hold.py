@@ -45,8 +45,6 @@ from asmonc_vision.core.camera import MetricPlane, StereoCamera, ground_axes
 from asmonc_vision.core.map_settings import DropHoldConfig
 
 _NONE = np.zeros(0, np.int64)
-#: ids of passed regions kept at most (ids are not reused; an old one is long gone)
-_PASSED_KEPT = 1000
 
 
 def nearest_ground_in_view(cam: StereoCamera, plane: MetricPlane) -> float:
@@ -114,11 +112,11 @@ class DropHold:
             stepped down onto, which no pair sees before it is underfoot)).
         """
         keep = region > 0
+        # a region id once gone from the map does not come back: forget it
+        self._passed &= set(region[keep].tolist())
         if not self.config.enabled or cam is None or plane is None or not keep.any():
             self._edge = {}
             return _NONE, _NONE
-        if len(self._passed) > _PASSED_KEPT:
-            self._passed = set()
         cells, region, cell_w = cells[keep], region[keep], cell_w[keep]
         x = to_ground(cell_w)[:, 0]
         view = nearest_ground_in_view(cam, plane)
