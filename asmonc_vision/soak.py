@@ -203,6 +203,7 @@ def soak(bag: Path, minutes: float, rate: float = 1.0, warmup: float = 60.0,
     from asmonc_vision import graph
     from asmonc_vision.io import bagio
     from asmonc_vision.replay.children import Child
+    from asmonc_vision.replay.spin import SpinThread
     from asmonc_vision.replay.domain import claim_domain
 
     topics, _ = bagio.bag_summary(bag)
@@ -223,7 +224,7 @@ def soak(bag: Path, minutes: float, rate: float = 1.0, warmup: float = 60.0,
     counter = _Counter(ctx)
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(counter.node)
-    threading.Thread(target=ex.spin, daemon=True).start()
+    spinner = SpinThread(ex, 'soak-counter')
     children: dict = {}
     samples: dict[str, list[ProcSample]] = {}
     died: list[str] = []
@@ -238,9 +239,9 @@ def soak(bag: Path, minutes: float, rate: float = 1.0, warmup: float = 60.0,
         for name in ['player', 'alarm', *children]:
             if name in children:
                 children[name].stop()
-        ex.shutdown(timeout_sec=2.0)
-        counter.node.destroy_node()
-        rclpy.try_shutdown(context=ctx)
+        if spinner.stop():  # destroying a node its thread still waits on would race it
+            counter.node.destroy_node()
+            rclpy.try_shutdown(context=ctx)
         lock.close()
     shutil.rmtree(log_dir, ignore_errors=True)
     return {'growth': {n: growth(s, warmup) for n, s in samples.items()},

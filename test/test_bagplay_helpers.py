@@ -6,7 +6,6 @@ rclpy Context on their own DDS domain, with discovery limited to this machine.
 from __future__ import annotations
 
 import os
-import threading
 import time
 from pathlib import Path
 
@@ -162,27 +161,18 @@ class Spinner:
     def __init__(self, context, *nodes):
         from rclpy.executors import SingleThreadedExecutor
 
+        from asmonc_vision.replay.spin import SpinThread
+
         self.executor = SingleThreadedExecutor(context=context)
         for n in nodes:
             self.executor.add_node(n)
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._spin, daemon=True)
-        self._thread.start()
+        self._spin = SpinThread(self.executor, 'test-spinner')
 
     def add(self, node) -> None:
         self.executor.add_node(node)
 
-    def _spin(self) -> None:
-        while not self._stop.is_set() and self.executor.context.ok():
-            try:
-                self.executor.spin_once(timeout_sec=0.02)
-            except Exception:  # context shut down under us
-                break
-
     def stop(self) -> None:
-        self._stop.set()
-        self._thread.join(5.0)
-        self.executor.shutdown(timeout_sec=1.0)
+        self._spin.stop()
 
 
 def wait_for(cond, timeout: float = 10.0, period: float = 0.01) -> bool:

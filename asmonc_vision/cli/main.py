@@ -76,10 +76,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    # `kill -USR1 PID` prints every thread's stack to stderr: where a run that seems stuck is
-    # (not where stderr is no file, as under a test's capture)
-    if hasattr(signal, 'SIGUSR1'):
-        with contextlib.suppress(OSError, ValueError, AttributeError):
+    # `kill -USR1 PID` prints every thread's stack to stderr: where a run that seems stuck is;
+    # a crash (SIGSEGV, SIGABRT ...) prints them too, where it happened (not where stderr is
+    # no file, as under a test's capture)
+    with contextlib.suppress(OSError, ValueError, AttributeError):
+        faulthandler.enable(all_threads=True)
+        if hasattr(signal, 'SIGUSR1'):
             faulthandler.register(signal.SIGUSR1, all_threads=True)
     args = build_parser().parse_args(argv)
     return int(args.func(args) or 0)

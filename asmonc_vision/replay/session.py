@@ -16,7 +16,6 @@ import shutil
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from collections import Counter
 from dataclasses import dataclass
@@ -231,6 +230,9 @@ class Replay:
         self.end_watch: Child | None = None
         #: the topics it watches, and their nodes
         self.end_watched: dict[str, str] = {}
+        #: the monitor's and the recorder's spinning threads (`start_ros`)
+        self.spinners: list = []
+        self.recorder = None
 
     # --- ROS side -------------------------------------------------------------------
 
@@ -238,6 +240,8 @@ class Replay:
         """The monitor (and, with --out, the recorder) on their own spinning threads."""
         import rclpy
         from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
+
+        from asmonc_vision.replay.spin import SpinThread
 
         self.ctx = rclpy.Context()
         rclpy.init(context=self.ctx)
@@ -254,21 +258,26 @@ class Replay:
         # The monitor spins on its own thread: the recorder's callbacks (compressing debug
         # images) must not delay the count of finished frames, which decides when the alarm
         # node is stopped -- late, it announces the end of the replay as a FAULT.
-        self.executors = [SingleThreadedExecutor(context=self.ctx)]
-        self.executors[0].add_node(self.monitor.node)
+        monitor_ex = SingleThreadedExecutor(context=self.ctx)
+        monitor_ex.add_node(self.monitor.node)
+        self.spinners = [SpinThread(monitor_ex, 'monitor')]
         if self.recorder is not None:
-            self.executors.append(MultiThreadedExecutor(num_threads=2, context=self.ctx))
-            self.executors[1].add_node(self.recorder)
-        for ex in self.executors:
-            threading.Thread(target=ex.spin, daemon=True).start()
+            recorder_ex = MultiThreadedExecutor(num_threads=2, context=self.ctx)
+            recorder_ex.add_node(self.recorder)
+            self.spinners.append(SpinThread(recorder_ex, 'recorder'))
 
     def stop_ros(self) -> None:
         import rclpy
 
-        for ex in self.executors:
-            ex.shutdown(timeout_sec=2.0)
+        # the threads stop before any node is destroyed (`replay.spin`)
+        stopped = all([sp.stop() for sp in self.spinners])
         if self.recorder is not None:
-            self.recorder.close()
+            self.recorder.close()  # under the recorder's lock: safe beside a late callback
+        if not stopped:
+            self.console.line('asmonc run: a spinning thread did not stop; its nodes are '
+                              'left to the end of the process', err=True)
+            return
+        if self.recorder is not None:
             self.recorder.destroy_node()
         self.monitor.node.destroy_node()
         rclpy.try_shutdown(context=self.ctx)
