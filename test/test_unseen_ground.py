@@ -189,6 +189,29 @@ def test_ground_seen_beyond_the_corridors_far_end_is_not_hidden_by_a_wall():
     assert mon.update(CAM, PLANE, u[keep], v[keep], excess, 0.8) is not None
 
 
+def test_ground_beyond_counts_on_the_sight_lines_the_band_would_hide():
+    """Seen from above, what covers the corridor (half width 0.5 m) from 2.5 m on hides
+    the ground behind it in a wedge: a point x metres out, y to the side, whose sight
+    line crosses the band's first cell (out to 2.75 m) within the corridor,
+    |y| <= 0.5 x / 2.75. The next dash of a centre line the walker has drifted off lies
+    0.6-0.9 m to the side 8 m out (asphalt_markings 1006, backpack rig: "cannot see the
+    way ahead" for 38 % of the walk when only the corridor's own width was looked at);
+    it is ground seen past the band. The same dash outside the wedge is not."""
+    rng, mon = _learnt(15, frames=1)
+    xy, u, v = _ground_points(rng, int(4000 * (4.0 + BEYOND_M) / 5.0), r_max=5.0 + BEYOND_M)
+    gap = xy[:, 0] < 2.5
+    beside = (xy[:, 0] > 5.0) & (np.abs(xy[:, 1]) > 0.5)      # off the corridor's strip
+    wedge = beside & (np.abs(xy[:, 1]) <= 0.5 * xy[:, 0] / 2.75 - 0.05)
+    outside = beside & (np.abs(xy[:, 1]) > 0.5 * xy[:, 0] / 2.75 + 0.05)
+    for pts, reported in ((wedge, False), (outside, True)):
+        keep = gap | (pts & (np.cumsum(pts) <= 3 * BEYOND_MIN))
+        assert (keep & pts).sum() == 3 * BEYOND_MIN
+        r = mon.update(CAM, PLANE, u[keep], v[keep], np.zeros(keep.sum()), 0.8)
+        assert (r is not None) == reported, r
+        if reported:
+            assert r.range == pytest.approx(2.5, abs=0.25)
+
+
 def test_a_poor_view_everywhere_is_not_ground_hidden_from_some_range_on():
     rng, mon = _learnt(9, frames=1)
     for _ in range(3):                              # motion blur: a tenth of the pixels
@@ -523,6 +546,29 @@ def test_the_cameras_reach_found_in_most_pairs_keeps_to_the_wearer():
     rng, mon = _learnt_following(15)
     got = _walk(mon, rng, lambda k: 10.0 if k % 10 >= 5 else 3.0, n=40)
     assert got[31] or got[32], got
+
+
+def test_a_wall_coming_into_the_cameras_reach_is_said():
+    """A plain wall beyond the camera's reach (3 m) leaves the band at the reach while
+    the wearer walks towards it, then its foot draws the band's edge nearer at the
+    walking pace. Judged over the whole trail, the edge came nearer by less than half
+    the distance walked, and the wall was taken for the reach (held-out stop_turn
+    900012, backpack rig: "all clear" 1.8 m before a plain wall). Over the trail's
+    latest 0.75 m it came nearer by all of it: the wall is said throughout (its foot at
+    4.2 m first); where the reach had already been judged (its foot at 4.9 m, the band at
+    the reach for 1.5 m of walking), the wall is said again within 3 pairs of its foot
+    coming within the reach's cell, and then in every pair."""
+    rng, mon = _learnt_following(16)
+    got = _walk(mon, rng, lambda k: min(3.0, 4.2 - 0.12 * k), n=24)   # foot 4.2 -> 1.4 m
+    assert all(got[1:]), got
+    rng, mon = _learnt_following(16)
+    got = _walk(mon, rng, lambda k: min(3.0, 4.9 - 0.12 * k), n=24)   # foot 4.9 -> 2.1 m
+    first = next(k for k in range(24) if 4.9 - 0.12 * k <= 2.75)
+    assert not all(got[1:first])                    # the reach: not said on the way
+    said = next(k for k in range(first, 24) if got[k])
+    assert said <= first + 3 and all(got[said:]), got
+    # standing before it
+    assert all(_walk(mon, rng, lambda k: 2.0, step=0.0, n=10))
 
 
 def test_a_band_nearer_than_the_cameras_reach_is_a_new_band():

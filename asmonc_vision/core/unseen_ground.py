@@ -31,10 +31,14 @@ from R out to the corridor's far end (at least ``MIN_CELLS`` of them):
   texture is not matched that far);
 - so are the last ``TAIL_CELLS`` (a plain patch of ground ends, a wall hides all behind
   it);
-- and so is the ground beyond the corridor's far end: fewer than ``BEYOND_MIN`` of the
-  pair's ground pixels lie within the corridor's width up to ``BEYOND_M`` past it
-  (between the dashes of a painted centre line the asphalt shows no edges out to the far
-  end, but the next dash shows beyond it; a wall shows none there, or a stray few);
+- and so is the ground beyond the corridor's far end that the band would hide: fewer
+  than ``BEYOND_MIN`` of the pair's ground pixels lie up to ``BEYOND_M`` past it, on
+  sight lines that cross the band's first cell within the corridor's width (seen from
+  above, the sight line to a ground point at range x and lateral y crosses range R at
+  lateral y R / x: what covers the corridor at R hides a wedge behind it, wider the
+  farther; between the dashes of a painted centre line the asphalt shows no edges out
+  to the far end, but the next dash shows beyond it, also where the walker has drifted
+  off the line; a wall shows none there, or a stray few);
 - and, for a band not already being reported, the cells in front of R showed at least
   ``FRONT_RATIO`` of theirs (a poor view everywhere, such as motion blur, is not ground
   hidden from some range on).
@@ -71,7 +75,8 @@ and ``follow_travel_m`` > 0, a band found over that much walking (in at least
 ``FOLLOW_FOUND_SHARE`` of the pairs, with no stretch of more than ``FOLLOW_GAP_SHARE`` of
 it without: the camera's reach flickers, bands glimpsed as a turn sweeps the view come
 and go) whose near edge came nearer by less than ``FOLLOW_SHARE`` of the distance walked
-(the least squares slope of its range against the distance walked) *keeps to the
+(the least squares slope of its range against the distance walked), over the whole
+trail and over the latest ``FOLLOW_RECENT_SHARE`` of ``follow_travel_m``, *keeps to the
 wearer*: it is not reported, and the cells in view learn what they show at the usual
 rate, so that the expectation comes to describe the new ground, until the band is no
 longer found. Without the travel (motion unknown, or the wearer standing) nothing
@@ -161,10 +166,17 @@ FOLLOW_SHARE = 0.5
 #: sweeps the view come and go (every other pair).
 FOLLOW_GAP_SHARE = 0.35
 FOLLOW_FOUND_SHARE = 0.75
+#: The band keeps to the wearer only if its near edge came nearer by less than
+#: FOLLOW_SHARE of the distance walked over the latest FOLLOW_RECENT_SHARE of
+#: ``follow_travel_m`` of walking too (at least 3 pairs that found it): a plain wall
+#: beyond the camera's reach leaves the band at the reach until its foot comes within it,
+#: and then draws the band's edge nearer at the walking pace.
+FOLLOW_RECENT_SHARE = 0.5
 #: What hides the ground out to the corridor's far end hides the ground beyond it too: a
-#: band is not hidden when at least BEYOND_MIN of the pair's ground pixels lie within the
-#: corridor's width up to BEYOND_M beyond its far end (the next dash of a painted line
-#: past a gap of plain asphalt; a plain wall shows none, or a stray few).
+#: band is not hidden when at least BEYOND_MIN of the pair's ground pixels lie up to
+#: BEYOND_M beyond its far end on sight lines through its first cell within the
+#: corridor's width (the next dash of a painted line past a gap of plain asphalt; a
+#: plain wall shows none, or a stray few).
 BEYOND_M = 7.0
 BEYOND_MIN = 10
 
@@ -297,17 +309,22 @@ class UnseenGroundMonitor:
                   & (v >= MARGIN_PX) & (v <= cam.height - 1 - MARGIN_PX)).all(axis=0)
         return inside[:-1] & inside[1:]
 
-    def _beyond(self, xy: np.ndarray, view: np.ndarray) -> float:
-        """Number of ground points xy (N, 2) within the corridor's width from the far
-        end of the last cell in ``view`` (n_r,) out to ``BEYOND_M`` past it (0 with no
-        cell in view)."""
+    def _beyond(self, xy: np.ndarray, view: np.ndarray, found: int) -> float:
+        """Number of ground points xy (N, 2) from the far end of the last cell in
+        ``view`` (n_r,) out to ``BEYOND_M`` past it whose sight lines cross the far end
+        of cell ``found`` (the band's first) within the corridor's width: seen from
+        above, the line from the camera to (x, y) crosses range R at lateral y R / x, so
+        that |y| <= half_width x / R (0 with no cell in view). The first cell's far end:
+        what hides the band stands within that cell, and the nearer it stands the wider
+        the wedge it hides; the narrowest is taken."""
         cells = flat_nonzero(view)
         if not len(cells):
             return 0.0
         far = float(self.range_edges[cells[-1] + 1])
+        near = float(self.range_edges[min(found + 1, len(self.range_edges) - 1)])
         with np.errstate(invalid='ignore'):
-            ok = ((np.abs(xy[:, 1]) <= self.half_width) & (xy[:, 0] > far)
-                  & (xy[:, 0] <= far + BEYOND_M))
+            ok = ((np.abs(xy[:, 1]) * near <= self.half_width * xy[:, 0])
+                  & (xy[:, 0] > far) & (xy[:, 0] <= far + BEYOND_M))
         return float(np.count_nonzero(ok))
 
     def _count(self, xy: np.ndarray) -> np.ndarray:
@@ -499,7 +516,7 @@ class UnseenGroundMonitor:
         trusted = view & (self.seen_frames >= TRUST_FRAMES)
         n_r = len(view)
         found = self._band_start(trusted, k_all)
-        if found is not None and self._beyond(seen, view) >= BEYOND_MIN:
+        if found is not None and self._beyond(seen, view, found) >= BEYOND_MIN:
             found = None        # ground seen beyond the far end is seen past the band
         follows = self._keeps_to_wearer(found, travel_m)
         learn = view.copy()
@@ -579,7 +596,9 @@ class UnseenGroundMonitor:
         once they span ``follow_travel_m`` and at least ``FOLLOW_FOUND_SHARE`` of them
         found it, the band keeps to the wearer if its near edge's range fell by less
         than ``FOLLOW_SHARE`` of the distance walked (least squares slope of range
-        against distance over the pairs that found it; a wall walked up to: -1). It
+        against distance over the pairs that found it; a wall walked up to: -1), over
+        the whole trail and over its latest ``FOLLOW_RECENT_SHARE`` of
+        ``follow_travel_m`` (a wall whose foot has just come within the reach). It
         goes on keeping to the wearer until no band is found over ``follow_travel_m`` of
         walking, or one is found more than two cells nearer (a new band: something in
         front of the wearer's reach). Always False with ``follow_travel_m`` 0."""
@@ -610,7 +629,15 @@ class UnseenGroundMonitor:
         trail.append((self._travel, r))
         self._trim(trail)
         if self._follows:
-            return True
+            # a wall whose foot comes within the reach draws the band nearer at the
+            # walking pace: the band no longer keeps to the wearer
+            s, rr = np.asarray(trail).T
+            hit = np.isfinite(rr)
+            s, rr = s[hit], rr[hit]
+            recent = s >= s[-1] - FOLLOW_RECENT_SHARE * self.follow_travel_m
+            if recent.sum() >= 3 and _slope(s[recent], rr[recent]) <= -FOLLOW_SHARE:
+                self._follows = False
+            return self._follows
         if trail[-1][0] - trail[0][0] < self.follow_travel_m:
             return False
         s, rr = np.asarray(trail).T               # distance walked, band's range (m)
@@ -620,9 +647,13 @@ class UnseenGroundMonitor:
         s, rr = s[hit], rr[hit]
         if s[-1] - s[0] < self.follow_travel_m:
             return False
-        ds = s - s.mean()
-        slope = float(ds @ (rr - rr.mean())) / float(ds @ ds)   # (ds spans follow_travel_m)
-        self._follows = slope > -FOLLOW_SHARE
+        # over the whole trail, and over its latest FOLLOW_RECENT_SHARE of
+        # follow_travel_m: a wall beyond the reach leaves the band at the reach until
+        # the wearer has come near enough for its foot to be the band's edge, from
+        # where the band comes nearer at the walking pace
+        recent = s >= s[-1] - FOLLOW_RECENT_SHARE * self.follow_travel_m
+        self._follows = (_slope(s, rr) > -FOLLOW_SHARE
+                         and recent.sum() >= 3 and _slope(s[recent], rr[recent]) > -FOLLOW_SHARE)
         if self._follows:
             self._follow_range = float(np.median(rr))
         return self._follows
@@ -680,6 +711,14 @@ class UnseenGroundMonitor:
                             width=2.0 * self.half_width,
                             expected=float(self.expected[band].sum()),
                             seen=float(k_all[band].sum()), far_range=far), False
+
+
+def _slope(s: np.ndarray, r: np.ndarray) -> float:
+    """Least squares slope of r against s (both (n,) float64, metres); -inf when s does
+    not vary (nothing to tell by)."""
+    ds = s - s.mean()
+    den = float(ds @ ds)
+    return float(ds @ (r - r.mean())) / den if den > 0.0 else -math.inf
 
 
 #: Texture energy (`_texture_energy`) of pixel noise alone, per grey level of its
