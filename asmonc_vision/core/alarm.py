@@ -17,7 +17,8 @@ number of plain-speech announcements for a blind pedestrian:
   exceed that level's threshold by ``hysteresis`` metres, and a lower level must then
   persist for ``hold_time`` seconds before the alarm steps down. While the ground plane
   is LOST (but not yet for ``timeout``) the alarm never steps down: an empty obstacle
-  list then is not evidence that the path is clear.
+  list then is not evidence that the path is clear; the time the lower level has
+  persisted stops counting then, and goes on once the ground is back.
 * **Announcements** (``Decision``) are made when the level changes, when the target
   changes (a different non-zero track id, at most once per ``hold_time``), and every
   ``repeat_period`` seconds while the level is not CLEAR. A repeat describes the target
@@ -372,6 +373,8 @@ class AlarmLogic:
         self._ground_t = -math.inf
         self._fault: str | None = 'starting'
         self._below_since: float | None = None
+        #: seconds since the previous obstacle list (0 for the first)
+        self._list_dt = 0.0
         self._current = Decision(AlarmLevel.FAULT, TEXT_STARTING, t=float(t0))
         self._last_announce_t = float(t0)
         #: the newest target seen while the current (obstacle) level holds, and when
@@ -587,6 +590,7 @@ class AlarmLogic:
             # until one has come after the silence reached the timeout.
             self._ground_fresh = False
             self._stale_since = t
+        self._list_dt = t - last if last is not None else 0.0
         self._last_obstacles_t = t
         if self._first_obstacles_t is None:
             self._first_obstacles_t = t
@@ -625,7 +629,7 @@ class AlarmLogic:
             return self._announce(self._decide(t, level, tgt))
         if level < cur.level:
             if self._ground == GroundStatus.LOST:
-                self._below_since = None  # no evidence the path is clear: hold
+                self._pause_below()       # no evidence the path is clear: hold
             else:
                 if self._below_since is None:
                     self._below_since = t
@@ -732,7 +736,7 @@ class AlarmLogic:
                       unknown: ObstacleInfo | None) -> Decision | None:
         """An obstacle list while "cannot see the way ahead" is in force: an obstacle's
         level at once; the unknown ground repeated; "all clear" after ``hold_time``
-        without either (not while the ground is LOST)."""
+        without either, counted while the ground is not LOST (`_pause_below`)."""
         tgt, level = self.select(t, obstacles)
         self._set_contact(t, tgt, level)
         if level > AlarmLevel.CLEAR:
@@ -746,7 +750,7 @@ class AlarmLogic:
                 return None
             return self._announce_unknown(t, unknown, repeat=True)
         if self._ground == GroundStatus.LOST:
-            self._below_since = None
+            self._pause_below()
             return None
         if self._below_since is None:
             self._below_since = t
@@ -754,6 +758,16 @@ class AlarmLogic:
             return None
         self._below_since = None
         return self._announce(self._decide(t, AlarmLevel.CLEAR, None))
+
+    def _pause_below(self) -> None:
+        """The ground is LOST: the time a lower level has persisted stops counting (its
+        start moves on by the time since the previous list) until the ground is back; a
+        lower level steps down after ``hold_time`` of lists with the ground seen. An
+        empty list without the ground is no evidence that the path is clear; nor does
+        it undo the evidence gathered before (a plane lost in a pair now and then held
+        a FAULT "cannot see the way ahead" long after the unseen ground had gone)."""
+        if self._below_since is not None:
+            self._below_since += self._list_dt
 
     def _announce_unknown(self, t: float, unknown: ObstacleInfo,
                           repeat: bool = False) -> Decision:
