@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import threading
 
-#: seconds each spin slice may wait: how long `stop()` waits for the thread at most
+#: seconds each spin slice may wait: the thread sees `stop()` within about this long
 SLICE_S = 0.05
 
 
