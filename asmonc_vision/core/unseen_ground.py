@@ -633,9 +633,8 @@ class UnseenGroundMonitor:
             # walking pace: the band no longer keeps to the wearer
             s, rr = np.asarray(trail).T
             hit = np.isfinite(rr)
-            s, rr = s[hit], rr[hit]
-            recent = s >= s[-1] - FOLLOW_RECENT_SHARE * self.follow_travel_m
-            if recent.sum() >= 3 and _slope(s[recent], rr[recent]) <= -FOLLOW_SHARE:
+            recent = self._recent_slope(s[hit], rr[hit])
+            if recent is not None and recent <= -FOLLOW_SHARE:
                 self._follows = False
             return self._follows
         if trail[-1][0] - trail[0][0] < self.follow_travel_m:
@@ -651,12 +650,20 @@ class UnseenGroundMonitor:
         # follow_travel_m: a wall beyond the reach leaves the band at the reach until
         # the wearer has come near enough for its foot to be the band's edge, from
         # where the band comes nearer at the walking pace
-        recent = s >= s[-1] - FOLLOW_RECENT_SHARE * self.follow_travel_m
+        recent = self._recent_slope(s, rr)
         self._follows = (_slope(s, rr) > -FOLLOW_SHARE
-                         and recent.sum() >= 3 and _slope(s[recent], rr[recent]) > -FOLLOW_SHARE)
+                         and recent is not None and recent > -FOLLOW_SHARE)
         if self._follows:
             self._follow_range = float(np.median(rr))
         return self._follows
+
+    def _recent_slope(self, s: np.ndarray, rr: np.ndarray) -> float | None:
+        """The slope of the band's range ``rr`` against the distance walked ``s`` (both
+        (n,) metres, the pairs that found it) over the latest ``FOLLOW_RECENT_SHARE`` of
+        ``follow_travel_m`` of walking (`_slope`: -inf with no walking among them); None
+        with fewer than 3 such pairs."""
+        recent = s >= s[-1] - FOLLOW_RECENT_SHARE * self.follow_travel_m
+        return _slope(s[recent], rr[recent]) if recent.sum() >= 3 else None
 
     def _trim(self, trail: list) -> None:
         """Keep the last 2 ``follow_travel_m`` of walking of ``trail`` (and 200 pairs:
