@@ -358,6 +358,52 @@ def test_a_band_that_shows_the_grounds_texture_is_not_reported():
     assert mon.update(CAM, PLANE, u[keep], v[keep], np.zeros(keep.sum()), 0.8) is not None
 
 
+@pytest.mark.parametrize('stands', [True, False])
+def test_a_textured_band_is_hidden_where_a_face_stands_at_its_edge(stands):
+    """The band whose image shows texture (above: not reported) is reported when the
+    ``face`` judge (`core.plain_face` in the detector) finds a face standing at its
+    near edge: a wall with texture hides the ground as a plain one does. The judge is
+    asked at the band's near edge."""
+    tex = np.random.default_rng(8).integers(90, 150, (CAM.height, CAM.width))
+    asked = []
+
+    def face(r):
+        asked.append(r)
+        return stands
+
+    rng, mon = _learnt(9, frames=1)
+    xy, u, v = _ground_points(rng, 4000)
+    keep = xy[:, 0] < 3.0
+    r = mon.update(CAM, PLANE, u[keep], v[keep], np.zeros(keep.sum()), 0.8,
+                   left=tex.astype(np.uint8), face=face)
+    assert (r is not None) == stands, r
+    assert len(asked) == 1 and 2.75 <= asked[0] <= 3.25, asked
+    if stands:
+        assert r.range == pytest.approx(asked[0])
+
+
+def test_a_lost_pair_keeps_what_the_ground_usually_shows():
+    """Pairs whose plane is lost (blank images) between the learnt ground and the
+    plain wall's appearing are no observation: the expectation learnt before them
+    stays, and the wall is reported from the second pair after them. Forgotten at each
+    lost pair, the cells the wall hides are never learnt again (a hidden band is not
+    learnt), and the wall is never said (the detector did so once, measured)."""
+    cam, frames = _plain_wall_frames()
+    det = GpodDetector(GpodConfig())
+    blank = np.full_like(frames[0].left, 90)
+    for f in frames[:8]:
+        det.process(f.left, f.right, cam, stamp_ns=int(f.time * 1e9))
+    for k in range(3):
+        r = det.process(blank, blank, cam, stamp_ns=int((0.73 + 0.02 * k) * 1e9))
+        assert r.status == 'lost'
+    said = []
+    for f in frames[8:]:
+        r = det.process(f.left, f.right, cam, stamp_ns=int(f.time * 1e9))
+        said.append(any(is_unknown(o.height) and abs(o.range - 2.4) <= 0.3
+                        for o in r.obstacles))
+    assert said[1:].count(True) >= 9 and not said[0], said      # of 11 (measured 11)
+
+
 def _fading_ground(rng, foot=None, amplitude=60.0):
     """(H, W) uint8 image of ground whose fine texture (a grain a few pixels across, of
     ``amplitude`` grey levels at 2 m and nearer) fades with range, as a small image's far

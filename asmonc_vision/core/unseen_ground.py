@@ -53,8 +53,14 @@ from R out to the corridor's far end (at least ``MIN_CELLS`` of them):
   pixel noise's (`noise_energy`). The ground's texture is finer in the image, and
   fainter, the farther it lies: a darker stain 3 m ahead still shows the texture the
   ground usually shows there, and is not hidden; a wall's face shows the noise alone.
+  A wall's face can show texture too, too faint for the edges: when the caller gives a
+  ``face`` judge (`update`; the detector's is the stereo plane sweep of
+  `core.plain_face`) and it finds a face standing at the band's near edge, the band is
+  hidden all the same.
 The nearest such R, found in ``frames`` pairs in a row (within a cell of the previous
-one; a pair whose band shows the ground's texture breaks the row), is reported as
+one; a pair whose band shows the ground's texture breaks the row; a pair without a
+ground plane is no observation, and the detector does not call `update` for it: what
+was learnt and the row stay), is reported as
 *unknown ahead* from R, unless a detected obstacle or drop-off already stands in the
 corridor no farther than R + ``EXPLAINED_M`` (what hides the ground is already
 reported). Unseen ground is not evidence of a thing: a plain wall hides it, but so do a
@@ -99,6 +105,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Callable
 
 import cv2
 import numpy as np
@@ -254,7 +261,7 @@ class UnseenGroundMonitor:
         self.reset()
 
     def reset(self) -> None:
-        """Forget every expectation (a new camera, or a lost ground plane)."""
+        """Forget every expectation (a new camera, or a new calibration)."""
         n_r = len(self.range_edges) - 1
         #: (n_r,) running mean of edge pixels per cell.
         self.expected = np.zeros(n_r)
@@ -477,7 +484,8 @@ class UnseenGroundMonitor:
     def update(self, cam: StereoCamera, metric: MetricPlane, u: np.ndarray, v: np.ndarray,
                excess: np.ndarray, threshold: np.ndarray | float,
                explained: np.ndarray | None = None, left: np.ndarray | None = None,
-               travel_m: float | None = None) -> UnseenReport | None:
+               travel_m: float | None = None,
+               face: Callable[[float], bool] | None = None) -> UnseenReport | None:
         """Count one frame's edge pixels, report the unseen band, learn the rest.
 
         Args:
@@ -495,6 +503,9 @@ class UnseenGroundMonitor:
             travel_m: metres the wearer walked forward along the ground since the
                 previous pair (the camera's motion laid on the plane), or None (unknown):
                 for a band that keeps to the wearer (`_keeps_to_wearer`).
+            face: whether a face stands across the corridor at a range (metres; e.g.
+                `core.plain_face`): a band whose image shows texture is still hidden
+                where that texture is a face standing at its near edge (None: never).
         Returns:
             the report, or None.
         """
@@ -541,7 +552,8 @@ class UnseenGroundMonitor:
                 report, textured = self._report(cam, metric, xy, excess, threshold, band,
                                                 found, k_all, explained, ii,
                                                 float(self._count(xy[raised])[band].sum()),
-                                                noise_energy(left) if left is not None else None)
+                                                noise_energy(left) if left is not None else None,
+                                                face)
                 if textured:
                     # the band showed the ground's own texture: this pair is evidence
                     # against it, and the pairs in a row start again (a turn that sets
@@ -675,14 +687,16 @@ class UnseenGroundMonitor:
                 excess: np.ndarray, threshold, band: np.ndarray, found: int,
                 k_all: np.ndarray, explained: np.ndarray | None,
                 ii: np.ndarray | None, raised: float = 0.0,
-                floor: float | None = None) -> tuple[UnseenReport | None, bool]:
+                floor: float | None = None, face: Callable[[float], bool] | None = None
+                ) -> tuple[UnseenReport | None, bool]:
         """The found band as a report: its near edge placed, unless a known obstacle
         explains it or it has not yet been found ``frames`` pairs in a row. ``ii``: the
         integral image of the pair's texture energy (`_texture_integral`; None: no image);
         ``raised``: the band's matched edge pixels standing above the threshold;
-        ``floor``: the pixel noise's texture energy (`noise_energy`; None: unknown).
-        Returns (the report or None, whether the band showed the ground's own fine
-        texture)."""
+        ``floor``: the pixel noise's texture energy (`noise_energy`; None: unknown);
+        ``face``: as `update`'s (a textured band at whose near edge a face stands is
+        hidden all the same). Returns (the report or None, whether the band showed the
+        ground's own fine texture)."""
         r0 = float(self.range_edges[found])
         # the last ground seen in the band's first cell moves R to it
         thr = np.broadcast_to(np.asarray(threshold, float), excess.shape)
@@ -701,8 +715,9 @@ class UnseenGroundMonitor:
             r_near, plain = self._foot_and_face(
                 ii, cam, metric, r_near, far,
                 floor if raised <= self.max_ratio * lam + SLACK else None)
-            if plain is False:
-                # the band shows the ground's fine texture: nothing plain hides it
+            if plain is False and (face is None or not face(r_near)):
+                # the band shows the ground's fine texture (not a face's that stands
+                # at its edge): nothing plain hides it
                 return None, True
         if explained is not None and len(explained):
             ex = np.asarray(explained, float).reshape(-1, 2)

@@ -17,6 +17,7 @@ from ..config import override
 from ..edges import detect_vertical_edges, image_noise_sigma, textured_edge_threshold
 from ..ground_plane import fast_median
 from ..matching import pmf_match
+from ..plain_face import FaceCheck, check_face
 from ..unseen_ground import UNKNOWN_HEIGHT
 from . import kernels as kn
 from .coarse import _coarse_consistent, _disparity_image, bin_pair
@@ -128,7 +129,7 @@ class GpodDetector(Tracking):
             metric = cast(MetricPlane, metric)   # (a pass stays 'tracking' only with one)
             obstacles = self._track(detections, stamp_s, p.still, cam, metric, motion)
             unseen = self._unseen_ground(p.features, p.threshold, cam, metric,
-                                         detections + obstacles, p.still)
+                                         detections + obstacles, p.still, right)
             if unseen:
                 detections = tuple(sorted(detections + unseen, key=lambda o: o.range))
                 obstacles = tuple(sorted(obstacles + unseen, key=lambda o: o.range))
@@ -136,7 +137,10 @@ class GpodDetector(Tracking):
             self._tracker.reset()
             self._surface_tracker.reset()
             self._last_motion = None
-            if self._unseen is not None:
+            if self._unseen is not None and status == 'initialising':
+                # a new calibration; a pair whose plane is lost is no observation of
+                # the ground the wearer walks on: the expectation and the band's pairs
+                # in a row stay as they were
                 self._unseen.reset()
         t4 = time.perf_counter()
         timings['obstacles'] = timings.get('obstacles', 0.0) + (t4 - t3) * 1e3
@@ -240,7 +244,8 @@ class GpodDetector(Tracking):
 
     def _unseen_ground(self, features: GpodFeatures, threshold: float, cam: StereoCamera,
                        metric: MetricPlane, known: tuple[GpodObstacle, ...],
-                       still: bool = False) -> tuple[GpodObstacle, ...]:
+                       still: bool = False, right: np.ndarray | None = None
+                       ) -> tuple[GpodObstacle, ...]:
         """The frame's band of unseen corridor ground (`core.unseen_ground`), unless an
         obstacle or drop-off in ``known`` at least ``unseen.explain_min_confidence``
         confident explains it, as unknown ground straight ahead: an untracked entry
@@ -250,7 +255,11 @@ class GpodDetector(Tracking):
         ``unseen.max_ratio`` is 0. The wearer's travel since the previous pair, for a
         band that keeps to the wearer, is the camera's motion (`_ground_motion`, as the
         ground surface is carried; ``still``: the rig stood still) along the plane's
-        forward axis."""
+        forward axis. With the right image given and ``unseen.face_min_ncc`` > 0, a
+        band whose near edge a plain face stands at (`core.plain_face`) is that face
+        instead: an untracked obstacle ``unseen.face_height_m`` tall (or as high as the
+        image shows it) at the face's range, straight ahead, the corridor's width, with
+        the band's confidence."""
         if self._unseen is None:
             return ()
         # the known feet on the ground: (forward, left) from their range and bearing; a
@@ -266,10 +275,32 @@ class GpodDetector(Tracking):
                 # X_prev = R X_curr + t: t is the camera's position now, in the previous
                 # pair's frame; its forward part along the ground is the travel
                 travel = float(np.asarray(motion[1], float).reshape(3) @ ground_axes(metric)[1])
+        us = self.config.unseen
+        checks: dict[float, FaceCheck | None] = {}
+        left = self._left
+
+        def face_at(range_m: float) -> FaceCheck | None:
+            """The plain-face check at a band's near edge (once per range), if it
+            confirms a face."""
+            if left is None or right is None:
+                return None
+            if range_m not in checks:
+                fc = check_face(left, right, cam, metric, range_m, us.half_width_m,
+                                us.face_height_m)
+                checks[range_m] = (fc if fc is not None
+                                   and fc.confirmed(us.face_min_ncc, us.face_margin) else None)
+            return checks[range_m]
+
+        faces = us.face_min_ncc > 0.0 and right is not None and left is not None
         r = self._unseen.update(cam, metric, features.u_left, features.v, features.excess,
-                                thr, explained, left=self._left, travel_m=travel)
+                                thr, explained, left=self._left, travel_m=travel,
+                                face=(lambda x: face_at(x) is not None) if faces else None)
         if r is None:
             return ()
+        confidence = float(np.clip(1.0 - r.seen / r.expected, 0.0, 1.0))
+        face = face_at(r.range) if faces else None
+        if face is not None:
+            return (_face_obstacle(face, cam, metric, r.width, confidence),)
         u, v = cam.project_left(np.stack([r.position, r.position - r.height
                                           * metric.normal_up]))
         x0 = int(np.clip(np.floor(min(u)), 0, cam.width - 1))
@@ -279,7 +310,7 @@ class GpodDetector(Tracking):
         return (GpodObstacle(
             position=r.position, height=UNKNOWN_HEIGHT, range=r.range, bearing=0.0,
             width=r.width, disparity_excess=0.0,
-            confidence=float(np.clip(1.0 - r.seen / r.expected, 0.0, 1.0)),
+            confidence=confidence,
             roi=(x0, y0, x1 - x0, y1 - y0), num_edge_pixels=0,
             string_ids=np.zeros(0, np.int32)),)
 
@@ -395,3 +426,19 @@ class GpodDetector(Tracking):
                                        target_density=c.edges.target_density, floor=floor,
                                        blur_sigma=c.edges.blur_sigma)
 
+
+def _face_obstacle(face: FaceCheck, cam: StereoCamera, metric: MetricPlane, width: float,
+                   confidence: float) -> GpodObstacle:
+    """A confirmed plain face (`core.plain_face`) as an untracked obstacle straight
+    ahead: its top ``face.height`` above its foot at ``face.range``, ``width`` metres
+    wide; its region in the left image from the tested region's top down to the foot."""
+    origin, fwd, _ = ground_axes(metric)
+    foot = origin + face.range * fwd
+    x, y, w, h = face.roi
+    foot_v = cam.project_left(foot[None])[1][0]
+    y1 = int(np.clip(np.ceil(foot_v), y + h, cam.height))
+    return GpodObstacle(
+        position=foot + face.height * np.asarray(metric.normal_up, float),
+        height=face.height, range=face.range, bearing=0.0, width=width,
+        disparity_excess=face.excess, confidence=confidence, roi=(x, y, w, y1 - y),
+        num_edge_pixels=0, string_ids=np.zeros(0, np.int32))

@@ -577,6 +577,22 @@ class UnseenSettings:
         'world (the camera\'s own reach on smoother or more oblique ground, not a thing '
         'hiding it): not reported, and learnt as what the ground shows; metres, 0 = off',
         range=(0.0, 20.0))
+    face_min_ncc: float = param(
+        0.25, 'Unseen ground, plain face (`core.plain_face`): the image above a reported '
+        'band\'s near edge is swept for a face standing across the walking direction; a '
+        'face whose gradients match between the images at least this well (normalised '
+        'cross-correlation), and face_margin better than the ground going on and than any '
+        'other face range, is reported as an obstacle face_height_m tall at its range in '
+        'place of the unknown ground; 0 = off', range=(0.0, 1.0))
+    face_margin: float = param(
+        0.15, 'Unseen ground, plain face: least margin of the face\'s correlation over the '
+        'ground\'s and over its rival ranges\' (one clear peak), 0..1', range=(0.0, 1.0))
+    face_height_m: float = param(
+        1.0, 'Unseen ground, plain face: the face is tested up to this height above the '
+        'ground (or the image\'s top), and reported this tall: a report at least the map\'s '
+        'pass_height_m tall goes out unconfirmed once chained over its pass_frames pairs, '
+        'metres',
+        range=(0.1, 5.0))
 
     def __post_init__(self) -> None:
         check_fields(self)
