@@ -142,18 +142,19 @@ def _region(cam: StereoCamera, metric: MetricPlane, near_m: float, half_width_m:
                         for h in (FOOT_CLEARANCE_M, height_m) for s in (-1.0, 1.0)])
     if np.any(corners[:2, 2] <= 0.0):
         return None
-    z = np.maximum(corners[:, 2], 1e-6)
-    u = cam.f * corners[:, 0] / z + cam.cx
-    v = cam.f * corners[:, 1] / z + cam.cy
-    u0 = int(max(0, math.floor(u.min())))
-    u1 = int(min(cam.width, math.ceil(u.max())))
+    top_ahead = corners[2:, 2].min() > 0    # the top corners in front of the camera
+    with np.errstate(divide='ignore', invalid='ignore'):
+        u, v = cam.project_left(corners)
+    cols = u if top_ahead else u[:2]
+    u0 = int(max(0, math.floor(cols.min())))
+    u1 = int(min(cam.width, math.ceil(cols.max())))
     v1 = int(min(cam.height, math.floor(v[:2].min())))
     # the face's top: the image's top row where the region's top lies above it
-    v0 = int(max(0, math.ceil(v[2:].max()))) if corners[2:, 2].min() > 0 else 0
+    v0 = int(max(0, math.ceil(v[2:].max()))) if top_ahead else 0
     if v1 - v0 < 4 or u1 - u0 < 8 or (v1 - v0) * (u1 - u0) < MIN_PIXELS:
         return None
     top_h = height_m
-    if v0 == 0 and corners[2:, 2].min() > 0 and v[2:].max() < 0:
+    if v0 == 0 and top_ahead and v[2:].max() < 0:
         # the image ends below the region's top: the face tested up to the top row
         ray_top = np.array([0.0, (0.0 - cam.cy) / cam.f, 1.0])
         along = float(fwd @ ray_top)
@@ -243,7 +244,7 @@ def check_face(left: np.ndarray, right: np.ndarray, cam: StereoCamera, metric: M
     origin, fwd, _ = ground_axes(metric)
     up = np.asarray(metric.normal_up, float)
     warp = _Warp(left, right, cam, u0, u1, v0, v1)
-    fb = cam.f * cam.baseline
+    fb = cam.fb
     # the ground going on: up . X = up . origin on the ray X = Z ray
     with np.errstate(divide='ignore', invalid='ignore'):
         d_ground = fb * (warp.ray @ up) / float(up @ origin)

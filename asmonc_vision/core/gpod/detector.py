@@ -293,7 +293,7 @@ class GpodDetector(Tracking):
 
         faces = us.face_min_ncc > 0.0 and right is not None and left is not None
         r = self._unseen.update(cam, metric, features.u_left, features.v, features.excess,
-                                thr, explained, left=self._left, travel_m=travel,
+                                thr, explained, left=left, travel_m=travel,
                                 face=(lambda x: face_at(x) is not None) if faces else None)
         if r is None:
             return ()
