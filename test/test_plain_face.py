@@ -44,13 +44,15 @@ def _sample(tex: tuple, a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def _render(face_m: float | None, face_texture, ground_texture, rng: np.random.Generator,
             face_albedo: float = 40.0, face_contrast: float = 1.5,
-            noise: float = 2.5) -> tuple[np.ndarray, np.ndarray]:
+            noise: float = 2.5, ground_contrast: float = 25.0,
+            bend: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The paper's rig (f 300 px, B 0.35 m, 1.25 m up, 20 degrees down) before textured
     ground and, at ``face_m`` along the ground (None: none), a wall across the walking
     direction, 2.4 m tall: ``face_albedo`` grey levels with ``face_texture`` (a function
     of the face's (lateral, height), metres, to a unit texture) times
-    ``face_contrast`` grey levels; pixel noise of ``noise`` grey levels. (left, right)
-    uint8."""
+    ``face_contrast`` grey levels; the ground 120 grey levels with a texture of
+    ``ground_contrast``, bent at ``bend`` = (metres along it, grade) if given (a crest's
+    brow: grade < 0); pixel noise of ``noise`` grey levels. (left, right) uint8."""
     uu, vv = np.meshgrid(np.arange(CAM.width, dtype=np.float64),
                          np.arange(CAM.height, dtype=np.float64))
     ray = np.stack([(uu - CAM.cx) / CAM.f, (vv - CAM.cy) / CAM.f, np.ones_like(uu)], -1)
@@ -60,13 +62,19 @@ def _render(face_m: float | None, face_texture, ground_texture, rng: np.random.G
         img = np.full(uu.shape, 90.0)
         with np.errstate(divide='ignore', invalid='ignore'):
             t_g = -(rel @ UP) / (ray @ UP)
+            if bend is not None:
+                # beyond s0 the ground is up . p = g (fwd . p - s0)
+                s0, g = bend
+                t_b = (g * (rel @ FWD - s0) - rel @ UP) / (ray @ UP - g * (ray @ FWD))
+                beyond = ~(t_g > 0) | (rel @ FWD + t_g * (ray @ FWD) > s0)
+                t_g = np.where(beyond, np.where(t_b > 0, t_b, -1.0), t_g)
             t_f = ((face_m - rel @ FWD) / (ray @ FWD) if face_m is not None
                    else np.full(uu.shape, np.inf))
         p_g = rel + t_g[..., None] * ray
         p_f = rel + np.where(np.isfinite(t_f), t_f, 0.0)[..., None] * ray
         on_f = np.isfinite(t_f) & (t_f > 0) & ((p_f @ UP) >= 0.0) & ((p_f @ UP) <= 2.4)
         on_g = (t_g > 0) & ~(on_f & (t_f < t_g))
-        g = 120.0 + 25.0 * _sample(ground_texture, p_g @ LEFT, p_g @ FWD)
+        g = 120.0 + ground_contrast * _sample(ground_texture, p_g @ LEFT, p_g @ FWD)
         img[on_g] = g[on_g]
         if face_m is not None:
             f = face_albedo + face_contrast * face_texture(p_f @ LEFT, p_f @ UP)
@@ -122,6 +130,46 @@ def test_the_ground_going_on_is_no_face(seed):
     assert fc is not None
     assert not fc.confirmed(0.25, 0.15), fc
     assert fc.ground > fc.score, fc
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_a_face_deep_in_the_band_is_found_out_to_its_far_end(seed):
+    """On faint ground (texture of 3 grey levels) the edges end short of the wall: a
+    band from 2.5 m whose wall stands at 4 m. Swept out to the band's far end (5 m),
+    the face is confirmed within 0.15 m of 4 m; swept as far as the near edge alone
+    allows (1 m beyond it), it is not (the face lies beyond the sweep and the
+    tolerance)."""
+    left, right = _scene(seed, 4.0, ground_contrast=3.0)
+    fc = check_face(left, right, CAM, METRIC, 2.5, 0.5, 1.0, far_m=5.0)
+    assert fc is not None and fc.confirmed(0.25, 0.15), fc
+    assert abs(fc.range - 4.0) <= 0.15, fc
+    near_only = check_face(left, right, CAM, METRIC, 2.5, 0.5, 1.0)
+    assert near_only is not None and not near_only.confirmed(0.25, 0.15), near_only
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_the_ground_going_on_is_no_face_out_to_the_far_end(seed):
+    """No wall, swept out to 5 m, on the same faint ground and on the usual: the ground
+    matches as ground, no face is confirmed."""
+    for contrast in (3.0, 25.0):
+        left, right = _scene(seed, None, ground_contrast=contrast)
+        fc = check_face(left, right, CAM, METRIC, 2.5, 0.5, 1.0, far_m=5.0)
+        assert fc is not None and not fc.confirmed(0.25, 0.15), (contrast, fc)
+
+
+@pytest.mark.parametrize('seed,grade', [(0, -0.1), (1, -0.2), (2, -0.3)])
+def test_ground_falling_away_beyond_a_brow_is_ground_not_a_face(seed, grade, monkeypatch):
+    """Faint ground that falls away beyond a brow at 2.5 m (grade -0.1 to -0.3) is no
+    face, and is explained as the ground bent at the band's edge: measured NCC 0.5-0.6
+    for the bent ground against -0.05 to 0.08 for the level ground going on, which
+    alone would leave a face at the brow little to beat."""
+    import asmonc_vision.core.plain_face as plain_face
+    left, right = _scene(seed, None, ground_contrast=3.0, bend=(2.5, grade))
+    fc = check_face(left, right, CAM, METRIC, 2.5, 0.5, 1.0, far_m=5.0)
+    assert fc is not None and not fc.confirmed(0.25, 0.15), fc
+    monkeypatch.setattr(plain_face, 'BEND_GRADES', ())
+    level = check_face(left, right, CAM, METRIC, 2.5, 0.5, 1.0, far_m=5.0)
+    assert fc.ground >= 0.4 and level.ground <= 0.15, (fc, level)
 
 
 @pytest.mark.parametrize('seed', [0, 1])

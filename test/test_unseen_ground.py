@@ -363,13 +363,14 @@ def test_a_textured_band_is_hidden_where_a_face_stands_at_its_edge(stands):
     """The band whose image shows texture (above: not reported) is reported when the
     ``face`` judge (`core.plain_face` in the detector) finds a face standing at its
     near edge: a wall with texture hides the ground as a plain one does. The judge is
-    asked at the band's near edge."""
+    asked from the band's near edge to its far end."""
     tex = np.random.default_rng(8).integers(90, 150, (CAM.height, CAM.width))
     asked = []
 
-    def face(r):
+    def face(r, far):
         asked.append(r)
-        return stands
+        assert far == pytest.approx(5.0)
+        return r + 0.1 if stands else None
 
     rng, mon = _learnt(9, frames=1)
     xy, u, v = _ground_points(rng, 4000)
@@ -757,3 +758,69 @@ def test_the_detector_gives_the_monitor_the_wearers_travel(monkeypatch):
     for f in frames[:8]:
         det.process(f.left, f.right, cam, stamp_ns=int(f.time * 1e9))
     assert got and all(t is None for t in got), got
+
+
+def _faint_learnt(seed, frames=2, follow_travel_m=0.0):
+    """(rng, monitor) after 12 frames of faint ground: its edges thin out beyond 3 m
+    (2 % of them matched), so that the band from 3 m to 5 m is expected to show fewer
+    than ``min_expected`` of them."""
+    rng = np.random.default_rng(seed)
+    mon = UnseenGroundMonitor(max_ratio=0.15, min_expected=30.0, frames=frames,
+                              max_range=5.0, half_width=0.5, follow_travel_m=follow_travel_m)
+    for _ in range(12):
+        xy, u, v = _ground_points(rng, 4000)
+        keep = (xy[:, 0] < 3.0) | (rng.random(len(u)) < 0.02)
+        assert mon.update(CAM, PLANE, u[keep], v[keep], np.zeros(keep.sum()), 0.8) is None
+    far = (mon.range_edges[:-1] >= 3.0) & (mon.seen_frames > 0)
+    assert mon.expected[far].sum() < mon.min_expected
+    return rng, mon
+
+
+@pytest.mark.parametrize('judge', ['none', 'no face', 'face'])
+def test_a_band_too_faint_to_judge_is_reported_only_for_a_face_in_it(judge):
+    """Beyond 3 m the faint ground is expected to show too few edges to say it is
+    hidden: without a face judge, or when it finds no face, nothing is reported. A
+    face the judge confirms in the band (asked from the band's near edge to its far
+    end, 5 m) is evidence enough: reported after two pairs."""
+    rng, mon = _faint_learnt(5)
+    asked = []
+
+    def face(r, far):
+        asked.append((r, far))
+        return 4.0 if judge == 'face' else None
+
+    out = []
+    for _ in range(3):
+        xy, u, v = _ground_points(rng, 4000)
+        keep = xy[:, 0] < 3.0                       # nothing seen from 3 m on
+        out.append(mon.update(CAM, PLANE, u[keep], v[keep], np.zeros(keep.sum()), 0.8,
+                              face=None if judge == 'none' else face))
+    if judge == 'face':
+        assert out[0] is None and out[1] is not None and out[2] is not None, out
+        assert 2.75 <= out[1].range <= 3.0, out[1]
+    else:
+        assert out == [None] * 3, out
+    if judge != 'none':
+        assert len(asked) >= 3 and all(2.75 <= r <= 3.0 and far == pytest.approx(5.0)
+                                       for r, far in asked), asked
+
+
+def test_a_face_walked_up_to_does_not_keep_to_the_wearer():
+    """On faint ground the edges end at the camera's reach (3 m) however far the wearer
+    walks, but the face the judge finds in the band comes nearer at the walking pace: it
+    is a wall walked up to, and stays reported over 1.2 m of walking (following the
+    band's edge, it would keep to the wearer from 0.5 m on and be dropped)."""
+    rng, mon = _faint_learnt(6, follow_travel_m=0.5)
+    at = [4.5]
+
+    def face(r, far):
+        return at[0]
+
+    reported = []
+    for _ in range(12):
+        xy, u, v = _ground_points(rng, 4000)
+        keep = xy[:, 0] < 3.0
+        reported.append(mon.update(CAM, PLANE, u[keep], v[keep], np.zeros(keep.sum()), 0.8,
+                                   travel_m=0.1, face=face) is not None)
+        at[0] -= 0.1
+    assert all(reported[1:]), reported

@@ -15,12 +15,17 @@ gradients of both images smoothed by a Gaussian of ``FACE_BLUR_PX`` (the stereo
 signal of a face with faint texture; a horizontal edge such as the wall's foot matches
 at every disparity and is left out by the horizontal gradient):
 - *the ground goes on*: the right image warped by the ground plane's disparity, row by
-  row (the disparity falls towards the horizon);
+  row (the disparity falls towards the horizon), or by that of the ground bent at R by
+  one of ``BEND_GRADES`` (beyond a crest's brow the ground falls away: seen at a
+  grazing angle, it keeps nearly one disparity up the image, as a face does); the best
+  of these is the ground's score;
 - *a face stands across the walking direction* at range Rf, for Rf swept in
-  ``COARSE_PX`` steps of the region centre's disparity from R + ``FAR_SWEEP_M`` to
-  R - ``NEAR_SWEEP_M`` (then ``STEP_PX`` steps around the best): the right image
-  warped, where the pixel's ray meets the ground nearer than Rf, by the ground's
-  disparity (the band's edge can lie short of the face's foot), and elsewhere by the
+  ``COARSE_PX`` steps of the region centre's disparity from ``RANGE_TOL_M`` beyond the
+  band's far end (or R + ``FAR_SWEEP_M`` if farther; on faint ground the edges end
+  short of the wall, anywhere in the band) to R - ``NEAR_SWEEP_M`` (then ``STEP_PX``
+  steps around the best): the right image warped, where the pixel's ray meets the
+  ground nearer than Rf, by the ground's disparity (the band's edge can lie short of
+  the face's foot), and elsewhere by the
   disparity of a vertical plane at Rf facing the wearer (constant up the face: a
   fronto-parallel face's disparity does not fall with the row as the ground's does).
 Each is scored by the normalised cross-correlation (NCC) of the left gradients with the
@@ -28,15 +33,20 @@ warped right ones over the region. The face is *confirmed* (`FaceCheck.confirmed
 its best NCC is at least ``min_ncc``, beats the ground's by ``margin``, beats every face
 hypothesis at least ``OFF_PEAK_PX`` of disparity away from it by ``margin`` (one clear
 peak: a repetitive pattern, such as a grate's bars, matches at several), and its range
-lies within ``max(RANGE_TOL_M, RANGE_TOL_SHARE * R)`` of R (the face stands where the
-ground stopped showing). Pixel noise alone correlates with nothing (NCC near 0 for
-every hypothesis): a truly blank face or plain ground stays unknown.
+lies in the band, give or take ``max(RANGE_TOL_M, RANGE_TOL_SHARE * R)`` at either end
+(where the ground stopped showing, or what hides the band's far end). The best must be
+a peak: at the sweep's first or last range the scores may rise on beyond it (the
+ground falling away beyond a crest's brow), and that is no face. Pixel noise alone
+correlates with nothing (NCC near 0 for every hypothesis): a truly blank face or plain
+ground stays unknown.
 
 The detector (`GpodDetector._unseen_ground`) asks this of a band about to be reported,
-which a confirmed face replaces by an obstacle, and of a band whose image shows texture
+which a confirmed face replaces by an obstacle; of a band whose image shows texture
 (`core.unseen_ground`'s texture comparison would dismiss it as ground), which a
-confirmed face keeps. A check takes about 7 ms at 320 x 240 (30 hypotheses over some
-12,000 pixels), on the pairs with such a band only.
+confirmed face keeps; and of a band with too little expected of it to be judged by its
+edges (faint pavement), which only a confirmed face makes one. A check takes about 7-10
+ms at 320 x 240 (30-40 hypotheses over some 12,000 pixels), on the pairs with such a band
+only.
 
 Frames: the left optical frame (x right, y down, z forward); ranges along the ground
 from the point below the left camera, as in `core.unseen_ground`.
@@ -75,6 +85,11 @@ RANGE_TOL_M = 0.3
 RANGE_TOL_SHARE = 0.1
 #: Fewest pixels of the region a hypothesis must be scored on.
 MIN_PIXELS = 200
+#: The ground going on may bend at the band's near edge by these grades (rise per
+#: metre): the face must beat each (beyond a crest's brow the ground falls away; a
+#: surface falling or rising at a grazing angle keeps nearly one disparity up the image,
+#: as a face does).
+BEND_GRADES = (-0.3, -0.2, -0.1, 0.1, 0.2, 0.3)
 
 
 @dataclass(frozen=True)
@@ -84,10 +99,15 @@ class FaceCheck:
     Attributes:
         range: metres along the ground to the best face hypothesis.
         near_range: metres along the ground to the band's near edge (the sweep's R).
+        far_range: metres along the ground to the band's far end: a face up to the
+            range tolerance beyond it stands in the band.
+        at_end: the best face lies at the sweep's nearest or farthest range: no peak
+            (beyond a crest's brow the scores rise on to the farthest range tried).
         height: metres above the ground of the tested region's top (``height_m``, or
             less where the image ends first).
         score: NCC of the best face hypothesis, -1..1.
-        ground: NCC of the ground going on, -1..1.
+        ground: NCC of the ground going on, flat or bent at the band's edge by one of
+            ``BEND_GRADES`` (the best), -1..1.
         off_peak: best NCC of the face hypotheses at least ``OFF_PEAK_PX`` from the
             best in disparity (-1 when there is none).
         disparity: pixels, the best face's disparity at the region's centre.
@@ -98,6 +118,8 @@ class FaceCheck:
 
     range: float
     near_range: float
+    far_range: float
+    at_end: bool
     height: float
     score: float
     ground: float
@@ -109,15 +131,22 @@ class FaceCheck:
     def confirmed(self, min_ncc: float, margin: float) -> bool:
         """Whether a face stands at the band's edge (see the module doc)."""
         tol = max(RANGE_TOL_M, RANGE_TOL_SHARE * self.near_range)
-        return (self.score >= min_ncc and self.score >= self.ground + margin
+        return (not self.at_end and self.score >= min_ncc
+                and self.score >= self.ground + margin
                 and self.score >= self.off_peak + margin
-                and abs(self.range - self.near_range) <= tol)
+                and self.near_range - tol <= self.range
+                <= max(self.near_range, self.far_range) + tol)
 
 
 def _gradient(img: np.ndarray) -> np.ndarray:
     """(H, W) float32 horizontal gradient of a grey image smoothed by ``FACE_BLUR_PX``."""
     g = cv2.GaussianBlur(img.astype(np.float32), (0, 0), FACE_BLUR_PX)
     return cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3)
+
+
+def _finite(x: float) -> float:
+    """A score for ``max``: NaN (not scored) below every score."""
+    return x if math.isfinite(x) else -math.inf
 
 
 def _ncc(a: np.ndarray, b: np.ndarray) -> float:
@@ -202,16 +231,19 @@ class _Warp:
 
 
 def _sweep(face: Callable[[float], float], d_far: float, d_near: float
-           ) -> tuple[float, float, float] | None:
+           ) -> tuple[float, float, float, bool] | None:
     """The best of ``face`` (a score of the region centre's disparity) from d_far to
     d_near: every ``COARSE_PX``, then every ``STEP_PX`` within ``COARSE_PX`` of the
     best. Returns (its disparity, its score, the best score ``OFF_PEAK_PX`` or more
-    from it, -1 when none), or None when nothing could be scored."""
+    from it, -1 when none, whether the best of every ``COARSE_PX`` was the sweep's
+    first or last: no peak, the scores may rise on beyond it), or None when nothing
+    could be scored."""
     dc = np.arange(d_far, d_near + 1e-9, COARSE_PX)
     scores = np.array([face(float(d)) for d in dc])
     if not np.isfinite(scores).any():
         return None
     j = int(np.nanargmax(scores))
+    at_end = j == 0 or j == len(dc) - 1
     rivals = scores[np.abs(dc - dc[j]) >= OFF_PEAK_PX]
     rivals = rivals[np.isfinite(rivals)]
     fine = np.arange(dc[j] - COARSE_PX + STEP_PX, dc[j] + COARSE_PX - 1e-9, STEP_PX)
@@ -219,11 +251,13 @@ def _sweep(face: Callable[[float], float], d_far: float, d_near: float
     dc = np.concatenate([dc[j:j + 1], fine])
     scores = np.concatenate([scores[j:j + 1], [face(float(d)) for d in fine]])
     j = int(np.nanargmax(scores))
-    return float(dc[j]), float(scores[j]), float(rivals.max()) if len(rivals) else -1.0
+    return (float(dc[j]), float(scores[j]), float(rivals.max()) if len(rivals) else -1.0,
+            at_end)
 
 
 def check_face(left: np.ndarray, right: np.ndarray, cam: StereoCamera, metric: MetricPlane,
-               near_m: float, half_width_m: float, height_m: float) -> FaceCheck | None:
+               near_m: float, half_width_m: float, height_m: float,
+               far_m: float | None = None) -> FaceCheck | None:
     """The plane sweep of a face standing across the walking direction at the edge of an
     unseen band (see the module doc).
 
@@ -234,6 +268,8 @@ def check_face(left: np.ndarray, right: np.ndarray, cam: StereoCamera, metric: M
         near_m: metres along the ground to the band's near edge (> 0).
         half_width_m: metres, the corridor's half width (> 0).
         height_m: metres above the ground up to which the face is tested (> 0).
+        far_m: metres along the ground to the band's far end: faces are swept out to
+            there, or to ``near_m + FAR_SWEEP_M`` if farther (None: ``near_m``).
     Returns:
         The check, or None when the region is out of the image or too small to score.
     """
@@ -254,7 +290,9 @@ def check_face(left: np.ndarray, right: np.ndarray, cam: StereoCamera, metric: M
     centre = fr[(v1 - v0) // 2, (u1 - u0) // 2]
     g_centre = float(d_ground[(v1 - v0) // 2, (u1 - u0) // 2])
     offset = float(fwd @ origin)
-    d_far = fb * centre / (near_m + FAR_SWEEP_M + offset)
+    far = near_m if far_m is None else float(far_m)
+    # (beyond the far end by the tolerance: a face just at it is a peak too)
+    d_far = fb * centre / (max(near_m + FAR_SWEEP_M, far + RANGE_TOL_M) + offset)
     d_near = fb * centre / max(near_m - NEAR_SWEEP_M + offset, 0.3)
     if not (math.isfinite(d_far) and d_far > 0.0 and d_near > d_far):
         return None
@@ -263,6 +301,14 @@ def check_face(left: np.ndarray, right: np.ndarray, cam: StereoCamera, metric: M
     with np.errstate(divide='ignore', invalid='ignore'):
         # each pixel's ray meets the ground this far ahead (inf: above the horizon)
         ahead = np.where(d_ground > 0.0, fb / d_ground * fr - offset, np.inf)
+        # the ground going on bent at the band's edge (a crest's brow, a rise): beyond
+        # near_m, up . (X - origin) = g (fwd . X - offset - near_m) on X = Z ray
+        a_up, c_up = warp.ray @ up, float(up @ origin)
+        for g in BEND_GRADES:
+            z = (c_up - g * (offset + near_m)) / (a_up - g * fr)
+            bent = np.where(ahead > near_m, np.where((z > 0.0) & (z * fr - offset > near_m),
+                                                     fb / z, np.nan), d_ground)
+            ground = max(ground, warp.score(np.where(bent > 0.0, bent, np.nan)), key=_finite)
 
     def face(d: float) -> float:
         """The score of the ground up to the face whose disparity at the region's
@@ -273,9 +319,9 @@ def check_face(left: np.ndarray, right: np.ndarray, cam: StereoCamera, metric: M
     best = _sweep(face, d_far, d_near)
     if best is None:
         return None
-    d_best, s_best, off_peak = best
+    d_best, s_best, off_peak, at_end = best
     return FaceCheck(range=float(fb * centre / d_best - offset), near_range=float(near_m),
-                     height=top_h, score=s_best,
+                     far_range=far, at_end=at_end, height=top_h, score=s_best,
                      ground=float(ground) if math.isfinite(ground) else -1.0,
                      off_peak=off_peak, disparity=d_best,
                      excess=d_best - (g_centre if g_centre > 0.0 else 0.0),

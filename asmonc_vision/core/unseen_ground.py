@@ -55,8 +55,15 @@ from R out to the corridor's far end (at least ``MIN_CELLS`` of them):
   ground usually shows there, and is not hidden; a wall's face shows the noise alone.
   A wall's face can show texture too, too faint for the edges: when the caller gives a
   ``face`` judge (`update`; the detector's is the stereo plane sweep of
-  `core.plain_face`) and it finds a face standing at the band's near edge, the band is
-  hidden all the same.
+  `core.plain_face`) and it finds a face standing in the band (from its near edge to
+  its far end), the band is hidden all the same.
+- On faint pavement the ground shows so few matched edges beyond 3 m that no band
+  there is expected to show ``min_expected`` of them, and on a level chest camera the
+  ground before it may be barely in view: such a band (every condition above but
+  ``min_expected`` and the ground in front) is judged by the ``face`` judge alone. A
+  face it finds standing in the band makes it hidden (and places it for
+  `_keeps_to_wearer`: a wall walked up to comes nearer, however steady the edges'
+  reach); no face, no band.
 The nearest such R, found in ``frames`` pairs in a row (within a cell of the previous
 one; a pair whose band shows the ground's texture breaks the row; a pair without a
 ground plane is no observation, and the detector does not call `update` for it: what
@@ -391,6 +398,20 @@ class UnseenGroundMonitor:
         with np.errstate(invalid='ignore', divide='ignore'):
             return np.where(cnt > 0, tot / np.maximum(cnt, 1), np.nan)
 
+    def _near_edge(self, xy: np.ndarray, excess: np.ndarray, threshold,
+                   found: int) -> float:
+        """The band's near edge, metres: the last ground edge pixel seen in its first
+        cell ``found`` (xy: (K, 2) the pixels' ground points, excess: (K,) pixels,
+        threshold: scalar or (K,) pixels), or the cell's near end."""
+        r0 = float(self.range_edges[found])
+        thr = np.broadcast_to(np.asarray(threshold, float), excess.shape)
+        with np.errstate(invalid='ignore'):
+            on = (np.isfinite(excess) & (np.abs(excess) <= thr) & np.isfinite(xy[:, 0])
+                  & np.isfinite(xy[:, 1]))
+        inside = (on & (xy[:, 1] >= -self.half_width) & (xy[:, 1] < self.half_width)
+                  & (xy[:, 0] >= r0) & (xy[:, 0] < r0 + CELL_DEPTH_M))
+        return float(np.max(xy[inside, 0])) if inside.any() else r0
+
     def _foot_and_face(self, ii: np.ndarray, cam: StereoCamera, metric: MetricPlane,
                        r_near: float, far: float,
                        floor: float | None = None) -> tuple[float, bool | None]:
@@ -461,15 +482,18 @@ class UnseenGroundMonitor:
         return r_near, True
 
     # ---------------------------------------------------------------- update
-    def _band_start(self, trusted: np.ndarray, k_all: np.ndarray) -> int | None:
+    def _band_start(self, trusted: np.ndarray, k_all: np.ndarray,
+                    min_expected: float | None = None) -> int | None:
         """The first cell of the nearest band hidden out to the corridor's far end (the
-        module doc's first two conditions), or None."""
+        module doc's first two conditions; ``min_expected``: the least expectation over
+        it, None: ``self.min_expected``), or None."""
         n_r = len(trusted)
+        least = self.min_expected if min_expected is None else min_expected
         # suffix sums over the trusted cells, from the far end in
         lam = np.where(trusted, self.expected, 0.0)[::-1].cumsum()[::-1]
         k = np.where(trusted, k_all, 0.0)[::-1].cumsum()[::-1]
         cells = trusted[::-1].cumsum()[::-1]
-        starts = flat_nonzero(trusted & (cells >= MIN_CELLS) & (lam >= self.min_expected)
+        starts = flat_nonzero(trusted & (cells >= MIN_CELLS) & (lam >= least)
                                 & (k <= self.max_ratio * lam + SLACK))
         if not len(starts):
             return None
@@ -485,7 +509,8 @@ class UnseenGroundMonitor:
                excess: np.ndarray, threshold: np.ndarray | float,
                explained: np.ndarray | None = None, left: np.ndarray | None = None,
                travel_m: float | None = None,
-               face: Callable[[float], bool] | None = None) -> UnseenReport | None:
+               face: Callable[[float, float], float | None] | None = None
+               ) -> UnseenReport | None:
         """Count one frame's edge pixels, report the unseen band, learn the rest.
 
         Args:
@@ -503,9 +528,11 @@ class UnseenGroundMonitor:
             travel_m: metres the wearer walked forward along the ground since the
                 previous pair (the camera's motion laid on the plane), or None (unknown):
                 for a band that keeps to the wearer (`_keeps_to_wearer`).
-            face: whether a face stands across the corridor at a range (metres; e.g.
-                `core.plain_face`): a band whose image shows texture is still hidden
-                where that texture is a face standing at its near edge (None: never).
+            face: the range (metres) of a face standing across the corridor in a band
+                from its near edge to its far end (the two arguments, metres), or None
+                (e.g. `core.plain_face`): a band whose image shows texture is still
+                hidden where that texture is such a face, and a band with too little
+                expected of it is one where there is such a face (None: never).
         Returns:
             the report, or None.
         """
@@ -529,7 +556,18 @@ class UnseenGroundMonitor:
         found = self._band_start(trusted, k_all)
         if found is not None and self._beyond(seen, view, found) >= BEYOND_MIN:
             found = None        # ground seen beyond the far end is seen past the band
-        follows = self._keeps_to_wearer(found, travel_m)
+        faced = None
+        if found is None and face is not None:
+            # too little expected of the band, or too little of the ground before it, to
+            # say it is hidden (faint pavement): a face the judge finds standing in it is
+            # evidence enough
+            weak = self._band_start(trusted, k_all, 0.0)
+            if weak is not None and self._beyond(seen, view, weak) < BEYOND_MIN:
+                far = float(self.range_edges[flat_nonzero(trusted)[-1] + 1])
+                faced = face(self._near_edge(xy, excess, threshold, weak), far)
+                found = weak if faced is not None else None
+        # (such a band is where its face stands: a wall walked up to comes nearer)
+        follows = self._keeps_to_wearer(found, travel_m, faced)
         learn = view.copy()
         report = None
         if found is None or follows:
@@ -546,14 +584,14 @@ class UnseenGroundMonitor:
             lam_f = float(self.expected[front].sum())
             front_ok = (lam_f >= FRONT_MIN * self.min_expected
                         and float(k_all[front].sum()) >= FRONT_RATIO * lam_f)
-            if front_ok or near:
+            if front_ok or near or faced is not None:
                 self._streak = self._streak + 1 if near else 1
                 self._last_cell = found
                 report, textured = self._report(cam, metric, xy, excess, threshold, band,
                                                 found, k_all, explained, ii,
                                                 float(self._count(xy[raised])[band].sum()),
                                                 noise_energy(left) if left is not None else None,
-                                                face)
+                                                face, faced is not None)
                 if textured:
                     # the band showed the ground's own texture: this pair is evidence
                     # against it, and the pairs in a row start again (a turn that sets
@@ -599,11 +637,13 @@ class UnseenGroundMonitor:
         g[old_e] += rate_e[old_e] * (z_e[old_e] - g[old_e])         # x <- x + a (z - x)
         self.seen_frames[learn] += 1
 
-    def _keeps_to_wearer(self, found: int | None, travel_m: float | None) -> bool:
-        """Whether the band found this pair (its first cell ``found``, None: none) keeps
-        to the wearer. The pairs since a band was first found, each at the distance
-        walked so far (a pair with an unknown ``travel_m`` adds no distance) with the
-        band's range (NaN: none found), are kept over the last 2 ``follow_travel_m`` of
+    def _keeps_to_wearer(self, found: int | None, travel_m: float | None,
+                         at: float | None = None) -> bool:
+        """Whether the band found this pair (its first cell ``found``, None: none; ``at``:
+        its range, metres, None: its first cell's near end) keeps to the wearer. The
+        pairs since a band was first found, each at the distance walked so far (a pair
+        with an unknown ``travel_m`` adds no distance) with the band's range (NaN: none
+        found), are kept over the last 2 ``follow_travel_m`` of
         walking, until no band is found over ``FOLLOW_GAP_SHARE`` of ``follow_travel_m``;
         once they span ``follow_travel_m`` and at least ``FOLLOW_FOUND_SHARE`` of them
         found it, the band keeps to the wearer if its near edge's range fell by less
@@ -634,7 +674,7 @@ class UnseenGroundMonitor:
                 trail.append((self._travel, math.nan))
                 self._trim(trail)
             return False
-        r = float(self.range_edges[found])
+        r = float(self.range_edges[found]) if at is None else float(at)
         if self._follows and r < self._follow_range - 2.0 * CELL_DEPTH_M:
             trail.clear()
             self._follows = False
@@ -687,27 +727,21 @@ class UnseenGroundMonitor:
                 excess: np.ndarray, threshold, band: np.ndarray, found: int,
                 k_all: np.ndarray, explained: np.ndarray | None,
                 ii: np.ndarray | None, raised: float = 0.0,
-                floor: float | None = None, face: Callable[[float], bool] | None = None
+                floor: float | None = None,
+                face: Callable[[float, float], float | None] | None = None, faced: bool = False
                 ) -> tuple[UnseenReport | None, bool]:
         """The found band as a report: its near edge placed, unless a known obstacle
         explains it or it has not yet been found ``frames`` pairs in a row. ``ii``: the
         integral image of the pair's texture energy (`_texture_integral`; None: no image);
         ``raised``: the band's matched edge pixels standing above the threshold;
         ``floor``: the pixel noise's texture energy (`noise_energy`; None: unknown);
-        ``face``: as `update`'s (a textured band at whose near edge a face stands is
-        hidden all the same). Returns (the report or None, whether the band showed the
-        ground's own fine texture)."""
-        r0 = float(self.range_edges[found])
-        # the last ground seen in the band's first cell moves R to it
-        thr = np.broadcast_to(np.asarray(threshold, float), excess.shape)
-        with np.errstate(invalid='ignore'):
-            on = (np.isfinite(excess) & (np.abs(excess) <= thr) & np.isfinite(xy[:, 0])
-                  & np.isfinite(xy[:, 1]))
-        inside = (on & (xy[:, 1] >= -self.half_width) & (xy[:, 1] < self.half_width)
-                  & (xy[:, 0] >= r0) & (xy[:, 0] < r0 + CELL_DEPTH_M))
-        r_near = float(np.max(xy[inside, 0])) if inside.any() else r0
+        ``face``: as `update`'s (a textured band in which a face stands is hidden all
+        the same); ``faced``: the band is one only for the face the judge found in it
+        (its texture is not judged). Returns (the report or None, whether the band showed
+        the ground's own fine texture)."""
+        r_near = self._near_edge(xy, excess, threshold, found)
         far = float(self.range_edges[flat_nonzero(band)[-1] + 1])
-        if ii is not None:
+        if ii is not None and not faced:
             # the texture the ground at the face's range usually shows; unless the band's
             # matched edges stand above the ground, as many as the ground's are missing
             # (a raised footway beyond a kerb: textured, but not the ground)
@@ -715,7 +749,7 @@ class UnseenGroundMonitor:
             r_near, plain = self._foot_and_face(
                 ii, cam, metric, r_near, far,
                 floor if raised <= self.max_ratio * lam + SLACK else None)
-            if plain is False and (face is None or not face(r_near)):
+            if plain is False and (face is None or face(r_near, far) is None):
                 # the band shows the ground's fine texture (not a face's that stands
                 # at its edge): nothing plain hides it
                 return None, True

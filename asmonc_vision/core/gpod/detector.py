@@ -256,10 +256,11 @@ class GpodDetector(Tracking):
         band that keeps to the wearer, is the camera's motion (`_ground_motion`, as the
         ground surface is carried; ``still``: the rig stood still) along the plane's
         forward axis. With the right image given and ``unseen.face_min_ncc`` > 0, a
-        band whose near edge a plain face stands at (`core.plain_face`) is that face
-        instead: an untracked obstacle ``unseen.face_height_m`` tall (or as high as the
-        image shows it) at the face's range, straight ahead, the corridor's width, with
-        the band's confidence."""
+        band in which a plain face stands (`core.plain_face`, swept from the band's near
+        edge to its far end) is that face instead: an untracked obstacle
+        ``unseen.face_height_m`` tall (or as high as the image shows it) at the face's
+        range, straight ahead, the corridor's width, with the band's confidence (its
+        seen edge pixels against at least ``unseen.min_expected``)."""
         if self._unseen is None:
             return ()
         # the known feet on the ground: (forward, left) from their range and bearing; a
@@ -276,29 +277,31 @@ class GpodDetector(Tracking):
                 # pair's frame; its forward part along the ground is the travel
                 travel = float(np.asarray(motion[1], float).reshape(3) @ ground_axes(metric)[1])
         us = self.config.unseen
-        checks: dict[float, FaceCheck | None] = {}
+        checks: dict[tuple[float, float], FaceCheck | None] = {}
         left = self._left
 
-        def face_at(range_m: float) -> FaceCheck | None:
-            """The plain-face check at a band's near edge (once per range), if it
-            confirms a face."""
+        def face_at(range_m: float, far_m: float) -> FaceCheck | None:
+            """The plain-face check of a band from its near edge to its far end (once
+            per band), if it confirms a face."""
             if left is None or right is None:
                 return None
-            if range_m not in checks:
+            if (range_m, far_m) not in checks:
                 fc = check_face(left, right, cam, metric, range_m, us.half_width_m,
-                                us.face_height_m)
-                checks[range_m] = (fc if fc is not None
-                                   and fc.confirmed(us.face_min_ncc, us.face_margin) else None)
-            return checks[range_m]
+                                us.face_height_m, far_m)
+                checks[range_m, far_m] = (fc if fc is not None and fc.confirmed(
+                    us.face_min_ncc, us.face_margin) else None)
+            return checks[range_m, far_m]
 
         faces = us.face_min_ncc > 0.0 and right is not None and left is not None
         r = self._unseen.update(cam, metric, features.u_left, features.v, features.excess,
                                 thr, explained, left=left, travel_m=travel,
-                                face=(lambda x: face_at(x) is not None) if faces else None)
+                                face=(lambda x, far: _face_range(face_at(x, far)))
+                                if faces else None)
         if r is None:
             return ()
-        confidence = float(np.clip(1.0 - r.seen / r.expected, 0.0, 1.0))
-        face = face_at(r.range) if faces else None
+        # (a band kept for its face alone may have had less expected of it)
+        confidence = float(np.clip(1.0 - r.seen / max(r.expected, us.min_expected), 0.0, 1.0))
+        face = face_at(r.range, r.far_range) if faces else None
         if face is not None:
             return (_face_obstacle(face, cam, metric, r.width, confidence),)
         u, v = cam.project_left(np.stack([r.position, r.position - r.height
@@ -425,6 +428,11 @@ class GpodDetector(Tracking):
         return textured_edge_threshold(left, c.edges.threshold, min_density=c.edges.min_density,
                                        target_density=c.edges.target_density, floor=floor,
                                        blur_sigma=c.edges.blur_sigma)
+
+
+def _face_range(face: FaceCheck | None) -> float | None:
+    """The range of a confirmed face, metres, or None."""
+    return None if face is None else face.range
 
 
 def _face_obstacle(face: FaceCheck, cam: StereoCamera, metric: MetricPlane, width: float,

@@ -578,12 +578,13 @@ class UnseenSettings:
         'hiding it): not reported, and learnt as what the ground shows; metres, 0 = off',
         range=(0.0, 20.0))
     face_min_ncc: float = param(
-        0.25, 'Unseen ground, plain face (`core.plain_face`): the image above a reported '
-        'band\'s near edge is swept for a face standing across the walking direction; a '
-        'face whose gradients match between the images at least this well (normalised '
-        'cross-correlation), and face_margin better than the ground going on and than any '
-        'other face range, is reported as an obstacle face_height_m tall at its range in '
-        'place of the unknown ground; 0 = off', range=(0.0, 1.0))
+        0.25, 'Unseen ground, plain face (`core.plain_face`): the image above a band\'s '
+        'near edge is swept, out to its far end, for a face standing across the walking '
+        'direction; a face whose gradients match between the images at least this well '
+        '(normalised cross-correlation), and face_margin better than the ground going on '
+        'and than any other face range, is reported as an obstacle face_height_m tall at '
+        'its range in place of the unknown ground (also in a band with too little '
+        'expected of it to be judged by its edges); 0 = off', range=(0.0, 1.0))
     face_margin: float = param(
         0.15, 'Unseen ground, plain face: least margin of the face\'s correlation over the '
         'ground\'s and over its rival ranges\' (one clear peak), 0..1', range=(0.0, 1.0))
