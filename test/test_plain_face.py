@@ -228,3 +228,39 @@ def test_the_detector_reports_a_faint_wall_as_an_obstacle_not_unknown_ground():
         counts[ncc] = (face, unknown)
     assert counts[0.25][0] >= 8 and counts[0.25][1] <= 2, counts    # of 10 frames
     assert counts[0.0][0] <= 1 and counts[0.0][1] >= 8, counts
+
+
+def _confirmed_face(range_m: float):
+    left, right = _scene(0, 2.5)
+    fc = check_face(left, right, CAM, METRIC, 2.55, 0.5, 1.0)
+    assert fc is not None and fc.confirmed(0.25, 0.15)
+    import dataclasses
+    return dataclasses.replace(fc, range=range_m)
+
+
+def test_a_remembered_face_is_carried_to_the_band_it_hides():
+    """A face confirmed 4 m ahead, walked towards 0.1 m a pair: the band found 2.6-3.5 m
+    ahead in the pairs after (no peak of its own) is that face, at its carried range;
+    a pair or two without a band is bridged, three are not; a band far from it, or a pair
+    whose travel is unknown, forgets it."""
+    from asmonc_vision.core.plain_face import FaceMemory
+    mem = FaceMemory(max_gap=2)
+    assert mem.explains(3.0) is None                 # nothing remembered
+    mem.confirmed(_confirmed_face(4.0))
+    for k in range(1, 6):
+        mem.carry(0.1)
+        got = mem.explains(4.0 - 0.1 * k + 0.2)       # the band's edge a little beyond
+        assert got is not None and got.range == pytest.approx(4.0 - 0.1 * k), (k, got)
+    for _ in range(2):                                # two pairs without the band
+        mem.carry(0.1)
+        assert mem.explains(None) is None
+    mem.carry(0.0)
+    assert mem.explains(3.2) is not None              # bridged: the face at 3.3 m
+    for _ in range(3):
+        mem.explains(None)
+    assert mem.face is None                           # three: forgotten
+    mem.confirmed(_confirmed_face(4.0))
+    assert mem.explains(2.0) is None and mem.face is None    # a band elsewhere
+    mem.confirmed(_confirmed_face(4.0))
+    mem.carry(None)
+    assert mem.face is None                           # travel unknown

@@ -46,13 +46,16 @@ which a confirmed face replaces by an obstacle; of a band whose image shows text
 confirmed face keeps; and of a band with too little expected of it to be judged by its
 edges (faint pavement), which only a confirmed face makes one. A check takes about 7-10
 ms at 320 x 240 (30-40 hypotheses over some 12,000 pixels), on the pairs with such a band
-only.
+only. A confirmed face is remembered (`FaceMemory`): carried by the wearer's travel, it
+is the face of the band found near it in the pairs after, whose own check, the face
+filling the region as the wearer comes near, may find no single peak.
 
 Frames: the left optical frame (x right, y down, z forward); ranges along the ground
 from the point below the left camera, as in `core.unseen_ground`.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Callable
@@ -326,3 +329,69 @@ def check_face(left: np.ndarray, right: np.ndarray, cam: StereoCamera, metric: M
                      off_peak=off_peak, disparity=d_best,
                      excess=d_best - (g_centre if g_centre > 0.0 else 0.0),
                      roi=(u0, v0, u1 - u0, v1 - v0))
+
+
+#: `FaceMemory`: a band found this near the carried face (metres, or this share of its
+#: range if more) is the band the face hides.
+MEMORY_TOL_M = 0.5
+MEMORY_TOL_SHARE = 0.15
+
+
+class FaceMemory:
+    """The last confirmed face, carried through the wearer's travel while the band it
+    hides goes on being found.
+
+    A face is confirmed 4-5 m ahead and walked up to; nearer, the check at the band's
+    edge can lose its single peak (the face fills the tested region: on a level chest
+    camera, rival ranges within 0.15 at 2.5-3 m), and the band alone is said as
+    unknown ground. What hid the ground there was a face, and it stands where it stood:
+    the band found within ``MEMORY_TOL_M`` (or ``MEMORY_TOL_SHARE``) of the face carried
+    by the travel is that face. The memory bridges at most ``max_gap`` pairs without
+    a band or a confirmation, and is forgotten when the travel is unknown (a pair whose
+    plane was lost carried nothing).
+
+    Args:
+        max_gap: pairs in a row without the band that the memory outlasts (>= 0).
+    """
+
+    def __init__(self, max_gap: int) -> None:
+        if max_gap < 0:
+            raise ValueError(f'max_gap = {max_gap} must be >= 0')
+        self.max_gap = int(max_gap)
+        self.forget()
+
+    def forget(self) -> None:
+        """No face remembered."""
+        self.face: FaceCheck | None = None
+        self._gap = 0
+
+    def carry(self, travel_m: float | None) -> None:
+        """The wearer walked ``travel_m`` metres forward along the ground since the
+        previous pair (None: unknown, and the memory is forgotten)."""
+        if self.face is None:
+            return
+        if travel_m is None or not math.isfinite(travel_m):
+            self.forget()
+            return
+        self.face = dataclasses.replace(self.face, range=self.face.range - float(travel_m))
+
+    def confirmed(self, face: FaceCheck) -> None:
+        """A face confirmed this pair: remembered."""
+        self.face = face
+        self._gap = 0
+
+    def explains(self, band_range: float | None) -> FaceCheck | None:
+        """The remembered face, at its carried range, if a band found this pair at
+        ``band_range`` metres (None: none) is the one it hides; else None (and the
+        memory is forgotten once ``max_gap`` pairs in a row had no band)."""
+        face = self.face
+        if face is None:
+            return None
+        if band_range is not None and abs(band_range - face.range) <= max(
+                MEMORY_TOL_M, MEMORY_TOL_SHARE * face.range):
+            self._gap = 0
+            return face
+        self._gap += 1
+        if self._gap > self.max_gap or band_range is not None:
+            self.forget()
+        return None

@@ -137,6 +137,7 @@ class GpodDetector(Tracking):
             self._tracker.reset()
             self._surface_tracker.reset()
             self._last_motion = None
+            self._face_memory.forget()      # (carried by no travel over this pair)
             if self._unseen is not None and status == 'initialising':
                 # a new calibration; a pair whose plane is lost is no observation of
                 # the ground the wearer walks on: the expectation and the band's pairs
@@ -260,7 +261,9 @@ class GpodDetector(Tracking):
         edge to its far end) is that face instead: an untracked obstacle
         ``unseen.face_height_m`` tall (or as high as the image shows it) at the face's
         range, straight ahead, the corridor's width, with the band's confidence (its
-        seen edge pixels against at least ``unseen.min_expected``)."""
+        seen edge pixels against at least ``unseen.min_expected``); so is a band found
+        near the face confirmed in the pairs before, carried by the travel
+        (`core.plain_face.FaceMemory`)."""
         if self._unseen is None:
             return ()
         # the known feet on the ground: (forward, left) from their range and bearing; a
@@ -269,14 +272,17 @@ class GpodDetector(Tracking):
                       if o.confidence >= self.config.unseen.explain_min_confidence)
         explained = _ground_points(known) if known else None
         thr = features.threshold if features.threshold is not None else threshold
+        us = self.config.unseen
+        faces = us.face_min_ncc > 0.0 and right is not None and self._left is not None
         travel = None
-        if self._unseen.follow_travel_m > 0.0:
+        if self._unseen.follow_travel_m > 0.0 or faces:
             motion = self._ground_motion(still)
             if motion is not None:
                 # X_prev = R X_curr + t: t is the camera's position now, in the previous
                 # pair's frame; its forward part along the ground is the travel
                 travel = float(np.asarray(motion[1], float).reshape(3) @ ground_axes(metric)[1])
-        us = self.config.unseen
+        memory = self._face_memory
+        memory.carry(travel)
         checks: dict[tuple[float, float], FaceCheck | None] = {}
         left = self._left
 
@@ -292,16 +298,22 @@ class GpodDetector(Tracking):
                     us.face_min_ncc, us.face_margin) else None)
             return checks[range_m, far_m]
 
-        faces = us.face_min_ncc > 0.0 and right is not None and left is not None
         r = self._unseen.update(cam, metric, features.u_left, features.v, features.excess,
                                 thr, explained, left=left, travel_m=travel,
                                 face=(lambda x, far: _face_range(face_at(x, far)))
                                 if faces else None)
         if r is None:
+            memory.explains(None)
             return ()
         # (a band kept for its face alone may have had less expected of it)
         confidence = float(np.clip(1.0 - r.seen / max(r.expected, us.min_expected), 0.0, 1.0))
         face = face_at(r.range, r.far_range) if faces else None
+        if face is not None:
+            memory.confirmed(face)
+        else:
+            # the face confirmed in the pairs before, carried, if this band is the one
+            # it hides (near, its single peak can be lost)
+            face = memory.explains(r.range)
         if face is not None:
             return (_face_obstacle(face, cam, metric, r.width, confidence),)
         u, v = cam.project_left(np.stack([r.position, r.position - r.height

@@ -16,6 +16,7 @@ from ..ground_plane import PlaneFit
 from ..ground_surface import GroundSurface
 from ..surface_tracking import SurfaceTracker
 from ..obstacle_tracks import ObstacleTracker
+from ..plain_face import FaceMemory
 from ..unseen_ground import UnseenGroundMonitor
 from .footing import _FrameContext
 from .settings import GpodConfig
@@ -114,4 +115,6 @@ class DetectorState:
                                             c.unseen.half_width_m,
                                             c.unseen.follow_travel_m)
                         if c.unseen.max_ratio > 0 else None)
+        #: the last plain face confirmed in an unseen band, carried by the travel
+        self._face_memory = FaceMemory(c.unseen.frames)
 
