@@ -46,9 +46,12 @@ which a confirmed face replaces by an obstacle; of a band whose image shows text
 confirmed face keeps; and of a band with too little expected of it to be judged by its
 edges (faint pavement), which only a confirmed face makes one. A check takes about 7-10
 ms at 320 x 240 (30-40 hypotheses over some 12,000 pixels), on the pairs with such a band
-only. A confirmed face is remembered (`FaceMemory`): carried by the wearer's travel, it
-is the face of the band found near it in the pairs after, whose own check, the face
-filling the region as the wearer comes near, may find no single peak.
+only: none on the bench bags; on faint pavement or a grate, where a faint band is found
+in most pairs, the detector takes up to 15 % more CPU a walk (tuning grate 1020,
+backpack: about 8 ms a pair). A confirmed face is remembered (`FaceMemory`): carried
+by the wearer's travel, it is the face of the band found near it in the pairs after,
+whose own check, the face filling the region as the wearer comes near, may find no
+single peak.
 
 Frames: the left optical frame (x right, y down, z forward); ranges along the ground
 from the point below the left camera, as in `core.unseen_ground`.
@@ -285,9 +288,11 @@ def check_face(left: np.ndarray, right: np.ndarray, cam: StereoCamera, metric: M
     warp = _Warp(left, right, cam, u0, u1, v0, v1)
     fb = cam.fb
     # the ground going on: up . X = up . origin on the ray X = Z ray
+    a_up, c_up = warp.ray @ up, float(up @ origin)
     with np.errstate(divide='ignore', invalid='ignore'):
-        d_ground = fb * (warp.ray @ up) / float(up @ origin)
-    ground = warp.score(np.where(d_ground > 0.0, d_ground, np.nan))
+        d_ground = fb * a_up / c_up
+    d_g = np.where(d_ground > 0.0, d_ground, np.nan).astype(np.float32)
+    ground = warp.score(d_g)
     # a face at Rf: fwd . X = Rf + fwd . origin; its disparity is fb (fwd . ray) / that
     fr = warp.ray @ fwd
     centre = fr[(v1 - v0) // 2, (u1 - u0) // 2]
@@ -300,13 +305,11 @@ def check_face(left: np.ndarray, right: np.ndarray, cam: StereoCamera, metric: M
     if not (math.isfinite(d_far) and d_far > 0.0 and d_near > d_far):
         return None
     fr32 = fr.astype(np.float32)
-    d_g = np.where(d_ground > 0.0, d_ground, np.nan).astype(np.float32)
     with np.errstate(divide='ignore', invalid='ignore'):
         # each pixel's ray meets the ground this far ahead (inf: above the horizon)
         ahead = np.where(d_ground > 0.0, fb / d_ground * fr - offset, np.inf)
         # the ground going on bent at the band's edge (a crest's brow, a rise): beyond
         # near_m, up . (X - origin) = g (fwd . X - offset - near_m) on X = Z ray
-        a_up, c_up = warp.ray @ up, float(up @ origin)
         for g in BEND_GRADES:
             z = (c_up - g * (offset + near_m)) / (a_up - g * fr)
             bent = np.where(ahead > near_m, np.where((z > 0.0) & (z * fr - offset > near_m),
@@ -382,8 +385,9 @@ class FaceMemory:
 
     def explains(self, band_range: float | None) -> FaceCheck | None:
         """The remembered face, at its carried range, if a band found this pair at
-        ``band_range`` metres (None: none) is the one it hides; else None (and the
-        memory is forgotten once ``max_gap`` pairs in a row had no band)."""
+        ``band_range`` metres (None: none) is the one it hides; else None, and the
+        memory is forgotten when the band lies elsewhere or ``max_gap`` pairs in a row
+        had none. (The face keeps the image region it was tested on.)"""
         face = self.face
         if face is None:
             return None

@@ -273,7 +273,8 @@ class GpodDetector(Tracking):
         explained = _ground_points(known) if known else None
         thr = features.threshold if features.threshold is not None else threshold
         us = self.config.unseen
-        faces = us.face_min_ncc > 0.0 and right is not None and self._left is not None
+        left = self._left
+        faces = us.face_min_ncc > 0.0 and right is not None and left is not None
         travel = None
         if self._unseen.follow_travel_m > 0.0 or faces:
             motion = self._ground_motion(still)
@@ -284,7 +285,6 @@ class GpodDetector(Tracking):
         memory = self._face_memory
         memory.carry(travel)
         checks: dict[tuple[float, float], FaceCheck | None] = {}
-        left = self._left
 
         def face_at(range_m: float, far_m: float) -> FaceCheck | None:
             """The plain-face check of a band from its near edge to its far end (once
