@@ -15,6 +15,7 @@ import pytest
 from asmonc_vision.core.camera import StereoCamera
 from asmonc_vision.core.config import override
 from asmonc_vision.core.gpod import GpodConfig, GpodDetector, rules
+from asmonc_vision.core.ground_surface import fall_limit
 
 CAM = StereoCamera(f=300.0, cx=159.5, cy=119.5, baseline=0.35, width=320, height=240)
 PITCH = np.radians(20.0)
@@ -247,3 +248,42 @@ def test_a_string_floating_within_the_rise_beyond_the_known_ground_is_that_groun
     ev = _risen_evidence(s, lat, h, sid, len(cases), known_until=3.0)
     rules.STRING_RULES['risen_ground'](override(GpodConfig(), {'risen.min_height_m': 0.0}), ev)
     assert ev.obst_string.all()
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_a_bend_is_judged_from_where_its_strings_leave_the_ground(seed):
+    """`rules.bending_ground` with ``lead``: a joint running ahead over a brow 4 m off (the
+    ground beyond falling 0.19 a metre, 1 cm of noise), whose pixels count as drop pixels
+    only deeper than 12 cm (the threshold there), has a line whose near end is 12 cm off:
+    no bend by that end alone, but a bend where its own pixels lead up to it. The same
+    joint over a 15 cm drop onto ground falling as steeply (the 0.45 m beyond the edge
+    hidden), over a flight of steps (0.55 a metre, steeper than ground a pedestrian
+    walks: max_grade), and beyond a gap in the joint stays a drop. (The wearer walks up
+    a 0.13 grade: the ground may fall by 0.25 a metre, `ground_surface.fall_limit`.)"""
+    rng = np.random.default_rng(seed)
+    s = np.arange(2.0, 7.0, 0.03)
+    s = s + rng.uniform(-0.01, 0.01, s.size)
+    lat = 0.5 + 0.01 * rng.normal(size=s.size)
+    noise = rng.normal(0.0, 0.01, s.size)
+    brow = -0.19 * np.maximum(s - 4.0, 0.0) + noise
+    step = np.where(s < 4.0, 0.0, -0.15 - 0.19 * (s - 4.0)) + noise
+    stairs = -0.55 * np.maximum(s - 4.0, 0.0) + noise
+    seen = ~((s >= 4.0) & (s < 4.45))                 # the drop hides what lies below its edge
+    gap = ~((s >= 4.0) & (s < 4.6))
+    sid = np.zeros(s.size, int)
+    c = GpodConfig()
+    cap = fall_limit(0.0, 0.13, c.surface.max_grade_fall)
+    assert cap == pytest.approx(0.25)
+    for h, keep, grade_cap, bend in ((brow, np.ones(s.size, bool), cap, True),
+                                     (step, seen, cap, False),
+                                     (stairs, np.ones(s.size, bool), cap, False),
+                                     (stairs, np.ones(s.size, bool), 0.6, True),
+                                     (brow, gap, cap, False),
+                                     (brow, np.ones(s.size, bool), 0.12, False)):
+        pts, plane = _along(s[keep], lat[keep], h[keep])
+        hk, sk = h[keep], sid[keep]
+        drop = hk < -0.12
+        assert not rules.bending_ground(c, drop, pts, hk, plane, 1, sk, 1.0, -1.0)[0]
+        got = rules.bending_ground(c, drop, pts, hk, plane, 1, sk, 1.0, -1.0, lead=~drop,
+                                   max_grade=grade_cap)
+        assert got[0] == bend, (bend, grade_cap)

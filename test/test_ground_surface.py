@@ -387,3 +387,21 @@ def test_the_lowest_ground_does_not_rise_beyond_the_known():
     down = fit_ground_surface(ground_points(slope_from(3.0, -5.0), np.random.default_rng(0),
                                             s_max=7.0), PLANE)
     assert down.tail_grade < 0.0 and down.lowest() is down
+
+
+def test_the_fall_limit_counts_from_level_where_the_ground_rose():
+    """`fall_limit`: max_grade_fall from the last grade on level ground or unknown level;
+    more by the grade the ground rose at; never less on a downhill. `level_grade`: the
+    plane's grade against the inclinometer's up."""
+    _, fwd, _ = ground_axes(PLANE)
+    for grade in (-0.1, 0.0, 0.13):
+        t = np.arctan(grade)
+        assert gs.level_grade(PLANE, np.cos(t) * PLANE.normal_up + np.sin(t) * fwd) == \
+            pytest.approx(grade)
+    assert gs.level_grade(PLANE, None) is None
+    assert gs.fall_limit(0.0, None, 0.12) == 0.12
+    assert gs.fall_limit(0.05, None, 0.12) == 0.12
+    assert gs.fall_limit(0.0, 0.0, 0.12) == 0.12
+    assert gs.fall_limit(0.0, 0.1, 0.12) == pytest.approx(0.22)
+    assert gs.fall_limit(0.05, 0.1, 0.12) == pytest.approx(0.27)
+    assert gs.fall_limit(0.0, -0.1, 0.12) == 0.12

@@ -534,6 +534,40 @@ def fit_ground_surface(points: np.ndarray, plane: MetricPlane,
     return flattened(out, c.min_bend_m) if flatten else out
 
 
+def level_grade(plane: MetricPlane, up: np.ndarray | None) -> float | None:
+    """The plane's grade along the walking direction against gravity (rise per metre,
+    > 0 rising ahead), from ``up`` (3,), the world's up direction in the left optical
+    frame (the inclinometer's); None without it."""
+    if up is None:
+        return None
+    u = np.asarray(up, float).reshape(3)
+    norm = float(np.linalg.norm(u))
+    if not math.isfinite(norm) or norm < 1e-9:
+        return None
+    _, fwd, _ = ground_axes(plane)
+    sin_t = float(fwd @ u) / norm
+    return sin_t / math.sqrt(max(1.0 - sin_t * sin_t, 1e-12))
+
+
+def fall_limit(grade: float, level: float | None, max_grade_fall: float) -> float:
+    """The largest fall of the ground's grade beyond ground of ``grade`` (relative to the
+    plane, rise per metre) that is still ground a pedestrian walks, the plane's own grade
+    against gravity being ``level`` (`level_grade`; None: unknown).
+
+    Walkable ground is judged against gravity, not against the ground the wearer stands
+    on: it may fall to ``max_grade_fall`` below level, or that much below the grade
+    before where that already falls. On level ground (or unknown level) that is
+    ``max_grade_fall``; after a rise of grade g (a crest's near side) it is
+    ``max_grade_fall + g`` (a crest from 7 degrees up to 7 degrees down falls by 0.25).
+
+    Returns:
+        The limit (>= max_grade_fall), rise per metre.
+    """
+    if level is None:
+        return max_grade_fall
+    return max_grade_fall + max(level + grade, 0.0)
+
+
 def tail_grade(knots_s: np.ndarray, knots_z: np.ndarray, known_until_m: float) -> float:
     """The grade (rise per metre) of the surface beyond its known ground: the one the
     last two known segments agree on (the smaller of theirs if they rise or fall alike,

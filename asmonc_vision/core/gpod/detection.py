@@ -13,7 +13,7 @@ import numpy as np
 from ..camera import (MetricPlane, StereoCamera, add_rows, ground_axes, plane_disparity,
                       row_norms, sub_scaled)
 from ..edges import EdgeMap, gradient_noise_gain
-from ..ground_surface import depth_noise, fit_ground_surface
+from ..ground_surface import depth_noise, fit_ground_surface, level_grade
 from ..matching import Candidates, Matches
 from . import kernels as kn
 from .faces import (
@@ -209,7 +209,7 @@ class Detection(PlaneTracking):
                            prev=prev, run=run, usable=usable, below=below, slope=slope,
                            weight=self._evidence_weight(m.strength),
                            min_px=self.min_obstacle_pixels(cam), n_s=n_s, obst=obst, drop=drop,
-                           surface=self._surface)
+                           surface=self._surface, level=level_grade(metric, self._up))
         run_rules(c, c.rules.pixels, PIXEL_RULES, ev)
         weight, min_px = ev.weight, ev.min_px
         n_obst = np.bincount(sid[obst], weights=weight[obst], minlength=n_s) + 1e-9

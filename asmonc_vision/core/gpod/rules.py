@@ -28,7 +28,7 @@ import numpy as np
 
 from ..camera import MetricPlane
 from ..edges import EdgeMap
-from ..ground_surface import GroundSurface
+from ..ground_surface import GroundSurface, fall_limit
 from ..matching import Candidates, Matches
 from . import kernels as kn
 from .faces import face_gap_points, lone_face_points, silhouette_owners, view_edge_points
@@ -59,6 +59,15 @@ LOWER_GROUND_FRACTION = 0.05
 #: ground is; a cluster whose line lies this far off the ground at its near end is a drop
 #: or an obstacle whatever its grade (the least step the wearer must be told of, m).
 BEND_MAX_START_M = 0.10
+#: Rule ``ground_bend``, a line farther off at its near end (`bending_ground`): its own
+#: strings lead up to it with at least this many pixels in the last BEND_LEAD_M (m)
+#: before it, the last at most BEND_LEAD_GAP_M (m) before it, their median at most
+#: BEND_LEAD_TOL_M (m) off the ground bent there (a kerb 10 cm down hides 0.3 m beyond
+#: its edge at 4 m on a chest camera, and its lower ground is level: 10 cm off).
+BEND_LEAD_MIN = 3
+BEND_LEAD_M = 0.5
+BEND_LEAD_GAP_M = 0.25
+BEND_LEAD_TOL_M = 0.04
 
 
 @dataclass
@@ -91,6 +100,9 @@ class FrameEvidence:
     n_drop: np.ndarray | None = None        # (n_s,) weighted drop pixels per string
     drop_string: np.ndarray | None = None   # (n_s,) bool (rules ``drops``)
     surface: GroundSurface | None = None    # the ground surface ahead (None: the plane)
+    #: the plane's grade against gravity along the walking direction (rise per metre;
+    #: `ground_surface.level_grade`), None: unknown (no inclinometer)
+    level: float | None = None
     #: clusterings of pixels by (sign, radius): (pixel indices, feet, labels)
     #: (`bending_ground`'s, for `Detection._clusters` to reuse on the same pixels)
     clustered: dict = field(default_factory=dict)
@@ -231,7 +243,8 @@ def _string_pieces(c: GpodConfig, ev: FrameEvidence) -> None:
 
 def bending_ground(c: GpodConfig, px: np.ndarray, pts: np.ndarray, h: np.ndarray,
                    metric: MetricPlane, n_s: int, sid: np.ndarray, radius: float,
-                   sign: float, memo: dict | None = None) -> np.ndarray:
+                   sign: float, memo: dict | None = None, lead: np.ndarray | None = None,
+                   max_grade: float = math.inf) -> np.ndarray:
     """(n_s,) bool: the strings that are ground bending away from the ground reference:
     in a cluster of their pixels (``px`` (K,) bool; feet clustered at ``radius`` m) of at
     least 8 pixels spread over ``bend.min_span_m`` or more along the walking direction
@@ -240,7 +253,20 @@ def bending_ground(c: GpodConfig, px: np.ndarray, pts: np.ndarray, h: np.ndarray
     `BEND_MAX_START_M` off it at its near end. Beyond a brow the ground goes on falling,
     beyond a dip rising, from where the ground is: the farther its points the farther
     off; the lower ground beyond a drop and the top of a kerb are level, as far off near
-    as far, and start a step away. ``memo`` (a dict, or None): the clustering is kept
+    as far, and start a step away.
+
+    A line's near end is as far off as the threshold lets a pixel first count, which
+    grows with range (12-20 cm at 4.5 m on the chest rig). So with ``lead`` (K,) bool
+    (the other reliable pixels of the strings), a line whose near end is farther off
+    still bends from the ground when its own strings lead up to it without a gap: at
+    least `BEND_LEAD_MIN` of their pixels in the `BEND_LEAD_M` before its nearest pixel,
+    the last within `BEND_LEAD_GAP_M` of it, lie on the ground bent there (the level
+    ground, then the line; median off it at most `BEND_LEAD_TOL_M`), at a grade of at
+    most ``max_grade`` (ground a pedestrian walks; steeper is a flight of steps). The
+    lower ground beyond a drop is hidden from the drop's edge for as far as the drop is
+    deep, times the range over the camera's height: no pixels lead up to it.
+
+    ``memo`` (a dict, or None): the clustering is kept
     in it under ``(sign, radius)`` as (pixel indices (P,) int64, their feet (P, 2), their
     cluster labels (P,) int64), for a later clustering of the same pixels
     (`Detection._clusters`)."""
@@ -261,9 +287,31 @@ def bending_ground(c: GpodConfig, px: np.ndarray, pts: np.ndarray, h: np.ndarray
             continue
         grade, at0 = (float(x) for x in np.polyfit(s_k, h_k, 1))
         near = grade * float(s_k.min()) + at0
-        if grade >= c.bend.min_grade and near < BEND_MAX_START_M:
+        if grade < c.bend.min_grade:
+            continue
+        if near < BEND_MAX_START_M or (
+                lead is not None and grade <= max_grade
+                and _leads_up(lead, sid, sid_i[sel], pts, h, metric, sign, grade, at0,
+                              float(s_k.min()))):
             out[sid_i[sel]] = True
     return out
+
+
+def _leads_up(lead: np.ndarray, sid: np.ndarray, strings: np.ndarray, pts: np.ndarray,
+              h: np.ndarray, metric: MetricPlane, sign: float, grade: float, at0: float,
+              s_min: float) -> bool:
+    """Whether the ``lead`` pixels (K,) bool of ``strings`` lead up to a line
+    ``sign * h = grade * s + at0`` whose nearest pixel is at ``s_min`` m along the ground
+    without a gap, lying on the ground bent there (`bending_ground`)."""
+    near = flat_nonzero(lead & np.isin(sid, strings))
+    if near.size < BEND_LEAD_MIN:
+        return False
+    s = ground_coords(pts[near], h[near], metric)[:, 0]
+    keep = (s >= s_min - BEND_LEAD_M) & (s < s_min)
+    if np.count_nonzero(keep) < BEND_LEAD_MIN or float(s[keep].max()) < s_min - BEND_LEAD_GAP_M:
+        return False
+    bent = np.maximum(grade * s[keep] + at0, 0.0)
+    return float(np.median(np.abs(sign * h[near][keep] - bent))) <= BEND_LEAD_TOL_M
 
 
 def _floating_string(c: GpodConfig, ev: FrameEvidence) -> None:
@@ -314,7 +362,9 @@ def _ground_bend_up(c: GpodConfig, ev: FrameEvidence) -> None:
     assert s is not None
     if s.any():
         s &= ~bending_ground(c, ev.obst & s[ev.sid], ev.pts, ev.h, ev.metric, ev.n_s, ev.sid,
-                             c.detection.cluster_radius_m, 1.0, ev.clustered)
+                             c.detection.cluster_radius_m, 1.0, ev.clustered,
+                             lead=ev.usable & ~ev.drop & ~ev.obst,
+                             max_grade=c.surface.max_grade_rise)
 
 
 def _half_occlusion(c: GpodConfig, ev: FrameEvidence) -> None:
@@ -380,8 +430,11 @@ def _ground_bend_down(c: GpodConfig, ev: FrameEvidence) -> None:
     s = ev.drop_string
     assert s is not None
     if s.any():
+        tail = ev.surface.tail_grade if ev.surface is not None else 0.0
         s &= ~bending_ground(c, ev.drop & s[ev.sid], ev.pts, ev.h, ev.metric, ev.n_s,
-                             ev.sid, c.drops.cluster_radius_m, -1.0, ev.clustered)
+                             ev.sid, c.drops.cluster_radius_m, -1.0, ev.clustered,
+                             lead=ev.usable & ~ev.drop & ~ev.obst,
+                             max_grade=fall_limit(tail, ev.level, c.surface.max_grade_fall))
 
 
 # --- placement rules -----------------------------------------------------------------
