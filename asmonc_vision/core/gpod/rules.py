@@ -112,6 +112,12 @@ class FrameEvidence:
         """(K,) the edge string of each match."""
         return self.m.string_id
 
+    @property
+    def on_ground(self) -> np.ndarray:
+        """(K,) bool: the reliable matches that are neither obstacle nor drop pixels
+        (what may lead up to a bend, `bending_ground`)."""
+        return self.usable & ~self.drop & ~self.obst
+
 
 Rule = Callable[[GpodConfig, FrameEvidence], None]
 
@@ -363,7 +369,7 @@ def _ground_bend_up(c: GpodConfig, ev: FrameEvidence) -> None:
     if s.any():
         s &= ~bending_ground(c, ev.obst & s[ev.sid], ev.pts, ev.h, ev.metric, ev.n_s, ev.sid,
                              c.detection.cluster_radius_m, 1.0, ev.clustered,
-                             lead=ev.usable & ~ev.drop & ~ev.obst,
+                             lead=ev.on_ground,
                              max_grade=c.surface.max_grade_rise)
 
 
@@ -433,7 +439,7 @@ def _ground_bend_down(c: GpodConfig, ev: FrameEvidence) -> None:
         tail = ev.surface.tail_grade if ev.surface is not None else 0.0
         s &= ~bending_ground(c, ev.drop & s[ev.sid], ev.pts, ev.h, ev.metric, ev.n_s,
                              ev.sid, c.drops.cluster_radius_m, -1.0, ev.clustered,
-                             lead=ev.usable & ~ev.drop & ~ev.obst,
+                             lead=ev.on_ground,
                              max_grade=fall_limit(tail, ev.level, c.surface.max_grade_fall))
 
 
