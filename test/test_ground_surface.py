@@ -405,3 +405,54 @@ def test_the_fall_limit_counts_from_level_where_the_ground_rose():
     assert gs.fall_limit(0.0, 0.1, 0.12) == pytest.approx(0.22)
     assert gs.fall_limit(0.05, 0.1, 0.12) == pytest.approx(0.27)
     assert gs.fall_limit(0.0, -0.1, 0.12) == 0.12
+
+
+def _rounded_brow(start, g0, g1, centre, width):
+    """The profile level to ``start``, then of grade g0 bending evenly to g1 over
+    ``width`` m about ``centre`` (m along the ground): a rounded crest."""
+    xs = np.linspace(0.0, 20.0, 4001)
+    a, b = centre - width / 2, centre + width / 2
+    g = np.where(xs < start, 0.0,
+                 np.where(xs < a, g0, np.where(xs > b, g1, g0 + (g1 - g0) * (xs - a) / (b - a))))
+    z = np.concatenate([[0.0], np.cumsum(0.5 * (g[1:] + g[:-1]) * np.diff(xs))])
+    return lambda s: np.interp(np.asarray(s, float), xs, z)
+
+
+def test_the_bend_error_is_a_share_of_the_grade_change_at_each_knot():
+    """`GroundSurface.bent_error`: lag_share x |grade change| x spacing at each known
+    knot (from level before the first, to the tail after the last), 0 beyond the known
+    ground and on a straight profile; `shifted` moves the known knots only."""
+    ks = np.arange(2.0, 9.0)
+    kz = np.array([0.0, 0.0, 0.1, 0.2, 0.2, 0.0, 0.0])
+    surf = GroundSurface(PLANE, ks, kz, known_until_m=6.0, tail_grade=-0.1)
+    err = surf.bent_error(0.5)
+    assert np.allclose(err, [0.0, 0.05, 0.0, 0.05, 0.05, 0.0, 0.0])
+    assert not surf.bent_error(0.0).any()
+    slope = GroundSurface(PLANE, ks, 0.05 * (ks - 2.0), 8.0, tail_grade=0.05)
+    assert np.allclose(slope.bent_error(0.5), [0.025, 0, 0, 0, 0, 0, 0])
+    up = surf.shifted(np.full(ks.shape, 0.01))
+    assert np.allclose(up.knots_z, kz + np.where(ks <= 6.0, 0.01, 0.0))
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_the_drop_margin_covers_a_rounded_brow_and_not_a_drop(seed):
+    """On a rise that starts at 2.5 m and rounds over a crest at 5 m, the fitted profile's
+    1 m segments lag the ground by a quarter of a pixel where it bends: the drop test's
+    margin (`drop_margin`) covers all but 0.05 px of the ground below the profile, and
+    takes less than a fifth of a 10 cm drop beyond the crest."""
+    prof = _rounded_brow(2.5, 0.06, -0.05, 5.0, 1.5)
+    surf = fit_ground_surface(ground_points(prof, np.random.default_rng(seed)), PLANE)
+    assert surf.known_until_m > 8.0
+    origin, fwd, _ = ground_axes(PLANE)
+    s = np.linspace(2.0, 8.0, 121)
+    u, v, d = CAM.project(origin + s[:, None] * fwd + prof(s)[:, None] * PLANE.normal_up)
+    pd = surf.disparity(CAM, u, v)
+    lag = GroundSurfaceConfig().lag_share
+    below = np.max(pd - d)                         # the ground below the profile, px
+    uncovered = np.max(pd - d - gs.drop_margin(surf, CAM, u, v, pd, lag))
+    assert below > 0.2 and uncovered < 0.05, (below, uncovered)
+    s = np.linspace(6.2, 7.0, 9)
+    u, v, d = CAM.project(origin + s[:, None] * fwd + (prof(s) - 0.1)[:, None] * PLANE.normal_up)
+    pd = surf.disparity(CAM, u, v)
+    low = gs.drop_margin(surf, CAM, u, v, pd, lag)
+    assert np.all(low < 0.2 * (pd - d)), (low, pd - d)

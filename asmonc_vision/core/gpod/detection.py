@@ -13,7 +13,7 @@ import numpy as np
 from ..camera import (MetricPlane, StereoCamera, add_rows, ground_axes, plane_disparity,
                       row_norms, sub_scaled)
 from ..edges import EdgeMap, gradient_noise_gain
-from ..ground_surface import depth_noise, fit_ground_surface, level_grade
+from ..ground_surface import depth_noise, drop_margin, fit_ground_surface, level_grade
 from ..matching import Candidates, Matches
 from . import kernels as kn
 from .faces import (
@@ -195,8 +195,9 @@ class Detection(PlaneTracking):
             det.min_matched_run, max(det.max_required_run, det.min_matched_run))
         usable = (run >= need) & in_range
         # The paper's test: obstacle pixels above the threshold, drop pixels as far below
-        # the lowest ground the surface allows (``low`` px under its disparity) where the
-        # plane is within the detection range; then the named rules (rules.py) in order.
+        # the lowest ground the surface allows (``low`` px under its disparity,
+        # `drop_margin`) where the plane is within the detection range; then the named
+        # rules (rules.py) in order.
         obst = (ex_mean > thr) & (h <= c.detection.max_obstacle_height_m) & usable
         drop = np.zeros_like(obst)
         below = (ex_mean < -thr - low) & (h >= -c.drops.max_depth_m)
@@ -255,8 +256,8 @@ class Detection(PlaneTracking):
                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | float]:
         """The ground the features are judged against: (its disparity at each feature,
         the features' 3-D points, their heights above it, how far (px, >= 0; 0.0 where
-        the surface does not rise beyond the known ground) the disparity of the lowest
-        ground it allows lies below its own there). The plane,
+        the surface does not bend) the lowest ground it allows lies below its own
+        disparity there, `drop_margin`). The plane,
         or with ``surface.enabled`` the ground surface ahead where it bends (kept in
         ``self._surface``), fitted knowing each feature's disparity noise ``sigma_px``
         (K,) px (the obstacle threshold over ``threshold.k``) as a depth noise. Beyond
@@ -285,9 +286,7 @@ class Detection(PlaneTracking):
                 pd_surf = surf.disparity(cam, u, v)
                 pd = np.where(np.isfinite(pd_surf), pd_surf, pd)
                 h = surf.height_above(pts)
-                if surf.tail_grade > 0.0:
-                    pd_low = surf.lowest().disparity(cam, u, v)
-                    low = np.where(np.isfinite(pd_low), np.maximum(pd - pd_low, 0.0), 0.0)
+                low = drop_margin(surf, cam, u, v, pd, c.surface.lag_share)
         return pd, pts, h, low
 
     def _ground_motion(self, still: bool) -> tuple | None:
