@@ -51,7 +51,10 @@ last two segments agree on, and the caller is told how far it knows the ground).
 Points are judged against the surface by their height above it
 (`GroundSurface.height_above`), or in disparity by the surface's disparity at their
 pixel (`GroundSurface.disparity`: the ray's first intersection with the profile, solved
-exactly per segment).
+exactly per segment). The drop test allows the ground below it by `drop_margin`: a rise
+beyond the known ground may end (`GroundSurface.lowest`), and where the profile bends
+its straight segments lag the ground by up to ``lag_share`` times the change of grade
+times the knot spacing (`GroundSurface.bent_error`).
 
 Frames: the left optical frame (REP 103: x right, y down, z forward, metres); pixels
 are cyclopean (u, v) with disparity d (docs/CONVENTIONS.md). No ROS here.
