@@ -231,8 +231,7 @@ class GroundSurface:
     def shifted(self, dz: np.ndarray) -> 'GroundSurface':
         """The surface with its known knots moved up by dz (K,) m (the first knot too:
         the plane before it stays)."""
-        keep = self.knots_s <= self.known_until_m + 1e-9
-        return replace(self, knots_z=np.where(keep, self.knots_z + dz, self.knots_z))
+        return replace(self, knots_z=np.where(self.known, self.knots_z + dz, self.knots_z))
 
     def profile(self, s: np.ndarray) -> np.ndarray:
         """(N,) surface height above the plane (m) at distances s (N,) along the ground
@@ -244,8 +243,13 @@ class GroundSurface:
             out = out + self.tail_grade * np.maximum(s - ks[-1], 0.0)
         return out
 
+    @property
+    def known(self) -> np.ndarray:
+        """(K,) bool: the knots on the known ground (at most ``known_until_m``)."""
+        return self.knots_s <= self.known_until_m + 1e-9
+
     def _known_knots(self) -> tuple[np.ndarray, np.ndarray]:
-        keep = self.knots_s <= self.known_until_m + 1e-9
+        keep = self.known
         return self.knots_s[keep], self.knots_z[keep]
 
     def coordinates(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -637,7 +641,7 @@ def flattened(surface: GroundSurface, min_bend_m: float) -> GroundSurface:
     """The surface, or the plane itself (knots at 0, level tail) when its known knots
     are all within ``min_bend_m`` (m) of it: a profile fitted to flat ground wanders by
     a few cm, which would shift the obstacle test."""
-    kz = surface.knots_z[surface.knots_s <= surface.known_until_m + 1e-9]
+    kz = surface.knots_z[surface.known]
     if kz.size and np.max(np.abs(kz)) > min_bend_m:
         return surface
     return replace(surface, knots_z=np.zeros_like(surface.knots_z), tail_grade=0.0)
