@@ -9,7 +9,7 @@ from asmonc_vision.sim.scenes import RIGS, SCENE_CLASSES, make_scene
 
 def test_scenes_api():
     """Only the API another sim.scenes must keep: classes, rigs, make_scene."""
-    assert RIGS == ('backpack', 'chest') and SCENE_CLASSES
+    assert RIGS == ('backpack', 'chest', 'narrow') and SCENE_CLASSES
     a = make_scene(SCENE_CLASSES[0], 1000, duration=2.0, rig='chest')
     chest = a.rig
     assert (chest.width, chest.height, chest.baseline) == (640, 480, 0.12)
@@ -18,6 +18,9 @@ def test_scenes_api():
     assert a.n_frames == 20
     b = make_scene(SCENE_CLASSES[0], 1000, duration=2.0)
     assert (b.rig.width, b.rig.height) == (320, 240)
+    n = make_scene(SCENE_CLASSES[0], 1000, duration=2.0, rig='narrow').rig
+    assert (n.width, n.height, n.focal, n.baseline) == (640, 400, 450.0, 0.075)
+    assert 1.0 <= n.camera_height <= 1.6 and 8.0 <= n.camera_pitch_deg <= 30.0
     with pytest.raises(KeyError):
         make_scene('nowhere', 1)
 
@@ -38,6 +41,16 @@ def test_plan_walks_seed_ranges_and_rigs():
                                                       for r in RIGS}
     with pytest.raises(ValueError):
         C.plan_walks('tuning', 1e6, list(SCENE_CLASSES), list(RIGS), 20.0)
+
+
+def test_default_rigs_are_the_reported_sets():
+    """A campaign without --rigs runs the backpack and chest rigs (the sets the docs
+    report); the narrow module is a choice."""
+    import argparse
+    p = argparse.ArgumentParser()
+    C.add_arguments(p)
+    assert p.parse_args([]).rigs == ['backpack', 'chest']
+    assert p.parse_args(['--rigs', 'narrow']).rigs == ['narrow']
 
 
 def test_cache_key_depends_on_everything():

@@ -1,6 +1,6 @@
 """Render-time benchmark of the scene classes: prints milliseconds per stereo frame.
 
-    python -m asmonc_vision.sim.benchmark [--classes C ...] [--rigs backpack chest]
+    python -m asmonc_vision.sim.benchmark [--classes C ...] [--rigs backpack chest narrow]
         [--frames N] [--seed S] [--realism on|off|both]
 
 Each (class, rig, realism) renders ``--frames`` frames spread over a 20 s walk with

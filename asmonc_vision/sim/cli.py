@@ -3,7 +3,7 @@
     python -m asmonc_vision.sim SCENARIO OUT_DIR [--seed N] [--duration S] [--fps F]
         [--width W --height H --focal F] [--rig FIELD=VALUE ...]
         [--gait extreme|FIELD=VALUE ...] [--force] [--list]
-        [--scene] [--preset backpack|chest] [--realism on|off]
+        [--scene] [--preset backpack|chest|narrow] [--realism on|off]
 
 SCENARIO is a scenario (``scenarios.SCENARIOS``) or a scene class of the campaign
 (``scenes.SCENE_CLASSES``, drawn from the seed as ``scenes.make_scene``); a name that
@@ -55,9 +55,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument('--scene', action='store_true',
                    help='SCENARIO names a scene class (scenes.SCENE_CLASSES) even where a '
                         'scenario has the same name')
-    p.add_argument('--preset', choices=('backpack', 'chest'), default=None,
-                   help="scene classes: the rig ('backpack' default, or 'chest'; its "
-                        'mounting drawn from the seed); scenarios: the chest rig instead of '
+    p.add_argument('--preset', choices=('backpack', 'chest', 'narrow'), default=None,
+                   help="scene classes: the rig ('backpack' default, 'chest' or 'narrow'; "
+                        'its mounting drawn from the seed); scenarios: that rig instead of '
                         "the paper's; --width etc. and --rig change it further")
     p.add_argument('--realism', choices=('on', 'off'), default=None,
                    help='scene classes: the camera realism effects on or off (default: '
@@ -174,7 +174,8 @@ def main(argv: list[str] | None = None) -> int:
                                    dataclasses.replace(base, **changes), realism,
                                    gait=_gait(args.gait))
         else:
-            base = RigSettings.chest() if args.preset == 'chest' else RigSettings()
+            base = {'chest': RigSettings.chest, 'narrow': RigSettings.narrow}.get(
+                args.preset, RigSettings)()
             rig = dataclasses.replace(base, **changes)
             scenario = make_scenario(args.scenario, seed=args.seed, duration=args.duration,
                                      rig=rig, gait=_gait(args.gait))

@@ -57,7 +57,7 @@ SCENE_CLASSES: tuple[str, ...] = (
 #: Classes with no true obstacle in the walking corridor (false-alarm tests).
 CLEAR_CLASSES: tuple[str, ...] = ('clear_walk', 'slope_ahead', 'crest', 'kerb_ramp',
                                   'camber', 'asphalt_markings', 'grate')
-RIGS: tuple[str, ...] = ('backpack', 'chest')
+RIGS: tuple[str, ...] = ('backpack', 'chest', 'narrow')
 #: Half-width (m) of the walking corridor the clear classes keep free.
 CORRIDOR = 0.5
 #: Share of seeds with the camera realism effects when ``realism`` is None.
@@ -69,13 +69,18 @@ REALISM_SHARE = 0.6
 
 def scene_rig(rig: str, rng: np.random.Generator) -> RigSettings:
     """The rig of a scene: 'backpack' (the paper's, 1.15-1.35 m high, 16-24 degrees
-    down) or 'chest' (``RigSettings.chest``, 1.2-1.4 m high, 0-10 degrees down)."""
+    down), 'chest' (``RigSettings.chest``, 1.2-1.4 m high, 0-10 degrees down) or
+    'narrow' (``RigSettings.narrow``, a 7.5 cm baseline module worn anywhere from the
+    belt to the head: 1.0-1.6 m high, 8-30 degrees down)."""
     if rig == 'backpack':
         return RigSettings(camera_height=round(float(rng.uniform(1.15, 1.35)), 3),
                            camera_pitch_deg=round(float(rng.uniform(16.0, 24.0)), 2))
     if rig == 'chest':
         return RigSettings.chest(camera_height=round(float(rng.uniform(1.2, 1.4)), 3),
                                  camera_pitch_deg=round(float(rng.uniform(0.0, 10.0)), 2))
+    if rig == 'narrow':
+        return RigSettings.narrow(camera_height=round(float(rng.uniform(1.0, 1.6)), 3),
+                                  camera_pitch_deg=round(float(rng.uniform(8.0, 30.0)), 2))
     raise ValueError(f"unknown rig '{rig}'; known: {', '.join(RIGS)}")
 
 
@@ -634,7 +639,8 @@ def make_scene(scene_class: str, seed: int, *, duration: float = 20.0,
         scene_class: one of SCENE_CLASSES.
         seed: the seed.
         duration: seconds simulated (10 Hz frames).
-        rig: 'backpack' (320 x 240, f 300, B 0.35 m) or 'chest' (640 x 480, B 0.12 m).
+        rig: 'backpack' (320 x 240, f 300, B 0.35 m), 'chest' (640 x 480, B 0.12 m) or
+            'narrow' (640 x 400, f 450, B 0.075 m).
         realism: camera realism effects on (True), off (False), or drawn (None).
     Raises:
         KeyError: unknown class; ValueError: unknown rig or bad duration.
