@@ -309,11 +309,17 @@ def test_the_rigs():
     chest = RigSettings.chest()
     assert (chest.width, chest.height, chest.baseline, chest.camera_height) == (
         640, 480, 0.12, 1.3)
-    assert RIGS == ('backpack', 'chest')
+    narrow = RigSettings.narrow()
+    assert (narrow.width, narrow.height, narrow.focal, narrow.baseline) == (
+        640, 400, 450.0, 0.075)
+    assert RIGS == ('backpack', 'chest', 'narrow')
     for seed in range(4):
         sc = make_scene('camber', seed, duration=1.0, rig='chest')
         assert sc.rig.width == 640 and 0.0 <= sc.rig.camera_pitch_deg <= 10.0
         assert make_scene('camber', seed, duration=1.0).rig.width == 320
+        sn = make_scene('camber', seed, duration=1.0, rig='narrow').rig
+        assert sn.height == 400 and 1.0 <= sn.camera_height <= 1.6
+        assert 8.0 <= sn.camera_pitch_deg <= 30.0
     shares = [make_scene('grate', s, duration=0.5).rig.realism for s in range(40)]
     assert 0.4 <= np.mean(shares) <= 0.8
     with pytest.raises(KeyError):
