@@ -1,4 +1,5 @@
 """`asmonc campaign`: the walk plan, the cache, one tiny walk end to end; sim.scenes."""
+import argparse
 import json
 
 import pytest
@@ -46,7 +47,6 @@ def test_plan_walks_seed_ranges_and_rigs():
 def test_default_rigs_are_the_reported_sets():
     """A campaign without --rigs runs the backpack and chest rigs (the sets the docs
     report); the narrow module is a choice."""
-    import argparse
     p = argparse.ArgumentParser()
     C.add_arguments(p)
     assert p.parse_args([]).rigs == ['backpack', 'chest']
