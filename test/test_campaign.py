@@ -1,10 +1,12 @@
 """`asmonc campaign`: the walk plan, the cache, one tiny walk end to end; sim.scenes."""
 import argparse
 import json
+import re
 
 import pytest
 
 from asmonc_vision.cli import campaign as C
+from asmonc_vision.core.surface_kernels import RULES
 from asmonc_vision.sim.scenes import RIGS, SCENE_CLASSES, make_scene
 
 
@@ -109,6 +111,11 @@ def test_one_walk_end_to_end_and_cached(tmp_path, capsys):
     assert [r[0] for r in rows] == ['0.20', '0.30', '0.40', '0.50', '0.60']
     assert all(r[2] in ('tracking', 'initialising', 'lost', '-') for r in rows)
     assert all(r[3] in ('CLEAR', 'CAUTION', 'WARNING', 'STOP', 'FAULT') for r in rows)
+    # and how far the ground surface is known, with the rule that ended it
+    known = [re.search(r'\|\s+ground known to (\d+\.\d) m(, then (rule_\w+) .+)?$', ln)
+             for ln in out.splitlines() if ln.startswith('         ') and ' s  ' in ln]
+    assert all(k is not None for k in known), out
+    assert all(k.group(3) in (None, *RULES, 'rule_anchor') for k in known)
     assert main(['campaign', '--trace', '0', '1', '--no-progress']) == 2       # no --walk
     assert main(['campaign', '--walk', f'{SCENE_CLASSES[0]}:1000:backpack', '--trace', '2',
                  '1']) == 2

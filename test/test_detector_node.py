@@ -119,6 +119,11 @@ def test_a_rig_off_its_calibration_is_corrected_and_reported(ros_context):
         assert values['misalignment_corrected'] == 'True'
         # the tiled pavement shows its edges: the edge threshold is not lowered
         assert float(values['edge_threshold']) == pytest.approx(4.0)
+        # how far the ground surface ahead is known, and what ended it
+        assert float(values['ground_known_m']) >= 2.0
+        ended = values['ground_ended_by']
+        assert ended == '' or ended.split()[0] in ('rule_support', 'rule_grade', 'rule_step',
+                                                   'rule_spread', 'rule_anchor'), ended
         assert len(got['obstacles'][-1].obstacles) >= 3
         ex.remove_node(probe)
         probe.destroy_node()

@@ -456,3 +456,18 @@ def test_the_drop_margin_covers_a_rounded_brow_and_not_a_drop(seed):
     pd = surf.disparity(CAM, u, v)
     low = gs.drop_margin(surf, CAM, u, v, pd, lag)
     assert np.all(low < 0.2 * (pd - d)), (low, pd - d)
+
+
+def test_the_surface_says_why_its_known_ground_ends():
+    """`GroundSurface.ended_by` names the rule that refused the segment beyond the known
+    ground with the number it judged; '' where no segment was refused."""
+    rng = np.random.default_rng(4)
+    kerb = fit_ground_surface(ground_points(step_at(4.5, 0.12), rng), PLANE)
+    rule, number, unit = kerb.ended_by().split()
+    assert rule == 'rule_step' and unit == 'cm'
+    assert float(number) == pytest.approx(kerb.checks[-1].step_m * 100, abs=0.05)
+    assert float(number) > 100 * GroundSurfaceConfig().max_step_m
+    bare = fit_ground_surface(ground_points(lambda s: 0.0 * s, rng, s_max=5.0), PLANE)
+    assert bare.ended_by().startswith('rule_support ')
+    assert bare.ended_by().endswith(' features')
+    assert GroundSurface.flat(PLANE, 2.0).ended_by() == ''

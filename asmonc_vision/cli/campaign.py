@@ -50,9 +50,10 @@ reports per frame, recall; then the set's totals, the obstacles warned by an ala
 about something farther off, and the frames with a hazard on the path and "all clear" in
 force; and the time per walk-minute
 (rendering, each detector). `--trace T0 T1` (with `--walk`) prints under each walk, per
-method, every pair from T0 to T1 s into it: the ground status, the alarm in force and each
-report. `--markdown FILE` writes the tables as Markdown (a results
-table a document can include). A progress bar goes to stderr. `--workers N` runs N walks
+method, every pair from T0 to T1 s into it: the ground status, the alarm in force, each
+report, and how far the ground surface was known with the rule that ended it.
+`--markdown FILE` writes the tables as Markdown (a results table a document can
+include). A progress bar goes to stderr. `--workers N` runs N walks
 at once (one process each, one OpenCV thread each). Exit status 0; 2 on bad arguments.
 """
 from __future__ import annotations
@@ -292,7 +293,9 @@ def trace_lines(runs, alarms: list[dict], window: tuple[float, float]) -> list[s
     """`--trace`: per pair whose time into the walk (from the first pair) lies in
     `window` (s): the time, the ground status, the alarm in force
     (`eval.evaluation.alarm_in_force`) and each report: id, height (cm; a drop negative,
-    '?' for ground that cannot be seen), range (m), bearing (degrees, left +)."""
+    '?' for ground that cannot be seen), range (m), bearing (degrees, left +); for GPOD
+    also how far the ground surface ahead is known (m along the ground) and the rule
+    that ended it (`GroundSurface.ended_by`)."""
     from asmonc_vision.core.alarm import AlarmLevel
     from asmonc_vision.eval.evaluation import alarm_in_force
 
@@ -314,7 +317,9 @@ def trace_lines(runs, alarms: list[dict], window: tuple[float, float]) -> list[s
             + ('?' if not math.isfinite(o.height[i]) else f'{o.height[i] * 100:+.0f} cm')
             + f' {o.range[i]:.2f} m {math.degrees(o.bearing[i]):+.0f} deg'
             for i in range(len(o.ids))) or 'none')
-        out.append(f'{t:6.2f} s  {r.status or "-":12s} {said}  |  {reports}')
+        ground = ('' if r.ground is None else f'  |  ground known to {r.ground[0]:.1f} m'
+                  + (f', then {r.ground[1]}' if r.ground[1] else ''))
+        out.append(f'{t:6.2f} s  {r.status or "-":12s} {said}  |  {reports}{ground}')
     return out
 
 

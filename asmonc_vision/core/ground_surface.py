@@ -197,6 +197,23 @@ class GroundSurface:
         """The plane alone (no profile), known nowhere beyond ``near_m``."""
         return cls(plane, np.array([near_m]), np.zeros(1), near_m)
 
+    def ended_by(self) -> str:
+        """Why the known ground ends at ``known_until_m``, for logs and diagnostics: the
+        rule that refused the segment beyond it and the number it judged ('rule_step
+        7.5 cm', 'rule_support 12 features', 'rule_grade +0.31' (change of grade, rise per
+        metre), 'rule_spread 9.0 cm', 'rule_anchor +3.1 cm' (the near ground's height above
+        the plane)), or '' when no segment was refused (the profile reaches ``far_m``, or
+        no features lie ahead of its first knot)."""
+        if not self.checks or not self.checks[-1].refused_by:
+            return ''
+        c = self.checks[-1]
+        number = {'rule_support': f'{c.features} features',
+                  'rule_grade': f'{c.grade_change:+.2f}',
+                  'rule_step': f'{c.step_m * 100:.1f} cm',
+                  'rule_spread': f'{c.spread_m * 100:.1f} cm',
+                  'rule_anchor': f'{c.step_m * 100:+.1f} cm'}.get(c.refused_by, '')
+        return f'{c.refused_by} {number}'.strip()
+
     @property
     def bends(self) -> bool:
         """Whether the profile leaves the plane anywhere."""

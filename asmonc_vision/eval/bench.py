@@ -73,7 +73,9 @@ class FrameRun:
     (MetricPlane or None), the wall time of process() and its stage timings (ms), the
     CPU time of process() (ms, this thread's), and the egomotion the graph would publish
     for the pair (``/egomotion``'s translation, (3,) m, the left camera's from the
-    estimator's reference pair in its optical frame; None: none published or not run)."""
+    estimator's reference pair in its optical frame; None: none published or not run),
+    and how far GPOD's ground surface ahead was known: (``known_until_m``, the rule
+    that ended it, `GroundSurface.ended_by`), None for the peer or without a surface."""
 
     stamp_ns: int
     status: str
@@ -83,6 +85,7 @@ class FrameRun:
     timings: dict
     cpu_ms: float = float('nan')
     ego_t: object = None
+    ground: tuple[float, str] | None = None
 
 
 def make_method(method: str, threshold_px: float | None = None, map_enabled: bool | None = None):
@@ -204,10 +207,16 @@ def run_method(frames: list[Frame], method: str = 'gpod', threshold_px: float | 
         plane = res.plane.metric if res.plane is not None else None
         out.append(FrameRun(f.stamp_ns, res.status, frame_from_detections(f.stamp_ns,
                                                                           res.obstacles),
-                            plane, ms, dict(res.timings), cpu_ms, ego_t))
+                            plane, ms, dict(res.timings), cpu_ms, ego_t,
+                            _ground_known(getattr(res, 'surface', None))))
         if progress is not None:
             progress(i + 1, len(frames))
     return out
+
+
+def _ground_known(surface) -> tuple[float, str] | None:
+    """`FrameRun.ground` of a result's surface (a GroundSurface or None)."""
+    return None if surface is None else (float(surface.known_until_m), surface.ended_by())
 
 
 def out_of_view_for(frames: list[Frame]) -> dict:

@@ -17,7 +17,10 @@ callbacks that receive images stay fast. Publishes, per processed pair:
   enabled (``map.enabled``) and someone subscribed: the map around the wearer, in the
   pair's left optical frame (the grid's origin pose places its horizontal world-fixed
   axes there), cell value P(raised) in percent, -1 where it holds no evidence
-* `/diagnostics`
+* `/diagnostics`: the pair counts, the image noise and edge threshold, the rows'
+  misalignment, the time per pair, and how far the ground surface ahead is known
+  (``ground_known_m``, m along the ground) with the rule that ended it
+  (``ground_ended_by``, e.g. ``rule_step 7.5 cm``: `GroundSurface.ended_by`)
 
 Subscribes to `/inclinometer/imu` (sensor_msgs/Imu, SENSOR_QOS) and keeps the latest
 orientation: a pair stamped within ``gpod.plane.gravity_prior_max_age_s`` of it gets the world's
@@ -329,6 +332,7 @@ class DetectorNode(StereoInputNode):
                 'off its calibration); '
                 + ('the right image is resampled to match, ' if result.misalignment_corrected
                    else '') + 'recalibrate the cameras', throttle_duration_sec=30.0)
+        surf = result.surface
         self.diag.update(level, message,
                          frames_in=self.frames_in, frames_done=self.frames_done + 1,
                          frames_dropped=self.frames_dropped, frames_bad=self.frames_bad,
@@ -340,7 +344,9 @@ class DetectorNode(StereoInputNode):
                          edge_threshold=f'{result.edge_threshold:.2f}',
                          misalignment_px=f'{mis:.2f}',
                          misalignment_corrected=result.misalignment_corrected,
-                         total_ms=f"{result.timings.get('total', float('nan')):.1f}")
+                         total_ms=f"{result.timings.get('total', float('nan')):.1f}",
+                         ground_known_m=f'{surf.known_until_m:.1f}' if surf is not None else '',
+                         ground_ended_by=surf.ended_by() if surf is not None else '')
 
 
     def _motion_ahead_ms(self) -> str:
