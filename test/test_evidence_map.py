@@ -347,6 +347,60 @@ def test_a_box_whose_matches_each_have_a_rival_is_confirmed_a_little_later():
     assert first[1.0] == 1 and first[0.5] == 3
 
 
+def _appear_walk(appear_min_pixels: int, thing: np.ndarray, seen_in, still: bool = False,
+                 hole=(4.7, 5.4, -0.4, 0.4), pairs: int = 12) -> list:
+    """Ground seen for six pairs, then ``thing`` (world points, raised) in the pairs
+    ``seen_in``, the ground around it unmatched from then on (too few matches there to
+    clear a cell): the map's objects of each pair."""
+    emap = EvidenceMap(EvidenceMapConfig(enabled=True, appear_min_pixels=appear_min_pixels))
+    xs = np.zeros(pairs) if still else np.arange(pairs) * 0.12
+    count = [0]
+
+    def scene(x):
+        k = count[0]
+        count[0] += 1
+        if k < 6:
+            return [(ground_grid(2.0, 8.0), GROUND, None)]
+        parts = [(ground_grid(2.0, 8.0, holes=[hole]), GROUND, None)]
+        return parts + ([(thing, RAISED, None)] if k in seen_in else [])
+    return walk(emap, scene, xs, still=still)
+
+
+def test_a_mismatch_that_comes_and_goes_over_ground_seen_is_not_confirmed():
+    """Two raised pixels 5 m ahead where the ground was seen, in one pair and again three
+    pairs later (far ground judged against a plane that is off for a pair does this):
+    they add to what the ground said and are not confirmed; starting from 0 at each
+    raised pair (appear_min_pixels 1) they were."""
+    blip = np.array([[5.0, 0.0, 0.10], [5.0, 0.0, 0.12]])
+    assert not _appear_walk(4, blip, (6, 9))[-1]
+    assert _appear_walk(1, blip, (6, 9))[-1]
+
+
+@pytest.mark.parametrize('still', [False, True])
+def test_a_thing_that_appears_over_ground_seen_is_confirmed(still):
+    """A box set down 5 m ahead where the ground was seen (a passer-by stepping in), then
+    seen in every pair, is confirmed in the same pair as when every raised pair starts
+    from 0 (its face puts many pixels in its cells); so is one seen by two pixels a
+    pair while walking (its second view is the later gate), and standing one pair
+    later."""
+    def first(appear, thing):
+        out = _appear_walk(appear, thing, range(6, 12), still=still)
+        return next(i for i, o in enumerate(out) if o)
+    box = box_edges(5.0, 0.0, 0.3)
+    assert first(4, box) == first(1, box) <= (7 if still else 9)
+    weak = np.array([[5.0, 0.0, 0.10], [5.0, 0.0, 0.12]])
+    assert first(4, weak) - first(1, weak) == (1 if still else 0)
+
+
+def test_a_face_seen_in_one_pair_of_three_over_ground_seen_is_confirmed():
+    """A kerb face seen only now and then (a short baseline at 2.5-3 m) puts many pixels
+    in its cells each time: it starts from 0 as a thing that appears, and is confirmed
+    when seen again."""
+    face = box_edges(5.0, 0.0, 0.15)
+    out = _appear_walk(4, face, (6, 9), pairs=10)
+    assert out[-1] and not out[-2]
+
+
 # ------------------------------------------------------------------ clearing, passers-by
 def test_ground_seen_where_a_thing_stood_clears_it():
     emap = EvidenceMap(EvidenceMapConfig(enabled=True))

@@ -36,7 +36,8 @@ Each pair, `EvidenceMap.update`:
    (free space) at its cell.
 4. updates the cells: raised evidence in a cell adds ``hit_logodds`` to its raised
    log-odds ``L_r`` (once per pair: the pixels of one pair share their errors; from
-   ``max(L_r, 0)``: a thing may step in), drop evidence likewise to the drop log-odds
+   ``max(L_r, 0)``, a thing may step in, when the pair has ``appear_min_pixels`` there
+   or the pair before had raised evidence near it), drop evidence likewise to the drop log-odds
    ``L_d`` (from ``L_d`` itself with ``drop_weighs_ground``: lower ground does not step
    in), ground evidence with no raised evidence there subtracts ``free_logodds`` from
    ``L_r`` and, where its height is known to ``drop_clear_max_sigma_m``, from ``L_d`` (a
@@ -160,6 +161,7 @@ class EvidenceMap:
         self.still_hits = np.zeros((n, n), np.int16)
         self.two_views = np.zeros((n, n), bool)
         self.last_hit_s = np.full((n, n), -np.inf)
+        self.raised_s = np.full((n, n), -np.inf)      # raised evidence last entered, s
         self.free_s = np.full((n, n), -np.inf)        # ground last seen there, finely
         self.moved_in = np.zeros((n, n), bool)        # raised where ground was just seen
         self.drop_before = np.zeros((n, n), bool)     # drop confirmed beyond the hold's reach
@@ -169,6 +171,7 @@ class EvidenceMap:
         self._plane: MetricPlane | None = None
         self._hold.reset()
         self._stamp_s: float | None = None
+        self._entered_s = -np.inf                      # the last pair entered, s
         self._gap = 0
         #: pairs entered since the last reset (the map's evidence is continuous over them)
         self.placed_pairs = 0
@@ -197,6 +200,7 @@ class EvidenceMap:
         fills = ((self.L_r, 0), (self.L_d, 0), (self.h_x, 0), (self.h_P, np.inf),
                  (self.pt_xy, 0), (self.first_xy, np.nan), (self.still_hits, 0),
                  (self.two_views, False), (self.last_hit_s, -np.inf), (self.ids, 0),
+                 (self.raised_s, -np.inf),
                  (self.free_s, -np.inf), (self.moved_in, False), (self.drop_before, False))
         for a, fill in fills:
             map_grid.shift(a, int(k[1]), int(k[0]), fill)
@@ -378,12 +382,21 @@ class EvidenceMap:
             free_d = free[n_sure[free] >= c.min_ground_pixels]
         if c.moved_in_s > 0:
             self._moved_in(stamp_s, raised[Lr[raised] <= 0], free_d)
-        # a thing seen now is not held back by the ground seen there before (a thing
-        # that appears, a passer-by stepping in): L = max(L, 0) + hit; lower ground
-        # does not appear (drop_weighs_ground): L = L + hit
+        # a thing that appears (a face: appear_min_pixels; or seen in the pair before
+        # too) is not held back by the ground seen there: L = max(L, 0) + hit; a pixel
+        # or two once, a mismatch that comes and goes, and lower ground (terrain,
+        # drop_weighs_ground) add to it: L = L + hit
         hit_r = hit * self._surest(ev, inside, kind == RAISED, f_r, raised)
         hit_d = hit * self._surest(ev, inside, kind == DROP, f_d, dropc)
-        Lr[raised] = np.maximum(Lr[raised], 0.0) + hit_r
+        rs = self.raised_s.reshape(-1)
+        restart = np.ones(raised.size, bool)
+        if c.appear_min_pixels > 1:
+            before = flat_nonzero(rs >= self._entered_s)   # raised in the pair before
+            restart = ((n_r[raised] >= c.appear_min_pixels)
+                       | self._near(before, raised, c.miss_guard_cells))
+        Lr[raised] = np.where(restart, np.maximum(Lr[raised], 0.0), Lr[raised]) + hit_r
+        rs[raised] = stamp_s
+        self._entered_s = stamp_s
         Ld[dropc] = (Ld[dropc] if c.drop_weighs_ground else np.maximum(Ld[dropc], 0.0)) + hit_d
         Lr[free] -= c.free_logodds
         Ld[free_d] -= c.free_logodds

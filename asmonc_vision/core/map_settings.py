@@ -101,6 +101,14 @@ class EvidenceMapConfig:
         'matched a period off stand about 10 cm up, nearly where they are in the world '
         'from every viewpoint, and texture on the ground matched a few pixels off stays in '
         'place too; their matches have such rivals. Off: every pixel counts fully')
+    appear_min_pixels: int = param(
+        4, 'raised evidence in a cell starts from 0 over the ground seen there before '
+        '(L_r = max(L_r, 0) + hit: a thing that appears, a passer-by stepping in) when '
+        'the pair has at least this many raised pixels in the cell (a face) or the pair '
+        'before had raised evidence within miss_guard_cells of it (seen again); else it '
+        'adds to what the ground said (L_r = L_r + hit: a mismatch over the ground, a '
+        'pixel or two that comes and goes). 1: every raised pair starts from 0',
+        range=(1, 1000))
     drop_weighs_ground: bool = param(
         True, 'drop evidence in a cell adds to what the ground seen there before said '
         '(L_d = L_d + hit): lower ground is terrain, it does not step in as a passer-by '
