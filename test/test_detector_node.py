@@ -8,6 +8,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import Image
 
+from asmonc_vision.core.surface_kernels import RULES
 from asmonc_vision.nodes.common import IMAGE_QOS, RESULT_QOS
 from asmonc_vision.nodes.detector_node import DetectorNode
 from asmonc_vision.nodes.stereo_input import StereoPairer
@@ -122,8 +123,7 @@ def test_a_rig_off_its_calibration_is_corrected_and_reported(ros_context):
         # how far the ground surface ahead is known, and what ended it
         assert float(values['ground_known_m']) >= 2.0
         ended = values['ground_ended_by']
-        assert ended == '' or ended.split()[0] in ('rule_support', 'rule_grade', 'rule_step',
-                                                   'rule_spread', 'rule_anchor'), ended
+        assert ended == '' or ended.split()[0] in (*RULES, 'rule_anchor'), ended
         assert len(got['obstacles'][-1].obstacles) >= 3
         ex.remove_node(probe)
         probe.destroy_node()
