@@ -365,9 +365,10 @@ def test_a_ramp_between_kerbs_is_a_bend_and_a_kerb_across_is_a_step(start):
     kerb across the corridor too, the step is found in each (a kerb up ahead)."""
     width = gs.GroundSurfaceConfig().step_half_width_m
     for seed in range(20):
-        ramp = gs._path_step(*_ramp_between_kerbs(seed, start, False), 0.0, 1.0, width)
-        kerb = gs._path_step(*_ramp_between_kerbs(seed, start, True), 0.0, 1.0, width)
-        assert ramp <= 0.04 < kerb, (seed, ramp, kerb)
+        ramp, _ = gs._path_step(*_ramp_between_kerbs(seed, start, False), 0.0, 1.0, width)
+        kerb, at = gs._path_step(*_ramp_between_kerbs(seed, start, True), 0.0, 1.0, width)
+        assert abs(ramp) <= 0.04 < kerb, (seed, ramp, kerb)
+        assert abs(at - start) <= 0.15, (seed, at, start)
 
 
 def test_the_lowest_ground_does_not_rise_beyond_the_known():

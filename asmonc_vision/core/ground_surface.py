@@ -152,8 +152,9 @@ class GroundSurfaceConfig:
 class SegmentCheck:
     """Why a segment was taken or not: the rule that refused it ('' = taken) and its
     numbers (features, width m, grade change (rise per metre, > 0 where the ground bends
-    up), step m, spread m; for 'rule_anchor' the
-    near ground's median height above the plane as step_m)."""
+    up), step m (> 0: the ground steps up), spread m; for 'rule_anchor' the
+    near ground's median height above the plane as step_m) and where the step is
+    (``step_at_m``: metres along the ground, NaN with no step)."""
 
     refused_by: str
     features: int
@@ -161,6 +162,7 @@ class SegmentCheck:
     grade_change: float
     step_m: float
     spread_m: float
+    step_at_m: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -209,7 +211,7 @@ class GroundSurface:
         c = self.checks[-1]
         number = {'rule_support': f'{c.features} features',
                   'rule_grade': f'{c.grade_change:+.2f}',
-                  'rule_step': f'{c.step_m * 100:.1f} cm',
+                  'rule_step': f'{c.step_m * 100:+.1f} cm',
                   'rule_spread': f'{c.spread_m * 100:.1f} cm',
                   'rule_anchor': f'{c.step_m * 100:+.1f} cm'}.get(c.refused_by, '')
         return f'{c.refused_by} {number}'.strip()
@@ -429,9 +431,9 @@ def _solve3(m: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nd
 
 
 def _boundary_step(t: np.ndarray, h: np.ndarray, z_a: float) -> float:
-    """The step (m) at a segment's start: how far the features' own line (least squares
-    of h = c + g t over t (N,) m from the start, h (N,) m) starts from the surface's
-    height there, ``|c - z_a|``, if significant against the features' scatter (t
+    """The step (m, > 0 up) at a segment's start: how far the features' own line (least
+    squares of h = c + g t over t (N,) m from the start, h (N,) m) starts from the
+    surface's height there, ``c - z_a``, if significant against the features' scatter (t
     statistic at least ``_STEP_T``), else 0 (also with fewer than 6 features). A kerb or a
     drop just at a knot has all its far side in the next segment: no step inside it,
     only a line that does not start where the surface is (a slope's does)."""
@@ -446,8 +448,8 @@ def _boundary_step(t: np.ndarray, h: np.ndarray, z_a: float) -> float:
     res = h - (c0 + g * t)
     sd = math.sqrt(float(np.sum(res * res)) / max(t.size - 2, 1))
     se = sd * math.sqrt(1.0 / t.size + tm * tm / sxx)
-    delta = abs(c0 - z_a)
-    return delta if delta >= _STEP_T * max(se, 1e-9) else 0.0
+    delta = c0 - z_a
+    return delta if abs(delta) >= _STEP_T * max(se, 1e-9) else 0.0
 
 
 def _corridor_step(t: np.ndarray, h: np.ndarray, cut: float) -> float:
@@ -472,8 +474,9 @@ def _corridor_step(t: np.ndarray, h: np.ndarray, cut: float) -> float:
 
 
 def _path_step(t: np.ndarray, lat: np.ndarray, h: np.ndarray, z_a: float, length: float,
-               half_width: float) -> float:
-    """The step (m) of the ground ahead in a segment's features (t: (N,) m from its
+               half_width: float) -> tuple[float, float]:
+    """The step (m, > 0 up) of the ground ahead and where it is (m from the segment's
+    start; NaN with no step) in a segment's features (t: (N,) m from its
     start, lat: (N,) m to the left, h: (N,) m): inside the segment (`_best_step`) if the
     walking corridor (|lat| <= ``half_width``) shows it too (its own line-plus-step at
     the same place, `_corridor_step`, steps at least half as much the same way, when it
@@ -489,7 +492,9 @@ def _path_step(t: np.ndarray, lat: np.ndarray, h: np.ndarray, z_a: float, length
         if math.isfinite(own) and own * math.copysign(1.0, delta) < 0.5 * step:
             step = 0.0
     at_start = _boundary_step(t, h, z_a)
-    return max(step, at_start) if at_start >= _KNOT_STEP_M else step
+    if abs(at_start) >= _KNOT_STEP_M and abs(at_start) > step:
+        return at_start, 0.0
+    return (delta, cut) if step > 0.0 else (0.0, math.nan)
 
 
 def depth_noise(cam: StereoCamera, d, sigma_px) -> np.ndarray:
@@ -723,12 +728,12 @@ def _segment(feats: tuple, s_a: float, z_a: float, grade: float, c: GroundSurfac
     if kernel is None:
         return _segment_numpy(feats, s_a, z_a, grade, c)
     length = min(c.knot_spacing_m, c.far_m - s_a)
-    rule, n_in, width, change, step, spread, z_b = kernel(
+    rule, n_in, width, change, step, spread, z_b, step_at = kernel(
         *feats, float(s_a), float(z_a), float(grade), float(length), c.gate_m,
         c.max_grade_rise, c.max_grade_fall, c.min_features, c.min_width_m, c.smoothness_m,
         c.step_half_width_m, c.max_step_m, c.max_spread_m, _STEP_T, _KNOT_STEP_M)
     return (SegmentCheck(surface_kernels.RULES[rule], int(n_in), float(width), float(change),
-                         float(step), float(spread)), length, float(z_b))
+                         float(step), float(spread), s_a + float(step_at)), length, float(z_b))
 
 
 def _segment_numpy(feats: tuple, s_a: float, z_a: float, grade: float,
@@ -758,15 +763,16 @@ def _segment_numpy(feats: tuple, s_a: float, z_a: float, grade: float,
     dd = np.abs(e_h[inseg] - new_grade * e_s[inseg])
     on = np.abs(res) <= np.maximum(c.gate_m, 2.5 * dd)
     # a step across the walking corridor inside the segment, or at its start
-    step = _path_step(ss[on] - s_a, ll[on], hh[on], z_a, length, c.step_half_width_m)
+    step, step_at = _path_step(ss[on] - s_a, ll[on], hh[on], z_a, length,
+                               c.step_half_width_m)
     spread = _mad(res[on])
     # the spread of a segment is the ground's own unevenness and the disparity noise
     noise = float(np.median(dd[on])) if on.any() else 0.0
     refused = ''
     for name, bad in (('rule_grade', not -c.max_grade_fall <= change <= c.max_grade_rise),
-                      ('rule_step', not step <= c.max_step_m),
+                      ('rule_step', not abs(step) <= c.max_step_m),
                       ('rule_spread', not spread <= math.hypot(c.max_spread_m, noise))):
         if bad:
             refused = name
             break
-    return SegmentCheck(refused, n_in, width, change, step, spread), length, z_b
+    return SegmentCheck(refused, n_in, width, change, step, spread, s_a + step_at), length, z_b

@@ -73,6 +73,55 @@ class DropHoldConfig:
 
 
 @dataclass(frozen=True)
+class GroundStepConfig:
+    """Settings of rule_ground_step (`core.map_steps`) (``EvidenceMapConfig.steps``; in ROS
+    ``map.steps.*``)."""
+
+    enabled: bool = param(
+        True, 'rule_ground_step: where the ground surface ahead ends at a step across '
+        'the walking corridor (its segment refused by rule_step, rule_grade or '
+        'rule_spread with a step measured), the step enters the map as raised (a kerb '
+        'up) or drop (a step down) evidence just beyond it, at its height')
+    min_step_m: float = param(
+        0.05, 'least height (or depth) of a step taken, metres', range=(0.0, 1.0))
+    band_m: float = param(
+        0.6, "the features up to this far before the step find its foot, those up to "
+        'this far beyond it its level, metres', range=(0.01, 5.0))
+    half_width_m: float = param(
+        0.6, 'the step is entered across the walking corridor to this distance either '
+        'side of the walking line, metres', range=(0.1, 10.0))
+    depth_m: float = param(
+        0.3, 'the step is entered on the ground from it to this far beyond it, metres',
+        range=(0.01, 5.0))
+    support_half_width_m: float = param(
+        2.0, "the far side's features within this distance of the walking line support "
+        'the step (the ground surface\'s own width), metres', range=(0.1, 50.0))
+    gate_m: float = param(
+        0.1, "the features within band_m before the step and this close to the known "
+        "surface find the step's foot (their median height over it); those beyond it "
+        "up to this much farther from the foot than the surface's own step (on its "
+        "side) find the far side's level, metres", range=(0.0, 1.0))
+    level_share: float = param(
+        0.5, "the far side's features within this share of its level's height of that "
+        'level support the step (the stepped ground, not a thing on it)',
+        range=(0.01, 10.0))
+    min_features: int = param(
+        4, "least number of the far side's features on its level within band_m of the "
+        'step', range=(1, 100000))
+    min_width_m: float = param(
+        0.8, "least width of the far side's features on its level (10th to 90th "
+        'percentile across the path), metres: the ground beyond a kerb is wide, the foot '
+        'of a post or a box narrow', range=(0.0, 20.0))
+    min_corridor_features: int = param(
+        6, "least number of the far side's features on its level within half_width_m of "
+        'the walking line: the step is seen crossing the corridor (the kerbs either side '
+        'of a kerb ramp step, the ramp between them does not)', range=(0, 100000))
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
 class EvidenceMapConfig:
     """Settings of the evidence map (`EvidenceMap`)."""
 
@@ -301,6 +350,9 @@ class EvidenceMapConfig:
     hold: DropHoldConfig = group(
         DropHoldConfig, 'rule_drop_hold: a confirmed drop whose edge has left the bottom '
         'of the view held until the wearer reaches it')
+    steps: GroundStepConfig = group(
+        GroundStepConfig, 'rule_ground_step: a step of the ground across the walking '
+        'corridor entered as raised or drop evidence')
     default_sigma_px: float = param(0.4, 'σ_d of a match when the detector gives '
                                     'neither a per-pixel threshold nor a sigma, px',
                                     range=(0.01, 10.0))

@@ -27,8 +27,10 @@ from asmonc_vision.core.evidence_map import EvidenceMap, EvidenceMapConfig
 from asmonc_vision.core.map_evidence import DROP, GROUND, NONE, RAISED, pair_evidence
 from asmonc_vision.core.gpod import GpodConfig, GpodDetector, GpodResult
 from asmonc_vision.core.map_motion import MotionPredictor
+from asmonc_vision.core.map_steps import ground_step, may_step, step_evidence
 from asmonc_vision.core.map_reports import objects_to_obstacles
 from asmonc_vision.core.moving_reports import ChainedReports, TallReports, report_arrays
+from asmonc_vision.core.npfast import flat_nonzero
 
 
 class Perception:
@@ -188,8 +190,12 @@ class Perception:
         pixel's threshold over ``threshold.k``; each weighed 1 - c, c the share of its
         rivals that say otherwise in its and its rivals' support
         (`GpodFeatures.contrary_rival_share`): the chance that it is not the ground matched
-        wrongly, were the supports likelihoods. ``ground_only``: the ground pixels alone
-        (the raised and drop ones enter nothing)."""
+        wrongly, were the supports likelihoods. Where the ground surface ends at a step
+        of the ground across the path (`core.map_steps.ground_step`, rule_ground_step),
+        the step enters as raised (drop) evidence just beyond it, at its height
+        (`core.map_steps.step_evidence`; a drop's with ``min_drop_pixels`` points a
+        place), and its far side's ground pixels as none. ``ground_only``: the ground
+        pixels alone (the raised and drop ones, and any step, enter nothing)."""
         f = result.features
         k = len(f)
         thr = (np.asarray(f.threshold, float) if f.threshold is not None
@@ -209,5 +215,32 @@ class Perception:
         weight = (1.0 - np.asarray(f.contrary_rival_share, float)
                   if f.contrary_rival_share is not None and self.map_config.weigh_by_rivals
                   else None)
-        return pair_evidence(cam, result.metric_plane, u, f.v, f.d, sigma_d, kind,
-                             self.map_config.max_range_m, weight)
+        # rule_ground_step: a step of the ground across the corridor, supported by
+        # pixels each under the threshold (the ground pixels: what stands out is the
+        # pixel test's)
+        step = None
+        if not ground_only and may_step(result.surface, self.map_config.steps):
+            on_ground = flat_nonzero(kind == GROUND)
+            step = ground_step(result.surface, cam.triangulate(u[on_ground], f.v[on_ground],
+                                                               f.d[on_ground]),
+                               self.map_config.steps)
+        if step is not None:
+            # its far side is ground, but not the ground the plane is: not seen free
+            kind[on_ground[step.far]] = NONE
+        ev = pair_evidence(cam, result.metric_plane, u, f.v, f.d, sigma_d, kind,
+                           self.map_config.max_range_m, weight)
+        if step is None:
+            return ev
+        # the step is raised (a step up) or drop evidence just beyond it
+        # (a drop's cells with as many points as the map asks of one pair's drop pixels:
+        # each is supported by the many pixels of the far side)
+        mc = self.map_config
+        xy, height, sigma_h = step_evidence(step, mc.steps, mc.cell_m,
+                                            mc.min_drop_pixels if step.height_m < 0 else 1)
+        n = height.shape[0]
+        return dataclasses.replace(
+            ev, xy=np.concatenate([ev.xy, xy]), height=np.concatenate([ev.height, height]),
+            sigma_h=np.concatenate([ev.sigma_h, sigma_h]),
+            kind=np.concatenate([ev.kind, np.full(n, RAISED if step.height_m > 0 else DROP,
+                                                  np.int8)]),
+            weight=None if ev.weight is None else np.concatenate([ev.weight, np.ones(n)]))

@@ -228,8 +228,8 @@ def _boundary_step(t, h, z_a, step_t):
     res = h - (c0 + g * t)
     sd = math.sqrt(nb_total(res * res) / max(n - 2, 1))
     se = sd * math.sqrt(1.0 / n + tm * tm / sxx)
-    delta = abs(c0 - z_a)
-    return delta if delta >= step_t * max(se, 1e-9) else 0.0
+    delta = c0 - z_a
+    return delta if abs(delta) >= step_t * max(se, 1e-9) else 0.0
 
 
 def _corridor_step(t, lat, h, half_width, cut):
@@ -278,7 +278,11 @@ def _path_step(t, lat, h, z_a, length, half_width, step_t, knot_step):
         if math.isfinite(own) and own * math.copysign(1.0, delta) < 0.5 * step:
             step = 0.0
     at_start = nb_boundary_step(t, h, z_a, step_t)
-    return max(step, at_start) if at_start >= knot_step else step
+    if abs(at_start) >= knot_step and abs(at_start) > step:
+        return at_start, 0.0
+    if step > 0.0:
+        return delta, cut
+    return 0.0, math.nan
 
 
 def segment_kernel(s, lat, h, e_s, e_h, s_a, z_a, grade, length, gate, max_rise, max_fall,
@@ -296,7 +300,8 @@ def segment_kernel(s, lat, h, e_s, e_h, s_a, z_a, grade, length, gate, max_rise,
             `ground_surface._STEP_T`, `_KNOT_STEP_M`.
     Returns:
         (rule index into `RULES` (0: taken), features in the segment, width m, grade
-        change, step m, spread m, far knot's height m).
+        change, step m (> 0 up), spread m, far knot's height m, the step's place m from
+        the segment's start (NaN: none)).
     """
     nan = math.nan
     n_all = s.shape[0]
@@ -321,7 +326,7 @@ def segment_kernel(s, lat, h, e_s, e_h, s_a, z_a, grade, length, gate, max_rise,
             first += 1
     z_b = z_a + grade * length
     if n_in < min_features or width < min_width or min(first, n_in - first) < min_features // 4:
-        return 1, n_in, width, nan, nan, nan, z_b
+        return 1, n_in, width, nan, nan, nan, z_b, nan
     t = (ss - s_a) / length
     z_b = nb_fit_line_knot(t, hh, z_a, z_b, smoothness, max(gate, 1e-3), 5)
     new_grade = (z_b - z_a) / length
@@ -330,8 +335,8 @@ def segment_kernel(s, lat, h, e_s, e_h, s_a, z_a, grade, length, gate, max_rise,
     dd = np.abs(e_h[sel] - new_grade * e_s[sel])
     on = np.abs(res) <= np.maximum(gate, 2.5 * dd)
     idx = np.flatnonzero(on)
-    step = nb_path_step(ss[idx] - s_a, ll[idx], hh[idx], z_a, length, step_half_width, step_t,
-                      knot_step)
+    step, step_at = nb_path_step(ss[idx] - s_a, ll[idx], hh[idx], z_a, length,
+                                 step_half_width, step_t, knot_step)
     if idx.shape[0]:
         r_on = res[idx]
         spread = 1.4826 * nb_median(np.abs(r_on - nb_median(r_on)))
@@ -342,11 +347,11 @@ def segment_kernel(s, lat, h, e_s, e_h, s_a, z_a, grade, length, gate, max_rise,
     rule = 0
     if not -max_fall <= change <= max_rise:
         rule = 2
-    elif not step <= max_step:
+    elif not abs(step) <= max_step:
         rule = 3
     elif not spread <= math.hypot(max_spread, noise):
         rule = 4
-    return rule, n_in, width, change, step, spread, z_b
+    return rule, n_in, width, change, step, spread, z_b, step_at
 
 
 def knot_sums_kernel(s, h, ks, kz, gate):

@@ -20,7 +20,7 @@ callbacks that receive images stay fast. Publishes, per processed pair:
 * `/diagnostics`: the pair counts, the image noise and edge threshold, the rows'
   misalignment, the time per pair, and how far the ground surface ahead is known
   (``ground_known_m``, m along the ground) with the rule that ended it
-  (``ground_ended_by``, e.g. ``rule_step 7.5 cm``: `GroundSurface.ended_by`)
+  (``ground_ended_by``, e.g. ``rule_step +7.5 cm``: `GroundSurface.ended_by`)
 
 Subscribes to `/inclinometer/imu` (sensor_msgs/Imu, SENSOR_QOS) and keeps the latest
 orientation: a pair stamped within ``gpod.plane.gravity_prior_max_age_s`` of it gets the world's
