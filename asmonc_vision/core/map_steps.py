@@ -78,11 +78,6 @@ class GroundStep:
     sigma_m: float
     far: np.ndarray
 
-    @property
-    def support(self) -> int:
-        """The number of the far side's features that support the step."""
-        return int(np.count_nonzero(self.far))
-
 
 #: The rules whose refusal of a segment leaves its step measured (`SegmentCheck.step_m`):
 #: a step down across the path is often refused first for the fall of its grade.
