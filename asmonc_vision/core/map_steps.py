@@ -29,7 +29,9 @@ the map (`ground_step`, then `step_evidence`):
   ``min_corridor_features`` of them within ``half_width_m`` of the walking line (the
   kerbs either side of a kerb ramp step, the ramp between them does not), their median
   at least ``min_step_m`` over (or under) the foot: the step's height, its standard
-  deviation from the spreads of both sides;
+  deviation from the spreads of both sides; a step up lies where its support begins
+  (the segment can end short of a kerb), a step down where the segment ends (its lower
+  side begins beyond the edge, hidden behind it);
 * the evidence is the step itself: points on the ground from the step to ``depth_m``
   beyond it, one per map cell across the walking corridor (``half_width_m`` either
   side), raised (a step up) or drop (a step down), at the step's height. A kerb across
@@ -63,7 +65,9 @@ class GroundStep:
 
     Attributes:
         at_m: where the ground steps, metres along the ground from the point below the
-            camera (the surface's s).
+            camera (the surface's s): a step up where its support begins (the
+            ``RAISED_SIDE_PERCENTILE`` of its distances, when beyond the segment's place
+            of the step), a step down where the segment put it.
         height_m: the step's height, metres (negative: a step down): the median height
             of its support over the ground at its foot.
         sigma_m: its standard deviation, metres: from the robust spreads of the support's
@@ -78,6 +82,11 @@ class GroundStep:
     sigma_m: float
     far: np.ndarray
 
+
+#: A step up lies where its support begins: this percentile of their distances along
+#: the ground (a few features of the far side may be matched short of it). A step
+#: down's lower side begins beyond its edge, hidden behind it: the segment's place stands.
+RAISED_SIDE_PERCENTILE = 5.0
 
 #: The rules whose refusal of a segment leaves its step measured (`SegmentCheck.step_m`):
 #: a step down across the path is often refused first for the fall of its grade.
@@ -146,6 +155,11 @@ def ground_step(surface: GroundSurface | None, points: np.ndarray,
         return None     # narrow: the foot of a thing, not the ground beyond a step
     if np.count_nonzero(np.abs(lat[far]) <= config.half_width_m) < config.min_corridor_features:
         return None     # not seen crossing the corridor (kerbs either side of a ramp)
+    if height > 0:
+        # a step up is where its raised side begins: the segment's place of the step can
+        # lie short of it (a level chest rig sees little ground before a kerb), and
+        # evidence short of a kerb falls in other cells as the wearer comes nearer
+        at = max(at, float(np.percentile(s[far], RAISED_SIDE_PERCENTILE)))
     var = (1.4826 * fast_median(np.abs(lv - height))) ** 2 / n
     if n_near >= config.min_features:
         ln = over[near]
