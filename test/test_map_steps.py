@@ -13,7 +13,7 @@ import pytest
 from asmonc_vision.core.ground_surface import fit_ground_surface
 from asmonc_vision.core.map_settings import EvidenceMapConfig, GroundStepConfig
 from asmonc_vision.core.map_evidence import DROP, RAISED
-from asmonc_vision.core.map_steps import GroundStep, ground_step, step_evidence
+from asmonc_vision.core.map_steps import GroundStep, ground_step, step_evidence, with_step
 
 from test_ground_surface import PLANE, box_points, ground_points, slope_from, step_at
 
@@ -95,6 +95,28 @@ def test_the_evidence_lies_across_the_corridor_just_beyond_the_step():
     assert np.all(height == step.height_m) and np.all(sigma == step.sigma_m)
 
 
+@pytest.mark.parametrize('rise', [0.10, -0.15])
+def test_a_pairs_evidence_takes_the_step_as_raised_or_drop_points(rise):
+    from asmonc_vision.core.map_evidence import GROUND, NONE, PairEvidence
+    cfg = EvidenceMapConfig()
+    ev = PairEvidence(xy=np.array([[3.0, 0.0], [4.0, 0.1]]), height=np.array([0.0, 0.2]),
+                      sigma_h=np.array([0.01, 0.02]), kind=np.array([GROUND, NONE], np.int8),
+                      weight=np.array([0.5, 0.7]))
+    step = GroundStep(at_m=4.5, height_m=rise, sigma_m=0.004, far=np.zeros(0, bool))
+    out = with_step(ev, step, cfg.steps, cfg.cell_m, 3)
+    xy, h, sg = step_evidence(step, cfg.steps, cfg.cell_m, 1 if rise > 0 else 3)
+    assert np.array_equal(out.xy, np.concatenate([ev.xy, xy]))
+    assert np.array_equal(out.kind[:2], ev.kind)
+    assert np.all(out.kind[2:] == (RAISED if rise > 0 else DROP))
+    assert np.all(out.height[2:] == rise) and np.all(out.sigma_h[2:] == 0.004)
+    assert np.array_equal(out.weight, np.concatenate([ev.weight, np.ones(len(h))]))
+    # a drop has min_drop_pixels points at each place, a step up one
+    assert len(out.kind) - 2 == len(step_evidence(step, cfg.steps, cfg.cell_m)[1]) * (
+        1 if rise > 0 else 3)
+    assert with_step(dataclasses.replace(ev, weight=None), step, cfg.steps, cfg.cell_m,
+                     3).weight is None
+
+
 def test_settings_refuse_values_out_of_range():
     with pytest.raises(ValueError, match='min_step_m'):
         GroundStepConfig(min_step_m=-0.1)
@@ -134,35 +156,29 @@ def test_the_map_confirms_a_step_seen_from_pair_to_pair(rise):
     from asmonc_vision.core.evidence_map import EvidenceMap
     from asmonc_vision.core.map_evidence import GROUND, PairEvidence
     from test_evidence_map import evidence, ground_grid, step_motion
-    import dataclasses as dc
     cfg = EvidenceMapConfig()
     sc = cfg.steps
 
-    def pair(cam_x: float, with_step: bool) -> PairEvidence:
+    def pair(cam_x: float, stepped: bool) -> PairEvidence:
         at = 6.0 - cam_x
         ground = ground_grid(cam_x + 2.0, cam_x + 8.0)
-        if with_step:     # its far side within band_m is not ground seen free
+        if stepped:     # its far side within band_m is not ground seen free
             ground = ground[~((ground[:, 0] >= 6.0) & (ground[:, 0] <= 6.0 + sc.band_m))]
         ev = evidence([(ground, GROUND, None)], cam_x)
-        if not with_step:
+        if not stepped:
             return ev
         step = GroundStep(at_m=at, height_m=rise, sigma_m=0.005, far=np.zeros(0, bool))
-        xy, h, sg = step_evidence(step, sc, cfg.cell_m, cfg.min_drop_pixels if rise < 0 else 1)
-        kind = np.full(h.shape[0], RAISED if rise > 0 else DROP, np.int8)
-        return dc.replace(ev, xy=np.concatenate([ev.xy, xy]),
-                          height=np.concatenate([ev.height, h]),
-                          sigma_h=np.concatenate([ev.sigma_h, sg]),
-                          kind=np.concatenate([ev.kind, kind]))
+        return with_step(ev, step, sc, cfg.cell_m, cfg.min_drop_pixels)
 
-    for with_step in (True, False):
+    for stepped in (True, False):
         emap = EvidenceMap(cfg)
         objects = ()
         xs = np.arange(0.0, 1.21, 0.12)          # 1.2 m/s at 10 Hz
         for i, x in enumerate(xs):
             motion = None if i == 0 else step_motion(x - xs[i - 1])
-            objects = emap.update(0.1 * i, PLANE, pair(x, with_step), motion, False)
+            objects = emap.update(0.1 * i, PLANE, pair(x, stepped), motion, False)
         found = [o for o in objects if (o.height < 0) == (rise < 0)]
-        if not with_step:
+        if not stepped:
             assert not found, found
             continue
         assert found, objects

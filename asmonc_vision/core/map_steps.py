@@ -56,6 +56,7 @@ import numpy as np
 
 from .ground_plane import fast_median
 from .ground_surface import GroundSurface
+from .map_evidence import DROP, RAISED, PairEvidence
 from .map_settings import GroundStepConfig
 
 
@@ -192,3 +193,28 @@ def step_evidence(step: GroundStep, config: GroundStepConfig, cell_m: float,
     xy = np.repeat(np.stack([xx.ravel(), yy.ravel()], axis=1), max(int(per_cell), 1), axis=0)
     k = xy.shape[0]
     return xy, np.full(k, step.height_m), np.full(k, step.sigma_m)
+
+
+def with_step(ev: PairEvidence, step: GroundStep, config: GroundStepConfig, cell_m: float,
+              min_drop_pixels: int) -> PairEvidence:
+    """A pair's evidence with the step's appended (`step_evidence`): raised points for a
+    step up, drop points for a step down (``min_drop_pixels`` at each place, as many as
+    the map asks of one pair's drop pixels in a cell), each counting fully.
+
+    Args:
+        ev: the pair's evidence (`core.map_evidence.pair_evidence`, ground frame G).
+        step: the step (`ground_step`).
+        config: the rule's settings.
+        cell_m: the map's cell side, metres.
+        min_drop_pixels: the map's ``min_drop_pixels``.
+    Returns:
+        A new PairEvidence: ``ev``'s points, then the step's.
+    """
+    up = step.height_m > 0
+    xy, height, sigma_h = step_evidence(step, config, cell_m, 1 if up else min_drop_pixels)
+    n = height.shape[0]
+    return PairEvidence(
+        xy=np.concatenate([ev.xy, xy]), height=np.concatenate([ev.height, height]),
+        sigma_h=np.concatenate([ev.sigma_h, sigma_h]),
+        kind=np.concatenate([ev.kind, np.full(n, RAISED if up else DROP, np.int8)]),
+        weight=None if ev.weight is None else np.concatenate([ev.weight, np.ones(n)]))

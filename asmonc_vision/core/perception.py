@@ -27,7 +27,7 @@ from asmonc_vision.core.evidence_map import EvidenceMap, EvidenceMapConfig
 from asmonc_vision.core.map_evidence import DROP, GROUND, NONE, RAISED, pair_evidence
 from asmonc_vision.core.gpod import GpodConfig, GpodDetector, GpodResult
 from asmonc_vision.core.map_motion import MotionPredictor
-from asmonc_vision.core.map_steps import ground_step, may_step, step_evidence
+from asmonc_vision.core.map_steps import ground_step, may_step, with_step
 from asmonc_vision.core.map_reports import objects_to_obstacles
 from asmonc_vision.core.moving_reports import ChainedReports, TallReports, report_arrays
 from asmonc_vision.core.npfast import flat_nonzero
@@ -193,7 +193,7 @@ class Perception:
         wrongly, were the supports likelihoods. Where the ground surface ends at a step
         of the ground across the path (`core.map_steps.ground_step`, rule_ground_step),
         the step enters as raised (drop) evidence just beyond it, at its height
-        (`core.map_steps.step_evidence`; a drop's with ``min_drop_pixels`` points a
+        (`core.map_steps.with_step`; a drop's with ``min_drop_pixels`` points a
         place), and its far side's ground pixels as none. ``ground_only``: the ground
         pixels alone (the raised and drop ones, and any step, enter nothing)."""
         f = result.features
@@ -232,15 +232,5 @@ class Perception:
         if step is None:
             return ev
         # the step is raised (a step up) or drop evidence just beyond it
-        # (a drop's cells with as many points as the map asks of one pair's drop pixels:
-        # each is supported by the many pixels of the far side)
         mc = self.map_config
-        xy, height, sigma_h = step_evidence(step, mc.steps, mc.cell_m,
-                                            mc.min_drop_pixels if step.height_m < 0 else 1)
-        n = height.shape[0]
-        return dataclasses.replace(
-            ev, xy=np.concatenate([ev.xy, xy]), height=np.concatenate([ev.height, height]),
-            sigma_h=np.concatenate([ev.sigma_h, sigma_h]),
-            kind=np.concatenate([ev.kind, np.full(n, RAISED if step.height_m > 0 else DROP,
-                                                  np.int8)]),
-            weight=None if ev.weight is None else np.concatenate([ev.weight, np.ones(n)]))
+        return with_step(ev, step, mc.steps, mc.cell_m, mc.min_drop_pixels)
