@@ -34,21 +34,13 @@ def test_a_kerb_up_or_a_step_down_across_the_path_is_taken(seed, rise):
     s, _, h = surf.coordinates(pts[step.far])
     assert np.all(s >= step.at_m - 0.1) and np.all(s <= step.at_m + GroundStepConfig().band_m)
     assert np.all(np.abs(h - rise) <= 0.5 * abs(rise))
-
-
-@pytest.mark.parametrize('seed', [0, 1, 2])
-@pytest.mark.parametrize('rise', [0.12, -0.15])
-def test_a_kerb_up_is_placed_where_its_raised_side_begins(seed, rise):
-    # the surface's segment that ends at a kerb may place the step short of it (a
-    # level chest rig sees little ground before the kerb): a step up lies where the
-    # features of its raised side begin; a drop's lower side begins beyond the edge
-    # (hidden behind it), so a drop stays where the segment put it
-    rng = np.random.default_rng(seed)
-    pts = ground_points(step_at(4.5, rise), rng)
-    surf = fit_ground_surface(pts, PLANE)
+    # the surface's segment that ends at a kerb may place the step short of it (a level
+    # chest rig sees little ground before the kerb): a step up lies where the features
+    # of its raised side begin; a drop's lower side begins beyond the edge (hidden
+    # behind it), so a drop stays where the segment put it
     short = dataclasses.replace(surf.checks[-1], step_at_m=4.2)
-    surf = dataclasses.replace(surf, checks=surf.checks[:-1] + (short,))
-    step = ground_step(surf, pts, GroundStepConfig())
+    short_surf = dataclasses.replace(surf, checks=surf.checks[:-1] + (short,))
+    step = ground_step(short_surf, pts, GroundStepConfig())
     assert step is not None
     assert step.at_m == pytest.approx(4.5 if rise > 0 else 4.2, abs=0.06)
     assert step.height_m == pytest.approx(rise, abs=0.03)
