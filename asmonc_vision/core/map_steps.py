@@ -107,9 +107,11 @@ def may_step(surface: GroundSurface | None, config: GroundStepConfig) -> bool:
 
 def ground_step(surface: GroundSurface | None, points: np.ndarray,
                 config: GroundStepConfig) -> GroundStep | None:
-    """The step of the ground ahead where the known surface ends by ``rule_step``, as
-    the module doc tells, or None (no such surface, a step under ``min_step_m``, or
-    fewer than ``min_features`` features on its far side's level within ``band_m``).
+    """The step of the ground ahead where the known surface ends at a measured step
+    (`may_step`), as the module doc tells, or None (no such surface, fewer than
+    ``min_features`` features on its far side's level within ``band_m``, a step under
+    ``min_step_m``, a far side narrower than ``min_width_m`` or with fewer than
+    ``min_corridor_features`` in the corridor).
 
     Args:
         surface: the pair's ground surface ahead (`core.ground_surface`), or None.
