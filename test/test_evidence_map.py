@@ -581,15 +581,15 @@ def test_a_passer_by_near_the_wearer_seen_above_the_foot_is_not_remembered(monke
     assert all(_near_passer_by(EvidenceMap(EvidenceMapConfig(enabled=True))))
 
 
-def _walk_past(emap: EvidenceMap, moved_in: bool):
-    """The wearer stands 2 s, then walks 2.25 m on. A thing 0.6 m wide and 0.4 m tall at
-    3 m: with ``moved_in`` a passer-by who steps in where the ground was seen (ground all
+def _walk_past(emap: EvidenceMap, moved_in: bool, height: float = 0.4):
+    """The wearer stands 2 s, then walks 2.25 m on. A thing 0.6 m wide and ``height``
+    tall at 3 m: with ``moved_in`` a passer-by who steps in where the ground was seen (ground all
     round for 1 s first) and walks off unseen over plain ground; else a box that stands
     there from the first pair (its ground never seen) and is seen while in the image.
     Returns the objects reported
     within 1.2 m ahead once the spot is below the view (the last pair)."""
     far_sparse = ground_grid(6.5, 7.5, -4.0, 4.0, step=0.25)
-    body = np.concatenate([box_edges(3.0, dy, 0.4, half_width=0.0)
+    body = np.concatenate([box_edges(3.0, dy, height, half_width=0.0)
                            for dy in np.arange(-0.3, 0.31, 0.05)])
     x = 0.0
     for i in range(35):
@@ -619,6 +619,19 @@ def test_a_thing_that_moved_in_is_not_remembered_out_of_view():
     assert not _walk_past(EvidenceMap(EvidenceMapConfig(**cfg)), moved_in=True)
     assert _walk_past(EvidenceMap(EvidenceMapConfig(**cfg)), moved_in=False)
     assert _walk_past(EvidenceMap(EvidenceMapConfig(**cfg, moved_in_s=0.0)), moved_in=True)
+
+
+def test_a_step_of_the_ground_seen_as_ground_first_is_remembered_out_of_view():
+    """The raised side of a kerb is ground: seen as ground (under the pixel threshold)
+    before the kerb is measured, its raised evidence begins where the ground was seen.
+    Lower than moved_in_min_height_m (0.3 m) it is no thing that moved in: once below
+    the view it is reported from memory. Counted as one (moved_in_min_height_m 0) it is
+    forgotten there, as a passer-by is, and the wearer standing at it hears "all
+    clear"."""
+    cfg = dict(enabled=True, miss_logodds=0.0)
+    assert _walk_past(EvidenceMap(EvidenceMapConfig(**cfg)), moved_in=True, height=0.12)
+    assert not _walk_past(EvidenceMap(EvidenceMapConfig(**cfg, moved_in_min_height_m=0.0)),
+                          moved_in=True, height=0.12)
 
 
 # ------------------------------------------------------------------ drops, ids, output

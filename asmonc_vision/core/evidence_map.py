@@ -67,8 +67,10 @@ Each pair, `EvidenceMap.update`:
    one in the image (in plain view or hidden behind a nearer thing) that the pair saw
    nothing at is not reported once its last evidence is older than ``unseen_report_s``;
    nor, as old and wherever it is (out of the image too), one whose raised evidence
-   began where the ground was seen at most ``moved_in_s`` before (a thing that moved
-   in, a passer-by, may have moved on; a thing walked up to covers its ground). Connected
+   began where the ground was seen at most ``moved_in_s`` before and that stands at
+   least ``moved_in_min_height_m`` high (a thing that moved in, a passer-by, may have
+   moved on; a thing walked up to covers its ground; the raised side of a kerb is
+   ground seen as ground before the kerb is measured, and is lower). Connected
    regions of them (8-connected, gaps of ``join_cells`` bridged) are obstacles
    (drop regions of at least ``min_drop_cells``: drop-offs, which are wide) with the
    nearest point to the wearer, the top height, the width across the line of sight,
@@ -709,8 +711,11 @@ class EvidenceMap:
                 stale = stamp_s - self.last_hit_s.reshape(-1)[cells] > c.unseen_report_s
                 vis &= ~(self._missed[cells] & stale)
                 # a thing that moved in is not remembered where it is no longer seen
-                # (hidden, or out of the image): it may have moved on
-                gone = self.moved_in.reshape(-1)[cells] & stale
+                # (hidden, or out of the image): it may have moved on. Not one lower
+                # than a body: the raised side of a kerb is ground, seen as ground (under
+                # the pixel threshold) before the kerb is measured, and stays put
+                gone = (self.moved_in.reshape(-1)[cells] & stale
+                        & (self.h_x.reshape(-1)[cells] >= c.moved_in_min_height_m))
                 vis &= ~gone
                 below &= ~gone
             masks.extend([(drop, cells[vis]), (drop, cells[below])])

@@ -303,6 +303,12 @@ class EvidenceMapConfig:
         'it is reported only while its evidence is younger than unseen_report_s, in view '
         'or not (a thing the wearer walks up to covers its ground and is remembered); '
         '0 = off', range=(0.0, 60.0))
+    moved_in_min_height_m: float = param(
+        0.3, 'moved_in_s applies to a cell whose height is at least this, m: a thing that '
+        'moves in (a person, a cyclist, a dog) is a body; the raised side of a kerb or a '
+        'step is ground, seen as ground (under the pixel threshold) before the step is '
+        'measured, and was forgotten as a passer-by once below the view (the wearer '
+        'standing at a kerb was told "all clear"); 0 = any height', range=(0.0, 10.0))
     carried_plane_evidence: str = param(
         'ground', "what a pair enters into the map when its ground plane was carried over "
         "from the pair before (the refit failed) while the rig moves: the camera has "
