@@ -307,8 +307,8 @@ class EvidenceMapConfig:
         0.3, 'moved_in_s applies to a cell whose height is at least this, m: a thing that '
         'moves in (a person, a cyclist, a dog) is a body; the raised side of a kerb or a '
         'step is ground, seen as ground (under the pixel threshold) before the step is '
-        'measured, and was forgotten as a passer-by once below the view (the wearer '
-        'standing at a kerb was told "all clear"); 0 = any height', range=(0.0, 10.0))
+        'measured, and stays put: below the view it is remembered, and the wearer standing '
+        'at a kerb is not told "all clear"; 0 = any height', range=(0.0, 10.0))
     carried_plane_evidence: str = param(
         'ground', "what a pair enters into the map when its ground plane was carried over "
         "from the pair before (the refit failed) while the rig moves: the camera has "
