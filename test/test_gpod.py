@@ -22,6 +22,7 @@ from asmonc_vision.core.gpod import grouping as gpod_grouping
 from asmonc_vision.core.gpod import kernels as gk
 from asmonc_vision.core.gpod import kernels_geometry as gkg
 from asmonc_vision.core.gpod import nearest as gpod_nearest
+from asmonc_vision.core.ground_plane import cyclopean_height
 
 CAM = StereoCamera(f=300.0, cx=159.5, cy=119.5, baseline=0.35, width=320, height=240)
 HEIGHT = 1.25
@@ -410,6 +411,49 @@ def test_calibrates_from_one_frame_when_the_walk_starts_at_once():
     angle, dh = plane_error(first[0].metric_plane, first[1].truth_plane)
     assert angle < 0.3 and abs(dh) < 0.01, (angle, dh)
     assert first[0].frame_index == 3 and not first[0].still
+
+
+def test_a_calibration_keeps_the_joint_plane_that_holds_the_latest_frame():
+    """When the window's joint plane and its latest frame's own disagree, the latest
+    frame's own fit calibrates (the nearer of two grounds: before a kerb down), unless
+    the two put the camera more than ``plane.init_max_step_m`` apart in height and the
+    joint plane holds more of the latest frame's features. A frame of faint ground,
+    clutter and a short line of near mismatches (35-50 px) can have, weighted by
+    disparity cubed, that line for its own plane: the camera 0.49 m up (a level chest
+    rig 1.40 m up), while 105 of its 300 features lie on the joint plane and 50 on the
+    line (RANSAC draws the line or not, as on a walk). Over ten draws the joint plane is
+    kept every time; with the bound at 0 (always the frame's own) the line is taken in
+    at least one. (Two planes 15 cm apart, before a kerb down: the frame's own,
+    test_the_paving_beyond_a_kerb_down_is_no_obstacle.)"""
+    cam = StereoCamera(f=560.0, cx=319.5, cy=239.5, baseline=0.12, width=640, height=480)
+    b = cam.baseline / 1.40
+    ground = np.array([0.0, b, -b * cam.cy])           # d = b (v - cy): level, 1.40 m up
+    line = np.array([0.009, 0.247, -55.2])             # a plane 0.49 m below the camera
+
+    def calibrated_height(step: float, seed: int) -> float:
+        rng = np.random.default_rng(seed)
+
+        def features(n, abc, rows, sigma):
+            u, v = rng.uniform(20, 620, n), rng.uniform(*rows, n)
+            return u, v, abc[0] * u + abc[1] * v + abc[2] + rng.normal(0, sigma, n)
+
+        frames = [features(400, ground, (260, 470), 0.15) for _ in range(2)]
+        parts = [features(105, ground, (260, 470), 0.15),
+                 features(50, line, (370, 420), 0.05)]
+        cu, cv_ = rng.uniform(20, 620, 145), rng.uniform(260, 470, 145)
+        parts.append((cu, cv_, rng.uniform(2.0, 50.0, 145)))         # clutter
+        frames.append(tuple(np.concatenate(x) for x in zip(*parts)))
+        det = GpodDetector(override(GpodConfig(), {'plane.init_max_step_m': step,
+                                                    'plane.seed': seed}))
+        for u, v, d in frames:
+            status, _ = det._calibrate(u, v, d, np.ones_like(u), cam)
+        assert status == 'tracking'
+        return cyclopean_height(cam, det.calibrated_plane.abc)
+
+    with_rule = [calibrated_height(0.3, seed) for seed in range(10)]
+    without = [calibrated_height(0.0, seed) for seed in range(10)]
+    assert all(abs(h - 1.40) < 0.03 for h in with_rule), with_rule
+    assert any(abs(h - 0.49) < 0.03 for h in without), without
 
 
 @pytest.mark.parametrize('scenario,seed', [('walk_stop_turn', 9013), ('slope', 9019),

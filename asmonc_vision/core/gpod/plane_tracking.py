@@ -486,11 +486,14 @@ class PlaneTracking(DetectorState):
             # Both tests: the latest frame's own robust fit may find another surface
             # than the joint fit (the near ground before a kerb down, where the joint
             # took the lower ground beyond it), which a least-squares refit started
-            # from the joint plane does not.
+            # from the joint plane does not. But two planes no step apart are not two
+            # grounds: then the one holding more of this frame's features calibrates.
             last = self._fit(u, v, d, cam, support)
             if last is not None and (
                     not _planes_agree(fit.abc, last.abc, cam, c.plane.inlier_px)
-                    or not self._window_shares_plane(fit, cam)):
+                    or not self._window_shares_plane(fit, cam)) and not (
+                    self._no_step_apart(fit, last, cam)
+                    and self._on_plane(fit, u, v, d) > self._on_plane(last, u, v, d)):
                 fit, uu, vv, dd, ss = last, u, v, d, s
         if fit.num_features < c.plane.init_min_inlier_fraction * uu.shape[0]:
             return 'initialising', False
@@ -510,6 +513,21 @@ class PlaneTracking(DetectorState):
         self._calibrate_sigma(uu, vv, dd, ss.astype(np.float64))
         self._init_window.clear()
         return 'tracking', True
+
+    def _no_step_apart(self, a: PlaneFit, b: PlaneFit, cam: StereoCamera) -> bool:
+        """Whether the planes ``a`` and ``b`` put the camera more than
+        ``plane.init_max_step_m`` apart in height: no kerb or step lies between two such
+        grounds, so one of them is a wrong consensus (a frame's own fit, weighted by
+        disparity cubed, through a short line of near mismatches), not the nearer ground
+        the wearer stands on. False when the bound is 0."""
+        gap = self.config.plane.init_max_step_m
+        return 0.0 < gap < abs(cyclopean_height(cam, a.abc) - cyclopean_height(cam, b.abc))
+
+    def _on_plane(self, fit: PlaneFit, u, v, d) -> int:
+        """How many of the features (u, v, d) lie within ``plane.inlier_px`` of ``fit``'s
+        plane, each counted once (no disparity weighting)."""
+        return int(np.count_nonzero(
+            np.abs(d - plane_disparity(fit.abc, u, v)) <= self.config.plane.inlier_px))
 
     def _coarse_then_fine(self, u, v, d, cam: StereoCamera, current: MetricPlane | None,
                           tight: bool, gate_m: float, gate_px: float

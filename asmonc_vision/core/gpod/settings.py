@@ -137,6 +137,14 @@ class PlaneSettings(PlausiblePlaneConfig):
         'calibration features lie on it (the ground is a large part of any view the rig '
         'starts in; a plane through a few per cent of them is a chance consensus of '
         'mismatches, as on ground with no clear edges); 0 = any', range=(0.0, 1.0))
+    init_max_step_m: float = param(
+        0.3, "When the calibration window's frames disagree, the latest frame's own plane "
+        'calibrates (weighted by disparity cubed: of two grounds a kerb or a step apart, the '
+        'nearer, the one the wearer stands on), unless it and the joint plane put the '
+        'camera more than this far apart in height: no kerb or step lies between such '
+        'grounds, one is a wrong consensus (a short line of near mismatches), and the one '
+        "holding more of the latest frame's features (each counted once, within inlier_px) "
+        "calibrates, metres; 0 = always the frame's own", range=(0.0, 10.0))
     init_max_height_sd_m: float = param(
         0.03, 'The initial ground plane is taken only if its features fix the camera '
         'height to this standard deviation (first order, from the fit\'s covariance), '
