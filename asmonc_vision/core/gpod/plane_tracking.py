@@ -486,8 +486,9 @@ class PlaneTracking(DetectorState):
             # Both tests: the latest frame's own robust fit may find another surface
             # than the joint fit (the near ground before a kerb down, where the joint
             # took the lower ground beyond it), which a least-squares refit started
-            # from the joint plane does not. But two planes no step apart are not two
-            # grounds: then the one holding more of this frame's features calibrates.
+            # from the joint plane does not. But two planes more than a step apart are
+            # not two grounds: then the one holding more of this frame's features
+            # calibrates.
             last = self._fit(u, v, d, cam, support)
             if last is not None and (
                     not _planes_agree(fit.abc, last.abc, cam, c.plane.inlier_px)
