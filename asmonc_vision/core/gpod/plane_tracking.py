@@ -490,11 +490,7 @@ class PlaneTracking(DetectorState):
             # not two grounds: then the one holding more of this frame's features
             # calibrates.
             last = self._fit(u, v, d, cam, support)
-            if last is not None and (
-                    not _planes_agree(fit.abc, last.abc, cam, c.plane.inlier_px)
-                    or not self._window_shares_plane(fit, cam)) and not (
-                    self._no_step_apart(fit, last, cam)
-                    and self._on_plane(fit, u, v, d) > self._on_plane(last, u, v, d)):
+            if last is not None and self._latest_frame_calibrates(fit, last, u, v, d, cam):
                 fit, uu, vv, dd, ss = last, u, v, d, s
         if fit.num_features < c.plane.init_min_inlier_fraction * uu.shape[0]:
             return 'initialising', False
@@ -515,7 +511,19 @@ class PlaneTracking(DetectorState):
         self._init_window.clear()
         return 'tracking', True
 
-    def _no_step_apart(self, a: PlaneFit, b: PlaneFit, cam: StereoCamera) -> bool:
+    def _latest_frame_calibrates(self, joint: PlaneFit, last: PlaneFit, u, v, d,
+                                 cam: StereoCamera) -> bool:
+        """Whether the latest frame's own plane ``last`` (its features u, v, d) calibrates
+        in place of the window's ``joint`` one: the two disagree (`_planes_agree`, or the
+        window's frames do not share ``joint``), unless they are more than a step apart
+        and ``joint`` holds more of the frame's features."""
+        if (_planes_agree(joint.abc, last.abc, cam, self.config.plane.inlier_px)
+                and self._window_shares_plane(joint, cam)):
+            return False
+        return not (self._more_than_a_step_apart(joint, last, cam)
+                    and self._on_plane(joint, u, v, d) > self._on_plane(last, u, v, d))
+
+    def _more_than_a_step_apart(self, a: PlaneFit, b: PlaneFit, cam: StereoCamera) -> bool:
         """Whether the planes ``a`` and ``b`` put the camera more than
         ``plane.init_max_step_m`` apart in height: no kerb or step lies between two such
         grounds, so one of them is a wrong consensus (a frame's own fit, weighted by
