@@ -11,8 +11,11 @@
    them, else where they were; the current left corner's own stereo match gives its
    current right position;
 4. the robust motion (``estimators.estimate_motion``; default the modern ``stereo_ba``),
-   a second, wide search without the prediction if that failed;
-5. plausibility (rotation and translation per frame) and the covariance.
+   a second, wide search without the prediction if that failed; if every search failed,
+   the first one's matches solved once more within the wider ``faint_threshold_px``
+   (faint texture: correct matches beyond the strict bound);
+5. plausibility (rotation and translation per frame, speed over the pairs' interval)
+   and the covariance.
 
 A pair with fewer than ``min_features`` stereo features (blank wall, darkness, lens
 covered) gives no motion (status ``too_few_features``) and does not replace the
@@ -118,6 +121,10 @@ class EgomotionConfig:
                                  'follows if it fails')
     threshold_px: float = param(1.5, 'RANSAC inlier bound on the reprojection error, pixels',
                                 range=(0.1, 20.0))
+    faint_threshold_px: float = param(2.5, 'when no search finds a consistent motion within '
+                                      'threshold_px, the first search\'s matches are '
+                                      'solved once more with this inlier bound, pixels (0: '
+                                      'never)', range=(0.0, 20.0))
     max_iterations: int = param(200, 'most RANSAC samples', range=(10, 100000))
     confidence: float = param(0.999, 'RANSAC stops once this sure of an all-inlier sample',
                               range=(0.5, 0.999999))
@@ -132,14 +139,20 @@ class EgomotionConfig:
                                     '(implausible), degrees', range=(0.1, 180.0))
     max_translation_m: float = param(1.5, 'a larger translation between two pairs is '
                                      'refused (implausible), metres', range=(0.001, 100.0))
+    max_speed_mps: float = param(3.0, 'a translation faster than this over the time between '
+                                 'the two pairs is refused (implausible for a walker; a '
+                                 'wrong motion on faint texture), m/s (0: no limit)',
+                                 range=(0.0, 100.0))
     seed: int = param(0, 'seed of the RANSAC sampling (repeatable results)',
                       range=(0, 2 ** 31 - 1))
 
     def __post_init__(self) -> None:
         check_fields(self)
 
-    def ransac_settings(self) -> RansacSettings:
-        return RansacSettings(threshold_px=self.threshold_px, max_iterations=self.max_iterations,
+    def ransac_settings(self, threshold_px: float | None = None) -> RansacSettings:
+        """The RANSAC settings (inlier bound ``threshold_px``, default the setting's)."""
+        bound = self.threshold_px if threshold_px is None else float(threshold_px)
+        return RansacSettings(threshold_px=bound, max_iterations=self.max_iterations,
                               confidence=self.confidence, min_inliers=self.min_inliers,
                               huber_px=self.huber_px, refine_iterations=self.refine_iterations)
 
@@ -303,6 +316,7 @@ class EgomotionEstimator:
         if c.wide_search_radius_px > c.search_radius_px:
             attempts.append((None, c.wide_search_radius_px))
         est, n_matches, used_pred = None, 0, False
+        first = None            # the first search's matches, and whether predicted
         t_match = t_solve = 0.0
         for p, radius in attempts:
             t1 = time.thread_time()
@@ -316,6 +330,14 @@ class EgomotionEstimator:
             used_pred = p is not None
             if est is not None and est.ok:
                 break
+            first = first if first is not None else (corr, used_pred)
+        if ((est is None or not est.ok) and first is not None
+                and c.faint_threshold_px > c.threshold_px and len(first[0]) >= c.min_inliers):
+            t2 = time.thread_time()
+            est = estimate_motion(c.method, first[0], cam,
+                                  c.ransac_settings(c.faint_threshold_px), self._rng)
+            t_solve += (time.thread_time() - t2) * 1e3
+            n_matches, used_pred = len(first[0]), first[1]
         times['match'] = t_match
         times['solve'] = t_solve
         base.update(n_matches=n_matches, predicted=used_pred)
@@ -330,13 +352,15 @@ class EgomotionEstimator:
                                         message=f'no motion: {why}'))
         angle = math.degrees(float(np.linalg.norm(so3_log(est.R))))
         dist = float(np.linalg.norm(est.t))
-        if angle > c.max_rotation_deg or dist > c.max_translation_m:
+        fast = c.max_speed_mps > 0 and dt is not None and dt > 0 and dist > c.max_speed_mps * dt
+        if angle > c.max_rotation_deg or dist > c.max_translation_m or fast:
             self.reference = feats
             self._last_motion = None
             return done(EgomotionResult(IMPLAUSIBLE, None, ref.stamp_ns, **base,
                                         n_inliers=est.num_inliers,
                                         message=f'implausible motion refused: {angle:.1f} deg, '
-                                                f'{dist:.2f} m'))
+                                                f'{dist:.2f} m'
+                                                + (f' in {dt:.2f} s' if fast else '')))
         self.reference = feats
         self._last_motion = (est.R, est.t)
         self._last_dt = dt
