@@ -480,6 +480,22 @@ def test_markings_passing_do_not_make_the_plain_ground_after_them_look_plain(mon
     assert (r is not None) == lifted, r
 
 
+def test_the_texture_energy_is_the_central_differences_of_the_smoothed_image():
+    """`_texture_energy` is |dI/du| + |dI/dv| by central differences of the 3 x 3 box
+    smoothed image, zero on the border where a difference has no neighbour: the same
+    float32 values as the formula written out."""
+    rng = np.random.default_rng(7)
+    img = rng.integers(0, 256, (CAM.height, CAM.width), dtype=np.uint8)
+    g = cv2.blur(img.astype(np.float32), (3, 3))
+    want = np.zeros_like(g)
+    want[:, 1:-1] += np.abs(0.5 * (g[:, 2:] - g[:, :-2]))
+    want[1:-1, :] += np.abs(0.5 * (g[2:, :] - g[:-2, :]))
+    got = _texture_energy(img)
+    assert got.dtype == np.float32 and got.shape == img.shape
+    assert np.array_equal(got, want)
+    assert got[0, 0] == 0.0 and got[-1, -1] == 0.0
+
+
 @pytest.mark.parametrize('sigma', [2.0, 3.0])
 def test_the_noise_floor_is_the_texture_energy_of_the_pixel_noise(sigma):
     """`noise_energy` of a smoothly shaded image with Gaussian pixel noise is the texture

@@ -810,6 +810,11 @@ def _texture_energy(left: np.ndarray) -> np.ndarray:
     g = cv2.blur(left.astype(np.float32), (3, 3))
     gx = np.zeros_like(g)
     gy = np.zeros_like(g)
-    gx[:, 1:-1] = 0.5 * (g[:, 2:] - g[:, :-2])
-    gy[1:-1, :] = 0.5 * (g[2:, :] - g[:-2, :])
-    return np.abs(gx) + np.abs(gy)
+    # in place, the halving last: the same values (halving is exact), a third the time
+    np.subtract(g[:, 2:], g[:, :-2], out=gx[:, 1:-1])
+    np.subtract(g[2:, :], g[:-2, :], out=gy[1:-1, :])
+    np.abs(gx, out=gx)
+    np.abs(gy, out=gy)
+    gx += gy
+    gx *= 0.5
+    return gx
