@@ -152,3 +152,125 @@ def test_a_repeat_describes_the_last_target_where_it_is_now(speed, said):
     d = logic.update(2.0, [])                        # held, and due for a repeat
     assert d is not None and d.repeat and d.level == first.level and d.obstacle_id == 1
     assert d.range == pytest.approx(said if said is not None else first.range)
+
+
+def _walk_up_to_a_drop_and_lose_the_ground(**cfg):
+    """A wearer walking at 1.2 m/s is warned of a drop 3.3 m ahead (WARNING by time to
+    contact), the drop seen in every pair up to t = 0.5 s; then the ground is LOST in
+    every pair (the whole view is the lower ground, as for a level chest camera 2.5 m
+    before a step down). Returns the logic and the decisions after the loss, (t, d)."""
+    logic = started(timeout=0.4, **cfg)
+    out = []
+    for k in range(6):
+        t = 0.1 * k
+        logic.walk_motion(t, 1.2, 0.0)
+        logic.ground_status(t, GroundStatus.TRACKING)
+        d = logic.update(t, [box(3.3 - 1.2 * t, height=-0.2, id=7)])
+        if k == 0:
+            assert d.level == AlarmLevel.WARNING and d.text == 'drop ahead, 3.5 metres'
+    for k in range(6, 40):
+        t = 0.1 * k
+        logic.walk_motion(t, 1.2, 0.0)
+        d = logic.update(t, [])                   # (lists first, as the node publishes)
+        d2 = logic.ground_status(t, GroundStatus.LOST)
+        d3 = logic.check_timeout(t + 0.05)
+        out += [(t, x) for x in (d, d2, d3) if x is not None]
+    return logic, out
+
+
+def test_a_hazard_walked_up_to_keeps_its_level_while_the_ground_is_lost():
+    """lost_hold: the drop announced is carried by the distance walked; its level rises
+    to STOP as it comes within stop_time (1.5 s at 1.2 m/s: 1.8 m, at 1.25 s), the
+    announcement says where it now is, and FAULT "cannot see the ground" comes once it
+    was seen lost_hold ago (2 s: at 2.5 s), not at the timeout (0.9 s); never before."""
+    logic, out = _walk_up_to_a_drop_and_lose_the_ground()
+    levels = [(round(t, 2), d.level) for t, d in out]
+    stop = [t for t, d in out if d.level == AlarmLevel.STOP]
+    fault = [t for t, d in out if d.level == AlarmLevel.FAULT]
+    assert stop and fault, levels
+    # where the drop now is: 2.7 m at 0.5 s less 1.2 m/s since; STOP from 1.8 m, the
+    # first list after 1.25 s
+    assert stop[0] == pytest.approx(1.3), levels
+    first = next(d for t, d in out if d.level == AlarmLevel.STOP)
+    assert first.text.startswith('stop, drop ahead') and first.obstacle_id == 7
+    assert first.range == pytest.approx(2.7 - 1.2 * (first.t - 0.5), abs=0.01)
+    assert min(fault) == pytest.approx(2.5, abs=0.11), levels
+    assert all(d.level != AlarmLevel.FAULT for t, d in out if t < 2.45), levels
+    assert out[-1][1].level == AlarmLevel.FAULT and logic.fault == 'ground_lost'
+
+
+def test_without_lost_hold_a_lost_ground_is_a_fault_after_the_timeout():
+    """lost_hold 0: FAULT once the ground has been LOST for the timeout, whatever was
+    announced."""
+    _, out = _walk_up_to_a_drop_and_lose_the_ground(lost_hold=0.0)
+    fault = [t for t, d in out if d.level == AlarmLevel.FAULT]
+    assert fault and min(fault) <= 0.6 + 0.4 + 0.1 + 1e-9
+    assert not any(d.level == AlarmLevel.STOP for _, d in out)
+
+
+def test_a_hazard_walked_past_while_the_ground_is_lost_is_a_fault():
+    """The drop carried by the walk leaves the path (passed, or out of the corridor):
+    FAULT then, before lost_hold has passed."""
+    logic = started(timeout=0.4)
+    for k in range(3):
+        logic.walk_motion(0.1 * k, 1.5, 0.0)
+        logic.ground_status(0.1 * k, GroundStatus.TRACKING)
+        logic.update(0.1 * k, [box(1.0, height=-0.2, id=3)])
+    assert logic.current.level == AlarmLevel.STOP
+    fault_t = None
+    for k in range(3, 30):
+        t = 0.1 * k
+        logic.walk_motion(t, 1.5, 0.0)
+        for d in (logic.update(t, []), logic.ground_status(t, GroundStatus.LOST)):
+            if d is not None and d.level == AlarmLevel.FAULT and fault_t is None:
+                fault_t = t
+    # the drop 1.0 m ahead at 0.2 s is passed at 0.2 + 1.0 / 1.5 = 0.87 s (the
+    # hysteresis keeps it in the path to -0 m: forward >= 0)
+    assert fault_t is not None and fault_t <= 1.0 + 1e-9
+
+
+def test_a_wide_drop_beside_the_walking_line_is_held_through_the_walking_directions_sway():
+    """The drop's nearest point lies 0.53 m beside the walking line, in the corridor
+    along the cameras' axis when last seen (the walking direction 1 degree right); the
+    walking direction then sways 2 degrees left, which puts it out of both corridors:
+    held all the same (it was in the path), and FAULT only when lost_hold has passed."""
+    logic = started(timeout=0.4)
+    for k in range(3):
+        t = 0.1 * k
+        logic.walk_motion(t, 1.1, math.radians(-1.0))
+        logic.ground_status(t, GroundStatus.TRACKING)
+        logic.update(t, [box(3.5 - 1.1 * t, bearing_deg=8.0, height=-0.3, id=5)])
+    assert logic.current.level == AlarmLevel.WARNING
+    levels = []
+    for k in range(3, 30):
+        t = 0.1 * k
+        logic.walk_motion(t, 1.1, math.radians(2.0))
+        for d in (logic.update(t, []), logic.ground_status(t, GroundStatus.LOST),
+                  logic.check_timeout(t + 0.05)):
+            if d is not None:
+                levels.append((round(t, 2), d.level))
+    fault = [t for t, lv in levels if lv == AlarmLevel.FAULT]
+    assert fault and min(fault) >= 2.2 - 1e-9, levels
+
+
+def test_a_ground_lost_for_less_than_the_timeout_holds_the_level_unmoved():
+    """A pair or two without the ground: the level is held as it was, not raised by
+    where the walk since would have brought the target (a passer-by misplaced by a
+    tenth of a second of dead reckoning was a new, false, WARNING: stop_turn 1205,
+    chest rig); lost_hold's carrying starts once the ground has been LOST for the
+    timeout."""
+    logic = started(timeout=0.4)
+    logic.ground_status(0.0, GroundStatus.TRACKING)
+    assert logic.update(0.1, [box(2.6, id=4)]).level == AlarmLevel.CAUTION  # standing
+    logic.walk_motion(0.15, 1.5, 0.0)           # 2.6 / 1.5 = 1.7 s: would be WARNING
+    logic.ground_status(0.15, GroundStatus.LOST)
+    for t in (0.2, 0.3, 0.4, 0.5):
+        logic.walk_motion(t, 1.5, 0.0)
+        assert logic.update(t, []) is None, t
+    assert logic.current.level == AlarmLevel.CAUTION
+    # LOST for longer than the timeout: carried by the walk since it was seen (0.5 s
+    # at 1.5 m/s: 1.85 m, 1.2 s to contact), STOP
+    logic.walk_motion(0.6, 1.5, 0.0)
+    d = logic.update(0.6, [])
+    assert d is not None and d.level == AlarmLevel.STOP and d.obstacle_id == 4
+    assert d.range == pytest.approx(2.6 - 1.5 * 0.5)

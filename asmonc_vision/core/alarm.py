@@ -31,14 +31,28 @@ number of plain-speech announcements for a blind pedestrian:
   passer-by glimpsed nearer has moved on).
 * **Faults**: no obstacle list for longer than ``timeout`` seconds (measured on the
   caller's clock, the time messages *arrive*), or the ground plane LOST for longer than
-  ``timeout``, or INITIALISING for longer than ``startup_grace``, gives FAULT, repeated
-  every ``repeat_period``. At start, and when the detector (re)initialises its ground
-  plane, FAULT "starting up, hold still" is announced once. When data return, the real
-  level is announced at once (CLEAR as "all clear") -- after a gap in the obstacle
-  lists, only once a ground status has come after it (a detector that died and was
-  restarted has no ground plane yet; the status from before the gap is stale). A gap
-  that ended before the periodic check said FAULT is not announced: the level is held
-  until that status comes, and FAULT follows if it has not come within ``timeout``.
+  ``timeout`` (but see *a hazard walked up to*, below), or INITIALISING for longer than
+  ``startup_grace``, gives FAULT, repeated every ``repeat_period``. At start, and when
+  the detector (re)initialises its ground plane, FAULT "starting up, hold still" is
+  announced once. When data return, the real level is announced at once (CLEAR as "all
+  clear") -- after a gap in the obstacle lists, only once a ground status has come
+  after it (a detector that died and was restarted has no ground plane yet; the status
+  from before the gap is stale). A gap that ended before the periodic check said FAULT
+  is not announced: the level is held until that status comes, and FAULT follows if it
+  has not come within ``timeout``.
+
+* **A hazard walked up to while the ground is LOST** (``lost_hold``): the ground plane
+  is often lost just as the wearer reaches a hazard already announced. A level camera
+  on the chest sees no ground nearer than about 2.5 m, so 2.5 m before a step down its
+  whole view is the lower ground; a wall walked up to fills the view. The hazard has not
+  gone: once the ground has been LOST for ``timeout`` (before that the level is held,
+  as above), the obstacle or drop announced at CAUTION or higher, last seen at most
+  ``lost_hold`` seconds ago, is carried by the distance walked since (at the walking
+  speed, along the walking direction, as a repeat describes it) and, while it still lies
+  ahead, keeps its level, which rises as it comes nearer (the levels by range
+  and time to contact of where it now is), in place of FAULT "cannot see the ground".
+  FAULT follows once it has been walked past or was seen ``lost_hold`` ago. Obstacle
+  lists that stop, a start and a ground still initialising are FAULT as before.
 
 * **Unknown ahead**: an entry of the obstacle list whose height is NaN is no obstacle
   but ground the detector cannot see from its range on (`core.unseen_ground`: a plain
@@ -80,7 +94,7 @@ import math
 from dataclasses import dataclass
 from typing import Iterable, Sequence
 
-from asmonc_vision.core.config import check_fields, param
+from asmonc_vision.core.alarm_settings import AlarmConfig  # noqa: F401 (its settings, here too)
 
 
 class AlarmLevel(enum.IntEnum):
@@ -117,106 +131,6 @@ TEXT_CLEAR = 'all clear'
 def unknown_text(r: float) -> str:
     """The spoken text for ground unknown from r metres ahead."""
     return f'cannot see the way ahead, {range_words(r)}, walk with care'
-
-
-@dataclass(frozen=True)
-class AlarmConfig:
-    """Settings of the alarm logic (ROS parameters of the alarm node)."""
-
-    corridor_half_width: float = param(
-        0.5, 'half width of the walking corridor, metres: obstacles whose lateral offset '
-        '|range*sin(bearing)| is larger are ignored', range=(0.05, 5.0))
-    max_range: float = param(
-        5.0, 'obstacles farther than this along the ground are ignored, metres',
-        range=(0.5, 50.0))
-    stop_range: float = param(
-        1.2, 'STOP when the nearest obstacle in the corridor is this near or nearer, metres',
-        range=(0.1, 20.0))
-    warning_range: float = param(
-        2.5, 'WARNING when the nearest obstacle is this near or nearer, metres',
-        range=(0.1, 30.0))
-    caution_range: float = param(
-        5.0, 'CAUTION when the nearest obstacle is this near or nearer, metres '
-        '(must not exceed max_range)', range=(0.1, 50.0))
-    hysteresis: float = param(
-        0.3, 'a level already held is kept until the range exceeds its threshold by this '
-        'much, metres', range=(0.0, 5.0))
-    hold_time: float = param(
-        1.0, 'a lower level must persist this long before the alarm steps down, seconds '
-        '(going up is always immediate)', range=(0.0, 30.0))
-    min_height: float = param(
-        0.05, 'obstacles lower than this are ignored, metres; drops (negative height) '
-        'deeper than this alarm too', range=(0.0, 2.0))
-    min_confidence: float = param(
-        0.3, 'obstacles with a lower detector confidence are ignored (0..1)',
-        range=(0.0, 1.0))
-    timeout: float = param(
-        0.4, 'FAULT when no obstacle list has arrived for this long, or the ground plane '
-        'has been LOST this long, seconds (with the node\'s 0.05 s check and the transport: '
-        'FAULT heard within 0.5 s of perception stopping)', range=(0.05, 60.0))
-    startup_grace: float = param(
-        10.0, 'at start (or while the ground plane initialises) FAULT says "starting up" '
-        'for at most this long before it says the system has stopped, seconds',
-        range=(0.0, 300.0))
-    repeat_period: float = param(
-        2.0, 'a non-clear alarm (including FAULT) is announced again this often, seconds',
-        range=(0.2, 60.0))
-    ahead_angle_deg: float = param(
-        10.0, 'bearings within +-this angle are spoken as "ahead", degrees',
-        range=(0.0, 90.0))
-    side_angle_deg: float = param(
-        30.0, 'bearings within +-this angle (and beyond ahead_angle_deg) are spoken as '
-        '"slightly left/right"; beyond as "left/right", degrees', range=(0.0, 90.0))
-    stop_time: float = param(
-        1.5, 'while walking, STOP when the time to contact (distance along the walking '
-        'direction / walking speed) is this short or shorter, seconds', range=(0.1, 20.0))
-    warning_time: float = param(
-        3.0, 'while walking, WARNING at this time to contact or less: the lead time, '
-        'seconds', range=(0.1, 30.0))
-    caution_time: float = param(
-        5.0, 'while walking, CAUTION at this time to contact or less, seconds',
-        range=(0.1, 60.0))
-    time_hysteresis: float = param(
-        0.5, 'a level already held is kept until the time to contact exceeds its time by '
-        'this much, seconds', range=(0.0, 10.0))
-    min_walking_speed: float = param(
-        0.2, 'the wearer counts as moving at this walking speed or faster (and when the '
-        'walk model, if any, says walking), m/s', range=(0.0, 3.0))
-    motion_timeout: float = param(
-        1.0, 'a walking speed or gait state older than this is not used (levels by range '
-        'only), seconds', range=(0.05, 60.0))
-    follow_walking_direction: bool = param(
-        True, 'lay the walking corridor along the walking direction (from /egomotion) '
-        'rather than the camera\'s axis while the wearer moves')
-    max_heading_deg: float = param(
-        45.0, 'a walking direction further than this from the camera\'s axis is clipped '
-        'to it, degrees', range=(0.0, 90.0))
-    repeat_when_standing: bool = param(
-        False, 'repeat an unchanged alarm every repeat_period also while the wearer stands '
-        'still (false: a standing wearer hears a known obstacle once)')
-    require_ground_plane: bool = param(
-        True, 'until the detector has reported a TRACKING ground plane on /ground_plane, '
-        'obstacle lists count as "starting up": an empty list before the ground is seen is '
-        'no evidence of a clear path. False only for detectors that publish no /ground_plane')
-
-    def __post_init__(self) -> None:
-        check_fields(self)
-        if not self.stop_range < self.warning_range:
-            raise ValueError(f'AlarmConfig.stop_range = {self.stop_range} must be less than '
-                             f'warning_range = {self.warning_range} (metres)')
-        if not self.warning_range <= self.caution_range:
-            raise ValueError(f'AlarmConfig.warning_range = {self.warning_range} must not '
-                             f'exceed caution_range = {self.caution_range} (metres)')
-        if not self.caution_range <= self.max_range:
-            raise ValueError(f'AlarmConfig.caution_range = {self.caution_range} must not '
-                             f'exceed max_range = {self.max_range} (metres)')
-        if not self.stop_time < self.warning_time <= self.caution_time:
-            raise ValueError(f'AlarmConfig: stop_time = {self.stop_time} < warning_time = '
-                             f'{self.warning_time} <= caution_time = {self.caution_time} '
-                             '(seconds) must hold')
-        if not self.ahead_angle_deg <= self.side_angle_deg:
-            raise ValueError(f'AlarmConfig.ahead_angle_deg = {self.ahead_angle_deg} must not '
-                             f'exceed side_angle_deg = {self.side_angle_deg} (degrees)')
 
 
 @dataclass(frozen=True)
@@ -621,12 +535,20 @@ class AlarmLogic:
             return self._announce(self._decide(t, level, tgt))
 
         tgt, level = self.select(t, obstacles, cur.level)
+        seen = tgt is not None
+        held = None if seen else self._held_through_lost(t)
+        if held is not None:         # (not remembered: it was not seen in this list)
+            tgt, level = held, self.obstacle_level(t, held, cur.level)
         self._set_contact(t, tgt, level)
-        if tgt is not None:
+        if seen:
             self._remember(t, tgt)
         if level > cur.level:
             self._below_since = None
             return self._announce(self._decide(t, level, tgt))
+        if held is not None:
+            # the ground LOST: no evidence either way; the hazard carried by the walk
+            self._pause_below()
+            return self._maybe_repeat(t, tgt)
         if level < cur.level:
             if self._ground == GroundStatus.LOST:
                 self._pause_below()       # no evidence the path is clear: hold
@@ -702,8 +624,29 @@ class AlarmLogic:
         if self._ground == GroundStatus.INITIALISING:
             return 'starting' if t - self._ground_since <= c.startup_grace else 'ground_lost'
         if self._ground == GroundStatus.LOST and t - self._ground_since > c.timeout:
-            return 'ground_lost'
+            return None if self._held_through_lost(t) is not None else 'ground_lost'
         return None
+
+    def _held_through_lost(self, t: float) -> ObstacleInfo | None:
+        """The hazard walked up to while the ground has been LOST for longer than
+        ``timeout`` (module docstring, ``lost_hold``; before that the level is held as
+        it was): the target last seen while the current obstacle level holds,
+        where the walk since has brought it (walking frame), if it was seen at most
+        ``lost_hold`` ago, is the one announced or was seen within ``hold_time`` (as a
+        repeat names it), and still lies ahead within ``max_range``; else None."""
+        c, last = self._cfg, self._last_target
+        if (c.lost_hold <= 0.0 or last is None or self._ground != GroundStatus.LOST
+                or t - self._ground_since <= c.timeout    # (held as before, unmoved)
+                or self._current.level not in (AlarmLevel.CAUTION, AlarmLevel.WARNING,
+                                               AlarmLevel.STOP)
+                or t - self._last_target_t > c.lost_hold
+                or not (last.id == self._current.obstacle_id
+                        or t - self._last_target_t <= c.hold_time)):
+            return None      # (another target glimpsed long ago has moved on)
+        moved = self.walked(t, last, self._last_target_t)
+        # (not the corridor test again: it was in the path, and the walking direction's
+        # sway moves a wide drop's nearest point, beside the walking line, in and out)
+        return moved if moved.forward > 0.0 and moved.range <= c.max_range else None
 
     def _announce_fault(self, t: float, reason: str) -> Decision | None:
         cur = self._current
