@@ -815,6 +815,6 @@ def _texture_energy(left: np.ndarray) -> np.ndarray:
     np.subtract(g[2:, :], g[:-2, :], out=gy[1:-1, :])
     np.abs(gx, out=gx)
     np.abs(gy, out=gy)
-    gx += gy
-    gx *= 0.5
+    np.add(gx, gy, out=gx)
+    np.multiply(gx, 0.5, out=gx)
     return gx
