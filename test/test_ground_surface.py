@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from asmonc_vision.core import ground_surface as gs
+from asmonc_vision.core import surface_steps
 from asmonc_vision.core.camera import MetricPlane, StereoCamera, ground_axes
 from asmonc_vision.core.ground_surface import (GroundSurface, GroundSurfaceConfig,
                                                depth_noise, fit_ground_surface)
@@ -359,14 +360,16 @@ def _ramp_between_kerbs(seed, start, across):
 
 @pytest.mark.parametrize('start', [0.15, 0.5, 0.85])
 def test_a_ramp_between_kerbs_is_a_bend_and_a_kerb_across_is_a_step(start):
-    """rule_step's corridor test (`_path_step`): most of a segment's features on the
+    """rule_step's corridor test (`surface_steps.path_step`): most of a segment's features on the
     kerbs beside a kerb ramp step 13 cm, but the corridor's own line-plus-step finds a
     bend there, not a step: no step, in each of 20 seeds (the ramp is ground). With the
     kerb across the corridor too, the step is found in each (a kerb up ahead)."""
-    width = gs.GroundSurfaceConfig().step_half_width_m
+    c = gs.GroundSurfaceConfig()
+    ray = np.full(200, -0.4)          # a chest rig 1.4 m up, 3.5 m ahead
+    args = (ray, 0.0, 0.0, 1.0, c.step_half_width_m, c.max_grade_rise)
     for seed in range(20):
-        ramp, _ = gs._path_step(*_ramp_between_kerbs(seed, start, False), 0.0, 1.0, width)
-        kerb, at = gs._path_step(*_ramp_between_kerbs(seed, start, True), 0.0, 1.0, width)
+        ramp, _, _ = surface_steps.path_step(*_ramp_between_kerbs(seed, start, False), *args)
+        kerb, at, _ = surface_steps.path_step(*_ramp_between_kerbs(seed, start, True), *args)
         assert abs(ramp) <= 0.04 < kerb, (seed, ramp, kerb)
         assert abs(at - start) <= 0.15, (seed, at, start)
 
@@ -472,3 +475,39 @@ def test_the_surface_says_why_its_known_ground_ends():
     assert bare.ended_by().startswith('rule_support ')
     assert bare.ended_by().endswith(' features')
     assert GroundSurface.flat(PLANE, 2.0).ended_by() == ''
+
+
+def _edge_features(seed, far, gap=0.0, n=200):
+    """One segment's features (t m from its start, lat m to the left, h m above the
+    plane; 1 cm noise), flat to 0.45 m, then ``far(t)`` beyond ``0.45 + gap`` m (the
+    ground a drop hides just beyond its edge: none there)."""
+    rng = np.random.default_rng(seed)
+    t = rng.uniform(0.0, 1.0, n)
+    t = t[(t <= 0.45) | (t > 0.45 + gap)]
+    lat = rng.uniform(-1.5, 1.5, t.size)
+    h = np.where(t <= 0.45, 0.0, far(t)) + rng.normal(0.0, 0.01, t.size)
+    return t, lat, h
+
+
+def test_a_sharp_brow_is_a_bend_and_a_drop_a_step():
+    """rule_step's bend test (`surface_steps.path_step`): ground falling at 0.15 a metre beyond a
+    sharp brow in the middle of a segment is explained better by a bent line than by a
+    line and a step: no step, the bend's change of grade for rule_grade instead (each
+    of 20 seeds), where the rays graze it at 0.4 (seen whole). Where they graze it at
+    0.2 the ground beyond falls at three quarters of the ray's grade, as the gap behind
+    a drop's edge would: the step stands. A 10 cm drop, its far side hidden for 0.2 m
+    beyond the edge, is a step however the rays fall."""
+    c = gs.GroundSurfaceConfig()
+    brow = lambda t: -0.15 * (t - 0.45)              # noqa: E731
+    drop = lambda t: -0.10 + 0.0 * t                 # noqa: E731
+    for seed in range(20):
+        args = (0.0, 0.0, 1.0, c.step_half_width_m, c.max_grade_rise)
+        t, lat, h = _edge_features(seed, brow)
+        step, at, bend = surface_steps.path_step(t, lat, h, np.full(t.size, -0.4), *args)
+        assert step == 0.0 and bend == pytest.approx(-0.15, abs=0.03), (seed, step, bend)
+        step, at, bend = surface_steps.path_step(t, lat, h, np.full(t.size, -0.2), *args)
+        assert step != 0.0 and np.isnan(bend), (seed, step, bend)
+        t, lat, h = _edge_features(seed, drop, gap=0.2)
+        for ray in (-0.4, -0.2):
+            step, at, bend = surface_steps.path_step(t, lat, h, np.full(t.size, ray), *args)
+            assert step == pytest.approx(-0.10, abs=0.02) and np.isnan(bend), (seed, step)

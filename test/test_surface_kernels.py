@@ -74,13 +74,19 @@ def _features(rng, kind, n):
         half = rng.uniform(0.6, 1.3)
         h += np.where(np.abs(lat) > half, np.where(s > 3.7, 0.13, 0.0),
                       0.1 * np.clip(s - 3.7, 0.0, None))
+    elif kind == 'brow':               # a sharp brow, seen whole or nearly grazed
+        h = (rng.normal(0.0, rng.uniform(0.003, 0.02), n)
+             - rng.uniform(0.1, 0.3) * np.clip(s - 3.7, 0.0, None))
+        e_s = rng.uniform(0.0, 0.2, n)
+        return s, lat, h, e_s, -e_s * rng.uniform(1.0, 2.0) / s     # along the rays
     return s, lat, h, rng.uniform(0.0, 0.2, n), rng.uniform(0.0, 0.05, n)
 
 
 @needs_numba
-@pytest.mark.parametrize('kind', ['flat', 'slope', 'step', 'clutter', 'kerb_ramp'])
+@pytest.mark.parametrize('kind', ['flat', 'slope', 'step', 'clutter', 'kerb_ramp', 'brow'])
 def test_the_compiled_segment_test_is_the_numpy_one(kind):
-    rng = np.random.default_rng(['flat', 'slope', 'step', 'clutter', 'kerb_ramp'].index(kind))
+    rng = np.random.default_rng(
+        ['flat', 'slope', 'step', 'clutter', 'kerb_ramp', 'brow'].index(kind))
     c = gs.GroundSurfaceConfig()
     verdicts = set()
     for _ in range(150):

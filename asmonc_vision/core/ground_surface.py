@@ -31,11 +31,16 @@ taken only if it is ground, not an obstacle or a step:
   the features' scatter, must have a step of at most ``max_step_m`` (a kerb of 10 cm is
   a line plus a step; a slope is a line) where the walking corridor
   (``step_half_width_m``) shows it too (a kerb beside a kerb ramp is an obstacle beside
-  the path, not a step of the ground ahead); nor at its start: the features' own line must
-  start where the surface is, within 7 cm (a knot lags a sharp bend by up to about 5 cm)
-  or its own uncertainty (t < 4) (a
-  kerb or a drop just at a knot has all its far side in the next segment, a line that
-  starts 10 cm up or down; a slope's starts on the surface);
+  the path, not a step of the ground ahead), and where a line with one bend in it does
+  not explain the features significantly better (t >= 4) as ground the camera sees
+  whole (a sharp brow: its far side starts where its near side ends, and falls less
+  than half as steeply as the rays that graze it; the gap a drop hides behind its edge,
+  bridged by a bent line, falls as steeply as the ray); such a bend is judged by
+  ``rule_grade`` instead, by the larger change of grade of its two pieces; nor at its
+  start: the features' own line must start where the surface is, within 7 cm (a knot
+  lags a sharp bend by up to about 5 cm) or its own uncertainty (t < 4) (a kerb or a
+  drop just at a knot has all its far side in the next segment, a line that starts 10
+  cm up or down; a slope's starts on the surface);
 * ``rule_spread``: the residuals' robust spread is at most ``max_spread_m`` beyond what
   the features' disparity noise explains (``depth_sd``: a feature moves along its ray,
   several cm across the ground at 9 m on a short baseline).
@@ -71,6 +76,8 @@ from .camera import MetricPlane, StereoCamera, ground_axes, sub_rows
 from .config import check_fields, param
 from .ground_plane import fast_median, fast_percentile
 from .npfast import flat_nonzero
+from .surface_steps import (BEND_RAY_BAND_M, BEND_RAY_SHARE, KNOT_STEP_M, STEP_T,
+                            path_step)
 
 
 @dataclass(frozen=True)
@@ -318,16 +325,6 @@ class GroundSurface:
         return out
 
 
-#: `_best_step`: a step whose t statistic is at least this is one, whatever share of
-#: the residual sum it explains (the best of 9 splits of pure noise: below 4 but for
-#: about 1 segment in 2 000).
-_STEP_T = 4.0
-#: `_boundary_step`: a step at a segment's start counts from this height (m): the
-#: surface's knot lags a sharp bend by up to about 5 cm (its stiff prior), which is no
-#: step; a 10 cm kerb or drop at a knot is.
-_KNOT_STEP_M = 0.07
-
-
 def _tukey(res: np.ndarray, c: float) -> np.ndarray:
     """Tukey biweight weights of residuals (N,) for the scale c (same units)."""
     x = np.clip(np.abs(res) / c, 0.0, 1.0)
@@ -355,146 +352,6 @@ def _fit_segment(s: np.ndarray, h: np.ndarray, s_a: float, z_a: float, length: f
              + z_prior / sigma_prior ** 2)
         z_b = b / a
     return z_b
-
-
-def _best_step(t: np.ndarray, h: np.ndarray, length: float, splits: int = 9
-               ) -> tuple[float, float]:
-    """The step that best explains a segment's features beside a line: for each split
-    t* at 1/(splits+1) .. splits/(splits+1) of the segment, least squares of
-    h = c + g t + delta [t > t*] over the features (t: (N,) m from the segment's start,
-    h: (N,) m). Returns (delta m, t* m) of the split whose residual sum is
-    least; delta is 0 (a slope has no step) unless that sum is at most 3/4 of the line's
-    alone or the step is significant against the features' own scatter (its t
-    statistic, sqrt((rss_line - rss) / (rss / (N - 3))), at least ``_STEP_T``: a kerb
-    among noisy far features cuts the residual sum by less than a quarter, yet by many
-    times the noise). NaNs with fewer than 3 features on either side of every split.
-
-    Every split is solved at once from the sums of the normal equations (A^T A) x =
-    A^T h, A = [1, t, [t > t*]] (Cramer's rule); the residual sum is h^T h - x^T A^T h.
-    The sums are numpy's (pairwise), as `surface_kernels` repeats them."""
-    none = (math.nan, math.nan)
-    if t.size < 6:
-        return none
-    t = np.asarray(t, float)
-    h = np.asarray(h, float)
-    n, st, stt = float(t.size), float(t.sum()), float(np.sum(t * t))
-    sh, sth, shh = float(h.sum()), float(np.sum(t * h)), float(np.sum(h * h))
-    # the line alone: rss = h^T h - x^T A^T h with A = [1, t]
-    det = n * stt - st * st
-    if det <= 1e-12 * max(n * stt, 1e-300):
-        return none
-    c0 = (stt * sh - st * sth) / det
-    g0 = (n * sth - st * sh) / det
-    rss_line = max(shh - (c0 * sh + g0 * sth), 0.0)
-    cuts = length * np.arange(1, splits + 1) / (splits + 1)          # (K,)
-    after = t[None, :] > cuts[:, None]                              # (K, N)
-    na = after.sum(axis=1).astype(float)
-    valid = np.minimum(na, n - na) >= 3
-    if not valid.any():
-        return none
-    sta = np.where(after, t[None, :], 0.0).sum(axis=1)
-    sha = np.where(after, h[None, :], 0.0).sum(axis=1)
-    ata = np.empty((splits, 3, 3))
-    ata[:, 0, 0], ata[:, 0, 1], ata[:, 0, 2] = n, st, na
-    ata[:, 1, 0], ata[:, 1, 1], ata[:, 1, 2] = st, stt, sta
-    ata[:, 2, 0], ata[:, 2, 1], ata[:, 2, 2] = na, sta, na
-    ath = np.stack([np.full(splits, sh), np.full(splits, sth), sha], axis=1)   # (K, 3)
-    ata[~valid] = np.eye(3)                         # placeholders, never chosen
-    coef = np.stack(_solve3(ata, ath), axis=1)                             # (K, 3)
-    rss = np.where(valid, shh - np.sum(coef * ath, axis=1), np.inf)
-    k = int(np.argmin(rss))
-    best_rss = max(float(rss[k]), 0.0)
-    significant = rss_line - best_rss >= _STEP_T ** 2 * best_rss / max(n - 3.0, 1.0)
-    delta = float(coef[k, 2]) if best_rss <= 0.75 * rss_line or significant else 0.0
-    return delta, float(cuts[k])
-
-
-def _solve3(m: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The solutions (x0, x1, x2), each (K,), of the 3x3 systems m x = r (m: (K, 3, 3),
-    r: (K, 3)) by Cramer's rule, as `surface_kernels` computes them."""
-    def e(i, j):
-        return m[:, i, j]
-    r0, r1, r2 = r[:, 0], r[:, 1], r[:, 2]
-    det = (e(0, 0) * (e(1, 1) * e(2, 2) - e(1, 2) * e(2, 1))
-           - e(0, 1) * (e(1, 0) * e(2, 2) - e(1, 2) * e(2, 0))
-           + e(0, 2) * (e(1, 0) * e(2, 1) - e(1, 1) * e(2, 0)))
-    x0 = (r0 * (e(1, 1) * e(2, 2) - e(1, 2) * e(2, 1))
-          - e(0, 1) * (r1 * e(2, 2) - e(1, 2) * r2)
-          + e(0, 2) * (r1 * e(2, 1) - e(1, 1) * r2)) / det
-    x1 = (e(0, 0) * (r1 * e(2, 2) - e(1, 2) * r2)
-          - r0 * (e(1, 0) * e(2, 2) - e(1, 2) * e(2, 0))
-          + e(0, 2) * (e(1, 0) * r2 - r1 * e(2, 0))) / det
-    x2 = (e(0, 0) * (e(1, 1) * r2 - r1 * e(2, 1))
-          - e(0, 1) * (e(1, 0) * r2 - r1 * e(2, 0))
-          + r0 * (e(1, 0) * e(2, 1) - e(1, 1) * e(2, 0))) / det
-    return x0, x1, x2
-
-
-def _boundary_step(t: np.ndarray, h: np.ndarray, z_a: float) -> float:
-    """The step (m, > 0 up) at a segment's start: how far the features' own line (least
-    squares of h = c + g t over t (N,) m from the start, h (N,) m) starts from the
-    surface's height there, ``c - z_a``, if significant against the features' scatter (t
-    statistic at least ``_STEP_T``), else 0 (also with fewer than 6 features). A kerb or a
-    drop just at a knot has all its far side in the next segment: no step inside it,
-    only a line that does not start where the surface is (a slope's does)."""
-    if t.size < 6:
-        return 0.0
-    tm = float(t.mean())
-    sxx = float(np.sum((t - tm) ** 2))
-    if sxx <= 1e-12:
-        return 0.0
-    g = float(np.sum((t - tm) * (h - h.mean()))) / sxx
-    c0 = float(h.mean()) - g * tm
-    res = h - (c0 + g * t)
-    sd = math.sqrt(float(np.sum(res * res)) / max(t.size - 2, 1))
-    se = sd * math.sqrt(1.0 / t.size + tm * tm / sxx)
-    delta = c0 - z_a
-    return delta if abs(delta) >= _STEP_T * max(se, 1e-9) else 0.0
-
-
-def _corridor_step(t: np.ndarray, h: np.ndarray, cut: float) -> float:
-    """The corridor's own step (m) at ``cut`` m: least squares of
-    h = c + g t + delta [t > cut] over its features (t: (N,) m from the segment's start,
-    h: (N,) m); NaN with fewer than 3 features on either side, or t constant on each.
-    The line has the corridor's own slope: a ramp in the corridor that starts inside
-    the segment is a bend, whose line-plus-step steps little (in the segment's middle
-    not at all), where a kerb across the path steps its whole height."""
-    t = np.asarray(t, float)
-    h = np.asarray(h, float)
-    after = t > cut
-    n, na = float(t.size), float(np.count_nonzero(after))
-    if min(na, n - na) < 3 or (np.ptp(t[after]) == 0.0 and np.ptp(t[~after]) == 0.0):
-        return math.nan
-    st, stt = float(t.sum()), float(np.sum(t * t))
-    sh, sth = float(h.sum()), float(np.sum(t * h))
-    sta, sha = float(np.where(after, t, 0.0).sum()), float(np.where(after, h, 0.0).sum())
-    ata = np.array([[[n, st, na], [st, stt, sta], [na, sta, na]]])
-    ath = np.array([[sh, sth, sha]])
-    return float(_solve3(ata, ath)[2][0])
-
-
-def _path_step(t: np.ndarray, lat: np.ndarray, h: np.ndarray, z_a: float, length: float,
-               half_width: float) -> tuple[float, float]:
-    """The step (m, > 0 up) of the ground ahead and where it is (m from the segment's
-    start; NaN with no step) in a segment's features (t: (N,) m from its
-    start, lat: (N,) m to the left, h: (N,) m): inside the segment (`_best_step`) if the
-    walking corridor (|lat| <= ``half_width``) shows it too (its own line-plus-step at
-    the same place, `_corridor_step`, steps at least half as much the same way, when it
-    has 3 features on each side), or at the segment's start (`_boundary_step`) if larger
-    and at least _KNOT_STEP_M. A kerb across the path steps in the corridor; a kerb
-    beside the path (beside a kerb ramp) does not: it is an obstacle beside the path,
-    not a step of the ground ahead, and the ramp between them is a line or a bend."""
-    delta, cut = _best_step(t, h, length)
-    step = abs(delta)
-    if step > 0.0:
-        path = np.abs(lat) <= half_width
-        own = _corridor_step(t[path], h[path], cut)
-        if math.isfinite(own) and own * math.copysign(1.0, delta) < 0.5 * step:
-            step = 0.0
-    at_start = _boundary_step(t, h, z_a)
-    if abs(at_start) >= _KNOT_STEP_M and abs(at_start) > step:
-        return at_start, 0.0
-    return (delta, cut) if step > 0.0 else (0.0, math.nan)
 
 
 def depth_noise(cam: StereoCamera, d, sigma_px) -> np.ndarray:
@@ -731,7 +588,8 @@ def _segment(feats: tuple, s_a: float, z_a: float, grade: float, c: GroundSurfac
     rule, n_in, width, change, step, spread, z_b, step_at = kernel(
         *feats, float(s_a), float(z_a), float(grade), float(length), c.gate_m,
         c.max_grade_rise, c.max_grade_fall, c.min_features, c.min_width_m, c.smoothness_m,
-        c.step_half_width_m, c.max_step_m, c.max_spread_m, _STEP_T, _KNOT_STEP_M)
+        c.step_half_width_m, c.max_step_m, c.max_spread_m, STEP_T, KNOT_STEP_M,
+        BEND_RAY_SHARE, BEND_RAY_BAND_M)
     return (SegmentCheck(surface_kernels.RULES[rule], int(n_in), float(width), float(change),
                          float(step), float(spread), s_a + float(step_at)), length, float(z_b))
 
@@ -763,8 +621,13 @@ def _segment_numpy(feats: tuple, s_a: float, z_a: float, grade: float,
     dd = np.abs(e_h[inseg] - new_grade * e_s[inseg])
     on = np.abs(res) <= np.maximum(c.gate_m, 2.5 * dd)
     # a step across the walking corridor inside the segment, or at its start
-    step, step_at = _path_step(ss[on] - s_a, ll[on], hh[on], z_a, length,
-                               c.step_half_width_m)
+    es = e_s[inseg][on]
+    with np.errstate(invalid='ignore', divide='ignore'):
+        ray = np.where(es > 0.0, e_h[inseg][on] / es, np.nan)
+    step, step_at, bend = path_step(ss[on] - s_a, ll[on], hh[on], ray, z_a, grade, length,
+                                     c.step_half_width_m, c.max_grade_rise)
+    if math.isfinite(bend) and abs(bend) > abs(change):
+        change = bend           # a bend inside the segment: rule_grade judges its pieces
     spread = _mad(res[on])
     # the spread of a segment is the ground's own unevenness and the disparity noise
     noise = float(np.median(dd[on])) if on.any() else 0.0

@@ -159,17 +159,33 @@ def _solve3(m, r):
     return x0, x1, x2
 
 
+def _sums(t, h):
+    """`surface_steps._sums`: (n, sum t, sum t^2, sum h, sum t h, sum h^2)."""
+    return (float(t.shape[0]), nb_total(t), nb_total(t * t), nb_total(h), nb_total(t * h),
+            nb_total(h * h))
+
+
+def _column_fit(n, st, stt, sh, sth, shh, sx, sxt, sxx, shx, m, r):
+    """`surface_steps._line_and` for one column x from its sums (sx, sxt, sxx, shx:
+    sum x, x t, x^2, x h) and the features' (n .. shh), in the 3x3 work arrays m, r:
+    (g, k, residual sum)."""
+    m[0, 0], m[0, 1], m[0, 2] = n, st, sx
+    m[1, 0], m[1, 1], m[1, 2] = st, stt, sxt
+    m[2, 0], m[2, 1], m[2, 2] = sx, sxt, sxx
+    r[0], r[1], r[2] = sh, sth, shx
+    x0, x1, x2 = nb_solve3(m, r)
+    return x1, x2, shh - (((0.0 + x0 * sh) + x1 * sth) + x2 * shx)
+
+
 def _best_step(t, h, length, splits, step_t):
-    """`ground_surface._best_step` (delta, cut), NaNs when it has none."""
+    """`surface_steps.best_step` (delta, cut, rss), NaNs when it has none."""
     nan = math.nan
     if t.shape[0] < 6:
-        return nan, nan
-    n = float(t.shape[0])
-    st, stt = nb_total(t), nb_total(t * t)
-    sh, sth, shh = nb_total(h), nb_total(t * h), nb_total(h * h)
+        return nan, nan, nan
+    n, st, stt, sh, sth, shh = nb_sums(t, h)
     det = n * stt - st * st
     if det <= 1e-12 * max(n * stt, 1e-300):
-        return nan, nan
+        return nan, nan, nan
     c0 = (stt * sh - st * sth) / det
     g0 = (n * sth - st * sh) / det
     rss_line = max(shh - (c0 * sh + g0 * sth), 0.0)
@@ -195,25 +211,47 @@ def _best_step(t, h, length, splits, step_t):
             continue
         any_valid = True
         sta, sha = nb_total(masked_t), nb_total(masked_h)
-        m[0, 0], m[0, 1], m[0, 2] = n, st, fna
-        m[1, 0], m[1, 1], m[1, 2] = st, stt, sta
-        m[2, 0], m[2, 1], m[2, 2] = fna, sta, fna
-        r[0], r[1], r[2] = sh, sth, sha
-        x0, x1, x2 = nb_solve3(m, r)
-        rss = shh - (((0.0 + x0 * sh) + x1 * sth) + x2 * sha)
+        x1, x2, rss = nb_column_fit(n, st, stt, sh, sth, shh, fna, sta, fna, sha, m, r)
         if rss < best_rss:
             best_rss, best_k = rss, k
             best = (x2, cut)
     if not any_valid or best_k < 0:
-        return nan, nan
+        return nan, nan, nan
     best_rss = max(best_rss, 0.0)
     significant = rss_line - best_rss >= step_t ** 2 * best_rss / max(n - 3.0, 1.0)
     delta = best[0] if best_rss <= 0.75 * rss_line or significant else 0.0
-    return delta, best[1]
+    return delta, best[1], best_rss
+
+
+def _best_bend(t, h, length, splits):
+    """`surface_steps.best_bend` (rss, g, k, cut), NaNs when it has none."""
+    nan = math.nan
+    if t.shape[0] < 6:
+        return nan, nan, nan, nan
+    n, st, stt, sh, sth, shh = nb_sums(t, h)
+    m = np.empty((3, 3))
+    r = np.empty(3)
+    rt = np.empty(t.shape[0])
+    best_rss = math.inf
+    best = (nan, nan, nan)
+    for k in range(splits):
+        cut = length * (k + 1) / (splits + 1)
+        rt[:] = np.maximum(t - cut, 0.0)
+        na = np.count_nonzero(rt > 0.0)         # the features beyond the bend
+        if min(float(na), n - float(na)) < 3:
+            continue
+        x1, x2, rss = nb_column_fit(n, st, stt, sh, sth, shh, nb_total(rt), nb_total(rt * t),
+                                    nb_total(rt * rt), nb_total(rt * h), m, r)
+        if rss < best_rss:
+            best_rss = rss
+            best = (x1, x2, cut)
+    if best_rss == math.inf:
+        return nan, nan, nan, nan
+    return max(best_rss, 0.0), best[0], best[1], best[2]
 
 
 def _boundary_step(t, h, z_a, step_t):
-    """`ground_surface._boundary_step`."""
+    """`surface_steps.boundary_step`."""
     n = t.shape[0]
     if n < 6:
         return 0.0
@@ -233,7 +271,7 @@ def _boundary_step(t, h, z_a, step_t):
 
 
 def _corridor_step(t, lat, h, half_width, cut):
-    """`ground_surface._corridor_step` of the features with |lat| <= half_width."""
+    """`surface_steps.corridor_step` of the features with |lat| <= half_width."""
     n_c = 0
     for i in range(t.shape[0]):
         if abs(lat[i]) <= half_width:
@@ -269,25 +307,44 @@ def _corridor_step(t, lat, h, half_width, cut):
     return nb_solve3(m, r)[2]
 
 
-def _path_step(t, lat, h, z_a, length, half_width, step_t, knot_step):
-    """`ground_surface._path_step`."""
-    delta, cut = nb_best_step(t, h, length, 9, step_t)
+def _path_step(t, lat, h, ray, z_a, grade, length, half_width, max_rise, step_t,
+               knot_step, ray_share, ray_band):
+    """`surface_steps.path_step`."""
+    delta, cut, rss_step = nb_best_step(t, h, length, 9, step_t)
     step = abs(delta)
     if step > 0.0:
         own = nb_corridor_step(t, lat, h, half_width, cut)
         if math.isfinite(own) and own * math.copysign(1.0, delta) < 0.5 * step:
             step = 0.0
+    bend = math.nan
+    if step > 0.0:
+        rss_bend, g, k, bend_at = nb_best_bend(t, h, length, 9)
+        n_r = 0
+        rays = np.empty(t.shape[0])
+        for i in range(t.shape[0]):
+            if abs(t[i] - bend_at) <= ray_band and math.isfinite(ray[i]):
+                rays[n_r] = ray[i]
+                n_r += 1
+        graze = nb_median(rays[:n_r]) if n_r else math.nan
+        if k >= 0.0:
+            seen = abs(g - grade) <= max_rise and k <= max_rise
+        else:
+            seen = abs(g - grade) <= max_rise and g + k > ray_share * graze
+        better = rss_step - rss_bend >= step_t ** 2 * rss_bend / max(t.shape[0] - 3.0, 1.0)
+        if better and seen:
+            step = 0.0
+            bend = g - grade if abs(g - grade) > abs(g + k - grade) else g + k - grade
     at_start = nb_boundary_step(t, h, z_a, step_t)
     if abs(at_start) >= knot_step and abs(at_start) > step:
-        return at_start, 0.0
+        return at_start, 0.0, bend
     if step > 0.0:
-        return delta, cut
-    return 0.0, math.nan
+        return delta, cut, bend
+    return 0.0, math.nan, bend
 
 
 def segment_kernel(s, lat, h, e_s, e_h, s_a, z_a, grade, length, gate, max_rise, max_fall,
                    min_features, min_width, smoothness, step_half_width, max_step,
-                   max_spread, step_t, knot_step):
+                   max_spread, step_t, knot_step, ray_share, ray_band):
     """`ground_surface._segment_numpy`'s verdict on one segment, compiled.
 
     Args:
@@ -297,7 +354,8 @@ def segment_kernel(s, lat, h, e_s, e_h, s_a, z_a, grade, length, gate, max_rise,
         length: the segment's length (m); the other scalars are `GroundSurfaceConfig`'s
             (gate_m, max_grade_rise, max_grade_fall, min_features, min_width_m,
             smoothness_m, step_half_width_m, max_step_m, max_spread_m) and
-            `ground_surface._STEP_T`, `_KNOT_STEP_M`.
+            `surface_steps.STEP_T`, `KNOT_STEP_M`, `BEND_RAY_SHARE`,
+            `BEND_RAY_BAND_M`.
     Returns:
         (rule index into `RULES` (0: taken), features in the segment, width m, grade
         change, step m (> 0 up), spread m, far knot's height m, the step's place m from
@@ -335,8 +393,15 @@ def segment_kernel(s, lat, h, e_s, e_h, s_a, z_a, grade, length, gate, max_rise,
     dd = np.abs(e_h[sel] - new_grade * e_s[sel])
     on = np.abs(res) <= np.maximum(gate, 2.5 * dd)
     idx = np.flatnonzero(on)
-    step, step_at = nb_path_step(ss[idx] - s_a, ll[idx], hh[idx], z_a, length,
-                                 step_half_width, step_t, knot_step)
+    es, eh = e_s[sel][idx], e_h[sel][idx]
+    ray = np.empty(idx.shape[0])
+    for i in range(idx.shape[0]):
+        ray[i] = eh[i] / es[i] if es[i] > 0.0 else nan
+    step, step_at, bend = nb_path_step(ss[idx] - s_a, ll[idx], hh[idx], ray, z_a, grade,
+                                       length, step_half_width, max_rise, step_t,
+                                       knot_step, ray_share, ray_band)
+    if math.isfinite(bend) and abs(bend) > abs(change):
+        change = bend
     if idx.shape[0]:
         r_on = res[idx]
         spread = 1.4826 * nb_median(np.abs(r_on - nb_median(r_on)))
@@ -389,7 +454,10 @@ nb_sorted_median = _jit(_sorted_median)
 nb_median = _jit(_median)
 nb_fit_line_knot = _jit(_fit_line_knot)
 nb_solve3 = _jit(_solve3)
+nb_column_fit = _jit(_column_fit)
+nb_sums = _jit(_sums)
 nb_best_step = _jit(_best_step)
+nb_best_bend = _jit(_best_bend)
 nb_boundary_step = _jit(_boundary_step)
 nb_corridor_step = _jit(_corridor_step)
 nb_path_step = _jit(_path_step)
@@ -408,5 +476,5 @@ def warm_up() -> None:
     x = np.array([0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5])
     z = np.zeros(8)
     nb_segment = _warmed(nb_segment, x, x - 1.75, z, z, z, 0.0, 0.0, 0.0, 1.0, 0.05, 0.1,
-                         0.05, 4, 0.5, 0.05, 0.6, 0.06, 0.02, 4.0, 0.07)
+                         0.05, 4, 0.5, 0.05, 0.6, 0.06, 0.02, 4.0, 0.07, 0.5, 0.25)
     nb_knot_sums = _warmed(nb_knot_sums, x, z, np.array([0.0, 1.0]), np.zeros(2), 0.05)
