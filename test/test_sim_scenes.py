@@ -16,8 +16,8 @@ from asmonc_vision.sim.relief import GroundProfile, slope_change
 from asmonc_vision.sim.render import StereoRenderer, exposure_gains
 from asmonc_vision.sim.rig import RigSettings
 from asmonc_vision.sim.scenarios import make_scenario, simulate_frame
-from asmonc_vision.sim.scenes import (CLEAR_CLASSES, CORRIDOR, RIGS, SCENE_CLASSES,
-                                      build_scene, make_scene)
+from asmonc_vision.sim.scenes import (CLEAR_CLASSES, CORRIDOR, EXTRA_CLASSES, RIGS,
+                                      SCENE_CLASSES, build_scene, make_scene)
 from asmonc_vision.sim.surfaces import Marking
 from asmonc_vision.sim.truth import (analytic_nearest_top_point, ground_plane_truth,
                                      obstacle_truth)
@@ -337,7 +337,7 @@ def _path_offsets(sc, ob_xy):
     return float(d.min())
 
 
-@pytest.mark.parametrize('scene_class', SCENE_CLASSES)
+@pytest.mark.parametrize('scene_class', SCENE_CLASSES + EXTRA_CLASSES)
 def test_every_scene_class_renders_with_consistent_truth(scene_class):
     sc = build_scene(scene_class, 7, 10.0, SMALL, realism=False)
     assert sc.name == scene_class and sc.n_frames == 100
@@ -383,3 +383,24 @@ def test_a_scene_class_writes_a_contract_bag(tmp_path, capsys):
     info = yaml.safe_load((tmp_path / 'sd' / 'metadata.yaml').read_text())
     meta = json.loads(info['rosbag2_bagfile_information']['custom_data']['asmonc_vision.sim'])
     assert meta['scenario'] == 'step_down' and 'across the path' in meta['description']
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_a_kerb_crossed_is_the_ground_under_the_wearer_after(seed):
+    """kerb_cross: the wearer walks over a kerb up (seed 0) or down (seed 1) and on. The
+    camera's height changes by the kerb's (within the gait's bob); before the crossing
+    the kerb is an obstacle ahead in the truth; after it the terrace is the ground under
+    the wearer (the truth's plane, the camera its own height above it), no obstacle."""
+    sc = build_scene('kerb_cross', seed, 20.0, SMALL, realism=False)
+    edge = [o for o in sc.world.obstacles if hasattr(o, 'polygon')][0]
+    assert (edge.rise > 0) == (seed == 0)
+    start, end = (sc.trajectory.pose(t).position for t in (1.0, 19.5))
+    assert sc.world.terrace_at(start[0], start[1]) is None
+    assert sc.world.terrace_at(end[0], end[1]) is edge
+    assert end[2] - start[2] == pytest.approx(edge.rise, abs=0.05)
+    r = StereoRenderer(sc.rig)
+    before, after = simulate_frame(sc, 30, r), simulate_frame(sc, 195, r)
+    assert any(o.id == edge.id and o.range > 2.0 for o in before.obstacles)
+    assert not after.obstacles
+    # the camera stays its own height above the ground under it: the terrace's top
+    assert after.plane.height == pytest.approx(before.plane.height, abs=0.06)

@@ -39,7 +39,8 @@ from asmonc_vision.sim.rig import (IMU_FRAME, LEFT_FRAME, RIGHT_FRAME, WORLD_FRA
                                    RigSettings)
 from asmonc_vision.sim.scenarios import (DEFAULT_DURATIONS, SCENARIOS, Scenario, SimFrame,
                                          make_scenario, simulate, simulate_frame)
-from asmonc_vision.sim.scenes import CLEAR_CLASSES, RIGS, SCENE_CLASSES, make_scene
+from asmonc_vision.sim.scenes import (CLEAR_CLASSES, EXTRA_CLASSES, RIGS, SCENE_CLASSES,
+                                      make_scene)
 from asmonc_vision.sim.surfaces import Marking
 from asmonc_vision.sim.truth import ObstacleTruth, ground_plane_truth, obstacle_truth
 from asmonc_vision.sim.world import (Box, Cylinder, Ground, Obstacle, PavementSettings,
@@ -47,8 +48,9 @@ from asmonc_vision.sim.world import (Box, Cylinder, Ground, Obstacle, PavementSe
                                      wall)
 
 __all__ = [
-    'Box', 'CLEAR_CLASSES', 'CameraPose', 'Cylinder', 'GroundProfile', 'Marking', 'Person',
-    'RIGS', 'SCENE_CLASSES', 'make_scene', 'walker', 'DEFAULT_DURATIONS', 'GaitSettings', 'Ground',
+    'Box', 'CLEAR_CLASSES', 'CameraPose', 'Cylinder', 'EXTRA_CLASSES', 'GroundProfile',
+    'Marking', 'Person', 'RIGS', 'SCENE_CLASSES', 'make_scene', 'walker', 'DEFAULT_DURATIONS',
+    'GaitSettings', 'Ground',
     'IMU_FRAME', 'InclinometerSettings', 'LEFT_FRAME', 'Leg', 'Obstacle', 'ObstacleTruth',
     'PavementSettings', 'RIGHT_FRAME', 'RigPose', 'RigSettings', 'SCENARIOS', 'Scenario',
     'SimFrame', 'StereoImages', 'StereoRenderer', 'Terrace', 'Trajectory', 'WORLD_FRAME',

@@ -24,8 +24,8 @@ from pathlib import Path
 from asmonc_vision.sim.motion import GaitSettings
 from asmonc_vision.sim.rig import RigSettings
 from asmonc_vision.sim.scenarios import DEFAULT_DURATIONS, SCENARIOS, make_scenario
-from asmonc_vision.sim.scenes import (CLEAR_CLASSES, SCENE_CLASSES, build_scene, drawn_rig,
-                                      scene_description)
+from asmonc_vision.sim.scenes import (CLEAR_CLASSES, EXTRA_CLASSES, SCENE_CLASSES, build_scene,
+                                      drawn_rig, scene_description)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -126,8 +126,9 @@ def main(argv: list[str] | None = None) -> int:
             doc = ' '.join((fn.__doc__ or '').split())
             print(f'{name:18s} {DEFAULT_DURATIONS[name]:5.1f} s  {doc}')
         print('scene classes (--scene where the name is also a scenario above):')
-        for name in SCENE_CLASSES:
-            clear = ' (clear)' if name in CLEAR_CLASSES else ''
+        for name in SCENE_CLASSES + EXTRA_CLASSES:
+            clear = (' (clear)' if name in CLEAR_CLASSES
+                     else ' (not in the default plans)' if name in EXTRA_CLASSES else '')
             print(f'{name:18s} {20.0:5.1f} s  {scene_description(name)}{clear}')
         return 0
     if not args.scenario or not args.out_dir:
@@ -135,11 +136,12 @@ def main(argv: list[str] | None = None) -> int:
         print('asmonc-sim: error: SCENARIO and OUT_DIR are required (or --list)',
               file=sys.stderr)
         return 2
-    scene = args.scene or (args.scenario not in SCENARIOS and args.scenario in SCENE_CLASSES)
-    if scene and args.scenario not in SCENE_CLASSES or (
+    classes = SCENE_CLASSES + EXTRA_CLASSES
+    scene = args.scene or (args.scenario not in SCENARIOS and args.scenario in classes)
+    if scene and args.scenario not in classes or (
             not scene and args.scenario not in SCENARIOS):
         print(f"asmonc-sim: error: unknown scenario '{args.scenario}'; known: "
-              f"{', '.join(SCENARIOS)}; scene classes: {', '.join(SCENE_CLASSES)}",
+              f"{', '.join(SCENARIOS)}; scene classes: {', '.join(classes)}",
               file=sys.stderr)
         return 2
     out = Path(args.out_dir)

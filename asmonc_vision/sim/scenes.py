@@ -32,6 +32,13 @@ in the walking corridor (``CORRIDOR`` m either side of the path) and test false 
 * ``kerb_up``, ``step_down``: a kerb up or down (10-20 cm / 10-25 cm) across the path;
   the wearer stops 1.2-2.4 m before it.
 * ``stop_turn``: walk towards a wall, stop, turn ~90 degrees, walk on past boxes.
+
+Classes outside the default plans (``EXTRA_CLASSES``; ``asmonc campaign --classes``
+names them):
+
+* ``kerb_cross``: a kerb up or down (10-20 cm) across the path 45-60 % of the way along;
+  the wearer walks on over it (the camera's height changes at once, by the kerb's) and
+  on along the new level: the ground under the wearer changes.
 """
 from __future__ import annotations
 
@@ -57,6 +64,8 @@ SCENE_CLASSES: tuple[str, ...] = (
 #: Classes with no true obstacle in the walking corridor (false-alarm tests).
 CLEAR_CLASSES: tuple[str, ...] = ('clear_walk', 'slope_ahead', 'crest', 'kerb_ramp',
                                   'camber', 'asphalt_markings', 'grate')
+#: Classes outside the default plans (named with ``--classes``).
+EXTRA_CLASSES: tuple[str, ...] = ('kerb_cross',)
 RIGS: tuple[str, ...] = ('backpack', 'chest', 'narrow')
 #: Half-width (m) of the walking corridor the clear classes keep free.
 CORRIDOR = 0.5
@@ -548,6 +557,23 @@ def _stop_turn(rng, rig, duration):
     return _Parts(legs, obs, _some_markings(rng, course), ground, start_speed=v)
 
 
+def _kerb_cross(rng, rig, duration):
+    legs = _walk(rng, duration)
+    course = Course(legs, rig, duration)
+    cross = float(rng.uniform(-0.03, 0.03))
+    ground = Ground(slope_deg=math.degrees(math.atan(abs(cross))),
+                    slope_yaw_deg=90.0 if cross >= 0 else -90.0, pavement=scene_pavement(rng))
+    x, y, psi = course.point(course.length * float(rng.uniform(0.45, 0.6)), 0.0)
+    yaw = math.degrees(psi) + float(rng.uniform(-10.0, 10.0))
+    size = round(float(rng.uniform(0.10, 0.20)), 3)
+    if rng.random() < 0.5:
+        edge = kerb_up(x, y, yaw, rise=size, depth=course.length + 20.0,
+                       name=f'kerb up {size * 100:.0f} cm')
+    else:
+        edge = step_down(x, y, yaw, drop=size, name=f'kerb down {size * 100:.0f} cm')
+    return _Parts(legs, [edge], _some_markings(rng, course), ground)
+
+
 _BUILDERS = {
     'pavement_obstacles': _pavement_obstacles, 'clear_walk': _clear_walk,
     'slope_ahead': _slope_ahead, 'crest': _crest, 'kerb_ramp': _kerb_ramp,
@@ -555,7 +581,7 @@ _BUILDERS = {
     'people_crossing': _people_crossing, 'people_towards': _people_towards,
     'kerb_up': lambda rng, rig, d: _kerb(rng, rig, d, True),
     'step_down': lambda rng, rig, d: _kerb(rng, rig, d, False),
-    'stop_turn': _stop_turn,
+    'stop_turn': _stop_turn, 'kerb_cross': _kerb_cross,
 }
 
 
@@ -603,7 +629,8 @@ def build_scene(scene_class: str, seed: int, duration: float, rig: RigSettings,
     """A scene of ``scene_class`` on an explicit rig (``make_scene`` draws the rig).
 
     Args:
-        scene_class: one of SCENE_CLASSES; seed: everything else is drawn from it.
+        scene_class: one of SCENE_CLASSES or EXTRA_CLASSES; seed: everything else is
+            drawn from it.
         duration: seconds (> 0); rig: the camera settings (realism is added to them when
         drawn on); realism: True, False, or None (on for ~60 % of seeds);
         gait: the walker (None: the default, varied per seed).
@@ -612,7 +639,7 @@ def build_scene(scene_class: str, seed: int, duration: float, rig: RigSettings,
     """
     if scene_class not in _BUILDERS:
         raise KeyError(f"unknown scene class '{scene_class}'; known: "
-                       f"{', '.join(SCENE_CLASSES)}")
+                       f"{', '.join(SCENE_CLASSES + EXTRA_CLASSES)}")
     salt = zlib.crc32(('scene/' + scene_class).encode())
     rng = np.random.default_rng([int(seed), salt, 1])
     walker_rng = np.random.default_rng([int(seed), salt, 2])
@@ -636,7 +663,7 @@ def make_scene(scene_class: str, seed: int, *, duration: float = 20.0,
     of seeds) drawn from seed.
 
     Args:
-        scene_class: one of SCENE_CLASSES.
+        scene_class: one of SCENE_CLASSES or EXTRA_CLASSES.
         seed: the seed.
         duration: seconds simulated (10 Hz frames).
         rig: 'backpack' (320 x 240, f 300, B 0.35 m), 'chest' (640 x 480, B 0.12 m) or
@@ -647,7 +674,7 @@ def make_scene(scene_class: str, seed: int, *, duration: float = 20.0,
     """
     if scene_class not in _BUILDERS:
         raise KeyError(f"unknown scene class '{scene_class}'; known: "
-                       f"{', '.join(SCENE_CLASSES)}")
+                       f"{', '.join(SCENE_CLASSES + EXTRA_CLASSES)}")
     if not duration > 0:
         raise ValueError(f'duration must be > 0 s, got {duration}')
     return build_scene(scene_class, seed, duration, drawn_rig(scene_class, seed, rig),
