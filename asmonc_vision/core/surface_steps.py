@@ -220,13 +220,14 @@ def path_step(t: np.ndarray, lat: np.ndarray, h: np.ndarray, ray: np.ndarray,
 
     A step inside the segment is a bend instead when a bent line (`best_bend`)
     explains the features significantly better (its residual sum below the step's by
-    a t statistic of at least STEP_T), and the bend is one the camera could see whole, after a piece that is ground: its near piece's grade within ``max_rise`` of
+    a t statistic of at least STEP_T), and the bend is one the camera could see whole,
+    after a piece that is ground: its near piece's grade within ``max_rise`` of
     ``grade``, then bending up by at most ``max_rise``, or bending down to a grade less
     than BEND_RAY_SHARE of the grade of the rays that graze it (the median ``ray`` of
     the features within BEND_RAY_BAND_M of the bend). A sharp brow falls away from the
-    rays and its far side is seen from its edge on. A drop hides the ground just beyond its edge
-    along the grazing ray, and a bent line through the gap falls as steeply as that ray;
-    a kerb up is a face, far steeper than max_rise."""
+    rays and its far side is seen from its edge on. A drop hides the ground just beyond
+    its edge along the grazing ray, and a bent line through the gap falls as steeply as
+    that ray; a kerb up is a face, far steeper than max_rise."""
     delta, cut, rss_step = best_step(t, h, length)
     step = abs(delta)
     if step > 0.0:
