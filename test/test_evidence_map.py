@@ -799,8 +799,8 @@ def test_the_hold_takes_only_drops_confirmed_before_they_reached_the_view_bottom
     with margin_m 1 m): a region first confirmed 3 m ahead is held once 2 m ahead; one
     first confirmed 2 m ahead (the far side of a crest, confirmed against a plane fitted
     to the rising ground before the brow) is not; once the wearer has passed the held
-    one's nearest point its cells nearer than the ground in view are let go, and it is
-    not held again."""
+    one's nearest point its cells nearer than the reach are let go, and it is not held
+    again."""
     hold = DropHold(EvidenceMapConfig().hold)
     before = np.zeros(100, bool)
     a, b = np.array([10, 11, 12]), np.array([20, 21])
@@ -810,16 +810,47 @@ def test_the_hold_takes_only_drops_confirmed_before_they_reached_the_view_bottom
         region = np.array([5] * 3 + ([] if xb is None else [6] * 2))
         x = np.asarray(list(xa) + ([] if xb is None else list(xb)), float)
         w = np.stack([x, np.zeros_like(x)], 1)
-        return hold.cells(cells, region, w, lambda p: p, CAM, PLANE, before)
+        return hold.cells(cells, region, w, lambda p: p, CAM, PLANE, before,
+                          np.full(x.size, -0.2))
 
     held, gone = pair([3.0, 3.1, 3.2])
     assert held.size == 0 and gone.size == 0 and before[a].all()
     held, gone = pair([2.0, 2.1, 2.2], [2.0, 2.1])
     assert held.tolist() == a.tolist() and gone.size == 0 and not before[b].any()
-    held, gone = pair([-0.1, 0.5, 1.6])
+    held, gone = pair([-0.1, 0.5, 3.0])
     assert held.size == 0 and gone.tolist() == [10, 11]
     held, gone = pair([0.5, 0.6, 1.6])
     assert held.size == 0 and gone.size == 0
+
+
+def test_stepping_down_lets_go_the_lower_ground_held_apart_but_not_a_second_step():
+    """DropHold.cells (reach 2.40 m, ``level_tol_m`` 6 cm): a drop 20 cm deep is held in
+    two regions (the part below the view, 5, and the part in view, 6, as the map
+    reports them), with a second step 40 cm down beyond (7). Once the wearer has passed
+    region 5's nearest point, region 6's cells nearer than the reach are let go too
+    and none of its cells is held again, as they slip below the view; the second step
+    stays held."""
+    hold = DropHold(EvidenceMapConfig().hold)
+    before = np.zeros(100, bool)
+    cells = np.array([10, 11, 20, 21, 22, 30, 31])
+    region = np.array([5, 5, 6, 6, 6, 7, 7])
+    h = np.array([-0.20, -0.21, -0.22, -0.19, -0.23, -0.41, -0.40])
+
+    def pair(x):
+        x = np.asarray(x, float)
+        w = np.stack([x, np.zeros_like(x)], 1)
+        return hold.cells(cells, region, w, lambda p: p, CAM, PLANE, before, h)
+
+    pair([3.0, 3.1, 3.5, 3.6, 3.7, 4.0, 4.1])            # all confirmed from afar
+    held, gone = pair([1.0, 1.1, 1.5, 1.6, 2.6, 2.0, 2.1])
+    assert held.tolist() == [10, 11, 20, 21, 22, 30, 31] and gone.size == 0
+    held, gone = pair([-0.1, 0.0, 0.4, 0.5, 2.6, 0.9, 1.0])
+    assert gone.tolist() == [10, 11, 20, 21]
+    assert held.tolist() == [30, 31]
+    assert not before[[10, 11, 20, 21, 22]].any() and before[[30, 31]].all()
+    # region 6's far cell slips below the view: not held
+    held, gone = pair([-0.3, -0.2, 0.2, 0.3, 1.0, 0.7, 0.8])
+    assert held.tolist() == [30, 31] and gone.size == 0
 
 
 def test_a_held_drop_is_let_go_once_walked_past():

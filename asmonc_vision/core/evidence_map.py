@@ -238,7 +238,8 @@ class EvidenceMap:
         held, let_go = self._hold.cells(drops, self.ids.reshape(-1)[drops],
                                         self.pt_xy.reshape(-1, 2)[drops].astype(np.float64),
                                         self.to_ground, cam, plane,
-                                        self.drop_before.reshape(-1))
+                                        self.drop_before.reshape(-1),
+                                        self.h_x.reshape(-1)[drops].astype(np.float64))
         held_L = self.L_d.reshape(-1)[held]
         # in place: still, or a step shorter than stationary_step_m (turning on the spot);
         # no parallax, so only separate frames can count as separate looks

@@ -16,9 +16,16 @@ nearest point lies ahead of the wearer and at most ``margin_m`` beyond the neare
 ground in view keep their drop log-odds through the pair (no ground seen free, no miss,
 no decay takes from them) until the wearer has passed that point. A drop the map has
 confirmed is then reported from memory up to its edge, as a thing walked up to is.
-Once the wearer has passed it (stepped down), its cells nearer than the ground in view
-are let go: the lower ground the wearer now stands on, which no pair sees before it is
-underfoot, would otherwise be remembered as a drop at the wearer's feet.
+Once the wearer has passed it (stepped down), its cells nearer than the reach are let
+go: the lower ground the wearer now stands on, which no pair sees before it is
+underfoot, would otherwise be remembered as a drop at the wearer's feet. So are the
+other confirmed drop cells at its level (within ``level_tol_m`` of its median height),
+and none of those is held again: the map reports the part of a region in view and the
+part below the view as two regions, and the lower ground still in view as the wearer
+steps down, not yet cleared, slips below the view as a region of its own, which would
+be held as a new drop up to the wearer's feet (tuning kerb_cross 1002, backpack rig: a
+false "stop, drop, half a metre" for 1.3 s after stepping down). A second step further
+down stands a step's height below that level, and is not let go.
 
 Only a region some of whose cells were confirmed while its nearest point lay beyond
 that reach is held: a drop confirmed while the ground before its edge was in view,
@@ -86,7 +93,7 @@ class DropHold:
 
     def cells(self, cells: np.ndarray, region: np.ndarray, cell_w: np.ndarray,
               to_ground, cam: StereoCamera | None, plane: MetricPlane | None,
-              before: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+              before: np.ndarray, heights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The confirmed drop cells to hold through this pair, and those to let go.
 
         Args:
@@ -108,8 +115,10 @@ class DropHold:
             ahead within ``margin_m`` of the nearest ground in view and some of whose
             cells were confirmed farther; (G,) int64 the cells
             let go: once the wearer has passed the nearest point a held region showed,
-            its cells nearer than the ground in view (the lower ground the wearer
-            stepped down onto, which no pair sees before it is underfoot)).
+            its cells and every confirmed drop cell within ``level_tol_m`` of its
+            median height, nearer than the reach (the lower ground the wearer stepped
+            down onto, which no pair sees before it is underfoot); the cells at its
+            level are not held again).
         """
         keep = region > 0
         # a region id once gone from the map does not come back: forget it
@@ -117,13 +126,14 @@ class DropHold:
         if not self.config.enabled or cam is None or plane is None or not keep.any():
             self._edge = {}
             return _NONE, _NONE
-        cells, region, cell_w = cells[keep], region[keep], cell_w[keep]
+        cells, region, cell_w, h = cells[keep], region[keep], cell_w[keep], heights[keep]
         x = to_ground(cell_w)[:, 0]
         view = nearest_ground_in_view(cam, plane)
         reach = view + self.config.margin_m
         held = np.zeros(cells.size, bool)
         gone = np.zeros(cells.size, bool)
         edges: dict[int, np.ndarray] = {}
+        nearest: dict[int, tuple[float, np.ndarray, np.ndarray]] = {}
         for oid in np.unique(region).tolist():
             if oid in self._passed:
                 continue
@@ -136,13 +146,23 @@ class DropHold:
                 if at < near:                   # the nearer point seen while held stands
                     near, near_w = at, edge
                 if near <= 0.0:                 # walked past: the wearer stepped down
-                    gone[mine] = x[mine] < view
                     self._passed.add(oid)
+                    # onto its lower ground, which the map may hold in other regions
+                    # too (the part in view and the part below it are reported apart):
+                    # every confirmed drop cell at its level is that ground
+                    level = float(np.median(h[mine]))
+                    same = np.abs(h - level) <= self.config.level_tol_m
+                    same[mine] = True
+                    gone |= same & (x < reach)
+                    before[cells[same]] = False
                     continue
+            nearest[oid] = (near, near_w, mine)
+        for oid, (near, near_w, mine) in nearest.items():
             if near > reach:
                 before[cells[mine]] = True
             elif near > 0.0 and before[cells[mine]].any():
                 held[mine] = True
                 edges[oid] = near_w
+        held &= ~gone
         self._edge = edges
         return cells[held], cells[gone]

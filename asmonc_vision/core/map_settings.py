@@ -55,7 +55,7 @@ class DropHoldConfig:
         True, "hold a confirmed drop-off whose nearest point has come within margin_m of "
         "the nearest ground the camera sees, and was confirmed farther than that: no "
         "ground seen, no miss and no decay takes from its cells until the wearer has "
-        "passed its nearest point (then its cells nearer than the view are let go). With "
+        "passed its nearest point (then its cells nearer than the reach are let go). With "
         "its edge out of view the pair's plane can be the lower ground beyond it (a level "
         "chest camera sees the ground from about 2.4 m), against which the drop's lower "
         "ground is ground seen free")
@@ -67,6 +67,12 @@ class DropHoldConfig:
         "was 10 cm low cleared one side of a 16 cm step down 3.5 m ahead, the view's "
         "bottom at 2.6 m: 0.5 kept that side's drop from the map)",
         range=(0.0, 5.0))
+    level_tol_m: float = param(
+        0.06, "once the wearer has passed a held drop, the confirmed drop cells within "
+        "this of its median height are the lower ground stepped onto: let go nearer "
+        "than the reach, and not held again, m (the cells of a 20 cm drop lie within "
+        "4 cm of each other; a second step down lies a step's height below)",
+        range=(0.0, 1.0))
 
     def __post_init__(self) -> None:
         check_fields(self)
