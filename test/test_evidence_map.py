@@ -14,6 +14,7 @@ import pytest
 from asmonc_vision.core.camera import MetricPlane, StereoCamera
 from asmonc_vision.core.evidence_map import EvidenceMap, EvidenceMapConfig, MapObject
 from asmonc_vision.core.map_drop_hold import DropHold, nearest_ground_in_view
+from asmonc_vision.core.map_step_up import stepped_onto
 from asmonc_vision.core.map_evidence import (DROP, GROUND, NONE, RAISED, PairEvidence,
                                              pair_evidence)
 from asmonc_vision.core.map_reports import (CORRIDOR_ID_BASE, MAP_ID_BASE,
@@ -1658,3 +1659,80 @@ def test_nonzero_box_is_the_box_of_the_rows_and_columns_with_any():
     for m in masks:
         for pad, align in ((0, 1), (1, 1), (2, 2), (3, 2), (40, 1)):
             assert map_grid.nonzero_box(m, pad, align) == _any_box(m, pad, align)
+
+
+def _footway(x0: float, x1: float, level: float = 0.18, rng=None) -> tuple:
+    """Confirmed raised cells of a footway from x0 to x1 ahead (G, m), 0.1 m apart,
+    0.6 m wide, at ``level`` +- 2 cm; its kerb face at x0, 8 cm."""
+    rng = rng or np.random.default_rng(0)
+    xs, ys = np.meshgrid(np.arange(x0, x1, 0.1), np.arange(-0.3, 0.31, 0.1))
+    xy = np.stack([xs.ravel(), ys.ravel()], 1)
+    h = level + rng.uniform(-0.02, 0.02, len(xy))
+    h[np.isclose(xy[:, 0], x0)] = 0.08
+    return xy, h
+
+
+def test_step_up_lets_go_the_footway_walked_onto_and_keeps_what_stands_on_it():
+    """stepped_onto (behind_m 0.15, depth 0.45, level_tol 6 cm, margin 1 m; the view from
+    1.4 m): a 18 cm footway confirmed from below the kerb, whose kerb is now 0.6 m
+    behind the wearer, is let go up to the reach (2.4 m) with its kerb face; a post
+    60 cm high on it and the footway beyond the reach stay."""
+    cfg = EvidenceMapConfig().step_up
+    xy, h = _footway(-0.6, 3.0)
+    xy = np.vstack([xy, [[1.0, 0.0], [1.1, 0.0]]])
+    h = np.concatenate([h, [0.6, 0.6]])
+    go, walked = stepped_onto(xy, h, 1.4, cfg)
+    assert walked.sum() >= 4 * 5 and go[walked].all()
+    assert go[(xy[:, 0] < 2.4) & (h < 0.3)].all()
+    assert not go[xy[:, 0] >= 2.4].any() and not go[h > 0.5].any()
+
+
+@pytest.mark.parametrize('case', ['before', 'wall', 'disabled', 'few'])
+def test_step_up_needs_raised_ground_of_a_step_walked_over(case):
+    """Nothing is let go when the wearer stands before the kerb (its cells begin 5 cm
+    ahead), when what lies behind the wearer is a wall's height (the map's pose error),
+    with the rule disabled, or with fewer than min_cells walked over."""
+    cfg = EvidenceMapConfig().step_up
+    x0, level = (0.05, 0.18) if case == 'before' else (-0.6, 0.18)
+    if case == 'wall':
+        level = 1.2
+    xy, h = _footway(x0, 3.0, level)
+    if case == 'disabled':
+        cfg = dataclasses.replace(cfg, enabled=False)
+    if case == 'few':
+        keep = ~((xy[:, 0] < -0.1) & (np.abs(xy[:, 1]) > 0.05))
+        xy, h = xy[keep], h[keep]
+        cfg = dataclasses.replace(cfg, min_cells=6)
+    go, walked = stepped_onto(xy, h, 1.4, cfg)
+    assert not go.any() and not walked.any()
+
+
+def test_the_map_lets_go_the_footway_under_the_wearer():
+    """EvidenceMap: confirmed footway cells around the wearer (entered from below its
+    kerb) are not reported after a pair once the wearer stands 0.5 m onto it, and a low
+    box apart from it still is; with rule_step_up disabled the footway is reported at
+    the wearer's feet."""
+    for enabled in (True, False):
+        cfg = EvidenceMapConfig()
+        cfg = dataclasses.replace(cfg, step_up=dataclasses.replace(cfg.step_up,
+                                                                   enabled=enabled))
+        m = EvidenceMap(cfg)
+        m.update(0.0, PLANE, None, None, True, CAM)
+        xy, h = _footway(-0.5, 1.2)
+        # a 10 cm box apart from the footway, 2 m ahead, stays
+        xy = np.vstack([xy, [[2.0, 0.0], [2.1, 0.0]]])
+        h = np.concatenate([h, [0.1, 0.1]])
+        flat, inside = m._cells(m.to_world(xy))
+        assert inside.all()
+        m.L_r.reshape(-1)[flat] = 3.0
+        m.two_views.reshape(-1)[flat] = True
+        m.h_x.reshape(-1)[flat] = h
+        m.h_P.reshape(-1)[flat] = 1e-4
+        m.pt_xy.reshape(-1, 2)[flat] = m.to_world(xy)
+        m.last_hit_s.reshape(-1)[flat] = 0.0
+        objs = [o for o in m.update(0.1, PLANE, None, (np.eye(3), np.zeros(3)), True, CAM)
+                if not o.is_drop]
+        assert len(objs) == (1 if enabled else 2)
+        near = min(float(np.hypot(*o.nearest_xy)) for o in objs)
+        assert near == (pytest.approx(2.0, abs=0.1) if enabled else
+                        pytest.approx(0.0, abs=0.2))

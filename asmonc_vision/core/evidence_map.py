@@ -90,10 +90,11 @@ import numpy as np
 
 from asmonc_vision.core import map_grid, map_kernels
 from asmonc_vision.core.camera import MetricPlane, StereoCamera, columns, sub_rows
-from asmonc_vision.core.map_drop_hold import DropHold
+from asmonc_vision.core.map_drop_hold import DropHold, nearest_ground_in_view
 from asmonc_vision.core.map_evidence import (DROP, GROUND, RAISED, PairEvidence, ground_frame,
                                              ground_motion)
 from asmonc_vision.core.map_settings import EvidenceMapConfig
+from asmonc_vision.core.map_step_up import stepped_onto
 from .npfast import flat_nonzero, linspace
 
 
@@ -257,6 +258,8 @@ class EvidenceMap:
             self._enter(stamp_s, ev, still)
             if cam is not None:
                 self._unseen(ev, cam)
+        if cam is not None and plane is not None:
+            self._step_up(cam, plane)
         Ld = self.L_d.reshape(-1)
         Ld[held] = np.maximum(Ld[held], held_L)
         Ld[let_go] = np.minimum(Ld[let_go], 0.0)
@@ -300,6 +303,26 @@ class EvidenceMap:
             self._scroll()
         self._plane = plane
         return step
+
+    def _step_up(self, cam: StereoCamera, plane: MetricPlane) -> None:
+        """rule_step_up (`core.map_step_up`): let go the confirmed raised cells of the
+        ground the wearer has walked onto."""
+        cells = self._confirmed_cells()
+        if not cells.size or not self.config.step_up.enabled:
+            return
+        level, walked = stepped_onto(self._cell_xy(cells), self.h_x.reshape(-1)[cells],
+                                     nearest_ground_in_view(cam, plane), self.config.step_up)
+        if not walked.any():
+            return
+        at = cells[level | walked]
+        go = [r for r in self._label(self._grid_of(at) > 0, at)
+              if np.isin(r, cells[walked]).any()]
+        if not go:
+            return
+        go = np.concatenate(go)
+        Lr = self.L_r.reshape(-1)
+        Lr[go] = np.minimum(Lr[go], 0.0)
+        self._forget(go[self.L_d.reshape(-1)[go] <= 0])
 
     def _surest(self, ev: PairEvidence, inside: np.ndarray, sel: np.ndarray,
                 flat: np.ndarray, cells: np.ndarray) -> np.ndarray | float:

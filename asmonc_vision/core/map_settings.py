@@ -79,6 +79,40 @@ class DropHoldConfig:
 
 
 @dataclass(frozen=True)
+class StepUpConfig:
+    """rule_step_up (`core.map_step_up`): raised ground the wearer has walked onto is the
+    ground they stand on (``map.step_up.*``)."""
+
+    enabled: bool = param(
+        True, "let go the confirmed raised cells at or below the level of those the "
+        "wearer has walked onto (a footway seen from below its kerb, which no pair sees again "
+        "before it is underfoot)")
+    behind_m: float = param(
+        0.15, "the walked-over cells lie at least this far behind the wearer (below the "
+        "left camera), m: standing before a kerb, its cells lie ahead", range=(0.0, 2.0))
+    depth_m: float = param(
+        0.45, "... and at most behind_m plus this, m", range=(0.05, 3.0))
+    half_width_m: float = param(
+        0.2, "... and within this of the path (the wearer's feet), m", range=(0.05, 2.0))
+    min_cells: int = param(
+        3, "least confirmed raised cells walked over", range=(1, 1000))
+    max_height_m: float = param(
+        0.3, "their median height must be a step up, at most this, m: a wall or a "
+        "person is never walked onto", range=(0.0, 2.0))
+    level_tol_m: float = param(
+        0.06, "confirmed raised cells at most this above that median height are at or "
+        "below the ground stepped onto, m (a thing standing on it stands its own height "
+        "higher)",
+        range=(0.0, 1.0))
+    margin_m: float = param(
+        1.0, "they are let go nearer than the nearest ground in view plus this, m (those "
+        "farther are in view, and cleared by the ground seen)", range=(0.0, 10.0))
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
 class GroundStepConfig:
     """Settings of rule_ground_step (`core.map_steps`) (``EvidenceMapConfig.steps``; in ROS
     ``map.steps.*``)."""
@@ -362,6 +396,9 @@ class EvidenceMapConfig:
     hold: DropHoldConfig = group(
         DropHoldConfig, 'rule_drop_hold: a confirmed drop whose edge has left the bottom '
         'of the view held until the wearer reaches it')
+    step_up: StepUpConfig = group(
+        StepUpConfig, 'rule_step_up: raised ground the wearer has walked onto is the '
+        'ground they stand on')
     steps: GroundStepConfig = group(
         GroundStepConfig, 'rule_ground_step: a step of the ground across the walking '
         'corridor entered as raised or drop evidence')
