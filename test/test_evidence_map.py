@@ -1600,19 +1600,6 @@ def test_the_compiled_height_update_gives_numpys():
             assert a.dtype == b.dtype and a.tobytes() == b.tobytes()
 
 
-def test_counted_is_numpys_unique_with_counts():
-    """`evidence_map._counted` gives np.unique(x, return_counts=True): one value, several,
-    none."""
-    from asmonc_vision.core.evidence_map import _counted
-    rng = np.random.default_rng(4)
-    for x in (np.zeros(0, np.int64), np.full(5, 7, np.int64), np.array([3], np.int64),
-              rng.integers(1, 4, 50), rng.integers(1, 1000, 200)):
-        vals, cnt = _counted(x)
-        want_v, want_c = np.unique(x, return_counts=True)
-        assert vals.tolist() == want_v.tolist() and cnt.tolist() == want_c.tolist()
-        assert vals.dtype == want_v.dtype and cnt.dtype == np.int64
-
-
 def test_bearing_bins_are_the_clipped_degrees():
     """`evidence_map._bearing_bin` gives ndarray.clip's bins byte for byte (int64),
     behind, beside, at the camera's foot and for NaN or infinite points."""

@@ -1,7 +1,7 @@
 """`core.npfast`: numpy's small functions without their wrappers give numpy's arrays."""
 import numpy as np
 
-from asmonc_vision.core.npfast import flat_nonzero
+from asmonc_vision.core.npfast import flat_nonzero, unique_counts
 
 
 def test_flat_nonzero_is_numpys_flatnonzero_byte_for_byte():
@@ -44,3 +44,15 @@ def test_linspace_is_numpys_linspace_byte_for_byte():
         assert got.tobytes() == want.tobytes(), (a, b, n)
         if max(abs(a), abs(b)) < 1e15:
             assert got.astype(np.int64).tobytes() == want.astype(np.int64).tobytes()
+
+
+def test_unique_counts_is_numpys_unique_with_counts():
+    """`npfast.unique_counts` gives np.unique(x, return_counts=True): one value, several,
+    none."""
+    rng = np.random.default_rng(4)
+    for x in (np.zeros(0, np.int64), np.full(5, 7, np.int64), np.array([3], np.int64),
+              rng.integers(1, 4, 50), rng.integers(1, 1000, 200)):
+        vals, cnt = unique_counts(x)
+        want_v, want_c = np.unique(x, return_counts=True)
+        assert vals.tolist() == want_v.tolist() and cnt.tolist() == want_c.tolist()
+        assert vals.dtype == want_v.dtype and cnt.dtype == np.int64

@@ -95,7 +95,7 @@ from asmonc_vision.core.map_evidence import (DROP, GROUND, RAISED, PairEvidence,
                                              ground_motion)
 from asmonc_vision.core.map_settings import EvidenceMapConfig
 from asmonc_vision.core.map_step_up import stepped_onto
-from .npfast import flat_nonzero, linspace
+from .npfast import flat_nonzero, linspace, unique_counts
 
 
 @dataclass(frozen=True)
@@ -775,7 +775,7 @@ class EvidenceMap:
                 # the id of the previous pair's region most of its cells had (the
                 # smallest of equal counts), of those not taken by a nearer region
                 prev = ids[cs]
-                vals, cnt = _counted(prev[prev > 0])
+                vals, cnt = unique_counts(prev[prev > 0])
                 if used and vals.size:
                     free = np.array([int(x) not in used for x in vals.tolist()], bool)
                     vals, cnt = vals[free], cnt[free]
@@ -834,21 +834,6 @@ _BINS = 180
 #: its height is (the part of a tall thing a level camera sees near the wearer, below
 #: its top, whose edge may be level and unmatched)
 _SEEN_SHARE = 0.75
-
-
-def _counted(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``np.unique(x, return_counts=True)`` of a 1-D integer array (its distinct values
-    ascending and how often each occurs), without np.unique's overhead."""
-    if x.size == 0:
-        return x[:0], np.zeros(0, np.int64)
-    if x.min() == x.max():                  # one value (a region's cells mostly are)
-        return x[:1], np.array([x.size], np.int64)
-    s = np.sort(x)
-    head = flat_nonzero(np.concatenate((_HEAD, s[1:] != s[:-1])))
-    return s[head], np.diff(np.append(head, s.size))
-
-
-_HEAD = np.ones(1, bool)
 
 
 def _bearing_bin(xy: np.ndarray) -> np.ndarray:
