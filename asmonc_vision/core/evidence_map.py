@@ -307,9 +307,20 @@ class EvidenceMap:
     def _step_up(self, cam: StereoCamera, plane: MetricPlane) -> None:
         """rule_step_up (`core.map_step_up`): let go the confirmed raised cells of the
         ground the wearer has walked onto."""
-        cells = self._confirmed_cells()
-        if not cells.size or not self.config.step_up.enabled:
+        c = self.config
+        if not c.step_up.enabled:
             return
+        # the cells walked over lie within behind_m + depth_m of the wearer: none
+        # confirmed there (most pairs), nothing to do
+        r = c.step_up.behind_m + c.step_up.depth_m + c.cell_m
+        x, y = (float(self.pose[k] - self.origin[k]) / c.cell_m for k in (0, 1))
+        k = r / c.cell_m
+        win = (slice(max(int(y - k), 0), max(int(y + k) + 1, 0)),
+               slice(max(int(x - k), 0), max(int(x + k) + 1, 0)))
+        if np.count_nonzero((self.L_r[win] >= c.report_logodds)
+                            & self.two_views[win]) < c.step_up.min_cells:
+            return
+        cells = self._confirmed_cells()
         level, walked = stepped_onto(self._cell_xy(cells), self.h_x.reshape(-1)[cells],
                                      nearest_ground_in_view(cam, plane), self.config.step_up)
         if not walked.any():
