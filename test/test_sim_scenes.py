@@ -16,8 +16,8 @@ from asmonc_vision.sim.relief import GroundProfile, slope_change
 from asmonc_vision.sim.render import StereoRenderer, exposure_gains
 from asmonc_vision.sim.rig import RigSettings
 from asmonc_vision.sim.scenarios import make_scenario, simulate_frame
-from asmonc_vision.sim.scenes import (CLEAR_CLASSES, CORRIDOR, EXTRA_CLASSES, RIGS,
-                                      SCENE_CLASSES, build_scene, make_scene)
+from asmonc_vision.sim.scenes import (ALL_CLASSES, CLEAR_CLASSES, CORRIDOR, RIGS,
+                                      build_scene, make_scene)
 from asmonc_vision.sim.surfaces import Marking
 from asmonc_vision.sim.truth import (analytic_nearest_top_point, ground_plane_truth,
                                      obstacle_truth)
@@ -337,7 +337,7 @@ def _path_offsets(sc, ob_xy):
     return float(d.min())
 
 
-@pytest.mark.parametrize('scene_class', SCENE_CLASSES + EXTRA_CLASSES)
+@pytest.mark.parametrize('scene_class', ALL_CLASSES)
 def test_every_scene_class_renders_with_consistent_truth(scene_class):
     sc = build_scene(scene_class, 7, 10.0, SMALL, realism=False)
     assert sc.name == scene_class and sc.n_frames == 100

@@ -89,7 +89,7 @@ def default_cache() -> Path:
 
 
 def add_arguments(p) -> None:
-    from asmonc_vision.sim.scenes import EXTRA_CLASSES, RIGS, SCENE_CLASSES
+    from asmonc_vision.sim.scenes import ALL_CLASSES, EXTRA_CLASSES, RIGS, SCENE_CLASSES
 
     p.add_argument('--minutes', type=float, default=20.0,
                    help='minutes of walks in all (default 20; split evenly between the '
@@ -101,7 +101,7 @@ def add_arguments(p) -> None:
                             '(never tuned on)')
     which.add_argument('--tuning', action='store_true',
                        help=f'only the TUNING seeds {TUNING_SEEDS[0]}-{TUNING_SEEDS[1] - 1}')
-    p.add_argument('--classes', nargs='+', choices=SCENE_CLASSES + EXTRA_CLASSES,
+    p.add_argument('--classes', nargs='+', choices=ALL_CLASSES,
                    default=list(SCENE_CLASSES),
                    help=f'scene classes (default all but {" ".join(EXTRA_CLASSES)})')
     p.add_argument('--rigs', nargs='+', choices=RIGS, default=list(DEFAULT_RIGS),
@@ -170,15 +170,15 @@ def plan_walks(seed_set: str, minutes: float, classes: list[str], rigs: list[str
 def parse_walk(text: str, duration: float) -> Walk:
     """The walk ``CLASS:SEED:RIG`` of `--walk`; its seed set is the range its seed lies
     in. Raises ValueError naming what is wrong."""
-    from asmonc_vision.sim.scenes import EXTRA_CLASSES, RIGS, SCENE_CLASSES
+    from asmonc_vision.sim.scenes import ALL_CLASSES, RIGS
 
     parts = text.split(':')
     if len(parts) != 3:
         raise ValueError(f'--walk {text!r}: expected CLASS:SEED:RIG')
     cls, seed_s, rig = parts
-    if cls not in SCENE_CLASSES + EXTRA_CLASSES:
+    if cls not in ALL_CLASSES:
         raise ValueError(f'--walk {text!r}: scene class {cls!r} is not one of '
-                         f'{", ".join(SCENE_CLASSES + EXTRA_CLASSES)}')
+                         f'{", ".join(ALL_CLASSES)}')
     if rig not in RIGS:
         raise ValueError(f'--walk {text!r}: rig {rig!r} is not one of {", ".join(RIGS)}')
     try:

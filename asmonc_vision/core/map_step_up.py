@@ -12,8 +12,8 @@ climbed (tuning kerb_cross 1003, both rigs).
 
 No pair measures the level the wearer stands on well enough to carry the heights over
 (the height of one pair's ground over the previous pair's varies by 4-8 cm at the 95th
-percentile on level walks, and jumps by 20-50 cm either way when the plane is lost and
-found again on a kerb). What does tell is where the wearer has walked: a body cannot
+percentile on level walks, and jumps by 22-45 cm at a kerb, often half or all of it
+back the next pair). What does tell is where the wearer has walked: a body cannot
 pass through a thing standing on its path. Confirmed raised cells on the wearer's path
 just behind the wearer (from ``behind_m`` to ``behind_m + depth_m`` back, within
 ``half_width_m`` of the path), at least ``min_cells`` of them, whose median height is a

@@ -6,7 +6,7 @@
         [--scene] [--preset backpack|chest|narrow] [--realism on|off]
 
 SCENARIO is a scenario (``scenarios.SCENARIOS``) or a scene class of the campaign
-(``scenes.SCENE_CLASSES``, drawn from the seed as ``scenes.make_scene``); a name that
+(``scenes.ALL_CLASSES``, drawn from the seed as ``scenes.make_scene``); a name that
 is both (clear_walk, step_down) is the scenario unless ``--scene`` is given.
 
 (console script ``asmonc-sim``). Exit status 0 on success, 2 on a usage error (unknown
@@ -24,7 +24,7 @@ from pathlib import Path
 from asmonc_vision.sim.motion import GaitSettings
 from asmonc_vision.sim.rig import RigSettings
 from asmonc_vision.sim.scenarios import DEFAULT_DURATIONS, SCENARIOS, make_scenario
-from asmonc_vision.sim.scenes import (CLEAR_CLASSES, EXTRA_CLASSES, SCENE_CLASSES, build_scene,
+from asmonc_vision.sim.scenes import (ALL_CLASSES, CLEAR_CLASSES, EXTRA_CLASSES, build_scene,
                                       drawn_rig, scene_description)
 
 
@@ -53,7 +53,7 @@ def _parser() -> argparse.ArgumentParser:
                         'bob_amp=0.05 (repeatable, applied in order; fields and ranges: '
                         'asmonc_vision.sim.motion.GaitSettings)')
     p.add_argument('--scene', action='store_true',
-                   help='SCENARIO names a scene class (scenes.SCENE_CLASSES) even where a '
+                   help='SCENARIO names a scene class (scenes.ALL_CLASSES) even where a '
                         'scenario has the same name')
     p.add_argument('--preset', choices=('backpack', 'chest', 'narrow'), default=None,
                    help="scene classes: the rig ('backpack' default, 'chest' or 'narrow'; "
@@ -126,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
             doc = ' '.join((fn.__doc__ or '').split())
             print(f'{name:18s} {DEFAULT_DURATIONS[name]:5.1f} s  {doc}')
         print('scene classes (--scene where the name is also a scenario above):')
-        for name in SCENE_CLASSES + EXTRA_CLASSES:
+        for name in ALL_CLASSES:
             clear = (' (clear)' if name in CLEAR_CLASSES
                      else ' (not in the default plans)' if name in EXTRA_CLASSES else '')
             print(f'{name:18s} {20.0:5.1f} s  {scene_description(name)}{clear}')
@@ -136,12 +136,11 @@ def main(argv: list[str] | None = None) -> int:
         print('asmonc-sim: error: SCENARIO and OUT_DIR are required (or --list)',
               file=sys.stderr)
         return 2
-    classes = SCENE_CLASSES + EXTRA_CLASSES
-    scene = args.scene or (args.scenario not in SCENARIOS and args.scenario in classes)
-    if scene and args.scenario not in classes or (
+    scene = args.scene or (args.scenario not in SCENARIOS and args.scenario in ALL_CLASSES)
+    if scene and args.scenario not in ALL_CLASSES or (
             not scene and args.scenario not in SCENARIOS):
         print(f"asmonc-sim: error: unknown scenario '{args.scenario}'; known: "
-              f"{', '.join(SCENARIOS)}; scene classes: {', '.join(classes)}",
+              f"{', '.join(SCENARIOS)}; scene classes: {', '.join(ALL_CLASSES)}",
               file=sys.stderr)
         return 2
     out = Path(args.out_dir)

@@ -66,6 +66,8 @@ CLEAR_CLASSES: tuple[str, ...] = ('clear_walk', 'slope_ahead', 'crest', 'kerb_ra
                                   'camber', 'asphalt_markings', 'grate')
 #: Classes outside the default plans (named with ``--classes``).
 EXTRA_CLASSES: tuple[str, ...] = ('kerb_cross',)
+#: Every class a scene can be built of.
+ALL_CLASSES: tuple[str, ...] = SCENE_CLASSES + EXTRA_CLASSES
 RIGS: tuple[str, ...] = ('backpack', 'chest', 'narrow')
 #: Half-width (m) of the walking corridor the clear classes keep free.
 CORRIDOR = 0.5
@@ -639,7 +641,7 @@ def build_scene(scene_class: str, seed: int, duration: float, rig: RigSettings,
     """
     if scene_class not in _BUILDERS:
         raise KeyError(f"unknown scene class '{scene_class}'; known: "
-                       f"{', '.join(SCENE_CLASSES + EXTRA_CLASSES)}")
+                       f"{', '.join(ALL_CLASSES)}")
     salt = zlib.crc32(('scene/' + scene_class).encode())
     rng = np.random.default_rng([int(seed), salt, 1])
     walker_rng = np.random.default_rng([int(seed), salt, 2])
@@ -674,7 +676,7 @@ def make_scene(scene_class: str, seed: int, *, duration: float = 20.0,
     """
     if scene_class not in _BUILDERS:
         raise KeyError(f"unknown scene class '{scene_class}'; known: "
-                       f"{', '.join(SCENE_CLASSES + EXTRA_CLASSES)}")
+                       f"{', '.join(ALL_CLASSES)}")
     if not duration > 0:
         raise ValueError(f'duration must be > 0 s, got {duration}')
     return build_scene(scene_class, seed, duration, drawn_rig(scene_class, seed, rig),
