@@ -420,7 +420,7 @@ def test_ground_seen_where_a_thing_stood_clears_it():
 
 
 def test_the_compiled_sight_line_test_gives_numpys_cells():
-    """`map_kernels.rays_kernel` (the compiled `EvidenceMap._rays`) clears the same cells
+    """`map_kernels.rays_kernel` (the compiled `map_sight.seen_through`) clears the same cells
     as its numpy path: raised cells of all heights and spreads, sight lines on both sides,
     through them, short of them and beyond them."""
     from asmonc_vision.core import map_kernels
@@ -1483,7 +1483,7 @@ def test_the_compiled_sight_line_test_at_its_edges(cells):
     R = np.hypot(ground[:, 0], ground[:, 1])
     gh = ground / np.maximum(R, 1e-6)[:, None]
     left, right = map_kernels.nb_rays(p, top, gh, R, 1.4, lat, 0.2)
-    # numpy's path (`EvidenceMap._rays`): each cell against each line
+    # numpy's path (`map_sight.seen_through`): each cell against each line
     along = p[:, 0:1] * gh[None, :, 0] + p[:, 1:2] * gh[None, :, 1]
     lateral = gh[None, :, 0] * p[:, 1:2] - gh[None, :, 1] * p[:, 0:1]
     with np.errstate(divide='ignore', invalid='ignore'):
@@ -1601,9 +1601,10 @@ def test_the_compiled_height_update_gives_numpys():
 
 
 def test_bearing_bins_are_the_clipped_degrees():
-    """`evidence_map._bearing_bin` gives ndarray.clip's bins byte for byte (int64),
+    """`map_sight.bearing_bin` gives ndarray.clip's bins byte for byte (int64),
     behind, beside, at the camera's foot and for NaN or infinite points."""
-    from asmonc_vision.core.evidence_map import _BINS, _bearing_bin
+    from asmonc_vision.core.map_sight import BINS as _BINS
+    from asmonc_vision.core.map_sight import bearing_bin as _bearing_bin
     rng = np.random.default_rng(2)
     xy = np.vstack([rng.normal(0.0, 3.0, (500, 2)), [[0.0, 0.0], [-0.0, 0.0], [np.nan, 1.0],
                                                      [np.inf, 0.0], [1.0, -np.inf],

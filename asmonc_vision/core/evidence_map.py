@@ -88,14 +88,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from asmonc_vision.core import map_grid, map_kernels
+from asmonc_vision.core import map_grid, map_kernels, map_sight
 from asmonc_vision.core.camera import MetricPlane, StereoCamera, columns, sub_rows
 from asmonc_vision.core.map_drop_hold import DropHold, nearest_ground_in_view
 from asmonc_vision.core.map_evidence import (DROP, GROUND, RAISED, PairEvidence, ground_frame,
                                              ground_motion)
 from asmonc_vision.core.map_settings import EvidenceMapConfig
 from asmonc_vision.core.map_step_up import stepped_onto
-from .npfast import flat_nonzero, linspace, unique_counts
+from .npfast import flat_nonzero, unique_counts
 
 
 @dataclass(frozen=True)
@@ -508,20 +508,10 @@ class EvidenceMap:
 
     def _rays(self, ground_xy: np.ndarray, n_r: np.ndarray, use_kernel: bool = True
               ) -> np.ndarray:
-        """Flat indices of raised cells seen through by this pair's ground matches.
-
-        The sight line from the camera (``H`` = the plane's camera height above the
-        wearer's foot) to a ground point at range R passes over the ground at range r
-        at ``h_ray = H (1 - r / R)``. A sight line passing within ``ray_lateral_m`` of a
-        raised cell's evidence point (its mean matched point), lower than its top (the
-        height estimate x less ``ray_margin_m`` and 2 sqrt(P)), went through where the
-        thing was said to stand. A real thing hides the ground behind it; its silhouette
-        edge (where its evidence is) is passed on its outer side only, and a thin post
-        hides the sight lines through its middle. A mismatch floating above the ground
-        (a repetitive pattern matched a period off) is seen through on both sides: at
-        least ``ray_min_pixels`` sight lines on each side in a pair, more in all than
-        the cell's own raised pixels, clear it. The sight lines stop ``ray_stop_m``
-        short of their ground point."""
+        """Flat indices of raised cells seen through by this pair's ground matches
+        (`map_sight.seen_through`: sight lines passing below a cell's top, within
+        ``ray_lateral_m`` of its evidence point, on both sides); the cells with positive
+        raised log-odds and a height, against the plane's camera height."""
         c = self.config
         none = np.zeros(0, np.int64)
         if c.ray_logodds <= 0 or ground_xy.shape[0] == 0 or self._plane is None:
@@ -530,29 +520,11 @@ class EvidenceMap:
         cells = flat_nonzero((Lr > 0) & np.isfinite(hP))
         if not cells.size:
             return none
-        if ground_xy.shape[0] > c.ray_max_points:
-            pick = linspace(0, ground_xy.shape[0] - 1, c.ray_max_points).astype(np.int64)
-            ground_xy = ground_xy[pick]
-        R = np.hypot(ground_xy[:, 0], ground_xy[:, 1])                 # (n,)
-        gh = ground_xy / np.maximum(R, 1e-6)[:, None]                   # sight line directions
-        p = self._cell_xy(cells)                                            # (m, 2)
         top = hx[cells] - np.maximum(c.ray_margin_m, 2.0 * np.sqrt(hP[cells]))
-        if map_kernels.nb_rays is not None and use_kernel and gh.dtype == np.float64:
-            # the same counts, compiled (`map_kernels.rays_kernel`)
-            left, right = map_kernels.nb_rays(p, top.astype(np.float64), gh, R,
-                                              float(self._plane.height),
-                                              float(c.ray_lateral_m), float(c.ray_stop_m))
-            return cells[(np.minimum(left, right) >= c.ray_min_pixels)
-                         & (left + right > n_r[cells])]
-        # (m, n): each evidence point against each sight line
-        along = p[:, 0:1] * gh[None, :, 0] + p[:, 1:2] * gh[None, :, 1]
-        lateral = gh[None, :, 0] * p[:, 1:2] - gh[None, :, 1] * p[:, 0:1]
-        h_ray = self._plane.height * (1.0 - along / R[None, :])
-        through = ((np.abs(lateral) <= c.ray_lateral_m) & (along > 0.3)
-                   & (along < R[None, :] - c.ray_stop_m) & (h_ray < top[:, None]))
-        left = np.count_nonzero(through & (lateral > 0), axis=1)
-        right = np.count_nonzero(through & (lateral <= 0), axis=1)
-        return cells[(np.minimum(left, right) >= c.ray_min_pixels) & (left + right > n_r[cells])]
+        through = map_sight.seen_through(self._cell_xy(cells), top, ground_xy,
+                                         float(self._plane.height), n_r[cells], c,
+                                         use_kernel)
+        return cells[through]
 
     def _label(self, mask: np.ndarray, cells: np.ndarray | None = None) -> list[np.ndarray]:
         """Flat cell indices of each region of ``mask`` (8-connected, gaps of
@@ -585,48 +557,27 @@ class EvidenceMap:
         if not cells.size:
             return
         g, feet, up = self._cell_feet(cells)
-        view = self._in_both_images(feet, cam)
+        view = map_sight.in_both_images(feet, cam, c.miss_margin_px)
         # a raised thing near a level camera shows its upper part, not its foot: the
         # point at _SEEN_SHARE of its height in view is in plain view too
         raised_cell = conf_r
         if raised_cell.any():
             seen_at = _SEEN_SHARE * np.maximum(self.h_x.reshape(-1)[cells], 0.0)   # (M,) m
-            view |= raised_cell & self._in_both_images(feet + seen_at[:, None] * up[None, :],
-                                                       cam)
-        # in plain view: this pair saw something (ground or a thing) at the cell's
-        # bearing beyond it, and no raised evidence nearer (1 degree bearing bins, each
-        # widened by one bin either side)
-        r, b = np.hypot(g[:, 0], g[:, 1]), _bearing_bin(g)
-        seen = (ev.kind == GROUND) | (ev.kind == RAISED)
-        xy_seen = ev.xy[seen]
-        er, eb = np.hypot(xy_seen[:, 0], xy_seen[:, 1]), _bearing_bin(xy_seen)
-        far = np.full(_BINS + 2, -np.inf)
-        np.maximum.at(far, eb + 1, er)
-        near = np.full(_BINS + 2, np.inf)
-        raised = ev.kind[seen] == RAISED
-        np.minimum.at(near, eb[raised] + 1, er[raised])
-        far = np.maximum(np.maximum(far[:-2], far[1:-1]), far[2:])
-        near = np.minimum(np.minimum(near[:-2], near[1:-1]), near[2:])
-        unhidden = view & (near[b] >= r - c.cell_m)
+            view |= raised_cell & map_sight.in_both_images(
+                feet + seen_at[:, None] * up[None, :], cam, c.miss_margin_px)
+        # in plain view: this pair saw something at the cell's bearing beyond it, and
+        # no raised evidence nearer (`map_sight.passed_unhidden`)
+        passed, unhidden = map_sight.passed_unhidden(g, ev.xy, ev.kind, c.cell_m)
+        unhidden &= view
         # not reported once stale (unseen_report_s): in the image, hidden or not (a
         # passer-by's cells behind them; the ground beyond need not have been matched;
         # what hides a thing is nearer and reported itself)
         self._missed[cells[view]] = True
-        fading = unhidden & (far[b] >= r + c.cell_m)
+        fading = unhidden & passed
         self.L_r.reshape(-1)[cells[fading & conf_r]] -= c.miss_logodds
         self.L_d.reshape(-1)[cells[fading & conf_d]] -= c.miss_logodds
         self.L_r.clip(c.min_logodds, c.max_logodds, out=self.L_r)
         self.L_d.clip(c.min_logodds, c.max_logodds, out=self.L_d)
-
-    def _in_both_images(self, p: np.ndarray, cam: StereoCamera) -> np.ndarray:
-        """(M,) bool: points ``p`` (M, 3) of the left optical frame (m) that project
-        ``miss_margin_px`` or more inside both images."""
-        m = self.config.miss_margin_px
-        z = np.maximum(p[:, 2], 1e-3)
-        u = cam.f * p[:, 0] / z + cam.cx
-        v = cam.f * p[:, 1] / z + cam.cy
-        return ((p[:, 2] > 0.1) & (u - cam.f * cam.baseline / z >= m)
-                & (u <= cam.width - 1 - m) & (v >= m) & (v <= cam.height - 1 - m))
 
     def _cell_feet(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The evidence points of ``cells`` (flat indices): (M, 2) on the ground (wearer
@@ -839,16 +790,8 @@ class EvidenceMap:
 _AROUND_DX = np.repeat(np.arange(-1, 2), 3)[None, :]
 _AROUND_DY = np.tile(np.arange(-1, 2), 3)[None, :]
 _AROUND_RING = flat_nonzero((_AROUND_DX[0] != 0) | (_AROUND_DY[0] != 0))
-#: bearings from -90 to 90 degrees in 1 degree bins (`EvidenceMap._unseen`)
-_BINS = 180
 #: `EvidenceMap._unseen`: a raised cell is in plain view when the point at this share of
 #: its height is (the part of a tall thing a level camera sees near the wearer, below
 #: its top, whose edge may be level and unmatched)
 _SEEN_SHARE = 0.75
 
-
-def _bearing_bin(xy: np.ndarray) -> np.ndarray:
-    """(N,) int: the 1 degree bearing bin (0 .. _BINS - 1) of ground points (N, 2)."""
-    b = np.degrees(np.arctan2(xy[:, 1], xy[:, 0])) + 90.0
-    # (ndarray.clip of the int64 bins, without its integer-bounds checks)
-    return np.minimum(np.maximum(b.astype(np.int64), 0), _BINS - 1)

@@ -1,8 +1,8 @@
 """The evidence map's inner loops compiled by numba (``core.jit``); `EvidenceMap`
-(`asmonc_vision.core.evidence_map`) runs each when it compiled, else its numpy path
-(test_evidence_map compares both):
+(`asmonc_vision.core.evidence_map`, and `core.map_sight` for the sight lines) runs each
+when it compiled, else its numpy path (test_evidence_map compares both):
 
-* `rays_kernel`, the sight-line test of `EvidenceMap._rays`. Its numpy path builds the
+* `rays_kernel`, the sight-line test of `map_sight.seen_through`. Its numpy path builds the
   (cells x sight lines) arrays of the same arithmetic (the same operations in the same
   order, in float64: both give the same counts). The kernel tests only the sight lines
   whose bearing is near a cell's: most pass far beside a cell, and those it skips fail
