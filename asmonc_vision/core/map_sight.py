@@ -85,8 +85,7 @@ def in_both_images(p: np.ndarray, cam: StereoCamera, margin_px: float) -> np.nda
     """(M,) bool: points ``p`` (M, 3) of the left optical frame (m) that project
     ``margin_px`` or more inside both images (and lie more than 0.1 m ahead)."""
     z = np.maximum(p[:, 2], 1e-3)
-    u = cam.f * p[:, 0] / z + cam.cx
-    v = cam.f * p[:, 1] / z + cam.cy
+    u, v = cam.project_left(np.column_stack([p[:, 0], p[:, 1], z]))
     return ((p[:, 2] > 0.1) & (u - cam.f * cam.baseline / z >= margin_px)
             & (u <= cam.width - 1 - margin_px) & (v >= margin_px)
             & (v <= cam.height - 1 - margin_px))
