@@ -494,6 +494,13 @@ class PlaneTracking(DetectorState):
                 fit, uu, vv, dd, ss = last, u, v, d, s
         if fit.num_features < c.plane.init_min_inlier_fraction * uu.shape[0]:
             return 'initialising', False
+        # The ground is where the wearer stands: a plane with the nearest ground
+        # above it is the lower ground beyond a drop just ahead (a wearer starting
+        # 1.8 m before a step down, step_down 1076), whose features outnumber the
+        # strip before the edge.
+        near = self._nearer_ground(fit, uu, vv, dd, cam)
+        if near is not None:
+            fit = near
         if 0.0 < c.plane.init_max_height_sd_m < _height_sd(cam, fit):
             # features in one band of the image (a kerb's joints across a plain
             # pavement, the only edges at full size) fix no plane: any plane through
@@ -510,6 +517,44 @@ class PlaneTracking(DetectorState):
         self._calibrate_sigma(uu, vv, dd, ss.astype(np.float64))
         self._init_window.clear()
         return 'tracking', True
+
+    def _nearer_ground(self, fit: PlaneFit, u, v, d, cam: StereoCamera) -> PlaneFit | None:
+        """The ground the wearer stands on when the calibrated plane ``fit`` is the
+        lower ground beyond a drop before them: the nearest features (the
+        ``plane.init_near_share`` of the calibration features (u, v, d: (N,) pixels)
+        with the largest disparity on ``fit``) lying above it on a parallel plane (their
+        median residual above ``plane.inlier_px``, and within it of the parallel plane)
+        at most ``plane.init_max_step_m`` higher. A level plane at camera height h' has
+        the disparities of one at h times h / h', so the parallel plane is ``fit``'s
+        (a, b, c) times the median ratio of the near features' disparities to
+        ``fit``'s. Returns that plane (its inliers: the features within ``inlier_px``)
+        or None: the nearest features lie on ``fit``, on no such plane, or the test is
+        off (share 0)."""
+        c = self.config
+        share = c.plane.init_near_share
+        if share <= 0.0 or u.shape[0] < 2 * c.plane.min_features:
+            return None
+        pd = plane_disparity(fit.abc, u, v)
+        near = pd >= np.quantile(pd, 1.0 - share)
+        if int(near.sum()) < c.plane.min_features:
+            return None
+        if fast_median(d[near] - pd[near]) <= c.plane.inlier_px:
+            return None
+        k = fast_median(d[near] / np.maximum(pd[near], 1e-6))
+        if fast_median(np.abs(d[near] - k * pd[near])) > c.plane.inlier_px:
+            return None
+        h = cyclopean_height(cam, fit.abc)
+        if h * (1.0 - 1.0 / k) > c.plane.init_max_step_m:
+            return None
+        abc = k * fit.abc
+        metric = plane_is_plausible(cam, abc, **cast(dict[str, Any], c.plane.plausibility()))
+        if metric is None:
+            return None
+        on = np.abs(d - (abc[0] * u + abc[1] * v + abc[2])) <= c.plane.inlier_px
+        res = d[on] - (abc[0] * u[on] + abc[1] * v[on] + abc[2])
+        return PlaneFit(abc=abc, cov=fit.cov * k * k, num_features=int(on.sum()),
+                        residual_rms=float(np.sqrt(np.mean(res ** 2))), inliers=on,
+                        metric=metric, residual_sigma=1.4826 * fast_median(np.abs(res)))
 
     def _latest_frame_calibrates(self, joint: PlaneFit, last: PlaneFit, u, v, d,
                                  cam: StereoCamera) -> bool:

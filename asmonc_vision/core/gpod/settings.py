@@ -145,6 +145,13 @@ class PlaneSettings(PlausiblePlaneConfig):
         'grounds, one is a wrong consensus (a short line of near mismatches), and the one '
         "holding more of the latest frame's features (each counted once, within inlier_px) "
         "calibrates, metres; 0 = always the frame's own", range=(0.0, 10.0))
+    init_near_share: float = param(
+        0.15, 'The nearest this share of the calibration features (the largest '
+        'disparities on the calibrated plane) must not lie above it on a parallel plane '
+        'at most init_max_step_m higher: if they do, the calibrated plane is the lower '
+        'ground beyond a drop just ahead, whose features outnumber the strip the wearer '
+        'stands on, and that parallel plane calibrates instead; 0 = no test',
+        range=(0.0, 0.5))
     init_max_height_sd_m: float = param(
         0.03, 'The initial ground plane is taken only if its features fix the camera '
         'height to this standard deviation (first order, from the fit\'s covariance), '
