@@ -550,11 +550,12 @@ class PlaneTracking(DetectorState):
         metric = plane_is_plausible(cam, abc, **cast(dict[str, Any], c.plane.plausibility()))
         if metric is None:
             return None
-        on = np.abs(d - (abc[0] * u + abc[1] * v + abc[2])) <= c.plane.inlier_px
-        res = d[on] - (abc[0] * u[on] + abc[1] * v[on] + abc[2])
+        res = d - k * pd                          # (abc's disparities are k * pd)
+        on = np.abs(res) <= c.plane.inlier_px
+        res = res[on]
         return PlaneFit(abc=abc, cov=fit.cov * k * k, num_features=int(on.sum()),
                         residual_rms=float(np.sqrt(np.mean(res ** 2))), inliers=on,
-                        metric=metric, residual_sigma=1.4826 * fast_median(np.abs(res)))
+                        metric=metric, residual_sigma=_mad_sigma(res))
 
     def _latest_frame_calibrates(self, joint: PlaneFit, last: PlaneFit, u, v, d,
                                  cam: StereoCamera) -> bool:
